@@ -1,0 +1,10 @@
+"""rimu.calibration: turntable sessions (simulated or recorded) → calibration files.
+
+Conventions are those of :mod:`fdi` (SI inside, MB frame, sensors numbered from 1 outside).
+"""
+
+from calibration.session import Session, Step
+from calibration.turntable import MOUNTS, body_inputs, earth_rate_n, gravity_local, mat_nb
+
+__all__ = ["MOUNTS", "Session", "Step", "body_inputs", "earth_rate_n", "gravity_local",
+           "mat_nb"]

@@ -1,0 +1,488 @@
+"""The calibration file ``rimu.calibration/1``: what the calibration produces and the runtime reads.
+
+Model per sensor (seed 000 Eq. 13, seed 001 Eq. 1), internally in SI::
+
+    SF_i · u_i = h̃_i · x + b_i + η_i
+
+``u_i`` the raw output (mV, LSB, ...), ``x`` the input (body rate in rad/s for gyros,
+specific force in m/s² for accelerometers, MB frame), ``SF_i`` the scale factor in *input
+per raw unit*, ``h̃_i`` the calibrated unit input axis, ``b_i`` the bias in input units.
+The compensated output the runtime uses is ``y_i = SF_i·u_i − b_i``.
+
+In the JSON file each value carries its unit (``scale_factor_unit``, ``bias_unit``); arrays
+are nested lists. Keys other tools read (keep them stable)::
+
+    {"schema": "rimu.calibration/1",
+     "sensors": {"gyro": [{"name", "axis", "axis_nominal", "misalignment_mrad",
+                           "misalignment_mrad_sd", "scale_factor", "scale_factor_sd",
+                           "scale_factor_unit", "bias", "bias_sd", "bias_unit",
+                           "input_error_cov", "raw_unit", "residual_rms"}, ...],
+                 "accel": [...]},
+     "noise_covariance": {"gyro": [[...]], "accel": [[...]], "unit": {...},
+                          "sample_rate_hz": 100.0},
+     "parity": {"nominal": V, "calibrated": V_c},   # gyros; accelerometers: "parity_accel"
+     "misalignment_matrices": {"gyro": [{"sensors": [1, 2, 3], "M": [[...]]}], ...},
+     "allan": {"gyro": {"tau_s": [...], "adev": [[...] per tau]}, ...},
+     "earth_rate_dph": 15.04, "earth_rate_dph_sd": 0.3, ...}
+
+``input_error_cov`` (3×3, dimensionless) is the covariance of the error of the estimated
+``h̃_i/SF_i`` scaled to unit gain: the compensated output errs by ``e_iᵀ·x`` with
+``e_i ~ N(0, input_error_cov)``; it holds both the scale-factor and the misalignment
+uncertainty and is what makes the parity residual grow with the rate.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from fdi.errors import ConfigError, FileFormatError
+from fdi.units import (
+    input_unit_factor,
+    scale_factor_from_si,
+    scale_factor_sd_from_si,
+    scale_factor_sd_to_si,
+    scale_factor_to_si,
+)
+
+__all__ = [
+    "CALIBRATION_SCHEMA",
+    "KINDS",
+    "AllanTable",
+    "Calibration",
+    "SensorCal",
+    "SensorSet",
+    "calibration_from_dict",
+    "load_calibration",
+    "misalignment_angles",
+    "tangent_basis",
+]
+
+CALIBRATION_SCHEMA = "rimu.calibration/1"
+KINDS = ("gyro", "accel")
+_INPUT_SI = {"gyro": "rad/s", "accel": "m/s^2"}
+
+
+def tangent_basis(axis_nominal: np.ndarray) -> np.ndarray:
+    """Two unit vectors (rows, shape (2, 3)) perpendicular to a nominal axis.
+
+    ``e1`` is the MB axis least aligned with the nominal one, made perpendicular;
+    ``e2 = h₀ × e1``. Misalignment angles are measured along e1 and e2.
+    """
+    h0 = np.asarray(axis_nominal, float)
+    h0 = h0 / np.linalg.norm(h0)
+    k = int(np.argmin(np.abs(h0)))
+    e = np.zeros(3)
+    e[k] = 1.0
+    e1 = e - (e @ h0) * h0
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(h0, e1)
+    return np.vstack([e1, e2])
+
+
+def misalignment_angles(axis_nominal: np.ndarray, axis: np.ndarray) -> np.ndarray:
+    """Two misalignment angles (rad) of ``axis`` about the nominal one, along e1 and e2."""
+    h = np.asarray(axis, float)
+    h = h / np.linalg.norm(h)
+    E = tangent_basis(axis_nominal)
+    c = float(np.dot(h, np.asarray(axis_nominal, float) / np.linalg.norm(axis_nominal)))
+    return np.arctan2(E @ h, c)
+
+
+@dataclass(frozen=True)
+class SensorCal:
+    """Calibration of one sensor, in SI.
+
+    Attributes
+    ----------
+    name : str
+    axis : ndarray, shape (3,)
+        Calibrated unit input axis h̃ (MB frame).
+    axis_nominal : ndarray, shape (3,)
+        Nominal axis (row of H).
+    scale_factor : float
+        SF in input per raw unit (rad/s or m/s² per raw unit).
+    scale_factor_sd : float
+    bias : float
+        b in rad/s or m/s².
+    bias_sd : float
+    input_error_cov : ndarray, shape (3, 3)
+        Covariance of the gain-normalised error of h̃/SF (see module docstring).
+    misalignment_sd : ndarray, shape (2,)
+        Standard deviations of the two misalignment angles (rad).
+    raw_unit : str
+        Unit of the raw output (``"mV"``, ``"LSB"``, ...).
+    scale_factor_unit : str
+        Unit in which files print the scale factor (``"mV/(deg/s)"``, ``"(deg/s)/LSB"``).
+    bias_unit : str
+        Unit in which files print the bias (``"deg/h"``, ``"mg"``, ...).
+    residual_rms : float
+        RMS of the calibration residual (input units, SI).
+    """
+
+    name: str
+    axis: np.ndarray
+    axis_nominal: np.ndarray
+    scale_factor: float
+    scale_factor_sd: float
+    bias: float
+    bias_sd: float
+    input_error_cov: np.ndarray = field(default_factory=lambda: np.zeros((3, 3)))
+    misalignment_sd: np.ndarray = field(default_factory=lambda: np.zeros(2))
+    raw_unit: str = "raw"
+    scale_factor_unit: str = "(rad/s)/raw"
+    bias_unit: str = "rad/s"
+    residual_rms: float = float("nan")
+
+    @property
+    def misalignment(self) -> np.ndarray:
+        """The two misalignment angles (rad) of the calibrated axis about the nominal one."""
+        return misalignment_angles(self.axis_nominal, self.axis)
+
+
+@dataclass(frozen=True)
+class AllanTable:
+    """Overlapping Allan deviation of the calibration residuals.
+
+    Attributes
+    ----------
+    tau_s : ndarray, shape (K,)
+        Averaging times (s).
+    adev : ndarray, shape (K, n)
+        Allan deviation per sensor (input units, SI).
+    """
+
+    tau_s: np.ndarray
+    adev: np.ndarray
+
+
+@dataclass(frozen=True)
+class SensorSet:
+    """All sensors of one kind (gyros or accelerometers) and their joint statistics.
+
+    Attributes
+    ----------
+    kind : str
+        ``"gyro"`` or ``"accel"``.
+    sensors : tuple of SensorCal
+    noise_covariance : ndarray, shape (n, n)
+        Per-sample noise covariance of the compensated outputs (SI²).
+    groups : tuple of tuple of int
+        Subsystems (0-based), each with one misalignment matrix.
+    misalignment_matrices : tuple of ndarray
+        M per group as the papers print it (H̃_g = M·H_g).
+    allan : AllanTable or None
+    """
+
+    kind: str
+    sensors: tuple[SensorCal, ...]
+    noise_covariance: np.ndarray
+    groups: tuple[tuple[int, ...], ...] = ()
+    misalignment_matrices: tuple[np.ndarray, ...] = ()
+    allan: AllanTable | None = None
+
+    @property
+    def n(self) -> int:
+        """Number of sensors."""
+        return len(self.sensors)
+
+    @property
+    def H(self) -> np.ndarray:
+        """Calibrated axes H̃, shape (n, 3)."""
+        return np.array([s.axis for s in self.sensors])
+
+    @property
+    def H_nominal(self) -> np.ndarray:
+        """Nominal axes H, shape (n, 3)."""
+        return np.array([s.axis_nominal for s in self.sensors])
+
+    @property
+    def scale_factors(self) -> np.ndarray:
+        """SF per sensor, shape (n,), input per raw unit."""
+        return np.array([s.scale_factor for s in self.sensors])
+
+    @property
+    def biases(self) -> np.ndarray:
+        """Bias per sensor, shape (n,), SI."""
+        return np.array([s.bias for s in self.sensors])
+
+    @property
+    def noise_sd(self) -> np.ndarray:
+        """Per-sample white-noise standard deviation per sensor, shape (n,), SI."""
+        return np.sqrt(np.diag(self.noise_covariance))
+
+
+@dataclass(frozen=True)
+class Calibration:
+    """A complete calibration: what ``rimu calibrate`` writes and the monitor reads.
+
+    Attributes
+    ----------
+    configuration : str
+        Configuration name (``"tetrad"``, ``"cone6"``, a file).
+    sets : dict of str to SensorSet
+        ``"gyro"`` and/or ``"accel"``.
+    sample_rate_hz : float
+        Rate at which ``noise_covariance`` holds (per sample).
+    earth_rate_dph, earth_rate_dph_sd : float or None
+        Earth rate estimated from the outer-axis modulation, where done.
+    latitude_deg : float or None
+    extra : dict
+        Anything else the calibration wants to keep (residual statistics per step,
+        method, source session). Written as is under ``"extra"``.
+    """
+
+    configuration: str
+    sets: Mapping[str, SensorSet]
+    sample_rate_hz: float
+    earth_rate_dph: float | None = None
+    earth_rate_dph_sd: float | None = None
+    latitude_deg: float | None = None
+    extra: Mapping[str, Any] = field(default_factory=dict)
+
+    schema: str = CALIBRATION_SCHEMA
+
+    @property
+    def gyro(self) -> SensorSet:
+        """The gyro set (raises ConfigError when the file has none)."""
+        return self.kind("gyro")
+
+    def kind(self, kind: str) -> SensorSet:
+        """The sensor set of one kind."""
+        try:
+            return self.sets[kind]
+        except KeyError:
+            raise ConfigError(f"calibration has no {kind} sensors") from None
+
+    # -- writing -----------------------------------------------------------------------
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready dictionary in the ``rimu.calibration/1`` layout."""
+        from fdi.parity import parity_matrix
+
+        doc: dict[str, Any] = {"schema": self.schema, "configuration": self.configuration,
+                               "sample_rate_hz": self.sample_rate_hz, "sensors": {},
+                               "noise_covariance": {"unit": {},
+                                                    "sample_rate_hz": self.sample_rate_hz},
+                               "misalignment_matrices": {}, "allan": {}}
+        for kind, s in self.sets.items():
+            doc["sensors"][kind] = [_sensor_to_dict(c) for c in s.sensors]
+            doc["noise_covariance"][kind] = s.noise_covariance.tolist()
+            doc["noise_covariance"]["unit"][kind] = f"({_INPUT_SI[kind]})^2"
+            doc["misalignment_matrices"][kind] = [
+                {"sensors": [i + 1 for i in g], "M": np.atleast_2d(M).tolist()}
+                for g, M in zip(s.groups, s.misalignment_matrices, strict=False)]
+            if s.allan is not None:
+                doc["allan"][kind] = {"tau_s": s.allan.tau_s.tolist(),
+                                      "adev": s.allan.adev.tolist(),
+                                      "unit": _INPUT_SI[kind]}
+            par = {"nominal": parity_matrix(s.H_nominal).tolist(),
+                   "calibrated": parity_matrix(s.H).tolist()}
+            doc["parity" if kind == "gyro" else "parity_accel"] = par
+        if self.earth_rate_dph is not None:
+            doc["earth_rate_dph"] = self.earth_rate_dph
+            doc["earth_rate_dph_sd"] = self.earth_rate_dph_sd
+        if self.latitude_deg is not None:
+            doc["latitude_deg"] = self.latitude_deg
+        doc["extra"] = _jsonable(dict(self.extra))
+        return doc
+
+    def save(self, path: str | Path) -> None:
+        """Write the calibration as JSON."""
+        Path(path).write_text(json.dumps(self.to_dict(), indent=1) + "\n", encoding="utf-8")
+
+
+def _jsonable(obj: Any) -> Any:
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if isinstance(obj, Mapping):
+        return {str(k): _jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [_jsonable(v) for v in obj]
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    return obj
+
+
+def _sensor_to_dict(c: SensorCal) -> dict[str, Any]:
+    bf = input_unit_factor(c.bias_unit)
+    return {
+        "name": c.name,
+        "axis": c.axis.tolist(),
+        "axis_nominal": c.axis_nominal.tolist(),
+        "misalignment_mrad": (1e3 * c.misalignment).tolist(),
+        "misalignment_mrad_sd": (1e3 * np.asarray(c.misalignment_sd)).tolist(),
+        "scale_factor": scale_factor_from_si(c.scale_factor, c.scale_factor_unit),
+        "scale_factor_sd": scale_factor_sd_from_si(c.scale_factor, c.scale_factor_sd,
+                                                   c.scale_factor_unit),
+        "scale_factor_unit": c.scale_factor_unit,
+        "bias": c.bias / bf,
+        "bias_sd": c.bias_sd / bf,
+        "bias_unit": c.bias_unit,
+        "input_error_cov": np.asarray(c.input_error_cov).tolist(),
+        "raw_unit": c.raw_unit,
+        "residual_rms": None if not math.isfinite(c.residual_rms) else c.residual_rms,
+    }
+
+
+# -- reading ---------------------------------------------------------------------------
+class _Reader:
+    """Field access that names the file and the field on every error."""
+
+    def __init__(self, path: str) -> None:
+        self.path = path
+
+    def fail(self, field: str, msg: str) -> FileFormatError:
+        return FileFormatError(self.path, msg, field=field)
+
+    def get(self, d: Mapping[str, Any], key: str, where: str, default: Any = ...) -> Any:
+        if not isinstance(d, Mapping):
+            raise self.fail(where, "expected an object")
+        if key not in d:
+            if default is not ...:
+                return default
+            raise self.fail(f"{where}.{key}" if where else key, "missing")
+        return d[key]
+
+    def number(self, v: Any, field: str, *, positive: bool = False) -> float:
+        if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
+            raise self.fail(field, f"expected a finite number, got {v!r}")
+        if positive and v <= 0:
+            raise self.fail(field, f"expected a positive number, got {v!r}")
+        return float(v)
+
+    def array(self, v: Any, field: str, shape: Sequence[int | None]) -> np.ndarray:
+        try:
+            a = np.array(v, dtype=float)
+        except (TypeError, ValueError):
+            raise self.fail(field, "expected an array of numbers") from None
+        if a.ndim != len(shape) or any(s is not None and s != d for s, d in zip(shape, a.shape,
+                                                                                 strict=True)):
+            want = "×".join("n" if s is None else str(s) for s in shape)
+            raise self.fail(field, f"expected shape {want}, got {a.shape}")
+        if not np.all(np.isfinite(a)):
+            raise self.fail(field, "non-finite value")
+        return a
+
+
+def load_calibration(path: str | Path) -> Calibration:
+    """Read and validate a ``rimu.calibration/1`` file.
+
+    Raises
+    ------
+    FileFormatError
+        Missing file, bad JSON, wrong schema or version, missing or malformed field,
+        unknown unit; the message names the file and the field.
+    """
+    p = str(path)
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except OSError as exc:
+        raise FileFormatError(p, f"cannot read ({exc.strerror})") from None
+    try:
+        doc = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise FileFormatError(p, f"not valid JSON ({exc.msg})", line=exc.lineno) from None
+    return calibration_from_dict(doc, p)
+
+
+def calibration_from_dict(doc: Mapping[str, Any], path: str = "<calibration>") -> Calibration:
+    """Build a :class:`Calibration` from its JSON dictionary (see :func:`load_calibration`)."""
+    r = _Reader(path)
+    schema = r.get(doc, "schema", "")
+    if not isinstance(schema, str) or not schema.startswith("rimu.calibration/"):
+        raise r.fail("schema", f"expected '{CALIBRATION_SCHEMA}', got {schema!r}")
+    if schema != CALIBRATION_SCHEMA:
+        raise r.fail("schema", f"unsupported version {schema!r}; this rimu reads "
+                     f"'{CALIBRATION_SCHEMA}'")
+    rate = r.number(r.get(doc, "sample_rate_hz", ""), "sample_rate_hz", positive=True)
+    sensors = r.get(doc, "sensors", "")
+    if not isinstance(sensors, Mapping) or not sensors:
+        raise r.fail("sensors", "expected an object with 'gyro' and/or 'accel' lists")
+    noise = r.get(doc, "noise_covariance", "")
+    sets: dict[str, SensorSet] = {}
+    for kind, entries in sensors.items():
+        if kind not in KINDS:
+            raise r.fail(f"sensors.{kind}", f"unknown sensor kind; expected one of {KINDS}")
+        if not isinstance(entries, list) or not entries:
+            raise r.fail(f"sensors.{kind}", "expected a non-empty list")
+        cals = tuple(_sensor_from_dict(r, e, f"sensors.{kind}[{i + 1}]")
+                     for i, e in enumerate(entries))
+        n = len(cals)
+        cov = r.array(r.get(noise, kind, "noise_covariance"), f"noise_covariance.{kind}", (n, n))
+        groups, mats = [], []
+        for j, g in enumerate(r.get(doc.get("misalignment_matrices", {}), kind,
+                                    "misalignment_matrices", [])):
+            f = f"misalignment_matrices.{kind}[{j + 1}]"
+            idx = [int(i) - 1 for i in r.get(g, "sensors", f)]
+            if any(i < 0 or i >= n for i in idx):
+                raise r.fail(f + ".sensors", f"sensor numbers must be 1..{n}")
+            groups.append(tuple(idx))
+            mats.append(r.array(r.get(g, "M", f), f + ".M", (len(idx), None)))
+        allan = None
+        al = doc.get("allan", {}).get(kind) if isinstance(doc.get("allan"), Mapping) else None
+        if al is not None:
+            taus = r.array(r.get(al, "tau_s", f"allan.{kind}"), f"allan.{kind}.tau_s", (None,))
+            adev = r.array(r.get(al, "adev", f"allan.{kind}"), f"allan.{kind}.adev",
+                           (len(taus), n))
+            allan = AllanTable(taus, adev)
+        sets[kind] = SensorSet(kind, cals, cov, tuple(groups), tuple(mats), allan)
+    er = doc.get("earth_rate_dph")
+    ers = doc.get("earth_rate_dph_sd")
+    lat = doc.get("latitude_deg")
+    return Calibration(
+        configuration=str(doc.get("configuration", "")),
+        sets=sets,
+        sample_rate_hz=rate,
+        earth_rate_dph=None if er is None else r.number(er, "earth_rate_dph"),
+        earth_rate_dph_sd=None if ers is None else r.number(ers, "earth_rate_dph_sd"),
+        latitude_deg=None if lat is None else r.number(lat, "latitude_deg"),
+        extra=dict(doc.get("extra", {}) or {}),
+    )
+
+
+def _sensor_from_dict(r: _Reader, e: Any, where: str) -> SensorCal:
+    if not isinstance(e, Mapping):
+        raise r.fail(where, "expected an object")
+    axis = r.array(r.get(e, "axis", where), where + ".axis", (3,))
+    nom = r.array(r.get(e, "axis_nominal", where), where + ".axis_nominal", (3,))
+    for f, a in (("axis", axis), ("axis_nominal", nom)):
+        if abs(np.linalg.norm(a) - 1.0) > 1e-6:
+            raise r.fail(f"{where}.{f}", f"expected a unit vector, norm is {np.linalg.norm(a)}")
+    sfu = r.get(e, "scale_factor_unit", where)
+    bu = r.get(e, "bias_unit", where)
+    sf = r.number(r.get(e, "scale_factor", where), where + ".scale_factor", positive=True)
+    sfsd = r.number(r.get(e, "scale_factor_sd", where), where + ".scale_factor_sd")
+    try:
+        sf_si = scale_factor_to_si(sf, str(sfu))
+        sfsd_si = scale_factor_sd_to_si(sf, sfsd, str(sfu))
+    except ConfigError as exc:
+        raise r.fail(where + ".scale_factor_unit", str(exc)) from None
+    try:
+        bf = input_unit_factor(str(bu))
+    except ConfigError as exc:
+        raise r.fail(where + ".bias_unit", str(exc)) from None
+    bias = r.number(r.get(e, "bias", where), where + ".bias") * bf
+    bias_sd = r.number(r.get(e, "bias_sd", where), where + ".bias_sd") * bf
+    mis_sd = r.array(r.get(e, "misalignment_mrad_sd", where), where + ".misalignment_mrad_sd",
+                     (2,)) * 1e-3
+    r.array(r.get(e, "misalignment_mrad", where), where + ".misalignment_mrad", (2,))
+    cov = r.array(e.get("input_error_cov", np.zeros((3, 3)).tolist()),
+                  where + ".input_error_cov", (3, 3))
+    rr = e.get("residual_rms")
+    return SensorCal(
+        name=str(r.get(e, "name", where)),
+        axis=axis / np.linalg.norm(axis), axis_nominal=nom / np.linalg.norm(nom),
+        scale_factor=sf_si, scale_factor_sd=sfsd_si, bias=bias, bias_sd=bias_sd,
+        input_error_cov=cov, misalignment_sd=mis_sd,
+        raw_unit=str(e.get("raw_unit", "raw")), scale_factor_unit=str(sfu), bias_unit=str(bu),
+        residual_rms=float("nan") if rr is None else r.number(rr, where + ".residual_rms"),
+    )
+

@@ -1,0 +1,3 @@
+"""rimu.replay"""
+
+__all__: list[str] = []

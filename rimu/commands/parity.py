@@ -1,0 +1,61 @@
+"""``rimu parity CONFIG``: measurement matrix, parity matrix and isolability."""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+import numpy as np
+
+from fdi.calfile import load_calibration
+from fdi.geometry import load_configuration
+from fdi.parity import isolability, parity_matrix
+
+HELP = "print H, the parity matrix V and the isolability of each sensor pair"
+
+
+def configure(p: argparse.ArgumentParser) -> None:
+    p.add_argument("config", help="tetrad, cone6, triad or a TOML configuration file")
+    p.add_argument("--misalignment", metavar="FILE",
+                   help="a rimu calibration file: also print the calibrated axes and V_c")
+    p.add_argument("--json", action="store_true", help="print JSON instead of text")
+
+
+def run(args: argparse.Namespace) -> int:
+    cfg = load_configuration(args.config)
+    V = parity_matrix(cfg.H)
+    iso = isolability(V)
+    out: dict[str, object] = {
+        "configuration": cfg.name,
+        "sensors": list(cfg.sensor_names),
+        "H": cfg.H.tolist(),
+        "V": V.tolist(),
+        "detectable": iso["detectable"],
+        "isolable_pairs": [
+            {"pair": [i + 1, j + 1], "isolable": ok, "cos": float(iso["pair_cos"][i, j])}
+            for (i, j), ok in zip(((i, j) for i in range(cfg.n) for j in range(i + 1, cfg.n)),
+                                  iso["isolable_pairs"], strict=True)],
+        "can_isolate": iso["can_isolate"],
+    }
+    if args.misalignment:
+        cal = load_calibration(args.misalignment)
+        Ht = cal.gyro.H
+        if Ht.shape != cfg.H.shape:
+            from fdi.errors import ConfigError
+            raise ConfigError(f"{args.misalignment}: {Ht.shape[0]} gyros, configuration "
+                              f"{cfg.name} has {cfg.n}")
+        out["H_calibrated"] = Ht.tolist()
+        out["V_calibrated"] = parity_matrix(Ht).tolist()
+    if args.json:
+        print(json.dumps(out, indent=1))
+        return 0
+    np.set_printoptions(precision=5, suppress=True, linewidth=100)
+    print(f"configuration {cfg.name}: {cfg.n} sensors, {V.shape[0]} parity equation(s)")
+    print("H =\n" + str(cfg.H))
+    print("V =\n" + str(V))
+    if "V_calibrated" in out:
+        print("V_c =\n" + str(np.array(out["V_calibrated"])))
+    bad = [p["pair"] for p in out["isolable_pairs"] if not p["isolable"]]
+    print("isolation: " + ("every pair isolable" if not bad else
+                           f"{len(bad)} pair(s) cannot be told apart: {bad}"))
+    return 0

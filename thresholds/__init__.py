@@ -1,0 +1,3 @@
+"""rimu.thresholds"""
+
+__all__: list[str] = []
