@@ -20,9 +20,9 @@ from fdi.errors import ConfigError, FileFormatError
 
 __all__ = [
     "COLLINEAR_COS",
+    "NAMED_CONFIGURATIONS",
     "CollinearSensorsWarning",
     "Configuration",
-    "NAMED_CONFIGURATIONS",
     "cone6",
     "load_configuration",
     "tetrad",

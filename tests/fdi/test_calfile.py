@@ -1,0 +1,94 @@
+"""The rimu.calibration/1 file: round trip and precise errors."""
+
+import json
+
+import numpy as np
+import pytest
+
+from fdi.calfile import (
+    AllanTable,
+    Calibration,
+    SensorCal,
+    SensorSet,
+    load_calibration,
+    misalignment_angles,
+)
+from fdi.errors import FileFormatError
+from fdi.geometry import tetrad
+from fdi.units import DPS, scale_factor_to_si
+
+
+def _cal() -> Calibration:
+    rng = np.random.default_rng(1)
+    H = tetrad().H
+    sensors = []
+    for i, h0 in enumerate(H):
+        h = h0 + rng.normal(0, 1e-3, 3)
+        h /= np.linalg.norm(h)
+        sensors.append(SensorCal(
+            name=f"g{i + 1}", axis=h, axis_nominal=h0,
+            scale_factor=scale_factor_to_si(26.0 + i, "mV/(deg/s)"), scale_factor_sd=1e-9,
+            bias=0.002 * DPS, bias_sd=1e-6, input_error_cov=np.eye(3) * 1e-8,
+            misalignment_sd=np.array([1e-5, 2e-5]), raw_unit="mV",
+            scale_factor_unit="mV/(deg/s)", bias_unit="deg/s", residual_rms=1e-4))
+    gyro = SensorSet("gyro", tuple(sensors), np.eye(4) * 1e-8, ((0, 1, 2), (3,)),
+                     (np.eye(3), H[3:4]), AllanTable(np.array([0.01, 0.02]), np.ones((2, 4))))
+    return Calibration("tetrad", {"gyro": gyro}, 100.0, earth_rate_dph=15.1,
+                       earth_rate_dph_sd=0.2, latitude_deg=-23.2, extra={"steps": [1, 2]})
+
+
+def test_round_trip(tmp_path):
+    cal = _cal()
+    p = tmp_path / "cal.json"
+    cal.save(p)
+    back = load_calibration(p)
+    for a, b in zip(cal.gyro.sensors, back.gyro.sensors, strict=True):
+        np.testing.assert_allclose(b.axis, a.axis, rtol=1e-12, err_msg=a.name + " axis")
+        assert b.scale_factor == pytest.approx(a.scale_factor, rel=1e-12), a.name
+        assert b.scale_factor_sd == pytest.approx(a.scale_factor_sd, rel=1e-9), a.name
+        assert b.bias == pytest.approx(a.bias, rel=1e-12), a.name
+        np.testing.assert_allclose(b.misalignment_sd, a.misalignment_sd, rtol=1e-12)
+    np.testing.assert_allclose(back.gyro.noise_covariance, cal.gyro.noise_covariance)
+    np.testing.assert_allclose(back.gyro.allan.adev, cal.gyro.allan.adev)
+    assert back.earth_rate_dph == 15.1 and back.latitude_deg == -23.2
+    doc = json.loads(p.read_text())
+    assert doc["schema"] == "rimu.calibration/1"
+    for key in ("name", "axis", "axis_nominal", "misalignment_mrad", "misalignment_mrad_sd",
+                "scale_factor", "scale_factor_sd", "scale_factor_unit", "bias", "bias_sd",
+                "bias_unit"):
+        assert key in doc["sensors"]["gyro"][0], key
+    assert set(doc["parity"]) == {"nominal", "calibrated"}
+    np.testing.assert_allclose(doc["sensors"]["gyro"][0]["scale_factor"], 26.0)
+
+
+def test_misalignment_angles_small_rotation():
+    h0 = np.array([0.0, 0.0, 1.0])
+    h = np.array([1e-3, -2e-3, 1.0])
+    ang = misalignment_angles(h0, h)
+    np.testing.assert_allclose(np.sort(np.abs(ang)), [1e-3, 2e-3], rtol=1e-5)
+
+
+@pytest.mark.parametrize(("mutate", "field"), [
+    (lambda d: d.update(schema="rimu.calibration/9"), "schema"),
+    (lambda d: d.pop("sample_rate_hz"), "sample_rate_hz"),
+    (lambda d: d["sensors"]["gyro"][1].update(scale_factor_unit="mV/(furlong/s)"),
+     "sensors.gyro[2].scale_factor_unit"),
+    (lambda d: d["sensors"]["gyro"][2].update(bias="x"), "sensors.gyro[3].bias"),
+    (lambda d: d["sensors"]["gyro"][0].update(axis=[1, 0]), "sensors.gyro[1].axis"),
+    (lambda d: d["noise_covariance"].update(gyro=[[1.0]]), "noise_covariance.gyro"),
+])
+def test_bad_fields_are_named(tmp_path, mutate, field):
+    doc = _cal().to_dict()
+    mutate(doc)
+    p = tmp_path / "bad.json"
+    p.write_text(json.dumps(doc))
+    with pytest.raises(FileFormatError) as err:
+        load_calibration(p)
+    assert field in str(err.value) and str(p) in str(err.value)
+
+
+def test_not_json(tmp_path):
+    p = tmp_path / "bad.json"
+    p.write_text("{\n  nope")
+    with pytest.raises(FileFormatError, match=r"bad.json:2: not valid JSON"):
+        load_calibration(p)
