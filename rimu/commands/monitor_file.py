@@ -1,0 +1,56 @@
+"""``rimu monitor-file DIR``: run the monitor over a flight directory and report."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from fdi.calfile import load_calibration
+from fdi.errors import ConfigError
+from replay.flight import load_flight_dir
+from replay.report import build_report, format_report
+
+HELP = "run the monitor over a flight sample directory; print events and a summary"
+
+
+def configure(p: argparse.ArgumentParser) -> None:
+    p.add_argument("flight", metavar="DIR", help="flight directory (rimu.flight/1)")
+    p.add_argument("--cal", required=True, metavar="FILE", help="calibration file")
+    p.add_argument("--false-alarms-per-hour", type=float, default=1e-3, metavar="X",
+                   help="false-alarm budget for computed thresholds (default 1e-3)")
+    p.add_argument("--thresholds", metavar="FILE",
+                   help="a rimu.thresholds/1 file (default: computed from the calibration)")
+    p.add_argument("--report", metavar="FILE", help="write the rimu.report/1 JSON here")
+    p.add_argument("--max-events", type=int, default=50, help="events to print (default 50)")
+
+
+def run(args: argparse.Namespace) -> int:
+    from fdi.monitor import Monitor
+    from fdi.settings import load_thresholds
+
+    cal = load_calibration(args.cal)
+    flight = load_flight_dir(args.flight)
+    if cal.kind(flight.kind).n != flight.n:
+        raise ConfigError(f"{args.flight}: {flight.n} sensors, calibration {args.cal} has "
+                          f"{cal.kind(flight.kind).n} {flight.kind} sensors")
+    if args.thresholds:
+        thr = load_thresholds(args.thresholds)
+        how = {"thresholds_file": str(args.thresholds)}
+    else:
+        if not args.false_alarms_per_hour > 0:
+            raise ConfigError(f"--false-alarms-per-hour must be positive, "
+                              f"got {args.false_alarms_per_hour}")
+        from thresholds import compute_thresholds
+        thr = compute_thresholds(cal, false_alarms_per_hour=args.false_alarms_per_hour,
+                                 kind=flight.kind)
+        how = {"false_alarms_per_hour": args.false_alarms_per_hour}
+    mon = Monitor(cal, thr, kind=flight.kind)
+    result = mon.run(flight.t, flight.raw, flight.valid)
+    report = build_report(result, flight, cal, extra={"thresholds": how})
+    print(format_report(report, max_events=args.max_events))
+    if args.report:
+        Path(args.report).write_text(json.dumps(report, indent=1, allow_nan=False) + "\n",
+                                     encoding="utf-8")
+        print(f"wrote {args.report}")
+    return 0
