@@ -48,6 +48,12 @@ MOUNTS: dict[str, np.ndarray] = {
                               [1.0, 0.0, 0.0]]),
     # Body axes aligned with the plate: X East, Y North (inner axis), Z Up (outer axis).
     "level": np.eye(3),
+    # Body X along the inner axis (North at a_o = 0), body Z Up, body Y = Z × X (West).
+    # Seed 001's table: "z-axis of the MB frame aligned with the table axis, x-axis with
+    # the tilt axis".
+    "x_inner_z_up": np.array([[0.0, -1.0, 0.0],
+                              [1.0, 0.0, 0.0],
+                              [0.0, 0.0, 1.0]]),
 }
 """Named mountings ``mat_pb`` (body axes as columns, in plate coordinates)."""
 

@@ -1,0 +1,1 @@
+"""Test sequences shipped with rimu (TOML data files, see :mod:`calibration.sequence`)."""
