@@ -1,0 +1,150 @@
+"""What the monitor answers: one :class:`Answer` per sample, a :class:`BlockResult` per block.
+
+Both are frozen results. Sensors are numbered from 1 in events and from 0 in arrays.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+__all__ = ["CAPABILITIES", "EVENT_TYPES", "STATUSES", "Answer", "BlockResult", "Event"]
+
+EVENT_TYPES = ("detected", "isolated", "health", "readmitted")
+"""Kinds of :class:`Event`."""
+
+CAPABILITIES = ("isolate", "detect", "reconstruct", "none")
+"""What the monitor can still do with its healthy sensors (best first)."""
+
+STATUSES = ("ok", "detected", "isolated", "stale", "nonfinite", "range", "stuck", "length")
+"""Per-sensor status strings: ``"ok"``; ``"detected"`` (a fault is detected in the healthy
+set and not yet attributed); ``"isolated"`` (by the parity test); or the health check that
+isolated it."""
+
+
+def _num(x: float | None) -> float | None:
+    if x is None:
+        return None
+    x = float(x)
+    return x if math.isfinite(x) else None
+
+
+@dataclass(frozen=True)
+class Event:
+    """A fault event.
+
+    Attributes
+    ----------
+    t : float
+        Time of the sample that caused it (s).
+    sensor : int or None
+        1-based sensor, None for a detection not attributed to a sensor.
+    type : str
+        ``"detected"``, ``"isolated"``, ``"health"`` or ``"readmitted"``.
+    reason : str
+        ``"parity scale 8"`` (window of 8 samples), ``"cusum"``, ``"stuck"``,
+        ``"nonfinite"``, ``"stale"``, ``"range"``, ``"length"``, ...
+    statistic, threshold : float
+        The test statistic and the threshold it crossed (NaN for health events without one).
+    scale : int or None
+        Window length in samples of the scale that fired.
+    magnitude : float or None
+        Estimated fault size (SI input units: rad/s for gyros), where estimable.
+    """
+
+    t: float
+    sensor: int | None
+    type: str
+    reason: str
+    statistic: float = float("nan")
+    threshold: float = float("nan")
+    scale: int | None = None
+    magnitude: float | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready dictionary (non-finite numbers become None)."""
+        return {"t": float(self.t), "sensor": self.sensor, "type": self.type,
+                "reason": self.reason, "statistic": _num(self.statistic),
+                "threshold": _num(self.threshold), "scale": self.scale,
+                "magnitude": _num(self.magnitude)}
+
+
+@dataclass(frozen=True)
+class Answer:
+    """The monitor's answer to one sample.
+
+    Attributes
+    ----------
+    t : float
+        Sample time (s).
+    omega : ndarray, shape (3,)
+        Reconstructed body rate (SI: rad/s for gyros), weighted least squares from the
+        healthy sensors that delivered this sample. NaN when fewer than 3 independent remain.
+    omega_sd : ndarray, shape (3,)
+        Standard deviation per axis of ``omega`` (white noise, from G Σ Gᵀ).
+    healthy : ndarray of bool, shape (n,)
+    status : tuple of str
+        One of :data:`STATUSES` per sensor.
+    parity : ndarray, shape (n - 3,)
+        Parity vector V·y of the healthy set (first m − 3 entries), NaN-padded.
+    statistics : ndarray, shape (K,)
+        Whitened detection statistic per scale (window of 1, 2, 4, ... samples); NaN while a
+        window is not yet full or the sample is incomplete.
+    thresholds : ndarray, shape (K,)
+        Threshold per scale for this sample (grows with the rate: calibration uncertainty).
+    events : tuple of Event
+    capability : str
+        ``"isolate"``, ``"detect"``, ``"reconstruct"`` or ``"none"``.
+    protection_level : float
+        Largest rate error (rad/s, vector norm) that a not yet detected fault on one
+        sensor could cause, at the stated missed-detection probability (inf without
+        detection capability).
+    """
+
+    t: float
+    omega: np.ndarray
+    omega_sd: np.ndarray
+    healthy: np.ndarray
+    status: tuple[str, ...]
+    parity: np.ndarray
+    statistics: np.ndarray
+    thresholds: np.ndarray
+    events: tuple[Event, ...]
+    capability: str
+    protection_level: float
+
+
+@dataclass(frozen=True)
+class BlockResult:
+    """The answers to a block of N samples (the block path :meth:`fdi.monitor.Monitor.run`).
+
+    Attributes
+    ----------
+    t : ndarray, shape (N,)
+    omega, omega_sd : ndarray, shape (N, 3)
+    healthy : ndarray of bool, shape (N, n)
+    statistics, thresholds : ndarray, shape (N, K)
+    protection_level : ndarray, shape (N,)
+    capability : ndarray of str, shape (N,)
+    events : list of Event
+        In time order.
+    parity : ndarray, shape (N, n - 3)
+        Parity vectors (NaN-padded), as in :class:`Answer`.
+    """
+
+    t: np.ndarray
+    omega: np.ndarray
+    omega_sd: np.ndarray
+    healthy: np.ndarray
+    statistics: np.ndarray
+    thresholds: np.ndarray
+    protection_level: np.ndarray
+    capability: np.ndarray
+    events: list[Event] = field(default_factory=list)
+    parity: np.ndarray | None = None
+
+    def __len__(self) -> int:
+        return int(self.t.shape[0])

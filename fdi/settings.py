@@ -1,0 +1,275 @@
+"""Settings of the monitor: detection thresholds (a file) and behaviour (persistence, health).
+
+:class:`Thresholds` is what ``thresholds.compute_thresholds`` produces and
+``rimu.thresholds/1`` files hold; :class:`MonitorSettings` is the rest of the monitor's
+behaviour (persistence, hysteresis, re-admission, health limits).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from fdi.errors import ConfigError, FileFormatError
+
+__all__ = [
+    "DETECTORS",
+    "THRESHOLDS_SCHEMA",
+    "MonitorSettings",
+    "Thresholds",
+    "load_thresholds",
+    "thresholds_from_dict",
+]
+
+THRESHOLDS_SCHEMA = "rimu.thresholds/1"
+DETECTORS = ("windows", "cusum", "both")
+
+
+@dataclass(frozen=True)
+class Thresholds:
+    """Detection thresholds for one sensor set.
+
+    The monitor tests the whitened statistic of the running mean of the parity vector over
+    windows of ``scales[k]`` samples::
+
+        D_k = w/f_k · p̄ᵀ (VΣVᵀ)⁻¹ p̄      ~ χ²(m − 3) for healthy white noise
+
+    against ``chi2.isf(alpha[k], m − 3)`` (m healthy sensors), times the inflation for the
+    calibration uncertainty at the current rate.
+
+    Attributes
+    ----------
+    kind : str
+        ``"gyro"`` or ``"accel"``.
+    n : int
+        Number of sensors.
+    sample_rate_hz : float
+    false_alarms_per_hour : float
+        The false-alarm budget these thresholds were made for.
+    scales : tuple of int
+        Window lengths in samples (1, 2, 4, ..., 2^K).
+    alpha : tuple of float
+        Per-sample false-alarm probability of each scale (Bonferroni split of the budget).
+    variance_factor : tuple of float
+        f_k ≥ 1: variance of the window mean relative to white noise (σ²/w), from the
+        Allan variance of the calibration residuals at τ = w/fs.
+    threshold : tuple of float
+        Threshold on D_k for the full set (m = n), for reference; the monitor recomputes it
+        for each set of healthy sensors from ``alpha``.
+    cusum_drift : float
+        Allowance ν of the CUSUM on the whitened per-sensor projections (units of σ).
+    cusum_threshold : float
+        CUSUM decision threshold h for the full set (reference; recomputed per set).
+    missed_detection : float
+        Missed-detection probability of the protection level.
+    notes : str
+        How the numbers were obtained.
+    """
+
+    kind: str
+    n: int
+    sample_rate_hz: float
+    false_alarms_per_hour: float
+    scales: tuple[int, ...]
+    alpha: tuple[float, ...]
+    variance_factor: tuple[float, ...]
+    threshold: tuple[float, ...]
+    cusum_drift: float = 0.5
+    cusum_threshold: float = float("nan")
+    missed_detection: float = 1e-3
+    notes: str = ""
+    schema: str = THRESHOLDS_SCHEMA
+
+    def __post_init__(self) -> None:
+        k = len(self.scales)
+        if k == 0:
+            raise ConfigError("thresholds: need at least one scale")
+        for name in ("alpha", "variance_factor", "threshold"):
+            if len(getattr(self, name)) != k:
+                raise ConfigError(f"thresholds: {name} has {len(getattr(self, name))} "
+                                  f"entries for {k} scales")
+        if any(int(s) < 1 for s in self.scales):
+            raise ConfigError("thresholds: scales must be positive window lengths")
+        if any(not (0.0 < a < 1.0) for a in self.alpha):
+            raise ConfigError("thresholds: alpha must lie in (0, 1)")
+        if any(not (f > 0.0 and math.isfinite(f)) for f in self.variance_factor):
+            raise ConfigError("thresholds: variance_factor must be positive and finite")
+
+    @property
+    def K(self) -> int:
+        """Number of scales."""
+        return len(self.scales)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready dictionary in the ``rimu.thresholds/1`` layout."""
+        return {"schema": self.schema, "kind": self.kind, "n": self.n,
+                "sample_rate_hz": self.sample_rate_hz,
+                "false_alarms_per_hour": self.false_alarms_per_hour,
+                "scales": list(self.scales), "alpha": list(self.alpha),
+                "variance_factor": list(self.variance_factor),
+                "threshold": list(self.threshold), "cusum_drift": self.cusum_drift,
+                "cusum_threshold": (None if not math.isfinite(self.cusum_threshold)
+                                    else self.cusum_threshold),
+                "missed_detection": self.missed_detection, "notes": self.notes}
+
+    def save(self, path: str | Path) -> None:
+        """Write as JSON."""
+        Path(path).write_text(json.dumps(self.to_dict(), indent=1) + "\n", encoding="utf-8")
+
+
+def load_thresholds(path: str | Path) -> Thresholds:
+    """Read and validate a ``rimu.thresholds/1`` file.
+
+    Raises
+    ------
+    FileFormatError
+        Missing file, bad JSON, wrong schema/version or a bad field (named in the message).
+    """
+    p = str(path)
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except OSError as exc:
+        raise FileFormatError(p, f"cannot read ({exc.strerror})") from None
+    try:
+        doc = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise FileFormatError(p, f"not valid JSON ({exc.msg})", line=exc.lineno) from None
+    return thresholds_from_dict(doc, p)
+
+
+def thresholds_from_dict(doc: Any, path: str = "<thresholds>") -> Thresholds:
+    """Build :class:`Thresholds` from its JSON dictionary (see :func:`load_thresholds`)."""
+    if not isinstance(doc, dict):
+        raise FileFormatError(path, "expected a JSON object")
+    schema = doc.get("schema")
+    if not isinstance(schema, str) or not schema.startswith("rimu.thresholds/"):
+        raise FileFormatError(path, f"expected '{THRESHOLDS_SCHEMA}', got {schema!r}",
+                              field="schema")
+    if schema != THRESHOLDS_SCHEMA:
+        raise FileFormatError(path, f"unsupported version {schema!r}; this rimu reads "
+                              f"'{THRESHOLDS_SCHEMA}'", field="schema")
+
+    def num(key: str, *, positive: bool = False, default: Any = ...) -> float:
+        if key not in doc:
+            if default is not ...:
+                return default
+            raise FileFormatError(path, "missing", field=key)
+        v = doc[key]
+        if v is None and default is not ...:
+            return default
+        if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
+            raise FileFormatError(path, f"expected a finite number, got {v!r}", field=key)
+        if positive and v <= 0:
+            raise FileFormatError(path, f"expected a positive number, got {v!r}", field=key)
+        return float(v)
+
+    def nums(key: str) -> tuple[float, ...]:
+        v = doc.get(key)
+        if not isinstance(v, list) or not v:
+            raise FileFormatError(path, "expected a non-empty list of numbers", field=key)
+        out = []
+        for j, x in enumerate(v):
+            if isinstance(x, bool) or not isinstance(x, int | float) or not math.isfinite(x):
+                raise FileFormatError(path, f"expected a finite number, got {x!r}",
+                                      field=f"{key}[{j + 1}]")
+            out.append(float(x))
+        return tuple(out)
+
+    kind = doc.get("kind")
+    if kind not in ("gyro", "accel"):
+        raise FileFormatError(path, f"expected 'gyro' or 'accel', got {kind!r}", field="kind")
+    scales = nums("scales")
+    if any(s < 1 or s != int(s) for s in scales):
+        raise FileFormatError(path, "expected positive integers", field="scales")
+    k = len(scales)
+    for key in ("alpha", "variance_factor", "threshold"):
+        if len(nums(key)) != k:
+            raise FileFormatError(path, f"expected {k} entries (one per scale)", field=key)
+    alpha = nums("alpha")
+    if any(not 0 < a < 1 for a in alpha):
+        raise FileFormatError(path, "expected probabilities in (0, 1)", field="alpha")
+    vf = nums("variance_factor")
+    if any(f <= 0 for f in vf):
+        raise FileFormatError(path, "expected positive factors", field="variance_factor")
+    n = num("n", positive=True)
+    if n != int(n):
+        raise FileFormatError(path, "expected an integer", field="n")
+    md = num("missed_detection", positive=True, default=1e-3)
+    if md >= 1:
+        raise FileFormatError(path, "expected a probability in (0, 1)", field="missed_detection")
+    return Thresholds(
+        kind=str(kind), n=int(n), sample_rate_hz=num("sample_rate_hz", positive=True),
+        false_alarms_per_hour=num("false_alarms_per_hour", positive=True),
+        scales=tuple(int(s) for s in scales), alpha=alpha, variance_factor=vf,
+        threshold=nums("threshold"), cusum_drift=num("cusum_drift", positive=True, default=0.5),
+        cusum_threshold=num("cusum_threshold", default=float("nan")),
+        missed_detection=md, notes=str(doc.get("notes", "")))
+
+
+@dataclass(frozen=True)
+class MonitorSettings:
+    """Behaviour of :class:`fdi.monitor.Monitor` beyond the thresholds.
+
+    Attributes
+    ----------
+    persistence : int
+        Consecutive samples over threshold (counted from the detection) before a fault is
+        confirmed and the sensor isolated.
+    clear_ratio : float
+        Hysteresis: a detection clears only when every statistic is below
+        ``clear_ratio × threshold`` ...
+    clear_samples : int
+        ... for this many consecutive samples.
+    detector : str
+        ``"windows"`` (dyadic running means), ``"cusum"`` or ``"both"``.
+    readmission : bool
+        Re-admit an isolated sensor after it behaved for ``readmit_dwell_s``. Off by
+        default: isolated sensors stay isolated.
+    readmit_dwell_s : float
+        Minimum time (s) of good behaviour before re-admission.
+    stale_timeout_s : float
+        A sensor without a valid sample for longer than this is isolated ("stale").
+    stuck_count : int
+        This many identical consecutive raw values isolate a sensor ("stuck"; PX4: 100).
+    raw_range : tuple of float or None
+        (low, high) raw limits; a raw value at or beyond them isolates ("range").
+    max_input : float or None
+        |compensated value| (SI) at or above which a sensor is at its range limit; None
+        takes 35 rad/s (2000 °/s) for gyros and 160 m/s² (16 g) for accelerometers.
+    missed_detection : float or None
+        Missed-detection probability for the protection level; None takes the thresholds'.
+    """
+
+    persistence: int = 3
+    clear_ratio: float = 0.5
+    clear_samples: int = 100
+    detector: str = "windows"
+    readmission: bool = False
+    readmit_dwell_s: float = 10.0
+    stale_timeout_s: float = 0.1
+    stuck_count: int = 100
+    raw_range: tuple[float, float] | None = None
+    max_input: float | None = None
+    missed_detection: float | None = None
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if int(self.persistence) < 1:
+            raise ConfigError("persistence must be >= 1 sample")
+        if not 0.0 < self.clear_ratio <= 1.0:
+            raise ConfigError("clear_ratio must lie in (0, 1]")
+        if int(self.clear_samples) < 1:
+            raise ConfigError("clear_samples must be >= 1")
+        if self.detector not in DETECTORS:
+            raise ConfigError(f"detector must be one of {DETECTORS}, got {self.detector!r}")
+        if not self.stale_timeout_s > 0:
+            raise ConfigError("stale_timeout_s must be positive")
+        if int(self.stuck_count) < 2:
+            raise ConfigError("stuck_count must be >= 2")
+        if self.readmit_dwell_s < 0:
+            raise ConfigError("readmit_dwell_s must be >= 0")
+        if self.raw_range is not None and not self.raw_range[0] < self.raw_range[1]:
+            raise ConfigError("raw_range must be (low, high) with low < high")
