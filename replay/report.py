@@ -22,9 +22,11 @@ Definitions:
   injected fault, or on a sensor that has no fault begun by then. Without truth (a recorded
   flight without sidecar) ``false_alarms`` is None: it cannot be known.
 - A fault's *detection* is the first ``detected``/``isolated``/``health`` event at or after
-  its onset that names its sensor or no sensor; the delay is event time − onset (0: caught
-  in the onset sample). Its *isolation* is the first ``isolated``/``health`` event at or
-  after the onset; it is correct when it names the faulted sensor.
+  its onset that does not name the sensor of another injected fault (a wrong isolation of a
+  healthy sensor still shows the fault was noticed, and counts as a false alarm too); the
+  delay is event time − onset (0: caught in the onset sample). Its *isolation* is the
+  first ``isolated``/``health`` event at or after the onset; it is correct when it names
+  the faulted sensor.
 - ``rate_error_rms_dps`` is the RMS over samples and axes of ω̂ − ω_true (°/s), over the
   samples where ω̂ is finite; ``rate_available_fraction`` the share of such samples.
 """
@@ -77,9 +79,11 @@ def _is_false_alarm(ev: Mapping[str, Any], faults: Sequence[Any]) -> bool:
     return s is not None and s not in {f.sensor for f in begun}
 
 
-def _fault_outcome(f: Any, events: Sequence[Mapping[str, Any]], fs: float) -> dict[str, Any]:
+def _fault_outcome(f: Any, events: Sequence[Mapping[str, Any]], fs: float,
+                   faults: Sequence[Any]) -> dict[str, Any]:
+    others = {g.sensor for g in faults if g.sensor != f.sensor}
     det = next((e for e in events if e["type"] in ALARM_TYPES and e["t"] >= f.onset - _EPS
-                and (e.get("sensor") is None or e.get("sensor") == f.sensor)), None)
+                and e.get("sensor") not in others), None)
     iso = next((e for e in events if e["type"] in _ISOLATING and e["t"] >= f.onset - _EPS),
                None)
     d = None if det is None else max(0.0, det["t"] - f.onset)
@@ -127,7 +131,7 @@ def build_report(result: Any, flight: Flight, cal: Calibration, *,
     faults = list(flight.faults)
     for e in events:
         e["false_alarm"] = _is_false_alarm(e, faults) if truth else None
-    outcomes = [_fault_outcome(f, events, fs) for f in faults] if truth else []
+    outcomes = [_fault_outcome(f, events, fs, faults) for f in faults] if truth else []
 
     healthy = np.asarray(result.healthy, bool)
     isolated = sorted({int(e["sensor"]) for e in events
