@@ -1,0 +1,491 @@
+"""CAN logs of flights: write them with python-can's writers, read them back with its readers.
+
+Writing (:func:`write_flight_log`): each sample of a :class:`~replay.flight.Flight` becomes
+one frame per sensor of the shipped DBC (:mod:`replay.frames`: raw float32, sample counter,
+status, rolling counter, CRC-8 SAE J1850), encoded by cantools and written by
+``can.Logger(path)`` (the suffix picks ``.asc``, ``.blf``, ``.log``, ``.csv``, ``.trc``).
+Timestamps are realistic epoch times (BLF loses precision for small ones): sample k's
+frames go out at ``t0_epoch_s + t_k + i·frame_gap_s + U(0, jitter_s)`` for sensor i = 0..n-1
+(the first sensor without jitter: it transmits at the sampling instant). A sensor without a
+sample (``valid`` False) sends no frame.
+
+The truth sidecar is ``<log>.truth.json`` (``rimu.flight-truth/1``, written by
+:func:`replay.flight.write_truth_sidecar`, true rates in ``<log>.truth_rates.npy``) with an
+extra ``"can_log"`` record: ``{"file", "format", "dbc", "t0_epoch_s", "t_start_s",
+"frame_gap_s", "jitter_s", "frames"}``.
+
+Reading (:func:`read_frames`, :func:`read_log`): python-can's reader for the suffix, once
+over the file, gathering (timestamp, id, payload) for the vectorised decoder
+(:mod:`replay.assemble`). What python-can does with damaged files, measured on 4.6.1:
+
+- ``.log`` (candump): a line it cannot parse raises ``ValueError`` and ends its generator;
+  rimu counts the line as a ``garbage_line`` and resumes with the next line.
+- ``.asc``: lines that do not look like frames are skipped silently; rimu tracks the lines
+  between frames and counts those that are not header, comment or known event lines as
+  ``garbage_line``; a frame line that raises is a ``garbage_line`` too and reading resumes.
+- binary formats (``.blf``) cannot resume: the error (where, why) is reported, the frames
+  read so far are kept.
+
+Flight time of a decoded sample is its earliest frame's timestamp minus the log's first
+frame timestamp, plus the sidecar's ``t_start_s`` when there is one (0 otherwise).
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Iterator
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import can
+import numpy as np
+
+from fdi.calfile import Calibration
+from fdi.errors import ConfigError, FileFormatError, ReplayError
+from replay.accounting import FrameAccounting
+from replay.assemble import (
+    FRAME_DATA,
+    FRAME_ERROR,
+    FRAME_REMOTE,
+    RawFrames,
+    Samples,
+    decode_frames,
+)
+from replay.channel_map import (
+    ChannelMap,
+    check_against_calibration,
+    default_channel_map,
+    load_channel_map,
+)
+from replay.frames import encode_imu_frames, imu_message_name, load_dbc
+
+__all__ = [
+    "CORRUPTION_REASONS",
+    "DEFAULT_T0_EPOCH_S",
+    "LOG_SUFFIXES",
+    "read_frames",
+    "read_log",
+    "resolve_map",
+    "samples_to_flight",
+    "truth_path",
+    "write_flight_log",
+]
+
+LOG_SUFFIXES = (".asc", ".blf", ".log", ".csv", ".trc")
+"""CAN log suffixes rimu writes through python-can."""
+DEFAULT_T0_EPOCH_S = 1_767_225_600.0
+"""2026-01-01T00:00:00Z: the epoch time of a simulated log's first sample."""
+CORRUPTION_REASONS = frozenset({"wrong_length", "crc", "counter_repeat", "counter_jump",
+                                "out_of_order", "duplicate", "garbage_line",
+                                "nonfinite_time"})
+"""Rejection reasons that make a ``strict`` replay fail."""
+_MAX_ERRORS = 50
+
+
+def truth_path(log: str | Path) -> Path:
+    """The truth sidecar of a log: ``<log>.truth.json``."""
+    return Path(str(log) + ".truth.json")
+
+
+def _suffix(path: Path) -> str:
+    sfx = path.suffixes
+    if sfx and sfx[-1].lower() == ".gz" and len(sfx) > 1:
+        return sfx[-2].lower()
+    return path.suffix.lower()
+
+
+# -- writing -----------------------------------------------------------------------------
+def write_flight_log(flight: Any, path: str | Path, *, dbc: str | Path | None = None,
+                     t0_epoch_s: float = DEFAULT_T0_EPOCH_S, frame_gap_s: float = 130e-6,
+                     jitter_s: float = 60e-6, seed: int = 0, channel: int = 0) -> None:
+    """Write a flight as a CAN log (python-can writer picked by suffix) + truth sidecar.
+
+    Parameters
+    ----------
+    flight : replay.flight.Flight
+    path : str or Path
+        ``.asc``, ``.blf``, ``.log`` (candump), ``.csv`` or ``.trc``.
+    dbc : path, optional
+        A DBC with the shipped DBC's ``RIMU_<KIND>_ii`` messages (default: the shipped one).
+    t0_epoch_s : float
+        Epoch time of ``t = 0``.
+    frame_gap_s, jitter_s : float
+        Sensor i's frame leaves ``i·frame_gap_s + U(0, jitter_s)`` after the sampling
+        instant (sensor 1: no jitter). ``n·frame_gap_s + jitter_s`` must stay under one period.
+    seed : int
+        Seed of the jitter.
+    channel : int
+
+    Raises
+    ------
+    ConfigError
+        Unknown suffix, more sensors than the DBC carries, frames that would overlap.
+    """
+    p = Path(path)
+    if _suffix(p) not in LOG_SUFFIXES:
+        raise ConfigError(f"{p}: unknown CAN log suffix; expected one of "
+                          f"{', '.join(LOG_SUFFIXES)}")
+    db = load_dbc(dbc)
+    N, n = flight.raw.shape
+    fs = float(flight.sample_rate_hz)
+    if n * frame_gap_s + jitter_s >= 1.0 / fs:
+        raise ConfigError(f"{n} frames of {frame_gap_s * 1e6:.0f} µs do not fit in one "
+                          f"{1e3 / fs:.2f} ms sample period")
+    kind = getattr(flight, "kind", "gyro")
+    rng = np.random.default_rng([seed, 7])
+    valid = np.asarray(flight.valid, bool)
+    t = np.asarray(flight.t, float)
+    times, ids, payloads = [], [], []
+    for i in range(n):
+        msg = db.get_message_by_name(imu_message_name(kind, i + 1))
+        k = np.flatnonzero(valid[:, i])
+        jit = rng.uniform(0.0, jitter_s, k.size) if i > 0 else np.zeros(k.size)
+        times.append(t0_epoch_s + t[k] + i * frame_gap_s + jit)
+        ids.append(np.full(k.size, msg.frame_id, np.int64))
+        payloads.extend(encode_imu_frames(msg, flight.raw[k, i], k, np.arange(k.size)))
+    ts = np.concatenate(times)
+    fid = np.concatenate(ids)
+    order = np.argsort(ts, kind="stable")
+    p.parent.mkdir(parents=True, exist_ok=True)
+    with can.Logger(str(p)) as writer:
+        for j in order.tolist():
+            writer.on_message_received(can.Message(
+                timestamp=float(ts[j]), arbitration_id=int(fid[j]), is_extended_id=False,
+                data=payloads[j], channel=channel, dlc=8))
+    from replay.flight import write_truth_sidecar
+
+    truth = dict(flight.truth)
+    truth["can_log"] = {"file": p.name, "format": _suffix(p),
+                        "dbc": "rimu_imu.dbc" if dbc is None else str(dbc),
+                        "t0_epoch_s": t0_epoch_s, "t_start_s": float(t[0]) if N else 0.0,
+                        "frame_gap_s": frame_gap_s, "jitter_s": jitter_s,
+                        "frames": int(ts.size)}
+    write_truth_sidecar(replace(flight, truth=truth), truth_path(p))
+
+
+# -- reading raw frames --------------------------------------------------------------------
+class _Lines:
+    """A text file's line iterator that counts lines and keeps the ones since a mark."""
+
+    def __init__(self, f: Any) -> None:
+        self._f = f
+        self.lineno = 0
+        self.last = ""
+        self.pending: list[str] | None = []
+
+    def __iter__(self) -> _Lines:
+        return self
+
+    def __next__(self) -> str:
+        line = next(self._f)
+        self.lineno += 1
+        self.last = line
+        if self.pending is not None:
+            self.pending.append(line)
+        return line
+
+    def readline(self) -> str:
+        try:
+            return next(self)
+        except StopIteration:
+            return ""
+
+    def close(self) -> None:
+        self._f.close()
+
+
+class _ResumableASCReader(can.ASCReader):
+    """python-can's ASCReader whose header is parsed once (so iteration can resume)."""
+
+    _header_done = False
+
+    def _extract_header(self) -> None:
+        if not self._header_done:
+            self._header_done = True
+            super()._extract_header()
+
+
+_ASC_NON_FRAME = re.compile(
+    r"^\s*($|//|date\s|base\s|(no\s+)?internal\s+events|begin\s+triggerblock|"
+    r"end\s+triggerblock|\d+(\.\d+)?\s+(start of measurement|can\s+\d+\s+status|"
+    r"\d+\s+statistic|statistic))", re.IGNORECASE)
+
+
+class _Gather:
+    """Collects frames from python-can messages (one pass, plain lists)."""
+
+    def __init__(self) -> None:
+        self.t: list[float] = []
+        self.arb: list[int] = []
+        self.ext: list[bool] = []
+        self.ch: list[Any] = []
+        self.data: list[bytes] = []
+        self.special: list[tuple[int, int]] = []
+
+    def frames(self) -> RawFrames:
+        M = len(self.t)
+        ft = np.zeros(M, np.int8)
+        for j, k in self.special:
+            ft[j] = k
+        ch = np.empty(M, dtype=object)
+        ch[:] = self.ch
+        uniq = set(self.ch)
+        if uniq:
+            norm = {c: _norm_channel(c) for c in uniq}
+            if any(norm[c] is not c for c in uniq):
+                ch[:] = [norm[c] for c in self.ch]
+        return RawFrames(t=np.array(self.t, dtype=float),
+                         arbitration_id=np.array(self.arb, dtype=np.int64),
+                         extended=np.array(self.ext, dtype=bool), channel=ch,
+                         data=self.data, frame_type=ft)
+
+
+_CH = re.compile(r"^v?can(\d+)$")
+
+
+def _norm_channel(c: Any) -> Any:
+    """``"can0"``, ``"vcan0"``, ``"0"`` → 0; anything else unchanged."""
+    if isinstance(c, str):
+        m = _CH.match(c)
+        if m:
+            return int(m.group(1))
+        if c.isdigit():
+            return int(c)
+    return c
+
+
+def _consume(it: Iterator[can.Message], g: _Gather, lines: _Lines | None,
+             acct: FrameAccounting, bar: Any) -> None:
+    t_app, a_app, e_app, c_app, d_app = (g.t.append, g.arb.append, g.ext.append,
+                                         g.ch.append, g.data.append)
+    track = lines is not None and lines.pending is not None
+    for msg in it:
+        if track:
+            pend = lines.pending
+            if len(pend) > 1:
+                first = lines.lineno - len(pend) + 1
+                for k, line in enumerate(pend[:-1]):
+                    if not _ASC_NON_FRAME.match(line):
+                        _garbage(acct, first + k, line,
+                                 "not a frame line (skipped by python-can)")
+            pend.clear()
+        if msg.is_error_frame or msg.is_remote_frame:
+            g.special.append((len(g.t), FRAME_ERROR if msg.is_error_frame else FRAME_REMOTE))
+        t_app(msg.timestamp)
+        a_app(msg.arbitration_id)
+        e_app(msg.is_extended_id)
+        c_app(msg.channel)
+        d_app(msg.data)
+        if bar is not None and not len(g.t) & 0xFFFF:
+            bar.update(0x10000)
+
+
+def _garbage(acct: FrameAccounting, lineno: int, line: str, why: str) -> None:
+    acct.read += 1
+    acct.reject("garbage_line")
+    if len(acct.errors) < _MAX_ERRORS:
+        acct.errors.append({"where": f"line {lineno}", "why": why,
+                            "text": line.strip()[:80], "kind": "garbage_line"})
+
+
+def read_frames(path: str | Path, *, strict: bool = False,
+                progress: bool = True) -> tuple[RawFrames, FrameAccounting]:
+    """Read every frame of a CAN log with python-can (see the module docstring).
+
+    Returns
+    -------
+    frames : RawFrames
+        The frames read (``acct.read`` does not include them yet: :func:`decode_frames`
+        counts them).
+    acct : FrameAccounting
+        Garbage lines (read and rejected) and reader errors so far.
+
+    Raises
+    ------
+    FileFormatError
+        The file cannot be opened or its suffix has no python-can reader.
+    ReplayError
+        ``strict`` and the reader failed or a line was garbage.
+    """
+    p = Path(path)
+    if not p.is_file():
+        raise FileFormatError(str(p), "no such file")
+    sfx = _suffix(p)
+    acct = FrameAccounting()
+    g = _Gather()
+    bar = None
+    if progress and p.stat().st_size > 20_000_000:
+        from tqdm import tqdm
+
+        bar = tqdm(desc=f"reading {p.name}", unit=" frames", unit_scale=True, leave=False)
+    try:
+        if sfx in (".log", ".asc") and not str(p).lower().endswith(".gz"):
+            _read_text(p, sfx, g, acct, strict)
+        else:
+            try:
+                reader = can.LogReader(str(p))
+            except (ValueError, NotImplementedError, ImportError) as exc:
+                raise FileFormatError(str(p), f"no CAN log reader for this file ({exc})") \
+                    from None
+            except Exception as exc:
+                _reader_error(acct, p, 0, exc, strict)
+                reader = None
+            if reader is not None:
+                try:
+                    _consume(iter(reader), g, None, acct, bar)
+                except Exception as exc:
+                    _reader_error(acct, p, len(g.t), exc, strict)
+                finally:
+                    try:
+                        reader.stop()
+                    except Exception:  # closing a broken file must not hide the report
+                        pass
+    finally:
+        if bar is not None:
+            bar.close()
+    return g.frames(), acct
+
+
+def _reader_error(acct: FrameAccounting, p: Path, nframes: int, exc: Exception,
+                  strict: bool) -> None:
+    where = f"after frame {nframes}"
+    why = f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__
+    if strict:
+        raise ReplayError(f"{p}: {where}: reader failed ({why})")
+    acct.errors.append({"where": where, "why": why, "kind": "reader_error"})
+
+
+def _read_text(p: Path, sfx: str, g: _Gather, acct: FrameAccounting, strict: bool) -> None:
+    with p.open("r", encoding="utf-8", errors="replace", newline=None) as f:
+        lines = _Lines(f)
+        if sfx == ".log":
+            reader = can.CanutilsLogReader(lines)
+            lines.pending = None  # candump: every non-blank line is a frame or raises
+        else:
+            reader = _ResumableASCReader(lines)
+        while True:
+            try:
+                _consume(iter(reader), g, lines if sfx == ".asc" else None, acct, None)
+                break
+            except Exception as exc:
+                line = lines.last
+                if strict:
+                    raise ReplayError(f"{p}:{lines.lineno}: unreadable line "
+                                      f"({type(exc).__name__}: {exc})") from None
+                _garbage(acct, lines.lineno, line, f"{type(exc).__name__}: {exc}")
+                if lines.pending:
+                    # the failing line is counted; lines before it were skipped
+                    first = lines.lineno - len(lines.pending) + 1
+                    for k, skipped in enumerate(lines.pending[:-1]):
+                        if not _ASC_NON_FRAME.match(skipped):
+                            _garbage(acct, first + k, skipped,
+                                     "not a frame line (skipped by python-can)")
+                    lines.pending.clear()
+        if sfx == ".asc" and lines.pending:
+            for k, line in enumerate(lines.pending):
+                if not _ASC_NON_FRAME.match(line):
+                    if strict:
+                        raise ReplayError(f"{p}:{lines.lineno - len(lines.pending) + k + 1}:"
+                                          " not a frame line")
+                    _garbage(acct, lines.lineno - len(lines.pending) + k + 1, line,
+                             "not a frame line (skipped by python-can)")
+
+
+# -- reading a flight ------------------------------------------------------------------------
+def resolve_map(cal: Calibration, *, dbc: str | Path | None = None,
+                channel_map: ChannelMap | str | Path | None = None,
+                kind: str = "gyro") -> tuple[Any, ChannelMap]:
+    """The DBC and channel map a replay uses (defaults: the shipped DBC and its map).
+
+    Raises
+    ------
+    ConfigError, FileFormatError
+    """
+    if channel_map is None:
+        s = cal.kind(kind)
+        cmap = default_channel_map(s.n, kind, axes=s.H_nominal,
+                                   names=tuple(c.name for c in s.sensors))
+    elif isinstance(channel_map, ChannelMap):
+        cmap = channel_map
+    else:
+        cmap = load_channel_map(channel_map)
+    check_against_calibration(cmap, cal)
+    db = load_dbc(dbc if dbc is not None else cmap.dbc)
+    return db, cmap
+
+
+def samples_to_flight(samples: Samples, cal: Calibration, cmap: ChannelMap, *,
+                      t_first_frame: float, source: str) -> Any:
+    """Turn assembled samples into a :class:`~replay.flight.Flight`, with the log's truth.
+
+    Flight time = frame time − first frame time + sidecar ``t_start_s``. True rates are
+    taken at ``round(t·fs)`` of the sidecar's sample grid.
+    """
+    from replay.flight import Flight, read_truth_sidecar
+
+    s = cal.kind(cmap.kind)
+    fs = float(cal.sample_rate_hz)
+    faults: tuple = ()
+    truth: dict[str, Any] = {}
+    rates = None
+    tp = truth_path(source)
+    t_start = 0.0
+    if tp.is_file():
+        faults, truth, rates_all = read_truth_sidecar(tp)
+        t_start = float(truth.get("can_log", {}).get("t_start_s", 0.0))
+        fs = float(truth.get("sample_rate_hz", fs))
+    t = samples.t - t_first_frame + t_start
+    if tp.is_file() and rates_all is not None and t.size:
+        k = np.clip(np.rint(t * fs).astype(np.int64), 0, rates_all.shape[0] - 1)
+        rates = rates_all[k]
+    return Flight(t=t, raw=samples.raw, valid=samples.valid, sample_rate_hz=fs,
+                  sensor_names=tuple(c.name for c in s.sensors),
+                  raw_unit=s.sensors[0].raw_unit if s.n else "raw", omega_true=rates,
+                  faults=tuple(faults), truth=truth, source=str(source), kind=cmap.kind)
+
+
+def read_log(path: str | Path, cal: Calibration, *, dbc: str | Path | None = None,
+             channel_map: ChannelMap | str | Path | None = None, strict: bool = False,
+             progress: bool = True, kind: str = "gyro") -> tuple[Any, dict[str, Any]]:
+    """Read a CAN log into a flight, accounting for every frame.
+
+    Parameters
+    ----------
+    path : str or Path
+        Any log python-can reads (suffix picks the reader).
+    cal : Calibration
+        Gives the sensors (order, names, nominal axes checked against the map) and rate.
+    dbc : path, optional
+        Overrides the map's DBC (default: the shipped ``rimu_imu.dbc``).
+    channel_map : ChannelMap or path, optional
+        Default: the shipped DBC's map for the calibration's sensors.
+    strict : bool
+        Raise :class:`ReplayError` on a reader failure, a garbage line or any corrupt
+        frame (:data:`CORRUPTION_REASONS`); otherwise report them and keep going.
+    progress : bool
+        tqdm progress bar on long logs (> 20 MB).
+    kind : str
+        Sensor kind when no map is given.
+
+    Returns
+    -------
+    flight : replay.flight.Flight
+    frames : dict
+        ``{"read", "used", "rejected": {reason: count}, "values_not_available",
+        "lost_frames", "errors": [{"where", "why", "kind"}], "balanced"}``
+        (:meth:`~replay.accounting.FrameAccounting.to_dict`).
+    """
+    db, cmap = resolve_map(cal, dbc=dbc, channel_map=channel_map, kind=kind)
+    frames, acct = read_frames(path, strict=strict, progress=progress)
+    samples = decode_frames(frames, db, cmap, acct, sample_rate_hz=cal.sample_rate_hz)
+    if strict:
+        bad = {k: v for k, v in acct.rejected.items() if k in CORRUPTION_REASONS and v}
+        if bad:
+            raise ReplayError(f"{path}: corrupt frames: "
+                              + ", ".join(f"{v} {k}" for k, v in sorted(bad.items())))
+    ok = frames.frame_type == FRAME_DATA
+    finite = ok & np.isfinite(frames.t)
+    t_first = float(frames.t[finite].min()) if finite.any() else 0.0
+    flight = samples_to_flight(samples, cal, cmap, t_first_frame=t_first, source=str(path))
+    return flight, acct.to_dict()
