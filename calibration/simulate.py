@@ -1,0 +1,308 @@
+"""Simulate a turntable calibration session from a sequence and true sensor parameters.
+
+Sensor model (seed 000 Eq. 13, seed 001 Eq. 1), per sensor i of each kind::
+
+    u_i = (h̃_i·x + b_i + e_i + η_i) / SF_i
+
+``u_i`` the raw output, ``x`` the input in the body (MB) frame — for gyros the table rate
+plus Earth rate (15.041 °/h at the latitude), for accelerometers the specific force
+``f_b`` (local gravity, Up) — ``h̃_i``, ``SF_i`` (input per raw unit) and ``b_i`` the true
+values from a :class:`fdi.calfile.Calibration`, ``e_i`` the effects switched on
+(:mod:`calibration.effects`) and ``η_i`` the noise: white with the truth's per-sample
+``noise_covariance`` (SI², correlations allowed), plus optionally a first-order Gauss-Markov
+bias instability and a bias random walk (:class:`NoiseModel`). Inputs come from the one
+kinematic model, :func:`calibration.turntable.body_inputs`, step by step.
+
+Time: each step of the sequence lasts ``round(duration_s·fs)`` samples at ``t = t0 + k/fs``
+(rate steps of whole turns therefore cover each turn exactly, uniformly sampled); steps
+follow each other without a gap and the table angles restart at each step's start angles.
+
+Random numbers: ``np.random.default_rng(seed)`` draws the white noise of the gyros, then of
+the accelerometers, then the optional bias processes; effects draw nothing, so the same seed
+gives the same noise with and without effects.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.signal import lfilter
+
+from calibration.effects import EFFECTS, WARMUP_TAU_S, resolve_effect_sensors
+from calibration.sequence import Sequence
+from calibration.session import Session
+from calibration.turntable import body_inputs, gravity_local
+from fdi.calfile import Calibration, SensorSet
+from fdi.errors import ConfigError
+from fdi.geometry import Configuration, load_configuration
+from fdi.units import DPH, G0
+
+__all__ = ["NoiseModel", "configuration_of", "simulate_session", "true_raw_means"]
+
+
+@dataclass(frozen=True)
+class NoiseModel:
+    """Noise beyond the white noise held in the truth's ``noise_covariance``.
+
+    Attributes
+    ----------
+    white : bool
+        Add the white noise of the truth (False: noise-free outputs, for tests).
+    bias_instability : dict of kind to float
+        Standard deviation of a first-order Gauss-Markov bias (SI: rad/s, m/s²) per kind.
+    bias_correlation_s : float
+        Its correlation time (s).
+    random_walk : dict of kind to float
+        Bias random walk density (SI per √s: rad/s/√s, m/s²/√s) per kind.
+    """
+
+    white: bool = True
+    bias_instability: Mapping[str, float] = field(default_factory=dict)
+    bias_correlation_s: float = 100.0
+    random_walk: Mapping[str, float] = field(default_factory=dict)
+
+    def to_dict(self) -> dict:
+        """JSON-ready description (SI)."""
+        return {"white": self.white, "bias_instability": dict(self.bias_instability),
+                "bias_correlation_s": self.bias_correlation_s,
+                "random_walk": dict(self.random_walk)}
+
+
+def configuration_of(s: SensorSet, name: str) -> Configuration:
+    """The nominal :class:`fdi.geometry.Configuration` of a sensor set."""
+    names = tuple(c.name for c in s.sensors)
+    return Configuration(name, s.H_nominal, names, tuple(s.groups))
+
+
+def _raw_unit(s: SensorSet) -> str:
+    units = {c.raw_unit for c in s.sensors}
+    if len(units) != 1:
+        raise ConfigError(f"{s.kind} sensors have different raw units {sorted(units)}; a "
+                          "session holds one raw unit per kind")
+    return units.pop()
+
+
+def _std_normal_to_cov(z: np.ndarray, cov: np.ndarray) -> np.ndarray:
+    """Correlate standard normals z (N, n) to covariance ``cov`` (n, n)."""
+    cov = np.asarray(cov, float)
+    if not np.any(cov):
+        return np.zeros_like(z)
+    try:
+        L = np.linalg.cholesky(cov)
+    except np.linalg.LinAlgError:
+        w, U = np.linalg.eigh(cov)
+        L = U * np.sqrt(np.clip(w, 0.0, None))
+    return z @ L.T
+
+
+def simulate_session(config: Configuration | str | None, sequence: Sequence,
+                     truth: Calibration, *, seed: int | None = 0,
+                     effects: Mapping[str, float] | None = None,
+                     effect_sensors: Mapping[str, Iterable[int]] | Iterable[int] | None = None,
+                     noise: NoiseModel | None = None, sample_rate_hz: float | None = None,
+                     latitude_deg: float | None = None,
+                     gravity: float | None = None) -> Session:
+    """Simulate the raw outputs of every sensor over a test sequence.
+
+    Parameters
+    ----------
+    config : Configuration, str or None
+        Nominal gyro configuration (a name or file for
+        :func:`fdi.geometry.load_configuration`); None takes it from ``truth`` (nominal axes,
+        names and groups of the gyro set). Its sensor count must match the truth's gyros.
+    sequence : Sequence
+    truth : Calibration
+        True parameters: ``truth.sets["gyro"]`` and optionally ``truth.sets["accel"]``.
+    seed : int or None
+        Seed of ``np.random.default_rng``.
+    effects : mapping of name to value, optional
+        See :mod:`calibration.effects` (units there); all off by default.
+    effect_sensors : mapping of name to 1-based sensors, or sensors for every effect
+        Default: every sensor of the kinds each effect acts on.
+    noise : NoiseModel, optional
+        Default: white noise only.
+    sample_rate_hz : float, optional
+        Default ``truth.sample_rate_hz``.
+    latitude_deg : float, optional
+        Default ``truth.latitude_deg`` (required from one of them).
+    gravity : float, optional
+        Local gravity (m/s²); default normal gravity at the latitude.
+
+    Returns
+    -------
+    Session
+        ``meta`` holds the sequence name, the seed, the mounting names, the effects and the
+        sensors they touch.
+
+    Raises
+    ------
+    ConfigError
+        Inconsistent configuration and truth, no latitude, bad effect or sensor number.
+    """
+    noise = NoiseModel() if noise is None else noise
+    gset = truth.kind("gyro")
+    aset = truth.sets.get("accel")
+    if config is None:
+        gcfg = configuration_of(gset, truth.configuration or "truth")
+    elif isinstance(config, Configuration):
+        gcfg = config
+    else:
+        gcfg = load_configuration(config)
+    if gcfg.n != gset.n:
+        raise ConfigError(f"configuration {gcfg.name!r} has {gcfg.n} gyros, the truth has "
+                          f"{gset.n}")
+    acfg = None if aset is None else configuration_of(aset, gcfg.name)
+    fs = float(sample_rate_hz or truth.sample_rate_hz)
+    if not fs > 0:
+        raise ConfigError(f"sample rate must be positive, got {fs}")
+    lat_deg = latitude_deg if latitude_deg is not None else truth.latitude_deg
+    if lat_deg is None:
+        raise ConfigError("no latitude: give latitude_deg or put it in the truth")
+    lat = np.deg2rad(float(lat_deg))
+    g = gravity_local(lat) if gravity is None else float(gravity)
+    effects = {k: float(v) for k, v in (effects or {}).items()}
+    n_by_kind = {"gyro": gset.n, "accel": 0 if aset is None else aset.n}
+    touched = resolve_effect_sensors(effects, effect_sensors, n_by_kind)
+
+    # -- time base and table motion, step by step ------------------------------------
+    counts = [round(s.duration_s * fs) for s in sequence.steps]
+    N = int(sum(counts))
+    t = np.arange(N) / fs
+    step = np.repeat([s.index for s in sequence.steps], counts).astype(np.int64)
+    inner, outer = np.zeros(N), np.zeros(N)
+    wi, wo = np.zeros(N), np.zeros(N)
+    tau_all = np.zeros(N)
+    start = 0
+    for s, n in zip(sequence.steps, counts, strict=True):
+        sl = slice(start, start + n)
+        tau = np.arange(n) / fs
+        tau_all[sl] = tau
+        inner[sl], outer[sl] = s.angles_at(tau)
+        wi[sl], wo[sl] = s.inner_rate, s.outer_rate
+        start += n
+
+    def inputs(skew: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Body inputs (ω_table, ω_earth, f_b) with the input sampled ``skew`` s late."""
+        wt, we, fb = np.zeros((N, 3)), np.zeros((N, 3)), np.zeros((N, 3))
+        start = 0
+        for s, n in zip(sequence.steps, counts, strict=True):
+            sl = slice(start, start + n)
+            a_i, a_o = s.angles_at(tau_all[sl] - skew)
+            wt[sl], we[sl], fb[sl] = body_inputs(a_i, a_o, wi[sl], wo[sl], s.mat_pb, lat, g)
+            start += n
+        return wt, we, fb
+
+    rng = np.random.default_rng(seed)
+    white = {}
+    for kind, sset in (("gyro", gset), ("accel", aset)):
+        if sset is None:
+            continue
+        z = rng.standard_normal((N, sset.n))
+        white[kind] = _std_normal_to_cov(z, sset.noise_covariance) if noise.white else 0.0 * z
+    slow = {}
+    for kind, sset in (("gyro", gset), ("accel", aset)):
+        if sset is None:
+            continue
+        extra = np.zeros((N, sset.n))
+        sd = float(noise.bias_instability.get(kind, 0.0))
+        if sd > 0:
+            phi = np.exp(-1.0 / (fs * noise.bias_correlation_s))
+            w = rng.standard_normal((N, sset.n)) * sd * np.sqrt(1 - phi**2)
+            x0 = rng.standard_normal(sset.n) * sd
+            extra += lfilter([1.0], [1.0, -phi], w, axis=0,
+                             zi=(phi * x0)[None, :])[0]
+        q = float(noise.random_walk.get(kind, 0.0))
+        if q > 0:
+            extra += np.cumsum(rng.standard_normal((N, sset.n)) * q / np.sqrt(fs), axis=0)
+        slow[kind] = extra
+
+    base = inputs(0.0)
+    skew = effects.get("time_skew", 0.0) if "time_skew" in touched else 0.0
+    skewed = inputs(skew) if skew != 0.0 else base
+    T = N / fs
+    w_ref = sequence.table_rate
+
+    # -- gyros ------------------------------------------------------------------------
+    Hg, sfg, bg = gset.H, gset.scale_factors, gset.biases
+    earth = 0.0 if effects.get("no_earth_rate", 0.0) else 1.0
+
+    def sel(name: str) -> np.ndarray:
+        return np.isin(np.arange(1, gset.n + 1), touched.get(name, ()))
+
+    sg = (base[0] + earth * base[1]) @ Hg.T             # input along the true axes
+    f_g = base[2] @ Hg.T                                 # specific force along h̃_i
+    if skew != 0.0:
+        m = sel("time_skew")
+        sg[:, m] = ((skewed[0] + earth * skewed[1]) @ Hg.T)[:, m]
+        f_g[:, m] = (skewed[2] @ Hg.T)[:, m]
+
+    if "scale_asymmetry" in touched:
+        m = sel("scale_asymmetry")
+        a = effects["scale_asymmetry"]
+        sg[:, m] = sg[:, m] * (1.0 + 0.5 * a * np.sign(sg[:, m]))
+    if "scale_nonlinearity" in touched:
+        m = sel("scale_nonlinearity")
+        sg[:, m] = sg[:, m] + effects["scale_nonlinearity"] * sg[:, m] ** 2 / w_ref
+    if "g_sensitivity" in touched:
+        m = sel("g_sensitivity")
+        sg[:, m] += effects["g_sensitivity"] * DPH * f_g[:, m] / G0
+    if "warmup" in touched:
+        m = sel("warmup")
+        sg[:, m] += effects["warmup"] * DPH * np.exp(-t / WARMUP_TAU_S)[:, None]
+    if "bias_drift" in touched:
+        m = sel("bias_drift")
+        sg[:, m] += effects["bias_drift"] * DPH * (t / T)[:, None]
+    raw_g = (sg + bg + white["gyro"] + slow["gyro"]) / sfg
+
+    # -- accelerometers -----------------------------------------------------------------
+    raw_a = None
+    if aset is not None:
+        Ha = aset.H
+        sa = base[2] @ Ha.T
+        if "time_skew" in touched and skew != 0.0:
+            m = np.isin(np.arange(1, aset.n + 1), touched["time_skew"])
+            sa[:, m] = (skewed[2] @ Ha.T)[:, m]
+        raw_a = (sa + aset.biases + white["accel"] + slow["accel"]) / aset.scale_factors
+
+    meta = {
+        "generator": "calibration.simulate.simulate_session",
+        "sequence": sequence.name,
+        "sequence_source": sequence.source,
+        "table_rate_dps": sequence.table_rate_dps,
+        "seed": seed,
+        "mounts": {str(s.index): s.mount for s in sequence.steps},
+        "effects": dict(effects),
+        "effect_sensors": {k: list(v) for k, v in touched.items()},
+        "effect_units": {k: EFFECTS[k].unit for k in effects},
+        "noise": noise.to_dict(),
+    }
+    return Session(
+        gyro_config=gcfg, accel_config=acfg, sample_rate_hz=fs,
+        latitude_deg=float(lat_deg), steps=sequence.session_steps(), t=t, step=step,
+        inner=inner, outer=outer, inner_rate=wi, outer_rate=wo, raw_gyro=raw_g,
+        raw_accel=raw_a, gyro_raw_unit=_raw_unit(gset),
+        accel_raw_unit=_raw_unit(aset) if aset is not None else "raw",
+        gravity=g, source="<simulated>", meta=meta)
+
+
+def true_raw_means(session: Session, truth: Calibration, *,
+                   earth_rate: bool = True) -> dict[str, np.ndarray]:
+    """Model step means of the raw outputs, ``mean((h̃·x + b)/SF)`` per step, no effects.
+
+    Returns
+    -------
+    dict of kind to ndarray, shape (S, n)
+        Rows in the order of ``session.steps``.
+    """
+    wt, we, fb = session.inputs()
+    out = {}
+    for kind, x in (("gyro", wt + (we if earth_rate else 0.0)), ("accel", fb)):
+        if kind not in truth.sets:
+            continue
+        s = truth.sets[kind]
+        u = (x @ s.H.T + s.biases) / s.scale_factors
+        out[kind] = np.array([u[session.step == st.index].mean(axis=0)
+                              for st in session.steps])
+    return out
