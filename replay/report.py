@@ -43,7 +43,7 @@ from fdi.calfile import Calibration
 from fdi.units import DPS
 from replay.flight import Flight
 
-__all__ = ["ALARM_TYPES", "REPORT_SCHEMA", "build_report", "format_report"]
+__all__ = ["ALARM_TYPES", "REPORT_SCHEMA", "build_report", "format_report", "format_summary"]
 
 REPORT_SCHEMA = "rimu.report/1"
 ALARM_TYPES = ("detected", "isolated", "health")
@@ -213,3 +213,8 @@ def format_report(report: Mapping[str, Any], *, max_events: int = 50) -> str:
         lines.append(f"frames: read {fr.get('read')}, used {fr.get('used')}, rejected "
                      f"{fr.get('rejected')}")
     return "\n".join(lines)
+
+
+def format_summary(report: Mapping[str, Any], *, max_events: int = 50) -> str:
+    """Same as :func:`format_report` (the name the demo and replay commands use)."""
+    return format_report(report, max_events=max_events)

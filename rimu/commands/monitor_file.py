@@ -26,11 +26,11 @@ def configure(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    cal = load_calibration(args.cal)
+    flight = load_flight_dir(args.flight)
     from fdi.monitor import Monitor
     from fdi.settings import load_thresholds
 
-    cal = load_calibration(args.cal)
-    flight = load_flight_dir(args.flight)
     if cal.kind(flight.kind).n != flight.n:
         raise ConfigError(f"{args.flight}: {flight.n} sensors, calibration {args.cal} has "
                           f"{cal.kind(flight.kind).n} {flight.kind} sensors")
