@@ -15,6 +15,9 @@ calibration the way real sensors do (seed 000 Eq. 13, seed 001 Eq. 1)::
   axis ``h_i/SF_i`` errs by ``δ_i ~ N(0, input_error_cov_i)`` (in units of the calibrated
   gain), and ``b_i ~ N(b̂_i, bias_sd_i²)``, so calibration error is present in every flight;
 - ``Σ`` is the calibration's per-sample noise covariance (the truth's when it has one);
+- the truth's extra *effects* (``calibration.effects``: g-sensitivity, ...) are not
+  simulated in flight; their names are listed in the truth record
+  (``"effects_not_simulated"``);
 - ``f_i(t)`` are the injected faults (:mod:`replay.faults`); ``stuck`` replaces the raw
   output, ``dropout`` clears ``valid`` (raw NaN).
 
@@ -254,6 +257,9 @@ def iter_flight(cal: Calibration, duration_s: float, *, seed: int,
     raw_unit = s.sensors[0].raw_unit if n else "raw"
     truth_doc = _truth_doc(cal, model, faults, seed=seed, fs=fs, N=N,
                            max_rate_dps=max_rate_dps, kind=kind)
+    if truth is not None and not isinstance(truth, Calibration) and len(truth) > 1 \
+            and truth[1]:
+        truth_doc["effects_not_simulated"] = sorted(str(k) for k in truth[1])
     k_on = {id(f): math.ceil(f.onset * fs - 1e-9) for f in faults}
     held: dict[int, float] = {}
     last_raw = np.full(n, np.nan)
