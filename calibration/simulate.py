@@ -24,8 +24,10 @@ gives the same noise with and without effects.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 from scipy.signal import lfilter
@@ -37,9 +39,10 @@ from calibration.turntable import body_inputs, gravity_local
 from fdi.calfile import Calibration, SensorSet
 from fdi.errors import ConfigError
 from fdi.geometry import Configuration, load_configuration
-from fdi.units import DPH, G0
+from fdi.units import DPH, EARTH_RATE_DPH, G0
 
-__all__ = ["NoiseModel", "configuration_of", "simulate_session", "true_raw_means"]
+__all__ = ["NoiseModel", "configuration_of", "save_simulation", "simulate_session",
+           "true_raw_means", "truth_of_session"]
 
 
 @dataclass(frozen=True)
@@ -306,3 +309,56 @@ def true_raw_means(session: Session, truth: Calibration, *,
         out[kind] = np.array([u[session.step == st.index].mean(axis=0)
                               for st in session.steps])
     return out
+
+
+def truth_of_session(session: Session, truth: Calibration
+                     ) -> tuple[Calibration, dict[str, float], dict[str, tuple[int, ...]],
+                                dict]:
+    """The truth of a simulated session as written to ``truth.json``.
+
+    Returns
+    -------
+    cal : Calibration
+        ``truth`` with the session's sample rate and latitude, the true Earth rate
+        (0 with ``no_earth_rate``) and, under ``extra``, the sequence and seed.
+    effects, effect_sensors : dict
+        From ``session.meta``.
+    details : dict
+        Constants the active effects used (warm-up τ, table rate, session length).
+    """
+    meta = session.meta
+    effects = {k: float(v) for k, v in meta.get("effects", {}).items() if v != 0.0}
+    sensors = {k: tuple(v) for k, v in meta.get("effect_sensors", {}).items()}
+    details: dict = {}
+    if "warmup" in effects:
+        details["warmup"] = {"tau_s": WARMUP_TAU_S}
+    if "scale_nonlinearity" in effects:
+        details["scale_nonlinearity"] = {"table_rate_dps": meta.get("table_rate_dps")}
+    if "bias_drift" in effects:
+        details["bias_drift"] = {"session_duration_s": float(session.t.size
+                                                             / session.sample_rate_hz)}
+    extra = dict(truth.extra)
+    extra.update({"sequence": meta.get("sequence"), "seed": meta.get("seed"),
+                  "noise": meta.get("noise")})
+    cal = dataclasses.replace(
+        truth, sample_rate_hz=session.sample_rate_hz, latitude_deg=session.latitude_deg,
+        earth_rate_dph=0.0 if effects.get("no_earth_rate") else EARTH_RATE_DPH,
+        earth_rate_dph_sd=0.0, extra=extra)
+    return cal, effects, sensors, details
+
+
+def save_simulation(session: Session, truth: Calibration, directory: str | Path) -> Path:
+    """Write a simulated session and its truth sidecar (``DIR/truth.json``).
+
+    Returns
+    -------
+    Path
+        The directory.
+    """
+    from calibration.session_io import save_session
+    from calibration.truth import save_truth
+
+    d = save_session(session, directory)
+    cal, effects, sensors, details = truth_of_session(session, truth)
+    save_truth(cal, effects, sensors, d / "truth.json", details=details)
+    return d

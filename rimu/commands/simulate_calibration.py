@@ -1,0 +1,93 @@
+"""``rimu simulate calibration``: a simulated turntable session with its truth sidecar.
+
+Writes ``DIR/manifest.json`` + ``DIR/samples.csv`` (:mod:`calibration.session_io`) and
+``DIR/truth.json`` (:mod:`calibration.truth`). With ``--preset`` the true parameters are the
+paper's (:mod:`calibration.presets`); without, nominal-ish parameters drawn with ``--seed``
+(:func:`calibration.presets.random_truth`).
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+
+from calibration.effects import effects_help, parse_effect_sensors, parse_effects
+from calibration.presets import PRESETS, default_sequence_name, preset, random_truth
+from calibration.sequence import load_sequence
+from calibration.simulate import save_simulation, simulate_session
+from fdi.errors import ConfigError
+from fdi.geometry import load_configuration
+
+HELP = "simulate a turntable calibration session (manifest, samples, truth sidecar)"
+
+
+def configure(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--config", metavar="CONFIG",
+                   help="tetrad, cone6 or a TOML configuration file (default: the preset's)")
+    p.add_argument("--out", metavar="DIR", required=True, help="session directory to write")
+    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--preset", choices=sorted(PRESETS),
+                   help="true parameters of a seed paper: "
+                        + "; ".join(f"{k}: {v}" for k, v in sorted(PRESETS.items())))
+    p.add_argument("--sequence", metavar="FILE",
+                   help="test sequence: tetrad-paper, cone-paper or a TOML sequence file "
+                        "(default: the preset's, else tetrad-paper for the tetrad and "
+                        "cone-paper otherwise)")
+    p.add_argument("--table-rate-dps", type=float, metavar="W",
+                   help="replace the sequence's table rate w (deg/s)")
+    p.add_argument("--turns", type=float, metavar="K",
+                   help="length of the rate steps in whole turns (default: the sequence's)")
+    p.add_argument("--latitude-deg", type=float, metavar="X",
+                   help="site latitude (default: the preset's; -23.2 tetrad, 37.5 others)")
+    p.add_argument("--effect", action="append", metavar="NAME=VALUE[,NAME=VALUE]",
+                   help="switch on an effect the calibration model lacks (repeatable): "
+                        + effects_help())
+    p.add_argument("--effect-sensors", metavar="1,3",
+                   help="sensors the effects touch, numbered from 1 within each kind "
+                        "(default: all)")
+
+
+def run(args: argparse.Namespace) -> int:
+    effects = parse_effects(args.effect)
+    sensors = parse_effect_sensors(args.effect_sensors)
+    if args.preset:
+        seq, truth, noise = preset(args.preset)
+        if args.config:
+            cfg = load_configuration(args.config)
+            if cfg.name != truth.configuration or cfg.n != truth.gyro.n:
+                raise ConfigError(f"--preset {args.preset} is for the {truth.configuration} "
+                                  f"configuration, not {args.config!r}")
+        else:
+            cfg = load_configuration(truth.configuration)
+        source = f"preset {args.preset}"
+    else:
+        if not args.config:
+            raise ConfigError("give --config (tetrad, cone6 or a file) or --preset")
+        cfg = load_configuration(args.config)
+        truth = random_truth(cfg, seed=args.seed, latitude_deg=args.latitude_deg)
+        seq, noise = None, None
+        source = f"random parameters (seed {args.seed})"
+    if args.latitude_deg is not None:
+        if not -90.0 <= args.latitude_deg <= 90.0:
+            raise ConfigError(f"--latitude-deg must be in [-90, 90], got {args.latitude_deg}")
+        truth = dataclasses.replace(truth, latitude_deg=args.latitude_deg)
+    if args.sequence or seq is None or args.table_rate_dps or args.turns:
+        name = args.sequence or (seq.source if seq is not None else default_sequence_name(cfg))
+        seq = load_sequence(name, table_rate_dps=args.table_rate_dps, turns=args.turns)
+    session = simulate_session(cfg, seq, truth, seed=args.seed, effects=effects,
+                               effect_sensors=sensors, noise=noise)
+    out = save_simulation(session, truth, args.out)
+    n_rate = len(seq.rate_steps())
+    n_pos = len(seq.position_steps())
+    kinds = f"{cfg.n} gyros" + ("" if session.raw_accel is None
+                                else f" and {session.raw_accel.shape[1]} accelerometers")
+    eff = ", ".join(f"{k}={v:g} on sensors {','.join(map(str, session.meta['effect_sensors'][k]))}"
+                    for k, v in effects.items() if v != 0.0) or "none"
+    print(f"Wrote a simulated calibration session to {out}/ (manifest.json, samples.csv, "
+          f"truth.json): configuration {cfg.name} ({kinds}), sequence {seq.name} "
+          f"({len(seq.steps)} steps: {n_rate} rate, {n_pos} position; table rate "
+          f"{seq.table_rate_dps:g} deg/s), {session.t.size} samples at "
+          f"{session.sample_rate_hz:g} Hz ({session.t.size / session.sample_rate_hz:g} s), "
+          f"latitude {session.latitude_deg:g} deg, true parameters from {source}, seed "
+          f"{args.seed}, effects: {eff}.")
+    return 0
