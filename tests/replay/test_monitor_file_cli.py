@@ -69,3 +69,24 @@ def test_cli_errors_are_one_line(tmp_path, cal_file, capsys):
     err = capsys.readouterr().err
     # the CAN writer is replay.logio's (another part): either it wrote the log or it says why
     assert (rc == 0 and (tmp_path / "f.asc").exists()) or (rc == 2 and "replay.logio" in err)
+
+
+def test_simulate_flight_with_truth_sidecar(tmp_path, cal_file):
+    from calibration.truth import save_truth
+    from replay.flight import draw_true_model, load_flight_dir
+
+    truth = _cal()
+    save_truth(truth, {}, {}, tmp_path / "truth.json")
+    rc = main(["simulate", "flight", "--cal", str(cal_file), "--duration", "2", "--seed", "1",
+               "--truth", str(tmp_path / "truth.json"), "--out", str(tmp_path / "f")])
+    assert rc == 0
+    fl = load_flight_dir(tmp_path / "f")
+    tp = fl.truth["true_parameters"]
+    assert tp["source"] == "truth"
+    np.testing.assert_allclose(tp["axis"], truth.gyro.H, rtol=1e-12)
+    # without --truth the parameters are drawn, and differ from the calibration
+    rc = main(["simulate", "flight", "--cal", str(cal_file), "--duration", "2", "--seed", "1",
+               "--out", str(tmp_path / "g")])
+    g = load_flight_dir(tmp_path / "g")
+    np.testing.assert_allclose(g.truth["true_parameters"]["axis"],
+                               draw_true_model(_cal(), 1).axis, rtol=1e-12)
