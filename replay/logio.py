@@ -336,6 +336,8 @@ def read_frames(path: str | Path, *, strict: bool = False,
                     _consume(iter(reader), g, None, acct, bar)
                 except Exception as exc:
                     _reader_error(acct, p, len(g.t), exc, strict)
+                else:
+                    _check_blf_complete(reader, p, len(g.t), acct, strict)
                 finally:
                     try:
                         reader.stop()
@@ -354,6 +356,27 @@ def _reader_error(acct: FrameAccounting, p: Path, nframes: int, exc: Exception,
     if strict:
         raise ReplayError(f"{p}: {where}: reader failed ({why})")
     acct.errors.append({"where": where, "why": why, "kind": "reader_error"})
+
+
+def _check_blf_complete(reader: Any, p: Path, nframes: int, acct: FrameAccounting,
+                        strict: bool) -> None:
+    """python-can's BLFReader stops silently on a truncated file: compare with the header."""
+    if not isinstance(reader, can.BLFReader):
+        return
+    size = p.stat().st_size
+    declared = int(getattr(reader, "file_size", 0) or 0)
+    objects = int(getattr(reader, "object_count", 0) or 0)
+    why = None
+    if declared and size < declared:
+        why = (f"truncated: the BLF header declares {declared} bytes, the file has {size} "
+               f"({objects} objects declared)")
+    elif objects and nframes < objects:
+        why = f"the BLF header declares {objects} objects, {nframes} frames were read"
+    if why is None:
+        return
+    if strict:
+        raise ReplayError(f"{p}: after frame {nframes}: {why}")
+    acct.errors.append({"where": f"after frame {nframes}", "why": why, "kind": "truncated"})
 
 
 def _read_text(p: Path, sfx: str, g: _Gather, acct: FrameAccounting, strict: bool) -> None:
