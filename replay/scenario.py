@@ -1,0 +1,194 @@
+"""Fault scenarios: faults injected into a healthy recording, so it carries known truth.
+
+A scenario file (``rimu.scenario/1`` TOML) lists faults in the terms of
+:mod:`replay.faults` (kinds step, ramp, stuck, noise, scale, spike, dropout; sizes as in
+``--fault``: ``15sigma``, ``0.02dps``, ``0.05sigma/s``, ``3x``, ``1%``)::
+
+    schema = "rimu.scenario/1"
+    seed = 0                      # for the 'noise' kind
+
+    [[faults]]
+    sensor = 3
+    kind = "step"
+    size = "15sigma"
+    onset = 20.0                  # s, flight time (0 = the log's first frame)
+    duration = 5.0                # optional; default: to the end
+
+    [[faults]]
+    spec = "ramp:2:0.05sigma/s:10"   # or the --fault text itself
+
+The faults are applied to the recorded **raw** samples through the calibration (the true
+scale factors of a real sensor are unknown; the calibrated ones are the best estimate), with
+the same time windows as :func:`replay.flight.simulate_flight`:
+
+========  ==========================================================================
+step      ``u_i += size / SF_i``  (spike: the one sample at onset, or the window)
+ramp      ``u_i += size·(t − onset) / SF_i``
+scale     ``u_i += size·(SF_i·u_i − b_i) / SF_i`` (the compensated output grows by size)
+noise     ``u_i += sqrt(size² − 1)·σ_i·N(0,1) / SF_i`` (white noise multiplied by size ≥ 1)
+stuck     ``u_i`` holds its last valid value before onset
+dropout   no sample (``valid = False``, raw NaN)
+========  ==========================================================================
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from collections.abc import Mapping, Sequence
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from fdi.calfile import Calibration
+from fdi.errors import ConfigError, FileFormatError
+from replay.faults import Fault, parse_fault
+
+__all__ = ["SCENARIO_SCHEMA", "apply_faults", "inject", "load_scenario"]
+
+SCENARIO_SCHEMA = "rimu.scenario/1"
+
+
+def load_scenario(path: str | Path, cal: Calibration, *,
+                  kind: str = "gyro") -> tuple[tuple[Fault, ...], int]:
+    """Read a scenario file: (faults, seed).
+
+    Raises
+    ------
+    FileFormatError
+        Naming the file and the field (``faults[2].size``).
+    """
+    p = Path(path)
+    ps = str(p)
+    try:
+        doc = tomllib.loads(p.read_text(encoding="utf-8"))
+    except OSError as exc:
+        raise FileFormatError(ps, f"cannot read ({exc.strerror})") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise FileFormatError(ps, f"not valid TOML ({exc})") from None
+    if doc.get("schema") != SCENARIO_SCHEMA:
+        raise FileFormatError(ps, f"expected '{SCENARIO_SCHEMA}', got {doc.get('schema')!r}",
+                              field="schema")
+    seed = doc.get("seed", 0)
+    if isinstance(seed, bool) or not isinstance(seed, int):
+        raise FileFormatError(ps, f"expected an integer, got {seed!r}", field="seed")
+    entries = doc.get("faults")
+    if not isinstance(entries, list) or not entries:
+        raise FileFormatError(ps, "expected a non-empty [[faults]] list", field="faults")
+    n = cal.kind(kind).n
+    faults = []
+    for j, e in enumerate(entries):
+        w = f"faults[{j + 1}]"
+        if not isinstance(e, Mapping):
+            raise FileFormatError(ps, "expected a table", field=w)
+        if "spec" in e:
+            spec = e["spec"]
+            if not isinstance(spec, str):
+                raise FileFormatError(ps, "expected a string", field=f"{w}.spec")
+        else:
+            for key in ("sensor", "kind", "onset"):
+                if key not in e:
+                    raise FileFormatError(ps, "missing", field=f"{w}.{key}")
+            size = e.get("size", "")
+            dur = e.get("duration")
+            spec = f"{e['kind']}:{e['sensor']}:{size}:{e['onset']}"
+            if dur is not None:
+                spec += f":{dur}"
+        try:
+            f = parse_fault(spec, cal, kind=kind)
+        except ConfigError as exc:
+            raise FileFormatError(ps, str(exc), field=w) from None
+        if not 1 <= f.sensor <= n:
+            raise FileFormatError(ps, f"sensor {f.sensor} out of range 1..{n}",
+                                  field=f"{w}.sensor")
+        if f.kind == "noise" and f.size < 1.0:
+            raise FileFormatError(ps, "a recording's noise can only be multiplied by ≥ 1",
+                                  field=f"{w}.size")
+        faults.append(f)
+    return tuple(faults), int(seed)
+
+
+def apply_faults(t: np.ndarray, raw: np.ndarray, valid: np.ndarray,
+                 faults: Sequence[Fault], cal: Calibration, *, kind: str = "gyro",
+                 seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """Inject faults into recorded raw samples (see the module docstring).
+
+    Parameters
+    ----------
+    t : ndarray, shape (N,)
+        Sample times (s).
+    raw : ndarray, shape (N, n)
+        Raw outputs.
+    valid : ndarray of bool, shape (N, n)
+    faults : sequence of Fault
+    cal : Calibration
+    kind : str
+    seed : int
+        Seed of the extra noise (``noise`` kind).
+
+    Returns
+    -------
+    raw, valid : ndarray
+        New arrays (the inputs are not modified).
+    """
+    s = cal.kind(kind)
+    sf = s.scale_factors
+    b = s.biases
+    sd = s.noise_sd
+    t = np.asarray(t, float)
+    raw = np.array(raw, dtype=float, copy=True)
+    valid = np.array(valid, dtype=bool, copy=True)
+    rng = np.random.default_rng([int(seed), 11])
+    n = raw.shape[1]
+    for f in faults:
+        i = f.sensor - 1
+        if not 0 <= i < n:
+            raise ConfigError(f"fault {f.spec or f.kind}: sensor {f.sensor} out of range 1..{n}")
+        if f.kind == "spike" and f.duration is None:
+            # the one sample at onset: the first at or after it (simulate_flight's k_on)
+            m = np.zeros(t.shape, bool)
+            after = np.flatnonzero(t >= f.onset - 1e-9)
+            if after.size:
+                m[after[0]] = True
+        else:
+            m = (t >= f.onset - 1e-12) & (t < f.end - 1e-12)
+        if not m.any():
+            continue
+        if f.kind in ("step", "spike"):
+            raw[m, i] += f.size / sf[i]
+        elif f.kind == "ramp":
+            raw[m, i] += f.size * (t[m] - f.onset) / sf[i]
+        elif f.kind == "scale":
+            raw[m, i] += f.size * (sf[i] * raw[m, i] - b[i]) / sf[i]
+        elif f.kind == "noise":
+            extra = math.sqrt(max(f.size ** 2 - 1.0, 0.0)) * sd[i] / sf[i]
+            raw[m, i] += extra * rng.standard_normal(int(m.sum()))
+        elif f.kind == "stuck":
+            before = np.flatnonzero(~m & (t < f.onset) & valid[:, i])
+            if before.size:
+                held = raw[before[-1], i]
+            else:
+                first = np.flatnonzero(m & valid[:, i])
+                held = raw[first[0], i] if first.size else np.nan
+            raw[m, i] = held
+        elif f.kind == "dropout":
+            valid[m, i] = False
+    raw[~valid] = np.nan
+    return raw, valid
+
+
+def inject(flight: Any, faults: Sequence[Fault], cal: Calibration, *,
+           seed: int = 0, source: str = "") -> Any:
+    """A copy of ``flight`` with ``faults`` applied to its raw samples and added to its truth.
+
+    The truth record gains ``"injected": {"faults": [...], "seed", "source"}``.
+    """
+    raw, valid = apply_faults(flight.t, flight.raw, flight.valid, faults, cal,
+                              kind=flight.kind, seed=seed)
+    truth: dict[str, Any] = dict(flight.truth)
+    truth["injected"] = {"faults": [f.to_dict() for f in faults], "seed": int(seed),
+                         "source": source}
+    return replace(flight, raw=raw, valid=valid, faults=tuple(flight.faults) + tuple(faults),
+                   truth=truth)
