@@ -65,6 +65,9 @@ class Thresholds:
         CUSUM decision threshold h for the full set (reference; recomputed per set).
     missed_detection : float
         Missed-detection probability of the protection level.
+    detector : str
+        ``"windows"`` (dyadic running means), ``"cusum"`` (the single-sample test plus a
+        CUSUM bank) or ``"both"``.
     notes : str
         How the numbers were obtained.
     """
@@ -80,6 +83,7 @@ class Thresholds:
     cusum_drift: float = 0.5
     cusum_threshold: float = float("nan")
     missed_detection: float = 1e-3
+    detector: str = "windows"
     notes: str = ""
     schema: str = THRESHOLDS_SCHEMA
 
@@ -97,6 +101,13 @@ class Thresholds:
             raise ConfigError("thresholds: alpha must lie in (0, 1)")
         if any(not (f > 0.0 and math.isfinite(f)) for f in self.variance_factor):
             raise ConfigError("thresholds: variance_factor must be positive and finite")
+        if self.detector not in DETECTORS:
+            raise ConfigError(f"thresholds: detector must be one of {DETECTORS}, "
+                              f"got {self.detector!r}")
+        if self.detector != "windows" and not (self.cusum_threshold > 0
+                                               and self.cusum_drift > 0):
+            raise ConfigError("thresholds: a CUSUM detector needs cusum_threshold > 0 "
+                              "and cusum_drift > 0")
 
     @property
     def K(self) -> int:
@@ -113,7 +124,8 @@ class Thresholds:
                 "threshold": list(self.threshold), "cusum_drift": self.cusum_drift,
                 "cusum_threshold": (None if not math.isfinite(self.cusum_threshold)
                                     else self.cusum_threshold),
-                "missed_detection": self.missed_detection, "notes": self.notes}
+                "missed_detection": self.missed_detection, "detector": self.detector,
+                "notes": self.notes}
 
     def save(self, path: str | Path) -> None:
         """Write as JSON."""
@@ -200,8 +212,13 @@ def thresholds_from_dict(doc: Any, path: str = "<thresholds>") -> Thresholds:
     md = num("missed_detection", positive=True, default=1e-3)
     if md >= 1:
         raise FileFormatError(path, "expected a probability in (0, 1)", field="missed_detection")
+    det = doc.get("detector", "windows")
+    if det not in DETECTORS:
+        raise FileFormatError(path, f"expected one of {DETECTORS}, got {det!r}",
+                              field="detector")
     return Thresholds(
-        kind=str(kind), n=int(n), sample_rate_hz=num("sample_rate_hz", positive=True),
+        kind=str(kind), detector=str(det), n=int(n),
+        sample_rate_hz=num("sample_rate_hz", positive=True),
         false_alarms_per_hour=num("false_alarms_per_hour", positive=True),
         scales=tuple(int(s) for s in scales), alpha=alpha, variance_factor=vf,
         threshold=nums("threshold"), cusum_drift=num("cusum_drift", positive=True, default=0.5),
@@ -223,8 +240,6 @@ class MonitorSettings:
         ``clear_ratio × threshold`` ...
     clear_samples : int
         ... for this many consecutive samples.
-    detector : str
-        ``"windows"`` (dyadic running means), ``"cusum"`` or ``"both"``.
     readmission : bool
         Re-admit an isolated sensor after it behaved for ``readmit_dwell_s``. Off by
         default: isolated sensors stay isolated.
@@ -246,7 +261,6 @@ class MonitorSettings:
     persistence: int = 3
     clear_ratio: float = 0.5
     clear_samples: int = 100
-    detector: str = "windows"
     readmission: bool = False
     readmit_dwell_s: float = 10.0
     stale_timeout_s: float = 0.1
@@ -263,8 +277,6 @@ class MonitorSettings:
             raise ConfigError("clear_ratio must lie in (0, 1]")
         if int(self.clear_samples) < 1:
             raise ConfigError("clear_samples must be >= 1")
-        if self.detector not in DETECTORS:
-            raise ConfigError(f"detector must be one of {DETECTORS}, got {self.detector!r}")
         if not self.stale_timeout_s > 0:
             raise ConfigError("stale_timeout_s must be positive")
         if int(self.stuck_count) < 2:
