@@ -57,17 +57,22 @@ MIN_STEP_SAMPLES = 10
 _ANALOG = {"mV", "V", "uA"}
 
 
-def display_units(kind: str, raw_unit: str) -> tuple[str, str]:
+def display_units(kind: str, raw_unit: str, biases: np.ndarray | None = None) -> tuple[str, str]:
     """(scale_factor_unit, bias_unit) files print for a sensor kind and raw unit.
 
     Analog outputs print raw per input as datasheets and seed 000 Table 2 do
     (``mV/(deg/s)``); digital ones input per raw as seed 001 Table 3 (``(deg/s)/LSB``).
-    Gyro biases in °/h, accelerometer biases in mg.
+    Gyro biases in °/h (°/s when one exceeds 1 °/s, MEMS raw offsets), accelerometer biases
+    in mg (g when one exceeds 1 g). ``biases`` in SI.
     """
     raw = raw_unit if raw_unit in RAW_UNITS else "raw"
     inp = "deg/s" if kind == "gyro" else "g"
     sfu = f"{raw}/({inp})" if raw in _ANALOG else f"({inp})/{raw}"
-    return sfu, ("deg/h" if kind == "gyro" else "mg")
+    big = biases is not None and np.size(biases) and float(np.max(np.abs(biases))) > (
+        input_unit_factor("deg/s") if kind == "gyro" else input_unit_factor("g"))
+    if kind == "gyro":
+        return sfu, "deg/s" if big else "deg/h"
+    return sfu, "g" if big else "mg"
 
 
 def _fail_steps(source: str, kind: str, steps: list[tuple[int, int]]) -> CalibrationError:
@@ -250,7 +255,8 @@ def calibrate(session: Session, *, bias_method: str = "model", denoise: bool = T
     resid = r_raw * sf
     chosen = parts_t if bias_method == "turns" else parts
 
-    gyro_sfu, gyro_bu = display_units("gyro", session.gyro_raw_unit)
+    gyro_sfu, gyro_bu = display_units("gyro", session.gyro_raw_unit,
+                                      np.array([p["bias"] for p in chosen]))
     cals = []
     for i, p in enumerate(parts):
         g = p["split"]
@@ -362,7 +368,8 @@ def _accelerometers(session: Session, fb: np.ndarray, nums: list[int], pos: dict
     parts = _split_all(mp.a, mp.c, Q, Sigma_raw, H0)
     sf = np.array([p["split"].scale_factor for p in parts])
     resid = r_raw * sf
-    sfu, bu = display_units("accel", session.accel_raw_unit)
+    sfu, bu = display_units("accel", session.accel_raw_unit,
+                            np.array([p["bias"] for p in parts]))
     cals = []
     for i, p in enumerate(parts):
         g = p["split"]

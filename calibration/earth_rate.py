@@ -127,7 +127,8 @@ def fit_earth_rate(y: np.ndarray, up_axes: np.ndarray, step: np.ndarray, noise_c
     y = np.asarray(y, float)
     M = y.shape[0]
     Sigma = np.asarray(noise_cov, float)
-    w = 1.0 / np.diag(Sigma)
+    d = np.diag(Sigma)
+    w = 1.0 / d if np.all(d > 0) else np.ones_like(d)       # noise-free data: equal weights
     G = np.stack([up_axes[:, 1, :], up_axes[:, 0, :]], axis=-1)      # (M, n, 2): north, east
     if heading_known:
         G = G[..., :1]

@@ -1,0 +1,130 @@
+"""Estimate against truth: estimate, truth, error and error/σ side by side.
+
+Used by ``rimu calibrate SESSION --compare TRUTH`` and by the acceptance tests. Values are
+shown in the calibration's own file units (scale factors in ``scale_factor_unit``, biases
+in ``bias_unit``, misalignment angles in mrad about the nominal axis, Earth rate in °/h).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import numpy as np
+
+from fdi.calfile import Calibration, misalignment_angles
+from fdi.errors import ConfigError
+from fdi.units import (
+    EARTH_RATE_DPH,
+    input_unit_factor,
+    scale_factor_from_si,
+    scale_factor_sd_from_si,
+)
+
+__all__ = ["ComparisonRow", "compare", "format_comparison", "true_earth_rate_dph"]
+
+
+@dataclass(frozen=True)
+class ComparisonRow:
+    """One estimated parameter against its true value.
+
+    Attributes
+    ----------
+    kind : str
+        ``"gyro"``, ``"accel"`` or ``"site"``.
+    sensor : str
+        Sensor name (``""`` for the Earth rate).
+    parameter : str
+        ``"scale_factor"``, ``"bias"``, ``"misalignment_1"``, ``"misalignment_2"``,
+        ``"earth_rate"``.
+    unit : str
+    estimate, truth, sd : float
+    """
+
+    kind: str
+    sensor: str
+    parameter: str
+    unit: str
+    estimate: float
+    truth: float
+    sd: float
+
+    @property
+    def error(self) -> float:
+        """estimate − truth."""
+        return self.estimate - self.truth
+
+    @property
+    def z(self) -> float:
+        """error / σ (NaN when σ is 0)."""
+        return self.error / self.sd if self.sd > 0 else float("nan")
+
+
+def true_earth_rate_dph(truth: Calibration, effects: Mapping[str, float] | None = None) -> float:
+    """The Earth rate a simulated session contains: 0 with ``no_earth_rate``, else the
+    truth's ``earth_rate_dph`` or 15.041 °/h."""
+    if effects and effects.get("no_earth_rate"):
+        return 0.0
+    return truth.earth_rate_dph if truth.earth_rate_dph is not None else EARTH_RATE_DPH
+
+
+def compare(cal: Calibration, truth: Calibration,
+            effects: Mapping[str, float] | None = None) -> list[ComparisonRow]:
+    """Rows of every parameter both calibrations hold.
+
+    Raises
+    ------
+    ConfigError
+        The two have different sensor counts for a kind.
+    """
+    rows: list[ComparisonRow] = []
+    for kind, est in cal.sets.items():
+        if kind not in truth.sets:
+            continue
+        tru = truth.sets[kind]
+        if tru.n != est.n:
+            raise ConfigError(f"{kind}: calibration has {est.n} sensors, truth has {tru.n}")
+        for e, t in zip(est.sensors, tru.sensors, strict=True):
+            u = e.scale_factor_unit
+            rows.append(ComparisonRow(
+                kind, e.name, "scale_factor", u, scale_factor_from_si(e.scale_factor, u),
+                scale_factor_from_si(t.scale_factor, u),
+                scale_factor_sd_from_si(e.scale_factor, e.scale_factor_sd, u)))
+            bf = input_unit_factor(e.bias_unit)
+            rows.append(ComparisonRow(kind, e.name, "bias", e.bias_unit, e.bias / bf,
+                                      t.bias / bf, e.bias_sd / bf))
+            me = e.misalignment
+            mt = misalignment_angles(e.axis_nominal, t.axis)
+            for j in range(2):
+                rows.append(ComparisonRow(kind, e.name, f"misalignment_{j + 1}", "mrad",
+                                          1e3 * me[j], 1e3 * mt[j],
+                                          1e3 * float(e.misalignment_sd[j])))
+    if cal.earth_rate_dph is not None and cal.earth_rate_dph_sd is not None:
+        rows.append(ComparisonRow("site", "", "earth_rate", "deg/h", cal.earth_rate_dph,
+                                  true_earth_rate_dph(truth, effects), cal.earth_rate_dph_sd))
+    return rows
+
+
+def _fmt(v: float) -> str:
+    if not math.isfinite(v):
+        return "nan"
+    return f"{v:.6g}"
+
+
+def format_comparison(rows: list[ComparisonRow]) -> str:
+    """A readable table; the last line counts the rows beyond 3σ."""
+    head = ("kind", "sensor", "parameter", "unit", "estimate", "truth", "error", "sd",
+            "error/sd")
+    body = [(r.kind, r.sensor, r.parameter, r.unit, _fmt(r.estimate), _fmt(r.truth),
+             _fmt(r.error), _fmt(r.sd), f"{r.z:+.2f}" if math.isfinite(r.z) else "nan")
+            for r in rows]
+    widths = [max(len(x[k]) for x in [head, *body]) for k in range(len(head))]
+    lines = ["  ".join(x[k].ljust(widths[k]) if k < 4 else x[k].rjust(widths[k])
+                       for k in range(len(head))) for x in [head, *body]]
+    z = np.array([r.z for r in rows], float)
+    ok = np.isfinite(z)
+    n_out = int(np.sum(np.abs(z[ok]) > 3))
+    lines.append(f"{int(ok.sum())} parameters compared, {n_out} beyond 3 sigma"
+                 + (f", max |error/sd| = {np.max(np.abs(z[ok])):.2f}" if ok.any() else ""))
+    return "\n".join(lines)

@@ -1,0 +1,124 @@
+"""``rimu calibrate SESSION --out cal.json``: calibrate a turntable session.
+
+Reads a session directory (``calibration.session_io.load_session``), runs
+:func:`calibration.calibrate.calibrate`, writes the ``rimu.calibration/1`` file and prints a
+summary; ``--compare TRUTH`` adds estimate, truth, error and error/σ side by side.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+
+from calibration.calibrate import BIAS_METHODS, calibrate
+from fdi.calfile import Calibration, SensorSet
+from fdi.errors import ConfigError
+from fdi.parity import parity_matrix
+from fdi.units import input_unit_factor, scale_factor_from_si, scale_factor_sd_from_si
+
+HELP = "calibrate redundant gyros/accelerometers from a turntable session"
+
+
+def configure(p: argparse.ArgumentParser) -> None:
+    p.add_argument("session", help="session directory (manifest.json + samples.csv)")
+    p.add_argument("--out", required=True, metavar="FILE",
+                   help="calibration file to write (rimu.calibration/1 JSON)")
+    p.add_argument("--compare", metavar="TRUTH",
+                   help="truth sidecar (DIR/truth.json): print estimate, truth, error, error/sd")
+    p.add_argument("--bias-method", choices=BIAS_METHODS, default="model",
+                   help="gyro bias in the file: explicit Earth-rate model (default) or seed "
+                        "000's average over whole outer-axis turns; both are printed")
+    p.add_argument("--no-denoise", action="store_true",
+                   help="fit the Earth rate to the raw outputs, not the wavelet-denoised ones")
+    p.add_argument("--plot", metavar="DIR",
+                   help="write PNG plots (per-step residuals, Earth-rate fit) into DIR")
+
+
+def _set_summary(s: SensorSet, V_sd: object) -> list[str]:
+    rms_unit = "deg/s" if s.kind == "gyro" else "mg"
+    rf = input_unit_factor(rms_unit)
+    out = [f"{s.kind}: {s.n} sensors"]
+    for c in s.sensors:
+        u = c.scale_factor_unit
+        bf = input_unit_factor(c.bias_unit)
+        m, msd = 1e3 * c.misalignment, 1e3 * np.asarray(c.misalignment_sd)
+        out.append(
+            f"  {c.name:>4s}  SF {scale_factor_from_si(c.scale_factor, u):.6g} ± "
+            f"{scale_factor_sd_from_si(c.scale_factor, c.scale_factor_sd, u):.2g} {u}"
+            f"   bias {c.bias / bf:+.6g} ± {c.bias_sd / bf:.2g} {c.bias_unit}"
+            f"   misalignment ({m[0]:+.4f} ± {msd[0]:.4f}, {m[1]:+.4f} ± {msd[1]:.4f}) mrad"
+            f"   residual rms {c.residual_rms / rf:.3g} {rms_unit}")
+    for g, M in zip(s.groups, s.misalignment_matrices, strict=False):
+        name = ",".join(str(i + 1) for i in g)
+        rows = np.atleast_2d(M)
+        out.append(f"  M (sensors {name}) =")
+        out.extend("    [" + " ".join(f"{v:+.7f}" for v in r) + "]" for r in rows)
+    V, Vc = parity_matrix(s.H_nominal), parity_matrix(s.H)
+    out.extend("  v   = [" + " ".join(f"{x:+.5f}" for x in r) + "]" for r in V)
+    sd = np.asarray(V_sd, float) if V_sd is not None and np.size(V_sd) else None
+    for k, r in enumerate(Vc):
+        line = "  v_c = [" + " ".join(f"{x:+.5f}" for x in r) + "]"
+        if sd is not None and sd.shape == Vc.shape:
+            line += "  sd [" + " ".join(f"{x:.5f}" for x in sd[k]) + "]"
+        out.append(line)
+    return out
+
+
+def summary_text(cal: Calibration) -> str:
+    """The readable summary ``rimu calibrate`` prints."""
+    ex = cal.extra
+    lines = [f"calibration of {ex.get('source', '?')} ({cal.configuration}, "
+             f"{cal.sample_rate_hz:g} Hz, latitude {cal.latitude_deg} deg)"]
+    for kind, s in cal.sets.items():
+        key = "parity_calibrated_sd" if kind == "gyro" else "parity_accel_calibrated_sd"
+        lines.extend(_set_summary(s, ex.get(key)))
+    gb = ex.get("gyro_bias", {})
+    if "turns" in gb:
+        lines.append(f"gyro bias, both methods ({gb['unit']}); file uses "
+                     f"'{ex.get('method', {}).get('bias', 'model')}':")
+        for i, c in enumerate(cal.gyro.sensors):
+            lines.append(f"  {c.name:>4s}  model {gb['model'][i]:+.6g} ± {gb['model_sd'][i]:.2g}"
+                         f"   turns {gb['turns'][i]:+.6g} ± {gb['turns_sd'][i]:.2g}"
+                         f"   (vertical Earth rate removed: {gb['vertical_correction'][i]:+.4g})")
+    rt = ex.get("rate_test", {})
+    if "chi2_dof" in rt:
+        lines.append("rate test: pairs " + " ".join(f"{a}/{b}" for a, b in rt["pairs"])
+                     + "; chi2/dof of the step differences: "
+                     + " ".join(f"{x:.2f}" for x in np.asarray(rt["chi2_dof"], float)))
+    if cal.earth_rate_dph is not None:
+        er = ex.get("earth_rate_fit", {})
+        lines.append(f"Earth rate from the outer-axis modulation: {cal.earth_rate_dph:.4f} ± "
+                     f"{cal.earth_rate_dph_sd:.4f} deg/h"
+                     + (f" ({len(er.get('steps', []))} steps, per-step scatter sd "
+                        f"{er['scatter_sd_dph']:.3f}, heading of table zero "
+                        f"{er['heading_offset_deg']:+.2f} ± {er['heading_offset_deg_sd']:.2f}"
+                        " deg)" if er else ""))
+    return "\n".join(lines)
+
+
+def run(args: argparse.Namespace) -> int:
+    from calibration.session_io import load_session
+
+    session = load_session(args.session)
+    cal = calibrate(session, bias_method=args.bias_method, denoise=not args.no_denoise)
+    out = Path(args.out)
+    if out.parent and not out.parent.exists():
+        raise ConfigError(f"{args.out}: directory {out.parent} does not exist")
+    cal.save(out)
+    print(summary_text(cal))
+    print(f"wrote {out}")
+    if args.compare:
+        from calibration.compare import compare, format_comparison
+        from calibration.truth import load_truth
+
+        truth, effects, _ = load_truth(args.compare)
+        print(f"\ncompared with {args.compare}:")
+        print(format_comparison(compare(cal, truth, effects)))
+    if args.plot:
+        from calibration.plots import write_plots
+
+        for p in write_plots(session, cal, args.plot):
+            print(f"wrote {p}")
+    return 0

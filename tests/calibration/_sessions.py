@@ -1,0 +1,29 @@
+"""Sessions for the calibration tests, from the presets and the product simulator."""
+
+import dataclasses
+
+import numpy as np
+
+from calibration.presets import preset
+from calibration.simulate import NoiseModel, simulate_session
+
+
+def session(name, seed=0, *, white=True, **kw):
+    """(session, truth) of a preset; ``white=False`` gives noise-free outputs."""
+    seq, truth, noise = preset(name)
+    s = simulate_session(None, seq, truth, seed=seed,
+                         noise=noise if white else NoiseModel(white=False), **kw)
+    return s, truth
+
+
+def with_changes(s, **kw):
+    """A copy of a session with some fields replaced."""
+    return dataclasses.replace(s, **kw)
+
+
+def shift_outer(s, delta_rad):
+    """The same samples, table outer angles recorded ``delta_rad`` off."""
+    return dataclasses.replace(s, outer=s.outer + delta_rad)
+
+
+__all__ = ["np", "session", "shift_outer", "with_changes"]
