@@ -1,0 +1,130 @@
+"""``rimu calibrate``: the file, the summary, --compare, and one-line errors on bad input."""
+
+import json
+
+import numpy as np
+import pytest
+
+from calibration.session_io import load_session, save_session
+from calibration.truth import save_truth
+from rimu.cli import main
+from tests.calibration._sessions import session, with_changes
+
+
+@pytest.fixture(scope="module")
+def tetrad_dir(tmp_path_factory):
+    d = tmp_path_factory.mktemp("tetrad")
+    s, truth = session("tetrad-paper", seed=5)
+    save_session(s, d)
+    save_truth(truth, {}, {}, d / "truth.json")
+    return d
+
+
+def _run(capsys, *argv):
+    code = main([str(a) for a in argv])
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
+def test_writes_file_summary_and_comparison(tetrad_dir, tmp_path, capsys):
+    out = tmp_path / "cal.json"
+    code, text, err = _run(capsys, "calibrate", tetrad_dir, "--out", out, "--compare",
+                           tetrad_dir / "truth.json")
+    assert code == 0, err
+    doc = json.loads(out.read_text())
+    assert doc["schema"] == "rimu.calibration/1" and len(doc["sensors"]["gyro"]) == 4
+    for key in ("SF ", "bias ", "misalignment (", "residual rms", "M (sensors 1,2,3)",
+                "M (sensors 4)", "v   =", "v_c =", "Earth rate from the outer-axis",
+                "turns", "chi2/dof"):
+        assert key in text, f"summary shows {key!r}"
+    # comparison table: every row's error/sd printed, none beyond 3 sigma on this seed
+    assert "error/sd" in text and "17 parameters compared, 0 beyond 3 sigma" in text
+
+
+def test_bias_method_turns_and_no_denoise(tetrad_dir, tmp_path, capsys):
+    out = tmp_path / "cal.json"
+    code, _, err = _run(capsys, "calibrate", tetrad_dir, "--out", out, "--bias-method",
+                        "turns", "--no-denoise")
+    assert code == 0, err
+    doc = json.loads(out.read_text())
+    ex = doc["extra"]
+    assert ex["method"]["bias"] == "turns" and ex["method"]["denoise"] == "none"
+    assert ex["earth_rate_fit"]["denoised"] is False
+    np.testing.assert_allclose([e["bias"] for e in doc["sensors"]["gyro"]],
+                               ex["gyro_bias"]["turns"], rtol=1e-12)
+
+
+def _one_line_error(capsys, *argv):
+    code, _, err = _run(capsys, *argv)
+    assert code != 0
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("rimu: error: "), err
+    assert "Traceback" not in err
+    return lines[0]
+
+
+def _copy(src, dst):
+    dst.mkdir()
+    for name in ("manifest.json", "samples.csv"):
+        (dst / name).write_bytes((src / name).read_bytes())
+    return dst
+
+
+def test_missing_column(tetrad_dir, tmp_path, capsys):
+    d = _copy(tetrad_dir, tmp_path / "s")
+    lines = (d / "samples.csv").read_text().splitlines()
+    head = lines[0].split(",")
+    j = head.index("gyro.g3")
+    (d / "samples.csv").write_text("\n".join(",".join(c for k, c in enumerate(r.split(","))
+                                                      if k != j) for r in lines) + "\n")
+    msg = _one_line_error(capsys, "calibrate", d, "--out", tmp_path / "c.json")
+    assert str(d) in msg and "gyro.g3" in msg
+
+
+def test_nan_sample(tetrad_dir, tmp_path, capsys):
+    d = _copy(tetrad_dir, tmp_path / "s")
+    lines = (d / "samples.csv").read_text().splitlines()
+    row = 1 + 36000 + 5                             # a sample of step 11 (3600 per step)
+    cells = lines[row].split(",")
+    cells[-1] = "nan"
+    lines[row] = ",".join(cells)
+    (d / "samples.csv").write_text("\n".join(lines) + "\n")
+    msg = _one_line_error(capsys, "calibrate", d, "--out", tmp_path / "c.json")
+    assert "samples.csv" in msg and "step 11" in msg
+
+
+def test_unknown_unit(tetrad_dir, tmp_path, capsys):
+    d = _copy(tetrad_dir, tmp_path / "s")
+    m = json.loads((d / "manifest.json").read_text())
+    m["raw_units"]["gyro"] = "furlongs"
+    (d / "manifest.json").write_text(json.dumps(m))
+    msg = _one_line_error(capsys, "calibrate", d, "--out", tmp_path / "c.json")
+    assert "manifest.json" in msg and "furlongs" in msg
+
+
+def _rewrite(tetrad_dir, d, keep_fn, steps=None):
+    s = load_session(tetrad_dir)
+    keep = keep_fn(s)
+    s2 = with_changes(s, t=s.t[keep], step=s.step[keep], inner=s.inner[keep],
+                      outer=s.outer[keep], inner_rate=s.inner_rate[keep],
+                      outer_rate=s.outer_rate[keep], raw_gyro=s.raw_gyro[keep],
+                      steps=s.steps if steps is None else steps(s))
+    save_session(s2, d)
+    return d
+
+
+def test_not_enough_excitation(tetrad_dir, tmp_path, capsys):
+    d = _rewrite(tetrad_dir, tmp_path / "s", lambda s: s.step <= 6, lambda s: s.steps[:6])
+    msg = _one_line_error(capsys, "calibrate", d, "--out", tmp_path / "c.json")
+    assert str(d) in msg and "1/2, 3/4, 5/6" in msg and "rank of R is 2" in msg
+
+
+def test_step_with_too_few_samples(tetrad_dir, tmp_path, capsys):
+    def keep(s):
+        k = np.ones(s.t.shape, bool)
+        k[np.flatnonzero(s.step == 12)[4:]] = False
+        return k
+    d = _rewrite(tetrad_dir, tmp_path / "s", keep)
+    msg = _one_line_error(capsys, "calibrate", d, "--out", tmp_path / "c.json")
+    # the loader or the estimator (whichever sees it first) names the step and the minimum
+    assert str(d) in msg and "step 12" in msg and "4 sample" in msg and "at least 10" in msg
