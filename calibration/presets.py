@@ -27,18 +27,20 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence as Seq
+from typing import NamedTuple
 
 import numpy as np
 
 from calibration.sequence import Sequence, load_sequence
-from calibration.simulate import NoiseModel
+from calibration.simulate import NoiseModel, configuration_of
 from fdi.calfile import Calibration, SensorCal, SensorSet, tangent_basis
 from fdi.errors import ConfigError
 from fdi.geometry import Configuration, cone6, tetrad
 from fdi.parity import calibrated_axes
 from fdi.units import DPS, MG, input_unit_factor, scale_factor_to_si
 
-__all__ = ["PRESETS", "default_sequence_name", "make_sensor_set", "preset", "random_truth"]
+__all__ = ["PRESETS", "Preset", "default_sequence_name", "make_sensor_set", "preset",
+           "random_truth"]
 
 PRESETS: dict[str, str] = {
     "cone-paper": "seed 001: MEMS orthogonal cone, Table 3 values, 30 deg/s, latitude 37.5",
@@ -46,6 +48,27 @@ PRESETS: dict[str, str] = {
                     "latitude -23.2",
 }
 """Preset names and one-line descriptions."""
+
+
+
+class Preset(NamedTuple):
+    """What :func:`preset` returns; unpacks as ``sequence, truth, noise``."""
+
+    sequence: Sequence
+    truth: Calibration
+    noise: NoiseModel
+
+    @property
+    def config(self) -> Configuration:
+        """Nominal gyro configuration (names, groups) of the truth."""
+        return configuration_of(self.truth.gyro, self.truth.configuration)
+
+    @property
+    def accel_config(self) -> Configuration | None:
+        """Nominal accelerometer configuration, or None without accelerometers."""
+        a = self.truth.sets.get("accel")
+        return None if a is None else configuration_of(a, self.truth.configuration)
+
 
 # seed 000 Eq. 26
 _M1 = np.array([[0.9999895, -0.0019974, 0.0041171],
@@ -145,17 +168,17 @@ def make_sensor_set(kind: str, config: Configuration, axes: np.ndarray,
                      _group_matrices(config.H, Ht, config.groups))
 
 
-def _tetrad_paper() -> tuple[Sequence, Calibration, NoiseModel]:
+def _tetrad_paper() -> Preset:
     cfg = tetrad()
     Ht = calibrated_axes(cfg.H, cfg.groups, [_M1, _M2])      # seed 000 Eq. 14, 26
     gyro = make_sensor_set("gyro", cfg, Ht, _TETRAD_SF_MV_DPS, "mV/(deg/s)",
                            _TETRAD_BIAS_DPS, "deg/s", TETRAD_NOISE_DPS * DPS, "mV")
     cal = Calibration("tetrad", {"gyro": gyro}, 100.0, latitude_deg=-23.2,
                       extra={"preset": "tetrad-paper"})
-    return load_sequence("tetrad-paper"), cal, NoiseModel()
+    return Preset(load_sequence("tetrad-paper"), cal, NoiseModel())
 
 
-def _cone_paper() -> tuple[Sequence, Calibration, NoiseModel]:
+def _cone_paper() -> Preset:
     cfg = cone6()
     sets = {}
     for kind, mats, sf, sfu, b, bu, sd in (
@@ -168,11 +191,13 @@ def _cone_paper() -> tuple[Sequence, Calibration, NoiseModel]:
         sets[kind] = make_sensor_set(kind, cfg, Ht, sf, sfu, b, bu, sd, "LSB")
     cal = Calibration("cone6", sets, 100.0, latitude_deg=37.5,
                       extra={"preset": "cone-paper"})
-    return load_sequence("cone-paper"), cal, NoiseModel()
+    return Preset(load_sequence("cone-paper"), cal, NoiseModel())
 
 
-def preset(name: str) -> tuple[Sequence, Calibration, NoiseModel]:
-    """A preset: (sequence, truth, noise model). Names: :data:`PRESETS`.
+def preset(name: str) -> Preset:
+    """A preset: (sequence, truth, noise model), also ``.config`` and ``.accel_config``.
+
+    Names: :data:`PRESETS`.
 
     Raises
     ------

@@ -105,8 +105,8 @@ def simulate_session(config: Configuration | str | None, sequence: Sequence,
                      effects: Mapping[str, float] | None = None,
                      effect_sensors: Mapping[str, Iterable[int]] | Iterable[int] | None = None,
                      noise: NoiseModel | None = None, sample_rate_hz: float | None = None,
-                     latitude_deg: float | None = None,
-                     gravity: float | None = None) -> Session:
+                     latitude_deg: float | None = None, gravity: float | None = None,
+                     accel_config: Configuration | None = None) -> Session:
     """Simulate the raw outputs of every sensor over a test sequence.
 
     Parameters
@@ -132,6 +132,9 @@ def simulate_session(config: Configuration | str | None, sequence: Sequence,
         Default ``truth.latitude_deg`` (required from one of them).
     gravity : float, optional
         Local gravity (m/s²); default normal gravity at the latitude.
+    accel_config : Configuration, optional
+        Nominal accelerometer configuration; default from ``truth.sets["accel"]``. Must
+        match the truth's accelerometer count.
 
     Returns
     -------
@@ -157,6 +160,12 @@ def simulate_session(config: Configuration | str | None, sequence: Sequence,
         raise ConfigError(f"configuration {gcfg.name!r} has {gcfg.n} gyros, the truth has "
                           f"{gset.n}")
     acfg = None if aset is None else configuration_of(aset, gcfg.name)
+    if accel_config is not None:
+        if aset is None or accel_config.n != aset.n:
+            raise ConfigError(f"accelerometer configuration {accel_config.name!r} has "
+                              f"{accel_config.n} sensors, the truth has "
+                              f"{0 if aset is None else aset.n}")
+        acfg = accel_config
     fs = float(sample_rate_hz or truth.sample_rate_hz)
     if not fs > 0:
         raise ConfigError(f"sample rate must be positive, got {fs}")
