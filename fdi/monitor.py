@@ -42,11 +42,11 @@ from typing import Any
 
 import numpy as np
 
-from fdi.answer import Answer, BlockResult, Event
+from fdi.answer import CAPABILITIES, Answer, BlockResult, Event
 from fdi.calfile import Calibration
 from fdi.detector import default_thresholds
 from fdi.errors import ConfigError
-from fdi.health import first_trigger, health_limits
+from fdi.health import health_limits
 from fdi.isolation import isolate, magnitude
 from fdi.reconstruction import SetCache, SetModel
 from fdi.settings import MonitorSettings, Thresholds
@@ -55,7 +55,7 @@ __all__ = ["Monitor"]
 
 _NAN = float("nan")
 _INF = float("inf")
-_CHUNK = 1 << 16
+_CHUNK = 1 << 13
 
 
 class Monitor:
@@ -498,7 +498,8 @@ class Monitor:
                 return
 
     # ------------------------------------------------------------------ block
-    def run(self, t: Any, raw: Any, valid: Any = None) -> BlockResult:
+    def run(self, t: Any, raw: Any, valid: Any = None, *, parity: bool = False,
+            chunk: int = _CHUNK) -> BlockResult:
         """Process a block of samples; answers bit-identical to :meth:`step` on each row.
 
         Parameters
@@ -506,39 +507,48 @@ class Monitor:
         t : array_like, shape (N,)
         raw : array_like, shape (N, n)
         valid : array_like of bool, shape (N, n), optional
+        parity : bool
+            Also return the parity vectors (``BlockResult.parity``; costs memory).
+        chunk : int
+            Rows per vectorised piece (bounds memory and wasted work after an event).
 
         Returns
         -------
         BlockResult
+            Arrays of shape (N, ...) (views of transposed storage), events in time order.
         """
         n, K = self.n, self.K
         try:
             ta = np.asarray(t, dtype=float).reshape(-1)
             ra = np.asarray(raw, dtype=float)
-            va = (np.ones(ra.shape, bool) if valid is None
-                  else np.asarray(valid, dtype=bool))
-            shaped = ra.ndim == 2 and ra.shape == (ta.shape[0], n) and va.shape == ra.shape
+            va = None if valid is None else np.asarray(valid, dtype=bool)
+            shaped = (ra.ndim == 2 and ra.shape == (ta.shape[0], n)
+                      and (va is None or va.shape == ra.shape))
         except (TypeError, ValueError):
             shaped = False
         if not shaped:
-            return self._run_rows(t, raw, valid)
+            return self._run_rows(t, raw, valid, parity)
+        if va is not None and va.all():
+            va = None
         N = ta.shape[0]
-        out = _Out(N, n, K)
+        out = _Out(N, n, K, parity)
+        chunk = max(1, int(chunk))
         r = 0
         while r < N:
-            if (not self._started or (self.settings.readmission and self._mask != self._full_mask)):
-                self._scalar_row(out, r, ta[r], ra[r], va[r])
+            if not self._started or (self.settings.readmission
+                                     and self._mask != self._full_mask):
+                self._scalar_row(out, r, ta[r], ra[r], None if va is None else va[r])
                 r += 1
                 continue
-            end = min(N, r + _CHUNK)
+            end = min(N, r + chunk)
             e = self._segment(out, ta, ra, va, r, end)
             if e < end:
-                self._scalar_row(out, e, ta[e], ra[e], va[e])
+                self._scalar_row(out, e, ta[e], ra[e], None if va is None else va[e])
                 e += 1
             r = e
         return out.result(ta)
 
-    def _run_rows(self, t: Any, raw: Any, valid: Any) -> BlockResult:
+    def _run_rows(self, t: Any, raw: Any, valid: Any, parity: bool) -> BlockResult:
         """Fallback for blocks of odd shape: step row by row."""
         try:
             rows = list(raw)
@@ -549,7 +559,7 @@ class Monitor:
         except (TypeError, ValueError):
             ts = [_NAN] * len(rows)
         N = min(len(rows), len(ts))
-        out = _Out(N, self.n, self.K)
+        out = _Out(N, self.n, self.K, parity)
         vl = None
         if valid is not None:
             try:
@@ -567,75 +577,111 @@ class Monitor:
         except Exception:
             tf = _NAN
         ans, stats, thrs, par, pl = self._step(tf, raw, valid)
-        out.omega[r] = ans.omega
-        out.omega_sd[r] = ans.omega_sd
+        out.omega[:, r] = ans.omega
+        out.omega_sd[:, r] = ans.omega_sd
         out.healthy[r] = ans.healthy
-        out.statistics[r] = stats
-        out.thresholds[r] = thrs
-        out.parity[r] = par
+        out.statistics[:, r] = stats
+        out.thresholds[:, r] = thrs
+        if out.parity is not None:
+            out.parity[:, r] = par
         out.pl[r] = pl
-        out.cap[r] = ans.capability
+        out.cap[r] = _CAP_CODE[ans.capability]
         out.events.extend(ans.events)
 
-    def _segment(self, out: _Out, ta: np.ndarray, ra: np.ndarray, va: np.ndarray,
+    def _segment(self, out: _Out, ta: np.ndarray, ra: np.ndarray, va: np.ndarray | None,
                  r0: int, r1: int) -> int:
-        """Vectorised rows r0 ... e−1 of one healthy set without state changes; returns e."""
+        """Vectorised rows r0 ... e−1 of one healthy set without state changes; returns e.
+
+        Writes its outputs straight into ``out`` (rows from e on are overwritten by what
+        follows) and commits the state of rows < e.
+        """
         mdl = self._model
         idx = mdl.idx
-        L = r1 - r0
+        il = list(idx)
+        n = self.n
+        e = r1 - r0
         Ub = ra[r0:r1]
-        Vb = va[r0:r1]
-        e = L
-        if idx:
-            inc = ~Vb[:, list(idx)].all(axis=1)
+        if va is not None and idx:
+            inc = ~va[r0:r1, il].all(axis=1)
             if inc.any():
                 e = int(np.argmax(inc))
-        lim = self._lim
-        runs = {}
-        for i in idx:
-            row, run = first_trigger(Ub[:e, i], lim.lo[i], lim.hi[i], self._last[i],
-                                     self._run[i], lim.stuck_count)
-            runs[i] = run
-            e = min(e, row)
         if e == 0:
             return r0
-        cols = [Ub[:e, i] for i in range(self.n)]
+        # health checks (values, stuck) on every healthy sensor at once
+        if idx:
+            X = Ub[:e] if len(il) == n else Ub[:e, il]
+            lim = self._lim
+            lo = np.array([lim.lo[i] for i in il])
+            hi = np.array([lim.hi[i] for i in il])
+            if (lo < X.min(axis=0)).all() and (X.max(axis=0) < hi).all():
+                trig = np.zeros(e, bool)                    # fast path (NaN fails it)
+            else:
+                trig = (~((lo < X) & (X < hi))).any(axis=1)
+            eq = np.empty(X.shape, bool)
+            eq[0] = X[0] == np.array([self._last[i] for i in il])
+            np.equal(X[1:], X[:-1], out=eq[1:])
+            if eq.any():
+                ii = np.arange(e)[:, None]
+                lastne = np.maximum.accumulate(np.where(eq, -1, ii), axis=0)
+                run0 = np.array([self._run[i] for i in il])[None, :]
+                run = np.where(lastne < 0, run0 + ii + 1, ii - lastne + 1)
+                trig |= (run >= lim.stuck_count).any(axis=1)
+            else:
+                run = None
+            if trig.any():
+                e = int(np.argmax(trig))
+                if e == 0:
+                    return r0
+        cols = [Ub[:e, i] for i in range(n)]
         p, z, w, rho = mdl.kernel_vec(*cols)
         df = mdl.df
-        K = self.K
         ns = len(self._scales)
+        sl = slice(r0, r0 + e)
+        stats = out.statistics[:, sl]
+        thrs = out.thresholds[:, sl]
         if df > 0:
             R = self._R
-            hist = np.array(self._ring[self._pos + 1:] + self._ring[:self._pos + 1])
-            inc_arr = np.empty((e + 1, df + 1))
-            inc_arr[0] = self._c
+            M = np.empty((df + 1, e + 1))
+            M[:, 0] = self._c
             for j in range(df):
-                inc_arr[1:, j] = z[j]
-            inc_arr[1:, df] = rho
-            C = np.cumsum(inc_arr, axis=0)[1:]
-            ext = np.concatenate([hist, C], axis=0)
-            counts = self._count + np.arange(1, e + 1)
-            stats = np.empty((e, K))
-            thrs = np.empty((e, K))
+                M[j, 1:] = z[j]
+            M[df, 1:] = rho
+            C = np.cumsum(M, axis=1)                        # sequential, as c = c + z
+            ring = self._ring
+            pos = self._pos
+            ext = np.empty((df + 1, R + e))
+            ext[:, :R] = np.array(ring[pos + 1:] + ring[:pos + 1]).T
+            ext[:, R:] = C[:, 1:]
+            cur = ext[:, R:]
+            count0 = self._count
             alarm = np.zeros(e, bool)
             noclear = np.zeros(e, bool)
-            cur = ext[R:R + e]
+            d = np.empty(e)
+            acc = np.empty(e)
+            bb = np.empty(e, bool)
             for k, wl in enumerate(self._scales):
-                old = ext[R - wl:R - wl + e]
-                d = cur[:, 0] - old[:, 0]
-                acc = d * d
+                old = ext[:, R - wl:R - wl + e]
+                np.subtract(cur[0], old[0], out=d)
+                np.multiply(d, d, out=acc)
                 for j in range(1, df):
-                    d = cur[:, j] - old[:, j]
-                    acc = acc + d * d
-                D = acc * mdl.invwf[k]
-                T = mdl.thr[k] * (1.0 + mdl.kof[k] * (cur[:, df] - old[:, df]))
-                full = counts >= wl
-                D = np.where(full, D, _NAN)
-                T = np.where(full, T, mdl.thr[k])
-                alarm |= D > T
-                noclear |= D >= self._cr[k]
-                stats[:, k] = D
-                thrs[:, k] = T
+                    np.subtract(cur[j], old[j], out=d)
+                    np.multiply(d, d, out=d)
+                    np.add(acc, d, out=acc)
+                D = stats[k]
+                T = thrs[k]
+                np.multiply(acc, mdl.invwf[k], out=D)
+                np.subtract(cur[df], old[df], out=T)
+                np.multiply(T, mdl.kof[k], out=T)
+                np.add(T, 1.0, out=T)
+                np.multiply(T, mdl.thr[k], out=T)
+                nf = min(e, max(0, wl - count0 - 1))       # windows not yet full
+                if nf:
+                    D[:nf] = _NAN
+                    T[:nf] = mdl.thr[k]
+                np.greater(D, T, out=bb)
+                alarm |= bb
+                np.greater_equal(D, self._cr[k], out=bb)
+                noclear |= bb
             if self._cusum:
                 rr = mdl.proj(*z)
                 drift = self._nu + 3.0 * np.sqrt(mdl.kappa * rho)
@@ -648,30 +694,31 @@ class Monitor:
                     M2 = np.minimum.accumulate(np.concatenate([[self._mm[i]], S2]))[1:]
                     g = np.maximum(g, np.maximum(S1 - M1, S2 - M2))
                     cus_state.append((S1, M1, S2, M2))
-                stats[:, ns] = g
-                thrs[:, ns] = mdl.cusum_h
+                stats[ns] = g
+                thrs[ns] = mdl.cusum_h
                 alarm |= g > mdl.cusum_h
                 noclear |= g >= self._crh
             # detection state machine: first row that changes state
-            ii = np.arange(e)
             if not self._det:
                 tr = int(np.argmax(alarm)) if alarm.any() else e
                 ra_arr = rc_arr = None
             else:
-                lf = np.maximum.accumulate(np.where(alarm, -1, ii))
-                ra_arr = np.where(lf < 0, self._run_alarm + ii + 1, ii - lf)
-                lc = np.maximum.accumulate(np.where(noclear, ii, -1))
-                rc_arr = np.where(lc < 0, self._run_clear + ii + 1, ii - lc)
-                trig = rc_arr >= self.settings.clear_samples
+                ii1 = np.arange(e)
+                lf = np.maximum.accumulate(np.where(alarm, -1, ii1))
+                ra_arr = np.where(lf < 0, self._run_alarm + ii1 + 1, ii1 - lf)
+                lc = np.maximum.accumulate(np.where(noclear, ii1, -1))
+                rc_arr = np.where(lc < 0, self._run_clear + ii1 + 1, ii1 - lc)
+                trig2 = rc_arr >= self.settings.clear_samples
                 if mdl.capability == "isolate":
-                    trig |= ra_arr >= self.settings.persistence
-                tr = int(np.argmax(trig)) if trig.any() else e
-            e = min(e, tr)
-            if e == 0:
-                return r0
+                    trig2 |= ra_arr >= self.settings.persistence
+                tr = int(np.argmax(trig2)) if trig2.any() else e
+            if tr < e:
+                e = tr
+                if e == 0:
+                    return r0
             # commit rows [0, e)
-            self._c = C[e - 1].tolist()
-            self._ring = ext[e:e + R].tolist()
+            self._c = C[:, e].tolist()
+            self._ring = ext[:, e:e + R].T.tolist()
             self._pos = R - 1
             self._count += e
             if self._cusum:
@@ -684,50 +731,63 @@ class Monitor:
                 self._det_rows += e
                 self._run_alarm = int(ra_arr[e - 1])
                 self._run_clear = int(rc_arr[e - 1])
-            out.statistics[r0:r0 + e] = stats[:e]
-            out.thresholds[r0:r0 + e] = thrs[:e]
-            for j in range(df):
-                out.parity[r0:r0 + e, j] = p[j][:e]
+            if out.parity is not None:
+                for j in range(df):
+                    out.parity[j, r0:r0 + e] = p[j][:e]
         else:
-            out.statistics[r0:r0 + e] = _NAN
-            out.thresholds[r0:r0 + e] = list(mdl.thr) + ([mdl.cusum_h] if self._cusum else [])
+            stats[:, :e] = _NAN
+            thrs[:, :e] = np.array(list(mdl.thr) + ([mdl.cusum_h] if self._cusum else []))[:, None]
+        sl = slice(r0, r0 + e)
         # health bookkeeping of the committed rows
-        for i in idx:
-            self._run[i] = int(runs[i][e - 1])
+        for k, i in enumerate(il):
+            self._run[i] = int(run[e - 1, k]) if run is not None else 1
             self._last[i] = float(Ub[e - 1, i])
             self._lvt[i] = float(ta[r0 + e - 1])
         if w is None:
-            out.omega[r0:r0 + e] = _NAN
+            out.omega[:, sl] = _NAN
             rho_e: Any = rho
         else:
             for a in range(3):
-                out.omega[r0:r0 + e, a] = w[a][:e]
-            rho_e = rho[:e] if isinstance(rho, np.ndarray) else rho
+                out.omega[a, sl] = w[a][:e]
+            rho_e = rho[:e] if isinstance(rho, np.ndarray) else np.full(e, rho)
         pl = mdl.pl
-        out.pl[r0:r0 + e] = pl.a * np.sqrt(1.0 + pl.b * rho_e) + pl.c * np.sqrt(pl.d + pl.e * rho_e)
-        out.omega_sd[r0:r0 + e] = mdl.omega_sd
-        out.healthy[r0:r0 + e] = self._healthy_array(self._mask)
-        out.cap[r0:r0 + e] = mdl.capability
+        t1 = out.pl[sl]
+        np.multiply(rho_e, pl.b, out=t1)
+        np.add(t1, 1.0, out=t1)
+        np.sqrt(t1, out=t1)
+        np.multiply(t1, pl.a, out=t1)
+        t2 = np.multiply(rho_e, pl.e)
+        np.add(t2, pl.d, out=t2)
+        np.sqrt(t2, out=t2)
+        np.multiply(t2, pl.c, out=t2)
+        np.add(t1, t2, out=t1)
+        out.omega_sd[:, sl] = mdl.omega_sd[:, None]
+        out.healthy[sl] = self._healthy_array(self._mask)
+        out.cap[sl] = _CAP_CODE[mdl.capability]
         return r0 + e
 
 
-class _Out:
-    """Preallocated block outputs."""
+_CAP_CODE = {c: k for k, c in enumerate(CAPABILITIES)}
+_CAP_NAMES = np.array(CAPABILITIES, dtype=object)
 
-    def __init__(self, N: int, n: int, K: int) -> None:
-        self.omega = np.empty((N, 3))
-        self.omega_sd = np.empty((N, 3))
+
+class _Out:
+    """Preallocated block outputs, stored transposed (rows contiguous per quantity)."""
+
+    def __init__(self, N: int, n: int, K: int, parity: bool = True) -> None:
+        self.omega = np.empty((3, N))
+        self.omega_sd = np.empty((3, N))
         self.healthy = np.empty((N, n), bool)
-        self.statistics = np.empty((N, K))
-        self.thresholds = np.empty((N, K))
-        self.parity = np.full((N, max(n - 3, 0)), _NAN)
+        self.statistics = np.empty((K, N))
+        self.thresholds = np.empty((K, N))
+        self.parity = np.full((max(n - 3, 0), N), _NAN) if parity else None
         self.pl = np.empty(N)
-        self.cap = np.empty(N, dtype=object)
+        self.cap = np.empty(N, np.int8)
         self.events: list[Event] = []
 
     def result(self, t: np.ndarray) -> BlockResult:
-        return BlockResult(t=np.asarray(t, float), omega=self.omega, omega_sd=self.omega_sd,
-                           healthy=self.healthy, statistics=self.statistics,
-                           thresholds=self.thresholds, protection_level=self.pl,
-                           capability=self.cap.astype(str), events=self.events,
-                           parity=self.parity)
+        return BlockResult(t=np.asarray(t, float), omega=self.omega.T, omega_sd=self.omega_sd.T,
+                           healthy=self.healthy, statistics=self.statistics.T,
+                           thresholds=self.thresholds.T, protection_level=self.pl,
+                           capability=_CAP_NAMES[self.cap], events=self.events,
+                           parity=None if self.parity is None else self.parity.T)
