@@ -74,7 +74,7 @@ def test_live_virtual_bus_matches_offline_replay(tmp_path):
     f = simulate_flight(CAL, 2.5, seed=9, faults=(fault,))
     p = tmp_path / "live.blf"
     write_flight_log(f, p)
-    flight, frames, res = _offline(p)
+    _, frames, res = _offline(p)
     assert any(e.type == "isolated" and e.sensor == 2 for e in res.events)
     channel = f"rimu-test-{uuid.uuid4().hex}"
     db, cmap = resolve_map(CAL)
@@ -140,5 +140,5 @@ def test_missing_frame_is_missing_not_zero_live(tmp_path, n_drop):
         out += dec.feed(m)
     out += dec.flush()
     assert len(out) == 50
-    t, raw, valid = out[10]
+    _, raw, valid = out[10]
     assert not valid[2] and np.isnan(raw[2]) and valid[[0, 1, 3, 4, 5]].all()
