@@ -35,6 +35,7 @@ from scipy.signal import lfilter
 from calibration.effects import EFFECTS, WARMUP_TAU_S, resolve_effect_sensors
 from calibration.sequence import Sequence
 from calibration.session import Session
+from calibration.session_io import MIN_STEP_SAMPLES
 from calibration.turntable import body_inputs, gravity_local
 from fdi.calfile import Calibration, SensorSet
 from fdi.errors import ConfigError
@@ -180,6 +181,11 @@ def simulate_session(config: Configuration | str | None, sequence: Sequence,
 
     # -- time base and table motion, step by step ------------------------------------
     counts = [round(s.duration_s * fs) for s in sequence.steps]
+    for s, n in zip(sequence.steps, counts, strict=True):
+        if n < MIN_STEP_SAMPLES:
+            raise ConfigError(f"sequence {sequence.name!r} step {s.index} lasts {s.duration_s:g} s"
+                              f", {n} samples at {fs:g} Hz; a step needs at least "
+                              f"{MIN_STEP_SAMPLES}")
     N = int(sum(counts))
     t = np.arange(N) / fs
     step = np.repeat([s.index for s in sequence.steps], counts).astype(np.int64)

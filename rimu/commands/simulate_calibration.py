@@ -14,9 +14,10 @@ import dataclasses
 from calibration.effects import effects_help, parse_effect_sensors, parse_effects
 from calibration.presets import PRESETS, default_sequence_name, preset, random_truth
 from calibration.sequence import load_sequence
-from calibration.simulate import save_simulation, simulate_session
+from calibration.simulate import NoiseModel, save_simulation, simulate_session
 from fdi.errors import ConfigError
 from fdi.geometry import load_configuration
+from fdi.units import DPH
 
 HELP = "simulate a turntable calibration session (manifest, samples, truth sidecar)"
 
@@ -42,6 +43,14 @@ def configure(p: argparse.ArgumentParser) -> None:
     p.add_argument("--effect", action="append", metavar="NAME=VALUE[,NAME=VALUE]",
                    help="switch on an effect the calibration model lacks (repeatable): "
                         + effects_help())
+    p.add_argument("--bias-instability-dph", type=float, default=0.0, metavar="S",
+                   help="add a first-order Gauss-Markov gyro bias of this standard deviation "
+                        "(deg/h; default 0: white noise only)")
+    p.add_argument("--bias-correlation-s", type=float, default=100.0, metavar="TAU",
+                   help="its correlation time (s, default 100)")
+    p.add_argument("--rate-random-walk-dph-rth", type=float, default=0.0, metavar="Q",
+                   help="add a gyro bias random walk of this density (deg/h/sqrt(h), "
+                        "default 0)")
     p.add_argument("--effect-sensors", metavar="1,3",
                    help="sensors the effects touch, numbered from 1 within each kind "
                         "(default: all)")
@@ -74,6 +83,18 @@ def run(args: argparse.Namespace) -> int:
     if args.sequence or seq is None or args.table_rate_dps or args.turns:
         name = args.sequence or (seq.source if seq is not None else default_sequence_name(cfg))
         seq = load_sequence(name, table_rate_dps=args.table_rate_dps, turns=args.turns)
+    if args.bias_instability_dph < 0 or args.rate_random_walk_dph_rth < 0 \
+            or args.bias_correlation_s <= 0:
+        raise ConfigError("--bias-instability-dph and --rate-random-walk-dph-rth must be >= 0, "
+                          "--bias-correlation-s > 0")
+    if args.bias_instability_dph or args.rate_random_walk_dph_rth:
+        base = noise or NoiseModel()
+        noise = dataclasses.replace(
+            base, bias_instability={**base.bias_instability,
+                                    "gyro": args.bias_instability_dph * DPH},
+            bias_correlation_s=args.bias_correlation_s,
+            random_walk={**base.random_walk,
+                         "gyro": args.rate_random_walk_dph_rth * DPH / 60.0})
     session = simulate_session(cfg, seq, truth, seed=args.seed, effects=effects,
                                effect_sensors=sensors, noise=noise)
     out = save_simulation(session, truth, args.out)
@@ -83,11 +104,17 @@ def run(args: argparse.Namespace) -> int:
                                 else f" and {session.raw_accel.shape[1]} accelerometers")
     eff = ", ".join(f"{k}={v:g} on sensors {','.join(map(str, session.meta['effect_sensors'][k]))}"
                     for k, v in effects.items() if v != 0.0) or "none"
+    extra_noise = ""
+    if args.bias_instability_dph:
+        extra_noise += (f" + gyro bias instability {args.bias_instability_dph:g} deg/h "
+                        f"(correlation {args.bias_correlation_s:g} s)")
+    if args.rate_random_walk_dph_rth:
+        extra_noise += f" + gyro bias random walk {args.rate_random_walk_dph_rth:g} deg/h/sqrt(h)"
     print(f"Wrote a simulated calibration session to {out}/ (manifest.json, samples.csv, "
           f"truth.json): configuration {cfg.name} ({kinds}), sequence {seq.name} "
           f"({len(seq.steps)} steps: {n_rate} rate, {n_pos} position; table rate "
           f"{seq.table_rate_dps:g} deg/s), {session.t.size} samples at "
           f"{session.sample_rate_hz:g} Hz ({session.t.size / session.sample_rate_hz:g} s), "
           f"latitude {session.latitude_deg:g} deg, true parameters from {source}, seed "
-          f"{args.seed}, effects: {eff}.")
+          f"{args.seed}, noise: white per the truth{extra_noise}, effects: {eff}.")
     return 0

@@ -13,6 +13,7 @@ from calibration.presets import preset
 from calibration.session_io import load_session, save_session
 from calibration.truth import load_truth
 from fdi.errors import FileFormatError
+from fdi.units import DPH
 from rimu.cli import main
 
 
@@ -233,6 +234,19 @@ def test_cli_random_parameters_and_custom_sequence(tmp_path, capsys):
     capsys.readouterr()
 
 
+def test_cli_extra_noise_recorded(tmp_path, capsys):
+    rc = main(["simulate", "calibration", "--preset", "tetrad-paper", "--out",
+               str(tmp_path / "n"), "--bias-instability-dph", "2", "--bias-correlation-s", "50",
+               "--rate-random-walk-dph-rth", "0.5"])
+    assert rc == 0
+    assert "bias instability 2 deg/h" in capsys.readouterr().out
+    doc = json.loads((tmp_path / "n" / "truth.json").read_text())
+    noise = doc["extra"]["noise"]
+    assert noise["bias_instability"]["gyro"] == pytest.approx(2 * DPH)
+    assert noise["random_walk"]["gyro"] == pytest.approx(0.5 * DPH / 60)
+    assert noise["bias_correlation_s"] == 50
+
+
 @pytest.mark.parametrize("argv", [
     ["--config", "nonesuch"],
     ["--preset", "cone-paper", "--config", "tetrad"],
@@ -240,6 +254,8 @@ def test_cli_random_parameters_and_custom_sequence(tmp_path, capsys):
     ["--config", "tetrad", "--effect", "warmup=1", "--effect-sensors", "9"],
     ["--config", "tetrad", "--sequence", "missing.toml"],
     ["--out-missing-config"],
+    ["--config", "tetrad", "--bias-instability-dph", "-1"],
+    ["--config", "tetrad", "--turns", "0.001"],
 ])
 def test_cli_errors_one_line_exit_2(tmp_path, capsys, argv):
     if argv == ["--out-missing-config"]:
