@@ -93,11 +93,10 @@ def _demean(X: np.ndarray, seg: np.ndarray, nseg: int) -> np.ndarray:
     return (flat - means[seg]).reshape(X.shape)
 
 
-def _solve(G: np.ndarray, y: np.ndarray, w: np.ndarray) -> np.ndarray:
-    """Weighted LS of y (M, n) on regressors G (M, n, p) with per-sensor weights w (n,)."""
-    A = np.einsum("tia,i,tib->ab", G, w, G)
-    rhs = np.einsum("tia,i,ti->a", G, w, y)
-    return np.linalg.solve(A, rhs)
+def _normal(G: np.ndarray, y: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per-sample normal-equation terms: ``Σ_i w_i g g^T`` (M, p, p) and ``Σ_i w_i g y`` (M, p)."""
+    Gw = G * w[None, :, None]
+    return np.matmul(np.swapaxes(Gw, 1, 2), G), np.einsum("tia,ti->ta", Gw, y)
 
 
 def fit_earth_rate(y: np.ndarray, up_axes: np.ndarray, step: np.ndarray, noise_cov: np.ndarray,
@@ -144,12 +143,17 @@ def fit_earth_rate(y: np.ndarray, up_axes: np.ndarray, step: np.ndarray, noise_c
                             level=level).reshape(G[m].shape)
     Gc = _demean(Gd, seg, K)
     yc = _demean(yd, seg, K)
-    theta = _solve(Gc, yc, w)
+    At, bt = _normal(Gc, yc, w)
+    p = G.shape[-1]
+    cnt, (Am, bm) = segment_means(seg, K, At.reshape(M, -1), bt)
+    A_step = (Am * cnt[:, None]).reshape(K, p, p)              # per-step normal equations
+    b_step = bm * cnt[:, None]
+    theta = np.linalg.solve(A_step.sum(axis=0), b_step.sum(axis=0))
     # white-noise sandwich with the raw (unfiltered) demeaned regressors
     G0 = _demean(G, seg, K)
-    A = np.einsum("tia,i,tib->ab", G0, w, G0)
+    A = np.matmul(np.swapaxes(G0 * w[None, :, None], 1, 2), G0).sum(axis=0)
     Wsw = (w[:, None] * Sigma) * w[None, :]
-    B = np.einsum("tia,ij,tjb->ab", G0, Wsw, G0)
+    B = G0.reshape(-1, p).T @ np.matmul(Wsw, G0).reshape(-1, p)
     Ainv = np.linalg.inv(A)
     C = Ainv @ B @ Ainv
     if heading_known:
@@ -165,15 +169,14 @@ def fit_earth_rate(y: np.ndarray, up_axes: np.ndarray, step: np.ndarray, noise_c
     cphi = abs(np.cos(latitude_rad))
     per = np.full(K, np.nan)
     for k in range(K):
-        m = seg == k
         try:
-            tk = _solve(Gc[m], yc[m], w)
+            tk = np.linalg.solve(A_step[k], b_step[k])
         except np.linalg.LinAlgError:
             continue
         per[k] = (tk[0] if heading_known else np.hypot(*tk)) / cphi / DPH
     ok = np.isfinite(per)
     scatter = float(np.std(per[ok], ddof=1) / np.sqrt(ok.sum())) if ok.sum() >= 2 else np.nan
-    fitted = yd - yc + np.einsum("tia,a->ti", Gc, theta)
+    fitted = yd - yc + Gc @ theta
     return EarthRateFit(
         rate_dph=h / cphi / DPH, rate_dph_sd=h_sd / cphi / DPH,
         horizontal_dph=h / DPH, horizontal_dph_sd=h_sd / DPH,
