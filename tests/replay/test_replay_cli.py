@@ -1,0 +1,115 @@
+"""``rimu replay``: same events as Monitor.run on the flight's samples, injection, strictness."""
+
+import json
+
+import numpy as np
+import pytest
+from test_logio import CAL
+
+from fdi.monitor import Monitor
+from replay.faults import parse_fault
+from replay.flight import simulate_flight
+from replay.logio import write_flight_log
+from rimu.cli import main
+
+
+@pytest.fixture(scope="module")
+def cal_path(tmp_path_factory):
+    p = tmp_path_factory.mktemp("cal") / "cal.json"
+    CAL.save(p)
+    return p
+
+
+def _report(path):
+    return json.loads(path.read_text())
+
+
+@pytest.mark.parametrize("suffix", [".log", ".blf"])
+def test_replay_gives_the_events_of_monitor_run_on_the_same_samples(tmp_path, cal_path,
+                                                                    suffix):
+    faults = (parse_fault("step:3:40sigma:2", CAL), parse_fault("ramp:5:2sigma/s:4", CAL))
+    f = simulate_flight(CAL, 8.0, seed=21, faults=faults)
+    ref = Monitor(CAL).run(f.t, f.raw, f.valid)
+    assert len(ref.events) >= 2
+    log = tmp_path / f"f{suffix}"
+    write_flight_log(f, log)
+    rep = tmp_path / "r.json"
+    assert main(["replay", str(log), "--cal", str(cal_path), "--report", str(rep),
+                 "--no-progress"]) == 0
+    d = _report(rep)
+    assert d["schema"] == "rimu.report/1"
+    got = [(e["sensor"], e["type"], e["reason"]) for e in d["events"]]
+    assert got == [(e.sensor, e.type, e.reason) for e in ref.events]
+    np.testing.assert_allclose([e["t"] for e in d["events"]], [e.t for e in ref.events],
+                               atol=1e-6, err_msg="event times")
+    fr = d["frames"]
+    assert fr["read"] == fr["used"] == int(f.valid.sum()) and fr["rejected"] == {}
+    assert d["truth"] and d["summary"]["isolation_correct"][0] is True
+    assert d["summary"]["detection_delay_s"][0] is not None
+
+
+def test_inject_scenario_into_a_clean_log(tmp_path, cal_path, capsys):
+    f = simulate_flight(CAL, 4.0, seed=22)
+    log = tmp_path / "clean.asc"
+    write_flight_log(f, log)
+    scen = tmp_path / "s.toml"
+    scen.write_text('schema = "rimu.scenario/1"\n[[faults]]\nsensor = 6\nkind = "step"\n'
+                    'size = "50sigma"\nonset = 1.5\n')
+    rep = tmp_path / "r.json"
+    assert main(["replay", str(log), "--cal", str(cal_path), "--inject", str(scen),
+                 "--report", str(rep), "--no-progress"]) == 0
+    d = _report(rep)
+    assert d["summary"]["isolated_sensors"] == [6]
+    assert d["faults"][0]["kind"] == "step" and d["faults"][0]["isolation_correct"]
+    assert 0 <= d["summary"]["detection_delay_s"][0] < 0.5
+    assert d["summary"]["false_alarms"] == 0
+    assert "isolated" in capsys.readouterr().out
+
+
+def test_corrupt_log_reports_and_strict_fails(tmp_path, cal_path, capsys):
+    f = simulate_flight(CAL, 2.0, seed=23)
+    log = tmp_path / "a.log"
+    write_flight_log(f, log)
+    lines = log.read_text().splitlines()
+    lines.insert(50, "garbage")
+    lines[100] = lines[100][:-3] + ("0" if lines[100][-3] != "0" else "1") + lines[100][-2:]
+    bad = tmp_path / "bad.log"
+    bad.write_text("\n".join(lines) + "\n")
+    (tmp_path / "bad.log.truth.json").write_text((tmp_path / "a.log.truth.json").read_text())
+    rep = tmp_path / "r.json"
+    assert main(["replay", str(bad), "--cal", str(cal_path), "--report", str(rep),
+                 "--no-progress"]) == 0
+    fr = _report(rep)["frames"]
+    assert fr["rejected"] == {"garbage_line": 1, "crc": 1} and fr["balanced"]
+    assert main(["replay", str(bad), "--cal", str(cal_path), "--strict",
+                 "--no-progress"]) == 2
+    assert "rimu: error:" in capsys.readouterr().err
+
+
+def test_truncated_blf_warns_keeps_and_strict_fails(tmp_path, cal_path, capsys):
+    f = simulate_flight(CAL, 3.0, seed=24)
+    log = tmp_path / "a.blf"
+    write_flight_log(f, log)
+    b = log.read_bytes()
+    log.write_bytes(b[: 2 * len(b) // 3])
+    rep = tmp_path / "r.json"
+    assert main(["replay", str(log), "--cal", str(cal_path), "--report", str(rep),
+                 "--no-progress"]) == 0
+    out = capsys.readouterr().out
+    assert "warning" in out and "truncated" in out
+    d = _report(rep)
+    assert 0 < d["samples"] < f.t.size and d["frames"]["errors"][0]["kind"] == "truncated"
+    assert main(["replay", str(log), "--cal", str(cal_path), "--strict",
+                 "--no-progress"]) == 2
+
+
+def test_replay_with_rrd(tmp_path, cal_path):
+    f = simulate_flight(CAL, 1.0, seed=25)
+    log = tmp_path / "a.trc"
+    write_flight_log(f, log)
+    rrd = tmp_path / "a.rrd"
+    rep = tmp_path / "r.json"
+    assert main(["replay", str(log), "--cal", str(cal_path), "--rrd", str(rrd),
+                 "--report", str(rep), "--no-progress"]) == 0
+    assert rrd.stat().st_size > 10_000
+    assert _report(rep)["timing_s"]["rerun"] > 0
