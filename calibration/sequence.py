@@ -5,7 +5,7 @@ constant rate; in a *position* step the table stands still. The body-frame input
 step are **derived** from the table angles and rates through the one kinematic model of
 :mod:`calibration.turntable` (outer axis vertical, inner axis horizontal along North at outer
 angle 0, right-handed angles, IMU on the inner plate through a named mounting); they are
-never typed in. Two sequences ship with rimu (``rimu/calibration/sequences``):
+never typed in. Two sequences ship with rimu (``calibration/sequences/*.toml``):
 
 - ``tetrad-paper``: seed 000 Table 1 (16 rate steps, tetrad of FOGs, 10 °/s);
 - ``cone-paper``: seed 001 Table 1 (10 positions) then Table 2 (14 rate steps), 30 °/s.

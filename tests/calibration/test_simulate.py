@@ -282,3 +282,16 @@ def test_random_truth_is_seeded():
     assert set(t.sets) == {"gyro"} and t.gyro.sensors[0].raw_unit == "mV"
     ang = np.array([s.misalignment for s in a.gyro.sensors])
     assert 1e-3 < np.abs(ang).mean() < 1e-2
+
+
+@pytest.mark.slow
+def test_monte_carlo_step_means_honest(tetrad_preset):
+    """Over 100 seeds, each step mean's error/σ has spread within ±25 % of 1 and no bias."""
+    seq, truth, noise = tetrad_preset
+    zs = np.array([_zscores(simulate_session(None, seq, truth, seed=1000 + k, noise=noise),
+                            truth)["gyro"] for k in range(100)])       # (100, 16, 4)
+    spread = zs.std(axis=0)
+    assert np.all(np.abs(spread - 1) < 0.25), f"spread {spread.min():.3f}..{spread.max():.3f}"
+    # mean of 100 error/σ has sd 0.1; 4 sd keeps the family-wise false failure of the 64
+    # cells near 0.4 %
+    assert np.all(np.abs(zs.mean(axis=0)) < 4 / np.sqrt(100)), "mean error/σ"
