@@ -1,5 +1,7 @@
 """rimu.replay: flights (simulated or recorded), fault injection, CAN replay and reports."""
 
+from replay.accounting import FrameAccounting
+from replay.channel_map import ChannelMap, default_channel_map, load_channel_map
 from replay.faults import FAULT_KINDS, Fault, parse_fault
 from replay.flight import (
     Flight,
@@ -8,18 +10,33 @@ from replay.flight import (
     save_flight_dir,
     simulate_flight,
 )
+from replay.live import StreamDecoder, run_live
+from replay.logio import read_frames, read_log, write_flight_log
 from replay.report import REPORT_SCHEMA, build_report, format_report
+from replay.scenario import apply_faults, inject, load_scenario
 
 __all__ = [
     "FAULT_KINDS",
     "REPORT_SCHEMA",
+    "ChannelMap",
     "Fault",
     "Flight",
+    "FrameAccounting",
+    "StreamDecoder",
+    "apply_faults",
     "build_report",
+    "default_channel_map",
     "format_report",
+    "inject",
     "iter_flight",
+    "load_channel_map",
     "load_flight_dir",
+    "load_scenario",
     "parse_fault",
+    "read_frames",
+    "read_log",
+    "run_live",
     "save_flight_dir",
     "simulate_flight",
+    "write_flight_log",
 ]
