@@ -183,7 +183,6 @@ def calibrate(session: Session, *, bias_method: str = "model", denoise: bool = T
     fs = float(session.sample_rate_hz)
     lat = np.deg2rad(session.latitude_deg)
     raw = np.asarray(session.raw_gyro, float)
-    n = raw.shape[1]
     _check_finite(src, "gyro", raw, session.step)
 
     wt, we, fb = session.inputs()
@@ -296,8 +295,7 @@ def calibrate(session: Session, *, bias_method: str = "model", denoise: bool = T
                                [steps[j].kind for j in bias_steps])},
     }
     if P_turns is not None:
-        vert = np.array([(EARTH_RATE * np.sin(lat) * (up[tw.in_window].mean(axis=0)))
-                         @ cals[i].axis for i in range(n)])
+        vert = Ht @ (EARTH_RATE * np.sin(lat) * up[tw.in_window].mean(axis=0))
         extra["gyro_bias"].update({
             "turns": [p["bias"] / bfac for p in parts_t],
             "turns_sd": [p["bias_sd"] / bfac for p in parts_t],
@@ -331,8 +329,11 @@ def _earth_rate(session: Session, Ht: np.ndarray, sf: np.ndarray, wt: np.ndarray
         if idx.size < MIN_STEP_SAMPLES or not is_outer_step(session.inner_rate[idx],
                                                             session.outer_rate[idx]):
             continue
-        C = mat_nb(session.inner[idx], session.outer[idx], s.mat_pb)  # (m, 3, 3)
-        ups.append(C @ Ht.T)                                          # (m, 3, n)
+        # inner angle fixed: C_nb = Rz(a_o)·[Ry(a_i)·P], rotate the fixed part about Up
+        q = mat_nb(np.median(session.inner[idx]), 0.0, s.mat_pb)[0] @ Ht.T    # (3, n)
+        co, so = np.cos(session.outer[idx])[:, None], np.sin(session.outer[idx])[:, None]
+        ups.append(np.stack([co * q[0] - so * q[1], so * q[0] + co * q[1],
+                             np.broadcast_to(q[2], co.shape[:1] + q[2].shape)], axis=1))
         idx_all.append(idx)
     if not idx_all:
         return None
