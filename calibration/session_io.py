@@ -27,7 +27,9 @@ A session directory holds (a simulated one also ``truth.json``, see :mod:`calibr
 steps), table angles in ° and rates in °/s (right-handed, :mod:`calibration.turntable`),
 then the raw output of every gyro (``gyro.<name>``) and accelerometer (``accel.<name>``) in
 its raw unit. Columns may come in any order; extra columns are ignored. Every value must be
-a finite number. Every step of the manifest needs at least :data:`MIN_STEP_SAMPLES` samples.
+a finite number. Every step of the manifest needs at least :data:`MIN_STEP_SAMPLES` samples;
+when the manifest gives ``samples.rows`` the file must hold that many rows (a truncated copy
+is an error). To edit samples by hand, drop ``rows`` or update it.
 
 Numbers are written with 17 significant digits: a save/load round trip returns ``t``,
 ``step`` and the raw outputs bit for bit; the angle and rate columns go through one ° ↔ rad
@@ -340,6 +342,10 @@ def load_session(directory: str | Path) -> Session:
     if data.shape[1] != len(cols):
         raise FileFormatError(cpath, f"rows hold {data.shape[1]} values, the header "
                               f"{len(cols)}", line=2)
+    rows = samp.get("rows") if isinstance(samp, Mapping) else None
+    if isinstance(rows, int) and not isinstance(rows, bool) and rows != data.shape[0]:
+        raise FileFormatError(cpath, f"holds {data.shape[0]} sample rows, the manifest says "
+                              f"{rows} (truncated or edited file?)", field="samples.rows")
     pos = {c: i for i, c in enumerate(cols)}
     step_col = data[:, pos["step"]]
     ok_step = np.isfinite(step_col)

@@ -183,9 +183,16 @@ def test_step_not_in_manifest(saved):
     assert (e.line, e.field) == (300, "step") and "not a step of the manifest" in str(e)
 
 
+def test_truncated_file(saved):
+    _edit_csv(saved, lambda lines: lines.__delitem__(slice(250, None)))
+    e = _load_err(saved)
+    assert e.field == "samples.rows" and "249 sample rows, the manifest says 300" in str(e)
+
+
 def test_step_with_too_few_samples(saved):
     # keep only 5 samples of step 2 (rows 52..101 hold step 2)
     _edit_csv(saved, lambda lines: lines.__delitem__(slice(56, 101)))
+    _edit_manifest(saved, lambda d: d["samples"].pop("rows"))
     e = _load_err(saved)
     assert (e.step, e.field) == (2, "step") and "5 samples, expected at least 10" in str(e)
 
