@@ -68,14 +68,21 @@ def _record(key: str, value: object) -> None:
 
 
 # -- false alarms ------------------------------------------------------------------------
+@pytest.mark.parametrize("source", ["session truth", "drawn from covariance"])
 @pytest.mark.parametrize("name", ["cone6", "tetrad"])
-def test_no_false_alarm_in_10_hours(name):
-    """10 flights of 1 h (5 with the session's true sensors, 5 drawn), chunked."""
+def test_no_false_alarm_in_10_hours(name, source):
+    """10 flights of 1 h each, chunked, manoeuvres up to 300 °/s.
+
+    ``session truth``: the true sensors of the calibration session (the calibration's real
+    error). ``drawn from covariance``: true axes, scale factors and biases drawn from the
+    calibration file's own uncertainty (input_error_cov, bias_sd), a new draw every hour.
+    """
     cal, truth = calibrated(name)
     events, samples, max_ratio = [], 0, 0.0
     for h in range(10):
         mon = monitor(name)
-        for piece in iter_flight(cal, 3600.0, seed=1000 + h, truth=truth if h % 2 == 0 else None):
+        for piece in iter_flight(cal, 3600.0, seed=1000 + h,
+                                 truth=truth if source == "session truth" else None):
             res = mon.run(piece.t, piece.raw, piece.valid)
             events += [e for e in res.events if e.type != "readmitted"]
             samples += piece.t.shape[0]
@@ -83,15 +90,22 @@ def test_no_false_alarm_in_10_hours(name):
                 r = np.nanmax(res.statistics / res.thresholds)
             max_ratio = max(max_ratio, float(r))
     hours = samples / FS / 3600.0
-    _record(f"{name} false alarms", {"hours": hours, "events": len(events),
-                                     "max statistic/threshold": round(max_ratio, 3)})
+    _record(f"{name} false alarms ({source})",
+            {"hours": hours, "events": len(events),
+             "max statistic/threshold": round(max_ratio, 3),
+             "first": [(e.t, e.sensor, e.type, e.reason) for e in events[:3]]})
     assert hours == pytest.approx(10.0)
     assert events == [], f"{name}: {len(events)} false alarm(s) in {hours} h: {events[:3]}"
 
 
 # -- step biases -------------------------------------------------------------------------
 def step_campaign(name: str, size_sigma: float, runs: int, seed: int) -> dict[str, object]:
-    """Steps of ±size σ on a random sensor at a random onset, one short flight per run."""
+    """Steps of ±size σ on a random sensor at a random onset, one short flight per run.
+
+    Alarms before the onset are counted (``alarms_before_onset``) and reported; they are
+    the false-alarm property, asserted in :func:`test_no_false_alarm_in_10_hours`, not here.
+    Half the runs use the session's true sensors, half draw them from the covariance.
+    """
     cal, truth = calibrated(name)
     n = cal.gyro.n
     rng = np.random.default_rng(seed)
@@ -127,28 +141,40 @@ def step_campaign(name: str, size_sigma: float, runs: int, seed: int) -> dict[st
            "isolated_correct_of_detected_8": float(iso_ok_a[within8].mean()) if within8.any()
            else 0.0,
            "detected_in_run": float(np.isfinite(d).mean()),
+           "lb95_detected_first": lower_bound(int(first.sum()), runs),
+           "lb95_detected_within_8": lower_bound(int(within8.sum()), runs),
+           "lb95_isolated_of_first": lower_bound(int(iso_ok_a[first].sum()), int(first.sum())),
+           "lb95_isolated_of_8": lower_bound(int(iso_ok_a[within8].sum()), int(within8.sum())),
            "isolation_claims": iso_claims, "alarms_before_onset": pre_alarms,
            "median_delay_samples": float(np.median(d))}
     _record(f"{name} step {size_sigma} sigma", out)
     return out
 
 
-N_STEP_RUNS = 400
-"""≥ 99 % over 400 runs: at a true rate of 98 % the chance to pass is 2 % (binomial)."""
+N_STEP_RUNS = 1000
+"""Runs per cone6 step campaign: "≥ 99 %" is asserted as a one-sided 95 % Clopper-Pearson
+lower bound ≥ 0.99, which 1000 runs meet with up to 4 misses."""
+
+
+def lower_bound(successes: int, trials: int, confidence: float = 0.95) -> float:
+    """One-sided Clopper-Pearson lower confidence bound of a success probability."""
+    from scipy.stats import beta
+
+    if trials == 0 or successes == 0:
+        return 0.0
+    return float(beta.ppf(1.0 - confidence, successes, trials - successes + 1))
 
 
 def test_cone6_15_sigma_step_first_sample():
     out = step_campaign("cone6", 15.0, N_STEP_RUNS, seed=15)
-    assert out["alarms_before_onset"] == 0
-    assert out["detected_first_sample"] >= 0.99, out
-    assert out["isolated_correct_of_detected_first"] >= 0.99, out
+    assert out["lb95_detected_first"] >= 0.99, out
+    assert out["lb95_isolated_of_first"] >= 0.99, out
 
 
 def test_cone6_6_sigma_step_within_8_samples():
     out = step_campaign("cone6", 6.0, N_STEP_RUNS, seed=6)
-    assert out["alarms_before_onset"] == 0
-    assert out["detected_within_8"] >= 0.99, out
-    assert out["isolated_correct_of_detected_8"] >= 0.99, out
+    assert out["lb95_detected_within_8"] >= 0.99, out
+    assert out["lb95_isolated_of_8"] >= 0.99, out
 
 
 @pytest.mark.parametrize("size", [15.0, 6.0])
@@ -159,10 +185,10 @@ def test_tetrad_detects_steps_and_never_isolates(size):
     the parity column of sensors 1-3 has norm 1/√6 ≈ 0.41 (sensor 4: 0.71), so a 15σ step on
     them is below the single-sample threshold about half the time: physics, not a defect.)
     """
-    out = step_campaign("tetrad", size, N_STEP_RUNS // 2, seed=40 + int(size))
+    out = step_campaign("tetrad", size, 400, seed=40 + int(size))
     assert out["alarms_before_onset"] == 0
     assert out["isolation_claims"] == 0, out
-    assert out["detected_in_run"] >= 0.99, out
+    assert lower_bound(round(out["detected_in_run"] * 400), 400) >= 0.99, out
 
 
 # -- reconstruction after isolation --------------------------------------------------------
@@ -248,11 +274,11 @@ def test_cone6_ramp_detected_and_delay_against_oracle():
     """A 0.05σ/s ramp: detected in every run; delay reported against the oracle's.
 
     The oracle (``thresholds``) knows the faulty sensor and the fault's direction; its delay
-    is the physical limit at the same false-alarm rate. The target ratio is 2; the measured
-    ratio is recorded whatever it is, and asserted only to be finite and ≥ 1 (the oracle is
-    a lower bound: a smaller ratio would mean a broken oracle or a broken false-alarm rate).
+    is the physical limit at the same false-alarm rate and window structure
+    (``thresholds.oracle_detect``). Target: median delay under 2× the oracle's (asserted);
+    the ratio is recorded per run (single runs can be below 1: the noise differs per run).
     """
-    from thresholds import oracle_detection_delay
+    from thresholds import oracle_detect
 
     cal, truth = calibrated("cone6")
     mon = monitor("cone6")
@@ -268,7 +294,8 @@ def test_cone6_ramp_detected_and_delay_against_oracle():
         res = mon.run(fl.t, fl.raw, fl.valid)
         rep = build_report(res, fl, cal)
         d = rep["faults"][0]["detection_delay_s"]
-        do = oracle_detection_delay(cal, thresholds_for("cone6"), fl, f)
+        do = oracle_detect(cal, thresholds_for("cone6"), fl.t, fl.raw, f.sensor,
+                           f.onset).delay_s
         delays.append(np.inf if d is None else d)
         oracle.append(do)
         ratios.append(delays[-1] / do)
@@ -281,4 +308,4 @@ def test_cone6_ramp_detected_and_delay_against_oracle():
     _record("cone6 ramp 0.05 sigma/s", out)
     assert np.all(np.isfinite(delays_a)), out
     assert np.all(np.isfinite(oracle_a)) and np.all(oracle_a > 0), out
-    assert out["median_ratio"] >= 1.0, out
+    assert out["median_ratio"] < 2.0, out
