@@ -48,7 +48,7 @@ from fdi.errors import CalibrationError
 from fdi.parity import parity_matrix
 from fdi.units import EARTH_RATE, RAW_UNITS, input_unit_factor
 
-__all__ = ["BIAS_METHODS", "MIN_STEP_SAMPLES", "calibrate", "display_units"]
+__all__ = ["BIAS_METHODS", "MIN_STEP_SAMPLES", "calibrate", "display_units", "outer_axis_fit"]
 
 BIAS_METHODS = ("model", "turns")
 MIN_STEP_SAMPLES = 10
@@ -318,6 +318,19 @@ def calibrate(session: Session, *, bias_method: str = "model", denoise: bool = T
         earth_rate_dph=None if er is None else er.rate_dph,
         earth_rate_dph_sd=None if er is None else er.rate_dph_sd,
         latitude_deg=float(session.latitude_deg), extra=extra)
+
+
+def outer_axis_fit(session: Session, cal: Calibration, *,
+                   denoise: bool = True) -> EarthRateFit | None:
+    """The Earth-rate fit of a session with a calibration's gyro parameters (for plots).
+
+    Same computation as inside :func:`calibrate`; the result keeps the (denoised)
+    compensated outputs and the fitted curves. None without outer-axis steps.
+    """
+    g = cal.gyro
+    wt, _, _ = session.inputs()
+    return _earth_rate(session, g.H, g.scale_factors, wt, g.noise_covariance,
+                       np.deg2rad(session.latitude_deg), denoise)
 
 
 def _earth_rate(session: Session, Ht: np.ndarray, sf: np.ndarray, wt: np.ndarray,

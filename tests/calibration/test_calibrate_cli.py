@@ -128,3 +128,13 @@ def test_step_with_too_few_samples(tetrad_dir, tmp_path, capsys):
     msg = _one_line_error(capsys, "calibrate", d, "--out", tmp_path / "c.json")
     # the loader or the estimator (whichever sees it first) names the step and the minimum
     assert str(d) in msg and "step 12" in msg and "4 sample" in msg and "at least 10" in msg
+
+
+def test_plots(tetrad_dir, tmp_path, capsys):
+    code, text, err = _run(capsys, "calibrate", tetrad_dir, "--out", tmp_path / "c.json",
+                           "--plot", tmp_path / "plots")
+    assert code == 0, err
+    for name in ("residual_steps_gyro.png", "allan_gyro.png", "earth_rate_fit.png"):
+        p = tmp_path / "plots" / name
+        assert p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n", name
+        assert f"wrote {p}" in text
