@@ -14,7 +14,9 @@ calibration the way real sensors do (seed 000 Eq. 13, seed 001 Eq. 1)::
 - otherwise they are drawn from the calibration file's own uncertainty: the gain-normalised
   axis ``h_i/SF_i`` errs by ``δ_i ~ N(0, input_error_cov_i)`` (in units of the calibrated
   gain), and ``b_i ~ N(b̂_i, bias_sd_i²)``, so calibration error is present in every flight;
-- ``Σ`` is the calibration's per-sample noise covariance (the truth's when it has one);
+- ``Σ`` is the calibration's per-sample noise covariance (the truth's when it has one),
+  scaled by ``fs/fs_cal`` when the flight's sample rate differs (white noise of the same
+  density);
 - the truth's extra *effects* (``calibration.effects``: g-sensitivity, ...) are not
   simulated in flight; their names are listed in the truth record
   (``"effects_not_simulated"``);
@@ -251,6 +253,10 @@ def iter_flight(cal: Calibration, duration_s: float, *, seed: int,
     faults = _check_faults(faults, n)
     model = (true_model_from_calibration(truth, cal, kind=kind) if truth is not None
              else draw_true_model(cal, seed, kind=kind))
+    if cal.sample_rate_hz > 0 and fs != cal.sample_rate_hz:
+        # white noise of a fixed density: per-sample variance grows with the sample rate
+        model = replace(model, noise_covariance=model.noise_covariance * (fs /
+                                                                          cal.sample_rate_hz))
     L = _sqrtm(model.noise_covariance)
     N = round(duration_s * fs)
     names = tuple(c.name for c in s.sensors)
