@@ -30,6 +30,7 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
+import scipy.stats
 
 from calibration.bias import is_outer_step, offset_operator, turn_windows
 from calibration.earth_rate import EarthRateFit, fit_earth_rate
@@ -274,6 +275,17 @@ def calibrate(session: Session, *, bias_method: str = "model", denoise: bool = T
                          allan_table(resid, fs) if allan else None)
 
     bfac = input_unit_factor(gyro_bu)
+    chi2 = rt.chi2(np.sqrt(np.diag(Sigma_raw)), np.maximum(cnt, 1))
+    dof = rt.R.shape[0] - 3
+    warnings = []
+    if dof > 0:
+        lim = float(scipy.stats.chi2.isf(0.01, dof)) / dof
+        for i in np.flatnonzero(chi2 > lim):
+            warnings.append(
+                f"gyro {session.gyro_config.sensor_names[i]}: the rate-step differences "
+                f"scatter more than white noise explains (chi2/dof {chi2[i]:.2f}, 1 % limit "
+                f"{lim:.2f}); correlated noise or an unmodelled effect: the uncertainties "
+                "are too small")
     extra: dict[str, Any] = {
         "source": src,
         "method": {"gyro": "rate test, seed 000 Eqs. 16-19 / seed 001 Eqs. 11-15, inputs "
@@ -281,8 +293,8 @@ def calibrate(session: Session, *, bias_method: str = "model", denoise: bool = T
                    "bias": bias_method, "denoise": "db4 level 8 (approximation)"
                    if denoise else "none"},
         "rate_test": {"pairs": [[nums[k], nums[p]] for k, p in rt.pairs],
-                      "R_rad_s": rt.R, "chi2_dof": rt.chi2(np.sqrt(np.diag(Sigma_raw)),
-                                                           np.maximum(cnt, 1))},
+                      "R_rad_s": rt.R, "chi2_dof": chi2},
+        "warnings": warnings,
         "gyro_bias": {"unit": gyro_bu,
                       "model": [p["bias"] / bfac for p in parts],
                       "model_sd": [p["bias_sd"] / bfac for p in parts]},

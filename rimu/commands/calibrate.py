@@ -95,6 +95,7 @@ def summary_text(cal: Calibration) -> str:
                         f"{er['scatter_sd_dph']:.3f}, heading of table zero "
                         f"{er['heading_offset_deg']:+.2f} ± {er['heading_offset_deg_sd']:.2f}"
                         " deg)" if er else ""))
+    lines.extend(f"warning: {w}" for w in ex.get("warnings", []))
     return "\n".join(lines)
 
 

@@ -151,3 +151,17 @@ def test_rank_deficient_sequence_names_steps():
     with pytest.raises(CalibrationError) as e:
         calibrate(s2)
     assert "tt" in str(e.value) and "1/2, 3/4, 5/6" in str(e.value)
+
+
+def test_warns_when_white_noise_does_not_explain_the_step_differences():
+    from calibration.presets import preset
+    from calibration.simulate import NoiseModel, simulate_session
+    from fdi.units import DPH
+
+    seq, truth, _ = preset("tetrad-paper")
+    s = simulate_session(None, seq, truth, seed=1,
+                         noise=NoiseModel(bias_instability={"gyro": 5 * DPH}))
+    cal = calibrate(s, allan=False)
+    assert any("scatter more than white noise" in w for w in cal.extra["warnings"])
+    s0, _ = session("tetrad-paper", seed=0)
+    assert calibrate(s0, allan=False).extra["warnings"] == []
