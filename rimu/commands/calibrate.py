@@ -94,7 +94,9 @@ def summary_text(cal: Calibration) -> str:
                      + (f" ({len(er.get('steps', []))} steps, per-step scatter sd "
                         f"{er['scatter_sd_dph']:.3f}, heading of table zero "
                         f"{er['heading_offset_deg']:+.2f} ± {er['heading_offset_deg_sd']:.2f}"
-                        " deg)" if er else ""))
+                        " deg)" if er else "")
+                     + (" - not resolved at this noise level (below 3 sd)"
+                        if cal.earth_rate_dph < 3 * (cal.earth_rate_dph_sd or 0.0) else ""))
     lines.extend(f"warning: {w}" for w in ex.get("warnings", []))
     return "\n".join(lines)
 
