@@ -19,7 +19,8 @@ Pipeline (:func:`decode_frames`), every frame ends in exactly one bucket of the
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from operator import itemgetter
 
 import cantools
 import numpy as np
@@ -68,9 +69,17 @@ class RawFrames:
     channel: np.ndarray
     data: list[bytes]
     frame_type: np.ndarray
+    _lengths: np.ndarray | None = field(default=None, repr=False)
 
     def __len__(self) -> int:
         return int(self.t.shape[0])
+
+    @property
+    def lengths(self) -> np.ndarray:
+        """Payload length of each frame (bytes), shape (M,)."""
+        if self._lengths is None or self._lengths.shape[0] != len(self.data):
+            self._lengths = np.fromiter(map(len, self.data), np.int64, len(self.data))
+        return self._lengths
 
     @classmethod
     def from_messages(cls, messages: list) -> RawFrames:
@@ -224,15 +233,16 @@ class _SlotFrames:
 def _stack(data: list[bytes], idx: np.ndarray, length: int) -> np.ndarray:
     if idx.size == 0:
         return np.zeros((0, length), np.uint8)
-    buf = b"".join([data[i] for i in idx.tolist()])
+    if idx.size == 1:
+        return np.frombuffer(bytes(data[int(idx[0])]), np.uint8).reshape(1, length)
+    buf = b"".join(itemgetter(*idx.tolist())(data))
     return np.frombuffer(buf, dtype=np.uint8).reshape(-1, length)
 
 
 def _decode_slot(slot: Slot, frames: RawFrames, idx: np.ndarray, j1939: bool,
                  max_counter_delta: int, acct: FrameAccounting) -> _SlotFrames:
     lay = slot.layout
-    lengths = np.fromiter((len(frames.data[i]) for i in idx.tolist()), np.int64, idx.size)
-    ok = lengths == lay.length
+    ok = frames.lengths[idx] == lay.length
     acct.reject("wrong_length", int(np.count_nonzero(~ok)))
     idx = idx[ok]
     block = _stack(frames.data, idx, lay.length)

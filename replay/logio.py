@@ -35,6 +35,7 @@ from __future__ import annotations
 import re
 from collections.abc import Iterator
 from dataclasses import replace
+from itertools import islice
 from pathlib import Path
 from typing import Any
 
@@ -81,6 +82,7 @@ CORRUPTION_REASONS = frozenset({"wrong_length", "crc", "counter_repeat", "counte
                                 "nonfinite_time"})
 """Rejection reasons that make a ``strict`` replay fail."""
 _MAX_ERRORS = 50
+_CHUNK = 65536
 
 
 def truth_path(log: str | Path) -> Path:
@@ -259,9 +261,27 @@ def _consume(it: Iterator[can.Message], g: _Gather, lines: _Lines | None,
              acct: FrameAccounting, bar: Any) -> None:
     t_app, a_app, e_app, c_app, d_app = (g.t.append, g.arb.append, g.ext.append,
                                          g.ch.append, g.data.append)
-    track = lines is not None and lines.pending is not None
+    s_app = g.special.append
+    if lines is None:
+        # the hot path: one pass over python-can's messages, plain appends, in chunks
+        # (the progress bar moves between chunks)
+        while True:
+            n0 = len(g.t)
+            for msg in islice(it, _CHUNK):
+                if msg.is_error_frame or msg.is_remote_frame:
+                    s_app((len(g.t), FRAME_ERROR if msg.is_error_frame else FRAME_REMOTE))
+                t_app(msg.timestamp)
+                a_app(msg.arbitration_id)
+                e_app(msg.is_extended_id)
+                c_app(msg.channel)
+                d_app(msg.data)
+            got = len(g.t) - n0
+            if bar is not None:
+                bar.update(got)
+            if got < _CHUNK:
+                return
     for msg in it:
-        if track:
+        if lines is not None:
             pend = lines.pending
             if len(pend) > 1:
                 first = lines.lineno - len(pend) + 1
@@ -271,7 +291,7 @@ def _consume(it: Iterator[can.Message], g: _Gather, lines: _Lines | None,
                                  "not a frame line (skipped by python-can)")
             pend.clear()
         if msg.is_error_frame or msg.is_remote_frame:
-            g.special.append((len(g.t), FRAME_ERROR if msg.is_error_frame else FRAME_REMOTE))
+            s_app((len(g.t), FRAME_ERROR if msg.is_error_frame else FRAME_REMOTE))
         t_app(msg.timestamp)
         a_app(msg.arbitration_id)
         e_app(msg.is_extended_id)
@@ -321,7 +341,7 @@ def read_frames(path: str | Path, *, strict: bool = False,
         bar = tqdm(desc=f"reading {p.name}", unit=" frames", unit_scale=True, leave=False)
     try:
         if sfx in (".log", ".asc") and not str(p).lower().endswith(".gz"):
-            _read_text(p, sfx, g, acct, strict)
+            _read_text(p, sfx, g, acct, strict, bar)
         else:
             try:
                 reader = can.LogReader(str(p))
@@ -379,7 +399,8 @@ def _check_blf_complete(reader: Any, p: Path, nframes: int, acct: FrameAccountin
     acct.errors.append({"where": f"after frame {nframes}", "why": why, "kind": "truncated"})
 
 
-def _read_text(p: Path, sfx: str, g: _Gather, acct: FrameAccounting, strict: bool) -> None:
+def _read_text(p: Path, sfx: str, g: _Gather, acct: FrameAccounting, strict: bool,
+               bar: Any) -> None:
     with p.open("r", encoding="utf-8", errors="replace", newline=None) as f:
         lines = _Lines(f)
         if sfx == ".log":
@@ -389,7 +410,7 @@ def _read_text(p: Path, sfx: str, g: _Gather, acct: FrameAccounting, strict: boo
             reader = _ResumableASCReader(lines)
         while True:
             try:
-                _consume(iter(reader), g, lines if sfx == ".asc" else None, acct, None)
+                _consume(iter(reader), g, lines if sfx == ".asc" else None, acct, bar)
                 break
             except Exception as exc:
                 line = lines.last

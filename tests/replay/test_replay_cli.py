@@ -113,3 +113,58 @@ def test_replay_with_rrd(tmp_path, cal_path):
                  "--report", str(rep), "--no-progress"]) == 0
     assert rrd.stat().st_size > 10_000
     assert _report(rep)["timing_s"]["rerun"] > 0
+
+
+def test_replay_three_j1939_imus_with_the_example_map(tmp_path):
+    """Three J1939 ARI gyros (nine sensors) through the shipped example DBC and map."""
+    import can
+
+    from fdi.calfile import Calibration, SensorCal, SensorSet
+    from fdi.units import DPS
+    from replay.channel_map import EXAMPLE_J1939_MAP, load_channel_map
+    from replay.frames import load_dbc
+
+    cmap = load_channel_map(EXAMPLE_J1939_MAP)
+    axes = [s.axis_nominal for s in cmap.sensors]
+    sd_dps = 0.05
+    sens = tuple(SensorCal(name=s.name, axis=a, axis_nominal=a, scale_factor=DPS,
+                           scale_factor_sd=0.0, bias=0.0, bias_sd=0.0,
+                           scale_factor_unit="(deg/s)/raw", raw_unit="raw")
+                 for s, a in zip(cmap.sensors, axes, strict=True))
+    cal = Calibration("3imu-j1939", {"gyro": SensorSet("gyro", sens,
+                                                       (sd_dps * DPS) ** 2 * np.eye(9))},
+                      100.0)
+    calp = tmp_path / "cal.json"
+    cal.save(calp)
+    rng = np.random.default_rng(31)
+    N = 300
+    t = np.arange(N) / 100.0
+    w = 20.0 * np.sin(2 * np.pi * 0.5 * t)[:, None] * np.array([1.0, -0.5, 0.3])
+    true = np.array([w[:, [1, 0, 2]]] * 3).transpose(1, 0, 2).reshape(N, 9)  # pitch,roll,yaw
+    meas = true + sd_dps * rng.standard_normal((N, 9))
+    meas[t >= 1.5, 4] += 40 * sd_dps            # imu2 roll: 40-sigma step at 1.5 s
+    msg = load_dbc(cmap.dbc).get_message_by_name("ARI")
+    log = tmp_path / "j.blf"
+    with can.Logger(str(log)) as wr:
+        for k in range(N):
+            for imu, sa in enumerate((0x80, 0x81, 0x82)):
+                raw = {n: round((meas[k, 3 * imu + j] + 250.0) * 128)
+                       for j, n in enumerate(("PitchRate", "RollRate", "YawRate"))}
+                if k == 100 and imu == 2:
+                    raw["YawRate"] = 0xFFFF   # not available
+                raw.update(PitchRateFigureOfMerit=0, RollRateFigureOfMerit=0,
+                           YawRateFigureOfMerit=0, RateMeasurementLatency=2)
+                wr.on_message_received(can.Message(
+                    timestamp=1.767e9 + t[k] + 3e-4 * imu, is_extended_id=True,
+                    arbitration_id=(msg.frame_id & ~0xFF) | sa,
+                    data=msg.encode(raw, scaling=False, strict=False)))
+    rep = tmp_path / "r.json"
+    assert main(["replay", str(log), "--cal", str(calp), "--map", str(EXAMPLE_J1939_MAP),
+                 "--report", str(rep), "--no-progress"]) == 0
+    d = _report(rep)
+    fr = d["frames"]
+    assert fr["read"] == fr["used"] == 3 * N and fr["values_not_available"] == 1
+    assert d["samples"] == N
+    assert d["summary"]["isolated_sensors"] == [5]
+    first = d["events"][0]
+    assert first["sensor"] == 5 and 1.5 <= first["t"] < 1.6
