@@ -37,7 +37,7 @@ def _ari_frames(rates_dps, t, *, na=(), rng=None):
             for f, name in enumerate(("PitchRate", "RollRate", "YawRate")):
                 r = forced.get((k, i, f))
                 if r is None:
-                    r = int(round((rates_dps[k, i, f] + 250.0) * 128))
+                    r = round((rates_dps[k, i, f] + 250.0) * 128)
                 raw[name] = r
             raw.update(PitchRateFigureOfMerit=0, RollRateFigureOfMerit=0,
                        YawRateFigureOfMerit=0, RateMeasurementLatency=2)

@@ -4,6 +4,7 @@ import cantools
 import numpy as np
 import pytest
 
+from replay.channel_map import EXAMPLE_J1939_MAP, load_channel_map
 from replay.crc import crc8_j1850
 from replay.frames import (
     DEFAULT_DBC,
@@ -14,7 +15,6 @@ from replay.frames import (
     load_dbc,
     message_layout,
 )
-from replay.channel_map import EXAMPLE_J1939_MAP, load_channel_map
 
 COMMA_DBC = (DEFAULT_DBC.parents[2] / ".." / "shared" / "data" / "comma2k19_can"
              / "toyota_2017_kinematics_excerpt.dbc")

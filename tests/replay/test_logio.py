@@ -157,14 +157,14 @@ def test_strict_mode_raises_on_garbage_and_corrupt_frames(tmp_path):
     write_flight_log(f, p)
     lines = p.read_text().splitlines()
     q = tmp_path / "g.log"
-    q.write_text("\n".join(lines[:10] + ["garbage"] + lines[10:]) + "\n")
+    q.write_text("\n".join([*lines[:10], "garbage", *lines[10:]]) + "\n")
     with pytest.raises(ReplayError, match=r"g\.log:11"):
         read_log(q, CAL, strict=True, progress=False)
     _, fr = read_log(q, CAL, progress=False)
     assert fr["rejected"] == {"garbage_line": 1} and fr["used"] == len(lines)
     b = tmp_path / "c.log"
     bad = lines[20][:-4] + ("00" if lines[20][-4:-2] != "00" else "11") + lines[20][-2:]
-    b.write_text("\n".join(lines[:20] + [bad] + lines[21:]) + "\n")
+    b.write_text("\n".join([*lines[:20], bad, *lines[21:]]) + "\n")
     with pytest.raises(ReplayError, match="1 crc"):
         read_log(b, CAL, strict=True, progress=False)
 
@@ -175,8 +175,9 @@ def test_asc_garbage_lines_counted(tmp_path):
     write_flight_log(f, p)
     lines = p.read_text().splitlines()
     first = next(i for i, x in enumerate(lines) if " Rx " in x)
-    new = (lines[:first + 7] + ["@@@ garbage @@@", "1.2345 1 101 Rx d 8 ZZ 00 00 00 00 00 00 00"]
-           + lines[first + 7:first + 30] + ["", "// a comment", "12345"] + lines[first + 30:])
+    junk = ["@@@ garbage @@@", "1.2345 1 101 Rx d 8 ZZ 00 00 00 00 00 00 00"]
+    new = [*lines[:first + 7], *junk, *lines[first + 7:first + 30], "", "// a comment",
+           "12345", *lines[first + 30:]]
     q = tmp_path / "g.asc"
     q.write_text("\n".join(new) + "\n")
     _, fr = read_log(q, CAL, progress=False)
@@ -213,7 +214,7 @@ def test_corrupt_blf_container_reported(tmp_path):
     b = bytearray(p.read_bytes())
     b[len(b) // 2: len(b) // 2 + 64] = b"\xff" * 64
     p.write_bytes(bytes(b))
-    f2, fr = read_log(p, CAL, progress=False)
+    _, fr = read_log(p, CAL, progress=False)
     assert fr["errors"] and fr["errors"][0]["kind"] == "reader_error" and fr["balanced"]
     with pytest.raises(ReplayError, match="reader failed"):
         read_log(p, CAL, strict=True, progress=False)
