@@ -13,7 +13,8 @@ Layout (keys other tools read; keep them stable)::
      "summary": {"events", "isolated_sensors", "healthy_at_end", "capability_at_end",
                  "false_alarms", "detection_delay_s", "isolation_delay_s",
                  "isolation_correct", "rate_error_rms_dps", "rate_error_rms_axis_dps",
-                 "rate_available_fraction"},
+                 "rate_available_fraction", "protection_level_median_dps",
+                 "integrity_breaches"},
      "frames": {...}}                                           # replay only
 
 Definitions:
@@ -29,6 +30,9 @@ Definitions:
   the faulted sensor.
 - ``rate_error_rms_dps`` is the RMS over samples and axes of ω̂ − ω_true (°/s), over the
   samples where ω̂ is finite; ``rate_available_fraction`` the share of such samples.
+- ``integrity_breaches``: samples where |ω̂ − ω_true| (vector norm) exceeds the protection
+  level the monitor gave with that ω̂ (with truth only); ``protection_level_median_dps``
+  the median protection level over the samples with a finite one.
 """
 
 from __future__ import annotations
@@ -153,10 +157,20 @@ def build_report(result: Any, flight: Flight, cal: Calibration, *,
     omega = np.asarray(result.omega, float)
     ok = np.all(np.isfinite(omega), axis=1) if omega.size else np.zeros(0, bool)
     summary["rate_available_fraction"] = float(ok.mean()) if ok.size else 0.0
+    pl = np.asarray(getattr(result, "protection_level", np.zeros(0)), float)
+    summary["protection_level_median_dps"] = None
+    summary["integrity_breaches"] = None
+    if pl.shape == ok.shape and ok.any():
+        fin = ok & np.isfinite(pl)
+        if fin.any():
+            summary["protection_level_median_dps"] = float(np.median(pl[fin]) / DPS)
     if flight.omega_true is not None and ok.any():
         err = (omega[ok] - flight.omega_true[ok]) / DPS
         summary["rate_error_rms_dps"] = float(np.sqrt(np.mean(err ** 2)))
         summary["rate_error_rms_axis_dps"] = np.sqrt(np.mean(err ** 2, axis=0)).tolist()
+        if pl.shape == ok.shape:
+            norm = np.linalg.norm(omega - flight.omega_true, axis=1)
+            summary["integrity_breaches"] = int(np.sum(ok & (norm > pl)))
     report: dict[str, Any] = {
         "schema": REPORT_SCHEMA, "source": flight.source, "configuration": cal.configuration,
         "kind": kind, "samples": int(flight.t.shape[0]), "duration_s": flight.duration_s,
@@ -208,6 +222,9 @@ def format_report(report: Mapping[str, Any], *, max_events: int = 50) -> str:
     lines.append(f"false alarms: {_fmt(s['false_alarms'])}")
     lines.append(f"rate error RMS: {_fmt(s['rate_error_rms_dps'], ' deg/s')} "
                  f"(rates delivered in {100 * s['rate_available_fraction']:.1f} % of samples)")
+    if s.get("protection_level_median_dps") is not None:
+        lines.append(f"protection level median: {_fmt(s['protection_level_median_dps'], ' deg/s')}"
+                     f"; integrity breaches: {_fmt(s.get('integrity_breaches'))}")
     if "frames" in report:
         fr = report["frames"]
         lines.append(f"frames: read {fr.get('read')}, used {fr.get('used')}, rejected "

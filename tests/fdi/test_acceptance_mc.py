@@ -79,7 +79,7 @@ def test_no_false_alarm_in_10_hours(name, source):
     factors and biases drawn from the file's own uncertainty (input_error_cov, and bias_sd
     independently per sensor, as the file states it), a new draw every hour.
     """
-    events, samples, max_ratio = [], 0, 0.0
+    events, samples, max_ratio, breaches = [], 0, 0.0, 0
     for h in range(10):
         session_seed = 3000 + h if source == "session truth" else 2024
         cal, truth = calibrated(name, session_seed)
@@ -89,6 +89,8 @@ def test_no_false_alarm_in_10_hours(name, source):
             res = mon.run(piece.t, piece.raw, piece.valid)
             events += [e for e in res.events if e.type != "readmitted"]
             samples += piece.t.shape[0]
+            err = np.linalg.norm(res.omega - piece.omega_true, axis=1)
+            breaches += int(np.sum(err > res.protection_level))
             with np.errstate(invalid="ignore"):
                 r = np.nanmax(res.statistics / res.thresholds)
             max_ratio = max(max_ratio, float(r))
@@ -96,6 +98,7 @@ def test_no_false_alarm_in_10_hours(name, source):
     _record(f"{name} false alarms ({source})",
             {"hours": hours, "events": len(events),
              "max statistic/threshold": round(max_ratio, 3),
+             "samples with |rate error| > protection level": breaches,
              "first": [(e.t, e.sensor, e.type, e.reason) for e in events[:3]]})
     assert hours == pytest.approx(10.0)
     assert events == [], f"{name}: {len(events)} false alarm(s) in {hours} h: {events[:3]}"

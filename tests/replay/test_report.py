@@ -32,13 +32,14 @@ def _flight(faults, omega_true=True, truth=None):
                   truth={} if truth is None else truth, source="mem")
 
 
-def _result(fl, events, omega=None, cap="isolate"):
+def _result(fl, events, omega=None, cap="isolate", pl=None):
     N = fl.t.shape[0]
     healthy = np.ones((N, 6), bool)
     return BlockResult(t=fl.t, omega=fl.omega_true if omega is None else omega,
                        omega_sd=np.zeros((N, 3)), healthy=healthy,
                        statistics=np.zeros((N, 4)), thresholds=np.ones((N, 4)),
-                       protection_level=np.zeros(N), capability=np.full(N, cap),
+                       protection_level=np.zeros(N) if pl is None else pl,
+                       capability=np.full(N, cap),
                        events=list(events))
 
 
@@ -57,8 +58,11 @@ def test_fields_order_false_alarms_and_delays():
     ]
     omega = fl.omega_true + np.array([1.0, -2.0, 2.0]) * DPS
     omega[:100] = np.nan                                          # no rate for 10 % of samples
-    rep = build_report(_result(fl, ev, omega), fl, _cal(), frames={"read": 3, "used": 2,
-                                                                   "rejected": {"crc": 1}})
+    pl = np.full(1000, 3.5 * DPS)                   # |error| = 3 deg/s: 2 breaches below
+    pl[500:502] = 2.0 * DPS
+    pl[600] = np.inf
+    rep = build_report(_result(fl, ev, omega, pl=pl), fl, _cal(),
+                       frames={"read": 3, "used": 2, "rejected": {"crc": 1}})
     assert rep["schema"] == REPORT_SCHEMA
     ts = [e["t"] for e in rep["events"]]
     assert ts == sorted(ts) and len(ts) == 7
@@ -79,6 +83,8 @@ def test_fields_order_false_alarms_and_delays():
     np.testing.assert_allclose(s["rate_error_rms_dps"], np.sqrt(3.0), rtol=1e-9)
     np.testing.assert_allclose(s["rate_available_fraction"], 0.9)
     assert rep["frames"]["rejected"] == {"crc": 1}
+    assert s["integrity_breaches"] == 2
+    np.testing.assert_allclose(s["protection_level_median_dps"], 3.5)
     assert s["capability_at_end"] == "isolate"
     json.dumps(rep, allow_nan=False)                               # JSON-able as written
     text = format_report(rep)
