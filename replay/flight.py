@@ -20,6 +20,8 @@ calibration the way real sensors do (seed 000 Eq. 13, seed 001 Eq. 1)::
 - the truth's extra *effects* (``calibration.effects``: g-sensitivity, ...) are not
   simulated in flight; their names are listed in the truth record
   (``"effects_not_simulated"``);
+- optionally an in-run bias drift (first-order Gauss-Markov and/or random walk,
+  ``bias_instability``/``random_walk``; streams ``default_rng([seed, 4, c])``), off by default;
 - ``f_i(t)`` are the injected faults (:mod:`replay.faults`); ``stuck`` replaces the raw
   output, ``dropout`` clears ``valid`` (raw NaN).
 
@@ -236,7 +238,9 @@ def _check_faults(faults: Sequence[Fault], n: int) -> tuple[Fault, ...]:
 def iter_flight(cal: Calibration, duration_s: float, *, seed: int,
                 faults: Sequence[Fault] = (), truth: Calibration | Sequence[Any] | None = None,
                 sample_rate_hz: float | None = None, max_rate_dps: float = 300.0,
-                kind: str = "gyro") -> Iterator[Flight]:
+                kind: str = "gyro", bias_instability: float | Sequence[float] = 0.0,
+                bias_correlation_s: float = 100.0,
+                random_walk: float | Sequence[float] = 0.0) -> Iterator[Flight]:
     """Simulate a flight in chunks of :data:`CHUNK_SAMPLES` samples.
 
     Same arguments as :func:`simulate_flight`; yields consecutive :class:`Flight` pieces
@@ -251,6 +255,12 @@ def iter_flight(cal: Calibration, duration_s: float, *, seed: int,
     if not (math.isfinite(duration_s) and duration_s > 0):
         raise ConfigError(f"duration must be positive, got {duration_s}")
     faults = _check_faults(faults, n)
+    gm_sd = _per_sensor(bias_instability, n, "bias_instability")
+    rw_q = _per_sensor(random_walk, n, "random_walk")
+    if gm_sd.any() and not (math.isfinite(bias_correlation_s) and bias_correlation_s > 0):
+        raise ConfigError(f"bias_correlation_s must be positive, got {bias_correlation_s}")
+    drift = bool(gm_sd.any() or rw_q.any())
+    phi = math.exp(-1.0 / (fs * bias_correlation_s)) if gm_sd.any() else 0.0
     model = (true_model_from_calibration(truth, cal, kind=kind) if truth is not None
              else draw_true_model(cal, seed, kind=kind))
     if cal.sample_rate_hz > 0 and fs != cal.sample_rate_hz:
@@ -267,8 +277,15 @@ def iter_flight(cal: Calibration, duration_s: float, *, seed: int,
             and truth[1]:
         truth_doc["effects_not_simulated"] = sorted(str(k) for k in truth[1])
     k_on = {id(f): math.ceil(f.onset * fs - 1e-9) for f in faults}
+    if drift:
+        truth_doc["bias_drift"] = {"bias_instability": gm_sd.tolist(),
+                                   "bias_correlation_s": float(bias_correlation_s),
+                                   "random_walk": rw_q.tolist(),
+                                   "units": "SI input; random walk per sqrt(s)"}
     held: dict[int, float] = {}
     last_raw = np.full(n, np.nan)
+    gm_state = gm_sd * np.random.default_rng([int(seed), 5]).standard_normal(n)  # stationary
+    rw_state = np.zeros(n)
     for c, k0 in enumerate(range(0, N, CHUNK_SAMPLES)):
         k1 = min(N, k0 + CHUNK_SAMPLES)
         k = np.arange(k0, k1)
@@ -296,6 +313,11 @@ def iter_flight(cal: Calibration, duration_s: float, *, seed: int,
                 add[m, i] += f.size * x[m, i]
             elif f.kind == "noise":
                 eta[m, i] *= f.size
+        if drift:
+            d, gm_state, rw_state = _bias_drift(np.random.default_rng([int(seed), 4, c]),
+                                                k.shape[0], gm_sd, phi, gm_state, rw_q, fs,
+                                                rw_state)
+            add += d
         raw = (x + model.bias + add + eta) / model.scale_factor
         for f in faults:
             i = f.sensor - 1
@@ -321,6 +343,40 @@ def iter_flight(cal: Calibration, duration_s: float, *, seed: int,
         yield Flight(t=t, raw=raw, valid=valid, sample_rate_hz=fs, sensor_names=names,
                      raw_unit=raw_unit, omega_true=omega, faults=faults, truth=truth_doc,
                      source="<simulated>", kind=kind)
+
+
+def _per_sensor(v: float | Sequence[float], n: int, name: str) -> np.ndarray:
+    a = np.broadcast_to(np.asarray(v, float), (n,)).copy() if np.ndim(v) == 0 \
+        else np.asarray(v, float)
+    if a.shape != (n,) or not np.all(np.isfinite(a)) or np.any(a < 0):
+        raise ConfigError(f"{name} must be one non-negative number or {n}, got {v!r}")
+    return a
+
+
+def _bias_drift(rng: np.random.Generator, m: int, gm_sd: np.ndarray, phi: float,
+                gm_state: np.ndarray, rw_q: np.ndarray, fs: float, rw_state: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Gauss-Markov bias + bias random walk of one chunk, shape (m, n), and the new states.
+
+    ``b[k] = φ·b[k−1] + √(1−φ²)·σ·w`` (φ = exp(−dt/τ), stationary sd σ) and
+    ``r[k] = r[k−1] + q·√dt·w'``.
+    """
+    from scipy.signal import lfilter
+
+    n = gm_sd.shape[0]
+    w = rng.standard_normal((m, 2 * n))
+    out = np.zeros((m, n))
+    if gm_sd.any():
+        g = math.sqrt(1.0 - phi * phi)
+        gm, _ = lfilter([1.0], [1.0, -phi], w[:, :n] * (g * gm_sd), axis=0,
+                        zi=(phi * gm_state)[None, :])
+        out += gm
+        gm_state = gm[-1].copy()
+    if rw_q.any():
+        rw = rw_state + np.cumsum(w[:, n:] * (rw_q / math.sqrt(fs)), axis=0)
+        out += rw
+        rw_state = rw[-1].copy()
+    return out, gm_state, rw_state
 
 
 def _truth_doc(cal: Calibration, model: TrueModel, faults: Sequence[Fault], *, seed: int,
@@ -353,7 +409,9 @@ def simulate_flight(cal: Calibration, duration_s: float, *, seed: int,
                     faults: Sequence[Fault] = (),
                     truth: Calibration | Sequence[Any] | None = None,
                     sample_rate_hz: float | None = None, max_rate_dps: float = 300.0,
-                    kind: str = "gyro") -> Flight:
+                    kind: str = "gyro", bias_instability: float | Sequence[float] = 0.0,
+                    bias_correlation_s: float = 100.0,
+                    random_walk: float | Sequence[float] = 0.0) -> Flight:
     """Simulate a manoeuvring flight with calibration error and injected faults.
 
     Parameters
@@ -372,6 +430,13 @@ def simulate_flight(cal: Calibration, duration_s: float, *, seed: int,
     max_rate_dps : float
         Largest body rate on each axis (°/s).
     kind : str
+    bias_instability : float or sequence of float
+        Stationary sd of a first-order Gauss-Markov bias per sensor (SI input units);
+        0 (default): none. In-run bias drift that the calibration does not know.
+    bias_correlation_s : float
+        Its correlation time (s).
+    random_walk : float or sequence of float
+        Bias random walk density per sensor (SI per √s); 0: none.
 
     Returns
     -------
@@ -380,7 +445,10 @@ def simulate_flight(cal: Calibration, duration_s: float, *, seed: int,
     """
     return concat_flights(list(iter_flight(cal, duration_s, seed=seed, faults=faults,
                                            truth=truth, sample_rate_hz=sample_rate_hz,
-                                           max_rate_dps=max_rate_dps, kind=kind)))
+                                           max_rate_dps=max_rate_dps, kind=kind,
+                                           bias_instability=bias_instability,
+                                           bias_correlation_s=bias_correlation_s,
+                                           random_walk=random_walk)))
 
 
 # -- files -------------------------------------------------------------------------------

@@ -7,6 +7,7 @@ from pathlib import Path
 
 from fdi.calfile import load_calibration
 from fdi.errors import ConfigError
+from fdi.units import DPH, MG
 from replay.faults import parse_fault
 from replay.flight import save_flight_dir, simulate_flight
 
@@ -33,6 +34,11 @@ def configure(p: argparse.ArgumentParser) -> None:
     p.add_argument("--max-rate", type=float, default=300.0, metavar="DPS",
                    help="largest body rate per axis in deg/s (default 300)")
     p.add_argument("--kind", default="gyro", choices=("gyro", "accel"))
+    p.add_argument("--bias-instability", type=float, default=0.0, metavar="X",
+                   help="in-run bias drift: stationary sd of a Gauss-Markov bias per sensor, "
+                        "deg/h for gyros, mg for accelerometers (default 0: none)")
+    p.add_argument("--bias-corr", type=float, default=100.0, metavar="S",
+                   help="correlation time of that bias (s, default 100)")
     p.add_argument("--out", required=True, metavar="DIR|FILE",
                    help="a flight directory, or a CAN log (.asc, .blf, .log)")
 
@@ -49,8 +55,11 @@ def run(args: argparse.Namespace) -> int:
     cal = load_calibration(args.cal)
     faults = [parse_fault(s, cal, kind=args.kind) for s in args.fault]
     truth = _load_truth(args.truth) if args.truth else None
+    unit = DPH if args.kind == "gyro" else MG
     flight = simulate_flight(cal, args.duration, seed=args.seed, faults=faults, truth=truth,
-                             sample_rate_hz=args.rate, max_rate_dps=args.max_rate, kind=args.kind)
+                             sample_rate_hz=args.rate, max_rate_dps=args.max_rate, kind=args.kind,
+                             bias_instability=args.bias_instability * unit,
+                             bias_correlation_s=args.bias_corr)
     out = Path(args.out)
     if out.suffix.lower() in CAN_SUFFIXES:
         try:

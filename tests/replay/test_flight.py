@@ -197,6 +197,35 @@ def test_other_sample_rate_keeps_noise_density():
     assert np.all(np.abs(ratio - 1) < 0.04), ratio
 
 
+def test_bias_drift_statistics_and_chunking():
+    """Gauss-Markov bias: stationary sd σ and correlation e⁻¹ at τ; random walk: q²·Δt."""
+    sig, tau, q = 0.05 * DPS, 2.0, 0.01 * DPS
+    base = simulate_flight(CAL, 700, seed=6)
+    gm = simulate_flight(CAL, 700, seed=6, bias_instability=sig, bias_correlation_s=tau)
+    model = draw_true_model(CAL, 6)
+    b = (gm.raw - base.raw) * model.scale_factor           # the drift alone (SI)
+    # 700 s / 2 s ≈ 350 independent stretches per sensor, 6 sensors: var within ~±8 %
+    ratio = b.var() / sig ** 2
+    assert abs(ratio - 1) < 0.25, f"GM variance ratio {ratio:.3f}"
+    lag = round(tau * 100)
+    rho = np.mean(b[lag:] * b[:-lag]) / np.mean(b * b)
+    assert abs(rho - np.exp(-1)) < 0.08, f"GM correlation at tau {rho:.3f}"
+    # the drift crosses the chunk boundary smoothly and a shorter flight is its prefix
+    short = simulate_flight(CAL, 100, seed=6, bias_instability=sig, bias_correlation_s=tau)
+    np.testing.assert_array_equal(short.raw, gm.raw[:10000])
+    k = CHUNK_SAMPLES
+    jump = np.abs(b[k] - b[k - 1]) / (sig * np.sqrt(2 / (100 * tau)))
+    assert np.all(jump < 5), f"drift jumps at the chunk boundary: {jump}"
+    rw = simulate_flight(CAL, 700, seed=6, random_walk=q)
+    r = (rw.raw - base.raw) * model.scale_factor
+    inc = r[100:] - r[:-100]                                 # 1-s increments: var q²·1 s
+    ratio = inc[::100].var() / q ** 2
+    assert abs(ratio - 1) < 0.15, f"random walk increment variance ratio {ratio:.3f}"
+    assert rw.truth["bias_drift"]["random_walk"] == [q] * 6
+    with pytest.raises(ConfigError, match="bias_instability"):
+        simulate_flight(CAL, 1, seed=0, bias_instability=[1.0, 2.0])
+
+
 def test_bad_arguments():
     with pytest.raises(ConfigError, match="out of range"):
         simulate_flight(CAL, 1, seed=0, faults=[Fault("step", 7, 1.0, 0.0)])

@@ -86,7 +86,10 @@ def test_simulate_flight_with_truth_sidecar(tmp_path, cal_file):
     np.testing.assert_allclose(tp["axis"], truth.gyro.H, rtol=1e-12)
     # without --truth the parameters are drawn, and differ from the calibration
     rc = main(["simulate", "flight", "--cal", str(cal_file), "--duration", "2", "--seed", "1",
-               "--out", str(tmp_path / "g")])
+               "--bias-instability", "5", "--bias-corr", "50", "--out", str(tmp_path / "g")])
+    assert rc == 0
     g = load_flight_dir(tmp_path / "g")
     np.testing.assert_allclose(g.truth["true_parameters"]["axis"],
                                draw_true_model(_cal(), 1).axis, rtol=1e-12)
+    np.testing.assert_allclose(g.truth["bias_drift"]["bias_instability"], [5 * DPH] * 6)
+    assert g.truth["bias_drift"]["bias_correlation_s"] == 50.0
