@@ -32,7 +32,7 @@ def _num(x: float | None) -> float | None:
     return x if math.isfinite(x) else None
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Event:
     """A fault event.
 
@@ -63,6 +63,21 @@ class Event:
     threshold: float = float("nan")
     scale: int | None = None
     magnitude: float | None = None
+
+    def _key(self) -> tuple:
+        def k(x: float | None) -> Any:
+            return ("nan",) if isinstance(x, float) and math.isnan(x) else x
+        return (self.t, self.sensor, self.type, self.reason, k(self.statistic),
+                k(self.threshold), self.scale, k(self.magnitude))
+
+    def __eq__(self, other: object) -> bool:
+        """Field-wise equality in which NaN equals NaN (two identical events are equal)."""
+        if not isinstance(other, Event):
+            return NotImplemented
+        return self._key() == other._key()
+
+    def __hash__(self) -> int:
+        return hash(self._key())
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dictionary (non-finite numbers become None)."""

@@ -20,6 +20,7 @@ arithmetic simple and the budget a guaranteed upper bound).
 from __future__ import annotations
 
 import math
+from functools import lru_cache
 
 import numpy as np
 from scipy import optimize, stats
@@ -53,6 +54,7 @@ def alpha_per_sample(false_alarms_per_hour: float, sample_rate_hz: float) -> flo
     return min(0.5, false_alarms_per_hour / (3600.0 * sample_rate_hz))
 
 
+@lru_cache(maxsize=1024)
 def chi2_threshold(alpha: float, df: int) -> float:
     """Threshold on a χ²(df) statistic exceeded with probability ``alpha``.
 
@@ -105,6 +107,7 @@ def _siegmund_arl0(h: float, nu: float) -> float:
     return (math.expm1(a) - a) / (2.0 * nu * nu)
 
 
+@lru_cache(maxsize=1024)
 def cusum_threshold(alpha: float, nu: float, n_cusums: int) -> float:
     """CUSUM decision threshold h for a per-sample false-alarm probability ``alpha``.
 
@@ -121,6 +124,7 @@ def cusum_threshold(alpha: float, nu: float, n_cusums: int) -> float:
     return float(optimize.brentq(f, 1e-6, hi, xtol=1e-10))
 
 
+@lru_cache(maxsize=1024)
 def minimum_detectable_noncentrality(threshold: float, df: int, missed_detection: float) -> float:
     """Noncentrality λ at which a χ²(df) test at ``threshold`` misses with ``missed_detection``.
 

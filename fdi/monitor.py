@@ -95,7 +95,7 @@ class Monitor:
         self._bias = s.biases
         self._sigma = np.asarray(s.noise_covariance, float)
         self.cache = SetCache(s.H, self._sf, self._bias, self._sigma, cin, self.thresholds, md)
-        self.cache.precompute(max(self.n - 2, 0))
+        self.cache.precompute(max(self.n - 1, 0))
         self._lim = health_limits(self.settings, kind, self._sf, self._bias)
         th = self.thresholds
         self._scales = tuple(int(w) for w in th.scales)
@@ -745,11 +745,10 @@ class Monitor:
             self._lvt[i] = float(ta[r0 + e - 1])
         if w is None:
             out.omega[:, sl] = _NAN
-            rho_e: Any = rho
         else:
             for a in range(3):
                 out.omega[a, sl] = w[a][:e]
-            rho_e = rho[:e] if isinstance(rho, np.ndarray) else np.full(e, rho)
+        rho_e = rho[:e] if isinstance(rho, np.ndarray) else np.full(e, float(rho))
         pl = mdl.pl
         t1 = out.pl[sl]
         np.multiply(rho_e, pl.b, out=t1)
