@@ -279,13 +279,28 @@ def calibrate(session: Session, *, bias_method: str = "model", denoise: bool = T
     dof = rt.R.shape[0] - 3
     warnings = []
     if dof > 0:
-        lim = float(scipy.stats.chi2.isf(0.01, dof)) / dof
+        lim = float(scipy.stats.chi2.isf(1e-3, dof)) / dof
         for i in np.flatnonzero(chi2 > lim):
             warnings.append(
                 f"gyro {session.gyro_config.sensor_names[i]}: the rate-step differences "
-                f"scatter more than white noise explains (chi2/dof {chi2[i]:.2f}, 1 % limit "
+                f"scatter more than white noise explains (chi2/dof {chi2[i]:.2f}, 0.1 % limit "
                 f"{lim:.2f}); correlated noise or an unmodelled effect: the uncertainties "
                 "are too small")
+    # scatter of the per-step residual means against white noise: r = B·ū_seg exactly,
+    # E[Σ_k N_k r_k²] = σ²·tr(D·B·diag(1/N_seg)·Bᵀ) (D = diag N_k over the bias steps)
+    bs = np.array(bias_steps)
+    B = frac[bs] - xt_step[bs] @ op_a - P_model[3][None, :]
+    r_step = B @ u0                                                   # (S_b, n) raw
+    expect = float(np.trace((cnt[bs][:, None] * B * inv_cnt) @ B.T))
+    step_chi2 = (cnt[bs] @ r_step**2) / (np.diag(Sigma_raw) * max(expect, 1e-300))
+    sdof = max(len(bs) - 4, 1)
+    slim = float(scipy.stats.chi2.isf(1e-3, sdof)) / sdof
+    for i in np.flatnonzero(step_chi2 > slim):
+        warnings.append(
+            f"gyro {session.gyro_config.sensor_names[i]}: the step means of the residuals "
+            f"scatter more than white noise explains (chi2/dof {step_chi2[i]:.2f}, 0.1 % limit "
+            f"{slim:.2f}); correlated noise (bias instability) or an unmodelled effect: the "
+            "bias uncertainty is too small")
     extra: dict[str, Any] = {
         "source": src,
         "method": {"gyro": "rate test, seed 000 Eqs. 16-19 / seed 001 Eqs. 11-15, inputs "
@@ -294,6 +309,7 @@ def calibrate(session: Session, *, bias_method: str = "model", denoise: bool = T
                    if denoise else "none"},
         "rate_test": {"pairs": [[nums[k], nums[p]] for k, p in rt.pairs],
                       "R_rad_s": rt.R, "chi2_dof": chi2},
+        "step_residual_chi2_dof": step_chi2,
         "warnings": warnings,
         "gyro_bias": {"unit": gyro_bu,
                       "model": [p["bias"] / bfac for p in parts],

@@ -86,7 +86,10 @@ def summary_text(cal: Calibration) -> str:
     if "chi2_dof" in rt:
         lines.append("rate test: pairs " + " ".join(f"{a}/{b}" for a, b in rt["pairs"])
                      + "; chi2/dof of the step differences: "
-                     + " ".join(f"{x:.2f}" for x in np.asarray(rt["chi2_dof"], float)))
+                     + " ".join(f"{x:.2f}" for x in np.asarray(rt["chi2_dof"], float))
+                     + "; of the per-step residual means: "
+                     + " ".join(f"{x:.2f}" for x in np.asarray(
+                         ex.get("step_residual_chi2_dof", []), float)))
     if cal.earth_rate_dph is not None:
         er = ex.get("earth_rate_fit", {})
         lines.append(f"Earth rate from the outer-axis modulation: {cal.earth_rate_dph:.4f} ± "
