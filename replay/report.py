@@ -26,8 +26,8 @@ Definitions:
   its onset that does not name the sensor of another injected fault (a wrong isolation of a
   healthy sensor still shows the fault was noticed, and counts as a false alarm too); the
   delay is event time − onset (0: caught in the onset sample). Its *isolation* is the
-  first ``isolated``/``health`` event at or after the onset; it is correct when it names
-  the faulted sensor.
+  first ``isolated``/``health`` event at or after the onset that does not name the sensor of
+  another injected fault; it is correct when it names the faulted sensor.
 - ``rate_error_rms_dps`` is the RMS over samples and axes of ω̂ − ω_true (°/s), over the
   samples where ω̂ is finite; ``rate_available_fraction`` the share of such samples.
 - ``integrity_breaches``: samples where |ω̂ − ω_true| (vector norm) exceeds the protection
@@ -88,8 +88,8 @@ def _fault_outcome(f: Any, events: Sequence[Mapping[str, Any]], fs: float,
     others = {g.sensor for g in faults if g.sensor != f.sensor}
     det = next((e for e in events if e["type"] in ALARM_TYPES and e["t"] >= f.onset - _EPS
                 and e.get("sensor") not in others), None)
-    iso = next((e for e in events if e["type"] in _ISOLATING and e["t"] >= f.onset - _EPS),
-               None)
+    iso = next((e for e in events if e["type"] in _ISOLATING and e["t"] >= f.onset - _EPS
+                and e.get("sensor") not in others), None)
     d = None if det is None else max(0.0, det["t"] - f.onset)
     di = None if iso is None else max(0.0, iso["t"] - f.onset)
     return {"spec": f.spec, "kind": f.kind, "sensor": f.sensor, "onset": f.onset,

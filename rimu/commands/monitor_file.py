@@ -41,7 +41,7 @@ def run(args: argparse.Namespace) -> int:
         if not args.false_alarms_per_hour > 0:
             raise ConfigError(f"--false-alarms-per-hour must be positive, "
                               f"got {args.false_alarms_per_hour}")
-        from thresholds import compute_thresholds
+        from thresholds.compute import compute_thresholds
         thr = compute_thresholds(cal, false_alarms_per_hour=args.false_alarms_per_hour,
                                  kind=flight.kind)
         how = {"false_alarms_per_hour": args.false_alarms_per_hour}

@@ -108,6 +108,20 @@ def test_wrong_isolation_and_missed_fault():
     np.testing.assert_allclose(s["rate_error_rms_dps"], 0.0, atol=1e-15)
 
 
+def test_isolation_of_another_fault_is_not_attributed():
+    f1 = Fault("ramp", 5, 1e-4, 1.0, spec="ramp")
+    f2 = Fault("dropout", 1, 0.0, 2.0, 0.5, spec="dropout")
+    fl = _flight([f1, f2])
+    ev = [Event(2.09, 1, "health", "stale", 0.1, 0.1)]
+    rep = build_report(_result(fl, ev), fl, _cal())
+    ramp, drop = rep["faults"]
+    assert ramp["detected"] is False and ramp["isolated"] is False
+    assert ramp["isolation_correct"] is None
+    assert drop["isolation_correct"] is True
+    np.testing.assert_allclose(drop["detection_delay_s"], 0.09, atol=1e-12)
+    assert rep["summary"]["false_alarms"] == 0
+
+
 def test_without_truth_false_alarms_unknown():
     fl = _flight([], omega_true=False)
     rep = build_report(_result(fl, [Event(1.0, None, "detected", "x", 1.0, 0.5)],
