@@ -44,7 +44,7 @@ def calibrated(name: str, session_seed: int = 2024):
 
 @functools.cache
 def thresholds_for(name: str, session_seed: int = 2024):
-    from thresholds import compute_thresholds
+    from thresholds.compute import compute_thresholds
 
     cal, _ = calibrated(name, session_seed)
     return compute_thresholds(cal, false_alarms_per_hour=FA_PER_HOUR, kind="gyro")
@@ -288,7 +288,7 @@ def test_cone6_ramp_detected_and_delay_against_oracle():
     (``thresholds.oracle_detect``). Target: median delay under 2× the oracle's (asserted);
     the ratio is recorded per run (single runs can be below 1: the noise differs per run).
     """
-    from thresholds import oracle_detect
+    from thresholds.oracle import oracle_detect
 
     cal, truth = calibrated("cone6")
     mon = monitor("cone6")
