@@ -22,7 +22,7 @@ SEEDS = range(100)
 
 def _collect(name):
     z: dict[str, list[float]] = {}
-    chi2 = []
+    chi2, step_chi2 = [], []
     for seed in SEEDS:
         s, truth = session(name, seed=seed)
         cal = calibrate(s, allan=False)
@@ -40,7 +40,8 @@ def _collect(name):
             for j in range(4):
                 z.setdefault(f"v_c[{j + 1}]", []).append((Vc[j] - Vt[j]) / sd[j])
         chi2.append(cal.extra["rate_test"]["chi2_dof"])
-    return {k: np.array(v) for k, v in z.items()}, np.array(chi2)
+        step_chi2.append(cal.extra["step_residual_chi2_dof"])
+    return {k: np.array(v) for k, v in z.items()}, np.array(chi2), np.array(step_chi2)
 
 
 @pytest.fixture(scope="module")
@@ -66,7 +67,8 @@ def _check(zs, skip=()):
 
 
 def _check_chi2(chi2, dof):
-    """Mean chi2/dof of the step differences within 3 standard errors of 1."""
+    """Mean chi2/dof (step differences, per-step residual means) within 3 standard errors
+    of 1."""
     tol = 3 * np.sqrt(2.0 / dof) / np.sqrt(chi2.shape[0])
     np.testing.assert_allclose(chi2.mean(axis=0), 1.0, atol=tol,
                                err_msg=f"chi2/dof of the step differences ({dof} dof)")
@@ -74,15 +76,16 @@ def _check_chi2(chi2, dof):
 
 @pytest.mark.slow
 def test_tetrad_paper_z_scores(tetrad):
-    zs, chi2 = tetrad
+    zs, chi2, step_chi2 = tetrad
     assert len(zs) == 4 * 5 + 1 + 4, sorted(zs)        # SF, bias, 2 angles, bias_turns; Ω; v_c
     _check(zs)
     _check_chi2(chi2, dof=8 - 3)
+    _check_chi2(step_chi2, dof=16 - 4)
 
 
 @pytest.mark.slow
 def test_tetrad_paper_earth_rate(tetrad):
-    zs, _ = tetrad
+    zs, _, _ = tetrad
     z = zs["site  earth_rate"]
     assert np.all(np.abs(z) < 3.5), "Earth rate within its uncertainty"
     assert 0.75 <= np.std(z, ddof=1) <= 1.25
@@ -90,7 +93,7 @@ def test_tetrad_paper_earth_rate(tetrad):
 
 @pytest.mark.slow
 def test_cone_paper_z_scores_gyros_and_accelerometers(cone):
-    zs, chi2 = cone
+    zs, chi2, step_chi2 = cone
     kinds = {k.split()[0] for k in zs}
     assert {"gyro", "accel"} <= kinds
     assert sum(k.startswith("accel") for k in zs) == 6 * 4
@@ -98,3 +101,4 @@ def test_cone_paper_z_scores_gyros_and_accelerometers(cone):
     # σ of ≈ 8 °/h per fit, where |(A, B)| is Rice-biased; its z is reported, not asserted
     _check(zs, skip=("site  earth_rate",))
     _check_chi2(chi2, dof=7 - 3)
+    _check_chi2(step_chi2, dof=24 - 4)
