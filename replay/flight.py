@@ -96,7 +96,7 @@ CHUNK_SAMPLES = 65536
 """Samples per internal simulation chunk (the noise stream is keyed on the chunk index)."""
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Flight:
     """Samples of one sensor set in flight.
 
@@ -146,7 +146,7 @@ class Flight:
         return self.t.shape[0] / self.sample_rate_hz if self.sample_rate_hz > 0 else 0.0
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class TrueModel:
     """The true sensor model a flight is simulated through.
 
