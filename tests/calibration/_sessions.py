@@ -2,8 +2,6 @@
 
 import dataclasses
 
-import numpy as np
-
 from calibration.presets import preset
 from calibration.simulate import NoiseModel, simulate_session
 
@@ -26,4 +24,4 @@ def shift_outer(s, delta_rad):
     return dataclasses.replace(s, outer=s.outer + delta_rad)
 
 
-__all__ = ["np", "session", "shift_outer", "with_changes"]
+__all__ = ["session", "shift_outer", "with_changes"]
