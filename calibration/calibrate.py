@@ -20,9 +20,29 @@
    (:mod:`calibration.multiposition`, seed 001 Eqs. 5-10), when the session has
    accelerometers and at least 4 positions.
 
-Assumption behind the uncertainties: the per-sample noise is white (what the residual
-Allan deviation shows; ``extra["rate_test"]["chi2_dof"]`` ≈ 1 checks it against the scatter of
-the step differences).
+Assumption behind the uncertainties: the per-sample noise is white. Two checks test it
+against the data and add a line to ``extra["warnings"]`` (printed by ``rimu calibrate``) when
+it fails at the 0.1 % level: the scatter of the rate-step differences about the fit
+(``extra["rate_test"]["chi2_dof"]``) and the scatter of the per-step residual means
+(``extra["step_residual_chi2_dof"]``, exact expectation 1 under white noise). With bias
+instability (correlated noise) the reported σ are too small, mostly for the biases.
+
+Keys of ``Calibration.extra`` written here::
+
+    source                     session path
+    method                     {"gyro", "bias", "denoise"}
+    rate_test                  {"pairs": [[k, p], ...] (1-based), "R_rad_s": (P, 3),
+                                "chi2_dof": (n,)}
+    step_residual_chi2_dof     (n,)
+    warnings                   [str, ...]
+    gyro_bias                  {"unit", "model", "model_sd", and when there are whole outer
+                                turns "turns", "turns_sd", "turns_steps", "turns_per_step",
+                                "vertical_correction"}   (values in "unit")
+    parity_calibrated_sd       (n-3, n) first-order sd of V_c (gyros)
+    parity_accel_calibrated_sd (n-3, n) (accelerometers)
+    residual_steps             {"unit": {...}, "gyro": [{"step", "label", "kind", "n",
+                                "mean": [n], "rms": [n]}, ...], "accel": [...]}  (SI)
+    earth_rate_fit             see :meth:`calibration.earth_rate.EarthRateFit.to_dict`
 """
 
 from __future__ import annotations
