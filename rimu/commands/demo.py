@@ -32,11 +32,9 @@ def _say(step: int, text: str) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from calibration.calibrate import calibrate
-    from calibration.compare import format_comparison
+    from calibration.compare import compare, format_comparison
     from calibration.presets import preset
-    from calibration.session_io import save_session
-    from calibration.simulate import simulate_session
-    from calibration.truth import save_truth
+    from calibration.simulate import save_simulation, simulate_session
     from fdi.calfile import load_calibration
     from fdi.monitor import Monitor
     from replay.faults import parse_fault
@@ -54,8 +52,7 @@ def run(args: argparse.Namespace) -> int:
     session = simulate_session(p.config, p.sequence, p.truth, seed=args.seed,
                                accel_config=p.accel_config, noise=p.noise)
     sess_dir = out / "session"
-    save_session(session, sess_dir)
-    save_truth(p.truth, {}, {}, sess_dir / "truth.json")
+    save_simulation(session, p.truth, sess_dir)
     print(f"  {session.t.size} samples, {len(session.steps)} steps -> {sess_dir}")
 
     _say(2, "calibrating (rate test, multi-position test, Earth rate removed)")
@@ -63,7 +60,7 @@ def run(args: argparse.Namespace) -> int:
     cal_path = out / "cal.json"
     cal.save(cal_path)
     cal = load_calibration(cal_path)
-    print(format_comparison(cal, p.truth, kinds=("gyro",)))
+    print(format_comparison(compare(cal, p.truth)))
     print(f"  -> {cal_path}")
 
     _say(3, "thresholds for 1e-3 false alarms per hour")
@@ -96,10 +93,10 @@ def run(args: argparse.Namespace) -> int:
     if args.no_rrd:
         print("  skipped (--no-rrd)")
     else:
-        from replay.rerun_log import write_recording
+        from replay.rerun_log import record
 
         rrd = out / "replay.rrd"
-        write_recording(rrd, result, replayed, cal, thresholds=thr)
+        record(result, replayed, cal, path=rrd, thresholds=thr)
         print(f"  -> {rrd}  (open with: rerun {rrd})")
     print(f"\ndone in {time.perf_counter() - t0:.1f} s; outputs in {out}/")
     return 0
