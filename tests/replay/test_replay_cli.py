@@ -168,3 +168,22 @@ def test_replay_three_j1939_imus_with_the_example_map(tmp_path):
     assert d["summary"]["isolated_sensors"] == [5]
     first = d["events"][0]
     assert first["sensor"] == 5 and 1.5 <= first["t"] < 1.6
+
+
+def test_realtime_replay_prints_events_as_they_happen_and_matches(tmp_path, cal_path, capsys):
+    f = simulate_flight(CAL, 1.0, seed=26, faults=(parse_fault("step:1:60sigma:0.4", CAL),))
+    log = tmp_path / "rt.log"
+    write_flight_log(f, log)
+    r1, r2 = tmp_path / "a.json", tmp_path / "b.json"
+    assert main(["replay", str(log), "--cal", str(cal_path), "--report", str(r1),
+                 "--no-progress"]) == 0
+    capsys.readouterr()
+    import time
+    t0 = time.monotonic()
+    assert main(["replay", str(log), "--cal", str(cal_path), "--report", str(r2),
+                 "--realtime", "--no-progress"]) == 0
+    assert time.monotonic() - t0 >= 0.95, "paced at the recorded rate"
+    out = capsys.readouterr().out
+    a, b = _report(r1), _report(r2)
+    assert a["events"] == b["events"] and a["events"]
+    assert out.index("isolated") < out.index("events:"), "printed before the summary"
