@@ -129,11 +129,12 @@ class SignalLayout:
     def physical(self, raw: np.ndarray) -> np.ndarray:
         """Physical value (float64) from :meth:`raw`."""
         if self.is_float:
-            if self.length == 32:
-                f = raw.astype(np.uint32).view(np.float32).astype(np.float64)
-            else:
-                f = raw.view(np.float64).copy()
-            return f * self.scale + self.offset
+            with np.errstate(invalid="ignore"):  # signalling NaN payloads are NaN
+                if self.length == 32:
+                    f = raw.astype(np.uint32).view(np.float32).astype(np.float64)
+                else:
+                    f = raw.view(np.float64).copy()
+                return f * self.scale + self.offset
         return raw.astype(np.float64) * self.scale + self.offset
 
 
