@@ -2,12 +2,12 @@
 
 import numpy as np
 import pytest
+from _sessions import session, with_changes
 
 from calibration.bias import offset_operator, turn_windows
 from calibration.calibrate import calibrate
 from fdi.errors import CalibrationError
 from fdi.units import DPH, EARTH_RATE
-from tests.calibration._sessions import session, with_changes
 
 
 def test_turn_windows_whole_turns_only():

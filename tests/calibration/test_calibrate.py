@@ -5,13 +5,13 @@ import json
 
 import numpy as np
 import pytest
+from _sessions import session, with_changes
 
 from calibration.calibrate import MIN_STEP_SAMPLES, calibrate
 from calibration.compare import compare
 from fdi.calfile import load_calibration
 from fdi.errors import CalibrationError
 from fdi.parity import parity_matrix
-from tests.calibration._sessions import session, with_changes
 
 EQ24 = np.array([-0.40825, -0.40825, -0.40825, 0.70711])          # seed 000 Eq. 24
 EQ25 = np.array([-0.40955, -0.40903, -0.40585, 0.70729])          # seed 000 Eq. 25

@@ -4,11 +4,11 @@ import json
 
 import numpy as np
 import pytest
+from _sessions import session, with_changes
 
 from calibration.session_io import load_session, save_session
 from calibration.truth import save_truth
 from rimu.cli import main
-from tests.calibration._sessions import session, with_changes
 
 
 @pytest.fixture(scope="module")

@@ -10,12 +10,12 @@ P(≥ 3 of 100 beyond 3σ) = 0.3 %).
 
 import numpy as np
 import pytest
+from _sessions import session
 
 from calibration.calibrate import calibrate
 from calibration.compare import compare
 from fdi.parity import parity_matrix
 from fdi.units import DPH
-from tests.calibration._sessions import session
 
 SEEDS = range(100)
 

@@ -2,10 +2,10 @@
 
 import numpy as np
 import pytest
+from _sessions import session, shift_outer, with_changes
 
 from calibration.calibrate import calibrate
 from fdi.units import EARTH_RATE_DPH
-from tests.calibration._sessions import session, shift_outer, with_changes
 
 
 @pytest.mark.parametrize("denoise", [True, False])
