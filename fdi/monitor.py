@@ -94,7 +94,9 @@ class Monitor:
         self._sf = s.scale_factors
         self._bias = s.biases
         self._sigma = np.asarray(s.noise_covariance, float)
-        self.cache = SetCache(s.H, self._sf, self._bias, self._sigma, cin, self.thresholds, md)
+        bsd = np.array([c.bias_sd for c in s.sensors], float)
+        self.cache = SetCache(s.H, self._sf, self._bias, self._sigma, cin, self.thresholds, md,
+                              bsd)
         self.cache.precompute(max(self.n - 1, 0))
         self._lim = health_limits(self.settings, kind, self._sf, self._bias)
         th = self.thresholds
@@ -346,7 +348,7 @@ class Monitor:
         clear = True
         fired = -1
         best = 0.0
-        thr, invwf, kof, cr = mdl.thr, mdl.invwf, mdl.kof, self._cr
+        thr, invwf, kof, obw, cr = mdl.thr, mdl.invwf, mdl.kof, mdl.one_bw, self._cr
         crho = c[df]
         for k, w in enumerate(self._scales):
             if count >= w:
@@ -357,7 +359,7 @@ class Monitor:
                     d = c[j] - old[j]
                     acc = acc + d * d
                 D = acc * invwf[k]
-                T = thr[k] * (1.0 + kof[k] * (crho - old[df]))
+                T = thr[k] * (obw[k] + kof[k] * (crho - old[df]))
                 if D > T:
                     alarm = True
                     if D / T > best:
@@ -372,7 +374,7 @@ class Monitor:
             thrs.append(T)
         if self._cusum:
             r = mdl.proj(*z)
-            drift = self._nu + 3.0 * math.sqrt(mdl.kappa * rho)
+            drift = self._nu + 3.0 * math.sqrt(mdl.kappa * rho + mdl.beta)
             sp, mp, sm, mm = self._sp, self._mp, self._sm, self._mm
             g = 0.0
             for i in range(mdl.m):
@@ -672,7 +674,7 @@ class Monitor:
                 np.multiply(acc, mdl.invwf[k], out=D)
                 np.subtract(cur[df], old[df], out=T)
                 np.multiply(T, mdl.kof[k], out=T)
-                np.add(T, 1.0, out=T)
+                np.add(T, mdl.one_bw[k], out=T)
                 np.multiply(T, mdl.thr[k], out=T)
                 nf = min(e, max(0, wl - count0 - 1))       # windows not yet full
                 if nf:
@@ -684,7 +686,7 @@ class Monitor:
                 noclear |= bb
             if self._cusum:
                 rr = mdl.proj(*z)
-                drift = self._nu + 3.0 * np.sqrt(mdl.kappa * rho)
+                drift = self._nu + 3.0 * np.sqrt(mdl.kappa * rho + mdl.beta)
                 g = np.zeros(e)
                 cus_state = []
                 for i in range(mdl.m):

@@ -74,8 +74,11 @@ class SetModel:
     omega_sd : ndarray, shape (3,)
     kappa : float
         Calibration-uncertainty constant: V diag(Σ_ii) Vᵀ ≼ κ·VΣVᵀ.
-    thr, invwf, kof : tuple of float, shape (K,)
-        Per scale: χ² threshold for df, 1/(w·f_w), κ/f_w.
+    beta : float
+        Bias-uncertainty constant: A·V·diag(bias_sd²)·Vᵀ·Aᵀ ≼ β·I (a constant parity offset
+        that no window averages down).
+    thr, invwf, kof, one_bw : tuple of float, shape (K,)
+        Per scale: χ² threshold for df, 1/(w·f_w), κ/f_w and 1 + w·β/f_w.
     cusum_h : float
     pl : ProtectionLevel
     kernel : callable
@@ -98,6 +101,8 @@ class SetModel:
     thr: tuple[float, ...]
     invwf: tuple[float, ...]
     kof: tuple[float, ...]
+    beta: float
+    one_bw: tuple[float, ...]
     cusum_h: float
     pl: ProtectionLevel
     kernel: Any = field(repr=False)
@@ -161,7 +166,7 @@ def _compile(src: str, name: str, vec: bool) -> Any:
 
 def build_set_model(H: np.ndarray, sf: np.ndarray, bias: np.ndarray, noise_cov: np.ndarray,
                     input_error_cov: np.ndarray, mask: int, thresholds: Thresholds,
-                    missed_detection: float) -> SetModel:
+                    missed_detection: float, bias_sd: np.ndarray | None = None) -> SetModel:
     """Compute (once) the model of one healthy set. See :class:`SetModel`.
 
     Parameters
@@ -176,8 +181,12 @@ def build_set_model(H: np.ndarray, sf: np.ndarray, bias: np.ndarray, noise_cov: 
         Bitmask of healthy sensors.
     thresholds : Thresholds
     missed_detection : float
+    bias_sd : ndarray, shape (n,), optional
+        Standard deviation of the calibrated biases (SI); zero when omitted.
     """
     n = H.shape[0]
+    if bias_sd is None:
+        bias_sd = np.zeros(n)
     healthy = np.array([(mask >> i) & 1 == 1 for i in range(n)])
     idx = tuple(int(i) for i in np.flatnonzero(healthy))
     m = len(idx)
@@ -196,7 +205,10 @@ def build_set_model(H: np.ndarray, sf: np.ndarray, bias: np.ndarray, noise_cov: 
         U = (A @ V)[:, list(idx)]
         Dg = V @ np.diag(np.diag(Sig)) @ V.T
         kappa = float(np.linalg.eigvalsh(A @ Dg @ A.T).max())
+        Bg = V @ np.diag(np.asarray(bias_sd, float) ** 2) @ V.T
+        beta = float(max(np.linalg.eigvalsh(A @ Bg @ A.T).max(), 0.0))
     else:
+        beta = 0.0
         A = np.zeros((0, 0))
         U = np.zeros((0, m))
         kappa = 1.0
@@ -230,6 +242,7 @@ def build_set_model(H: np.ndarray, sf: np.ndarray, bias: np.ndarray, noise_cov: 
     thr = tuple(chi2_threshold(a, df) if df > 0 else float("inf") for a in thresholds.alpha)
     invwf = tuple(1.0 / (w * f) for w, f in zip(scales, vf, strict=True))
     kof = tuple(kappa / f for f in vf)
+    one_bw = tuple(1.0 + w * beta / f for w, f in zip(scales, vf, strict=True))
     h = float("nan")
     if df > 0 and thresholds.detector != "windows":
         h = cusum_threshold(thresholds.alpha[0], thresholds.cusum_drift, 2 * m)
@@ -247,7 +260,8 @@ def build_set_model(H: np.ndarray, sf: np.ndarray, bias: np.ndarray, noise_cov: 
     for a in (V, A, U, G, cov, osd):
         a.setflags(write=False)
     return SetModel(mask=mask, idx=idx, df=df, capability=cap, V=V, A=A, U=U, G=G, cov=cov,
-                    omega_sd=osd, kappa=kappa, thr=thr, invwf=invwf, kof=kof, cusum_h=h,
+                    omega_sd=osd, kappa=kappa, thr=thr, invwf=invwf, kof=kof, beta=beta,
+                    one_bw=one_bw, cusum_h=h,
                     pl=pl, kernel=kern, kernel_vec=kern_vec, proj=proj, source=src + psrc)
 
 
@@ -256,7 +270,7 @@ class SetCache:
 
     def __init__(self, H: np.ndarray, sf: np.ndarray, bias: np.ndarray,
                  noise_cov: np.ndarray, input_error_cov: np.ndarray, thresholds: Thresholds,
-                 missed_detection: float) -> None:
+                 missed_detection: float, bias_sd: np.ndarray | None = None) -> None:
         self.H = np.asarray(H, float)
         self.n = self.H.shape[0]
         self.sf = np.asarray(sf, float)
@@ -265,6 +279,7 @@ class SetCache:
         self.input_error_cov = np.asarray(input_error_cov, float)
         self.thresholds = thresholds
         self.missed_detection = float(missed_detection)
+        self.bias_sd = np.zeros(self.n) if bias_sd is None else np.asarray(bias_sd, float)
         self._models: dict[int, SetModel] = {}
 
     def get(self, mask: int) -> SetModel:
@@ -273,7 +288,7 @@ class SetCache:
         if mdl is None:
             mdl = build_set_model(self.H, self.sf, self.bias, self.noise_cov,
                                   self.input_error_cov, mask, self.thresholds,
-                                  self.missed_detection)
+                                  self.missed_detection, self.bias_sd)
             self._models[mask] = mdl
         return mdl
 

@@ -17,12 +17,13 @@ FS = 100.0
 
 
 def manoeuvre(N: int, seed: int, amp: float = 3.0) -> np.ndarray:
-    """Smooth body rates (N, 3), rad/s, a few rad/s."""
+    """Smooth body rates (N, 3), rad/s, with |ω| up to ``amp`` (reached now and then)."""
     rng = np.random.default_rng(seed)
     t = np.arange(N) / FS
     f = rng.uniform(0.05, 0.5, 3)
     ph = rng.uniform(0, 2 * np.pi, 3)
-    return amp * np.sin(2 * np.pi * f[None, :] * t[:, None] + ph[None, :])
+    om = np.sin(2 * np.pi * f[None, :] * t[:, None] + ph[None, :])
+    return amp / np.sqrt(3.0) * om
 
 
 def scenario(cfg: str, N: int, faults: list[tuple[int, int, float]], seed: int = 0,
