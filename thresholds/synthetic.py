@@ -27,7 +27,8 @@ def synthetic_calibration(config_name: str = "cone6", *, noise_sd: float = 0.1 *
                           input_error_sd: float = 1e-4, seed: int = 0, raw_unit: str = "LSB",
                           sample_rate_hz: float = 100.0, misalignment_rad: float = 2e-3,
                           scale_factor: float = 0.0610 * DPS, bias_sd: float = 0.5 * DPS,
-                          noise_sd_spread: float = 0.0, allan: bool = True) -> Calibration:
+                          noise_sd_spread: float = 0.0, allan: bool = True,
+                          bias_uncertainty: float = 0.1) -> Calibration:
     """An in-memory gyro calibration of a built-in (or file) configuration.
 
     Parameters
@@ -52,6 +53,8 @@ def synthetic_calibration(config_name: str = "cone6", *, noise_sd: float = 0.1 *
         Relative spread of the per-sensor noise levels (0: all equal).
     allan : bool
         Attach an Allan table of white noise (τ = 2^k/fs, k = 0..14).
+    bias_uncertainty : float
+        ``bias_sd`` of each sensor as a fraction of its noise_sd.
     """
     rng = np.random.default_rng(seed)
     cfg = load_configuration(config_name)
@@ -67,7 +70,7 @@ def synthetic_calibration(config_name: str = "cone6", *, noise_sd: float = 0.1 *
         sensors.append(SensorCal(
             name=cfg.sensor_names[i], axis=h, axis_nominal=h0.copy(), scale_factor=sf,
             scale_factor_sd=sf * input_error_sd, bias=bias_sd * rng.standard_normal(),
-            bias_sd=0.1 * noise_sd, input_error_cov=input_error_sd**2 * np.eye(3),
+            bias_sd=bias_uncertainty * float(sds[i]), input_error_cov=input_error_sd**2 * np.eye(3),
             misalignment_sd=np.full(2, input_error_sd), raw_unit=raw_unit,
             scale_factor_unit=f"(deg/s)/{raw_unit}", bias_unit="deg/s",
             residual_rms=float(sds[i])))
