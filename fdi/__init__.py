@@ -14,6 +14,7 @@ Conventions (hold for every rimu package)
 ``fdi`` imports none of the other rimu packages.
 """
 
+from fdi.answer import Answer, BlockResult, Event
 from fdi.calfile import (
     CALIBRATION_SCHEMA,
     AllanTable,
@@ -25,26 +26,35 @@ from fdi.calfile import (
 )
 from fdi.errors import CalibrationError, ConfigError, FileFormatError, ReplayError, RimuError
 from fdi.geometry import Configuration, cone6, load_configuration, tetrad, triad
+from fdi.monitor import Monitor
 from fdi.parity import calibrated_axes, isolability, parity_matrix, reconstruction_matrix
+from fdi.settings import MonitorSettings, Thresholds, load_thresholds
 
 __all__ = [
     "CALIBRATION_SCHEMA",
     "AllanTable",
+    "Answer",
+    "BlockResult",
     "Calibration",
     "CalibrationError",
     "ConfigError",
     "Configuration",
+    "Event",
     "FileFormatError",
+    "Monitor",
+    "MonitorSettings",
     "ReplayError",
     "RimuError",
     "SensorCal",
     "SensorSet",
+    "Thresholds",
     "calibrated_axes",
     "calibration_from_dict",
     "cone6",
     "isolability",
     "load_calibration",
     "load_configuration",
+    "load_thresholds",
     "parity_matrix",
     "reconstruction_matrix",
     "tetrad",
