@@ -11,12 +11,14 @@ Per sample, with the healthy set's cached :class:`fdi.reconstruction.SetModel`:
    (one generated straight-line kernel per set; :mod:`fdi.reconstruction`).
 3. Windows: cumulative sums c_t of z and of ρ since the set began, a ring of the last 2^K
    of them; the sum over the last w samples is ``c_t − c_{t−w}`` (O(1) per scale). Per
-   scale ``D_w = |Σz|²/(w f_w)`` against ``T_w · (1 + κ/f_w · Σρ)``: the calibration's own
-   error adds ``V diag(ω̂ᵀC_iω̂) Vᵀ ≼ ρ κ VΣVᵀ`` to the parity covariance, and it does not
-   average down, so the threshold grows with the rate (ρ averaged over the window bounds ρ
-   of the window-mean rate, by convexity).
+   scale ``D_w = |Σz|²/(w f_w)`` against ``T_w · (1 + w·β/f_w + κ/f_w · Σρ)``: the
+   calibration's own error adds ``V diag(ω̂ᵀC_iω̂) Vᵀ ≼ ρ κ VΣVᵀ`` (input_error_cov) and a
+   constant offset ``V diag(bias_sd²) Vᵀ ≼ β·VΣVᵀ`` (in whitened units) to the covariance
+   of the window mean; neither averages down, so the threshold grows with the window and
+   with the rate (ρ averaged over the window bounds ρ of the window-mean rate, by
+   convexity). Clearing (hysteresis) compares with ``clear_ratio`` × the base threshold.
 4. Optional CUSUM bank on the unit whitened projections r_i = u_iᵀz/|u_i| (two sides per
-   sensor, allowance ν + 3·sqrt(κρ)); computed as S_t − min_{s≤t} S_s so that the block path
+   sensor, allowance ν + 3·sqrt(κρ + β)); computed as S_t − min_{s≤t} S_s so that the block path
    can use cumulative sums and running minima with the same arithmetic.
 5. Detection state machine: the first alarm emits ``"detected"``; after ``persistence``
    consecutive alarms a set that can isolate isolates the GLT sensor at the scale with the
