@@ -239,6 +239,7 @@ def test_no_alarm_in_healthy_manoeuvring_flight_with_calibration_error():
 @pytest.mark.parametrize("cfg", ["cone6", "tetrad"])
 def test_long_healthy_300dps_flight_raises_no_alarm(cfg):
     """5 calibration-error draws × 1 h at 100 Hz, manoeuvres up to 300 °/s: no event."""
+    top = 0.0
     for k in range(5):
         cal = synthetic_calibration(cfg, seed=30 + k)
         truth = draw_truth(cal, seed=40 + k)
@@ -250,3 +251,5 @@ def test_long_healthy_300dps_flight_raises_no_alarm(cfg):
             t = (blk * N + np.arange(N)) / FS
             res = mon.run(t, raw)
             assert res.events == [], (cfg, k, blk, res.events[:3])
+            top = max(top, float(np.nanmax(res.statistics / res.thresholds)))
+    assert 0.3 < top < 1.0, top                 # the statistics are alive, and below 1
