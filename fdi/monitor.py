@@ -689,15 +689,25 @@ class Monitor:
             if self._cusum:
                 rr = mdl.proj(*z)
                 drift = self._nu + 3.0 * np.sqrt(mdl.kappa * rho + mdl.beta)
-                g = np.zeros(e)
-                cus_state = []
-                for i in range(mdl.m):
-                    S1 = np.cumsum(np.concatenate([[self._sp[i]], rr[i] - drift]))[1:]
-                    M1 = np.minimum.accumulate(np.concatenate([[self._mp[i]], S1]))[1:]
-                    S2 = np.cumsum(np.concatenate([[self._sm[i]], -rr[i] - drift]))[1:]
-                    M2 = np.minimum.accumulate(np.concatenate([[self._mm[i]], S2]))[1:]
-                    g = np.maximum(g, np.maximum(S1 - M1, S2 - M2))
-                    cus_state.append((S1, M1, S2, M2))
+                m = mdl.m
+                X1 = np.empty((e + 1, m))
+                X2 = np.empty((e + 1, m))
+                X1[0] = self._sp
+                X2[0] = self._sm
+                for i in range(m):
+                    X1[1:, i] = rr[i] - drift
+                    X2[1:, i] = -rr[i] - drift
+                np.cumsum(X1, axis=0, out=X1)               # sequential, as s = s + x
+                np.cumsum(X2, axis=0, out=X2)
+                Y1 = X1.copy()
+                Y2 = X2.copy()
+                Y1[0] = self._mp
+                Y2[0] = self._mm
+                np.minimum.accumulate(Y1, axis=0, out=Y1)
+                np.minimum.accumulate(Y2, axis=0, out=Y2)
+                g = np.maximum(X1[1:] - Y1[1:], X2[1:] - Y2[1:]).max(axis=1)
+                np.maximum(g, 0.0, out=g)
+                cus_state = (X1, Y1, X2, Y2)
                 stats[ns] = g
                 thrs[ns] = mdl.cusum_h
                 alarm |= g > mdl.cusum_h
@@ -726,11 +736,11 @@ class Monitor:
             self._pos = R - 1
             self._count += e
             if self._cusum:
-                for i, (S1, M1, S2, M2) in enumerate(cus_state):
-                    self._sp[i] = float(S1[e - 1])
-                    self._mp[i] = float(M1[e - 1])
-                    self._sm[i] = float(S2[e - 1])
-                    self._mm[i] = float(M2[e - 1])
+                X1, Y1, X2, Y2 = cus_state
+                self._sp = X1[e].tolist()
+                self._mp = Y1[e].tolist()
+                self._sm = X2[e].tolist()
+                self._mm = Y2[e].tolist()
             if self._det:
                 self._det_rows += e
                 self._run_alarm = int(ra_arr[e - 1])

@@ -91,13 +91,13 @@ def test_step_and_run_are_bit_identical(cfg, detector):
     assert any(e.type == "detected" for e in res.events)
 
 
-@settings(max_examples=15, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=20, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(st.lists(st.tuples(st.integers(1, 6), st.integers(0, 399),
                           st.floats(-30.0, 30.0), st.sampled_from(["step", "nan", "miss",
                                                                     "stuck", "spike"])),
                 max_size=4),
-       st.integers(0, 10_000), st.integers(1, 97))
-def test_step_and_run_identical_for_random_fault_scenarios(faults, seed, chunk):
+       st.integers(0, 10_000), st.integers(1, 97), st.sampled_from(["windows", "both"]))
+def test_step_and_run_identical_for_random_fault_scenarios(faults, seed, chunk, detector):
     cal, t, raw, _ = scenario("cone6", 400, [], seed=seed % 50)
     valid = np.ones(raw.shape, bool)
     sd = cal.gyro.noise_sd / cal.gyro.scale_factors
@@ -113,9 +113,10 @@ def test_step_and_run_identical_for_random_fault_scenarios(faults, seed, chunk):
             raw[row:, i] = raw[row, i]
         else:
             raw[row, i] += 50 * size * sd[i]
-    a = Monitor(cal)
+    th = default_thresholds(cal, detector=detector)
+    a = Monitor(cal, th)
     answers = [a.step(t[i], raw[i], valid[i]) for i in range(len(t))]
-    res = Monitor(cal).run(t, raw, valid, parity=True, chunk=chunk)
+    res = Monitor(cal, th).run(t, raw, valid, parity=True, chunk=chunk)
     assert_identical(answers, res)
 
 
