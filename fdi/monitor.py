@@ -690,24 +690,27 @@ class Monitor:
                 rr = mdl.proj(*z)
                 drift = self._nu + 3.0 * np.sqrt(mdl.kappa * rho + mdl.beta)
                 m = mdl.m
-                X1 = np.empty((e + 1, m))
-                X2 = np.empty((e + 1, m))
-                X1[0] = self._sp
-                X2[0] = self._sm
+                X1 = np.empty((m, e + 1))
+                X2 = np.empty((m, e + 1))
+                X1[:, 0] = self._sp
+                X2[:, 0] = self._sm
                 for i in range(m):
-                    X1[1:, i] = rr[i] - drift
-                    X2[1:, i] = -rr[i] - drift
-                np.cumsum(X1, axis=0, out=X1)               # sequential, as s = s + x
-                np.cumsum(X2, axis=0, out=X2)
+                    np.subtract(rr[i], drift, out=X1[i, 1:])
+                    np.subtract(-rr[i], drift, out=X2[i, 1:])
+                np.cumsum(X1, axis=1, out=X1)               # sequential, as s = s + x
+                np.cumsum(X2, axis=1, out=X2)
                 Y1 = X1.copy()
                 Y2 = X2.copy()
-                Y1[0] = self._mp
-                Y2[0] = self._mm
-                np.minimum.accumulate(Y1, axis=0, out=Y1)
-                np.minimum.accumulate(Y2, axis=0, out=Y2)
-                g = np.maximum(X1[1:] - Y1[1:], X2[1:] - Y2[1:]).max(axis=1)
+                Y1[:, 0] = self._mp
+                Y2[:, 0] = self._mm
+                np.minimum.accumulate(Y1, axis=1, out=Y1)
+                np.minimum.accumulate(Y2, axis=1, out=Y2)
+                np.subtract(X1, Y1, out=Y1)
+                np.subtract(X2, Y2, out=Y2)
+                np.maximum(Y1, Y2, out=Y1)
+                g = Y1[:, 1:].max(axis=0)
                 np.maximum(g, 0.0, out=g)
-                cus_state = (X1, Y1, X2, Y2)
+                cus_state = (X1, X2)
                 stats[ns] = g
                 thrs[ns] = mdl.cusum_h
                 alarm |= g > mdl.cusum_h
@@ -736,11 +739,11 @@ class Monitor:
             self._pos = R - 1
             self._count += e
             if self._cusum:
-                X1, Y1, X2, Y2 = cus_state
-                self._sp = X1[e].tolist()
-                self._mp = Y1[e].tolist()
-                self._sm = X2[e].tolist()
-                self._mm = Y2[e].tolist()
+                X1, X2 = cus_state                          # running minima: exact
+                self._sp = X1[:, e].tolist()
+                self._mp = np.minimum(X1[:, 1:e + 1].min(axis=1), self._mp).tolist()
+                self._sm = X2[:, e].tolist()
+                self._mm = np.minimum(X2[:, 1:e + 1].min(axis=1), self._mm).tolist()
             if self._det:
                 self._det_rows += e
                 self._run_alarm = int(ra_arr[e - 1])
