@@ -170,15 +170,15 @@ class Monitor:
         n = self.n
         vals: list[float] | None = None
         try:
-            if type(raw) is np.ndarray and raw.shape == (n,):
-                vals = raw.astype(float, copy=False).tolist()
+            if type(raw) is np.ndarray and raw.shape == (n,) and raw.dtype.kind == "f":
+                vals = raw.tolist()
             else:
                 seq = list(raw)
                 if len(seq) == n:
                     vals = []
                     for x in seq:
                         try:
-                            vals.append(float(x))
+                            vals.append(_NAN if isinstance(x, complex) else float(x))
                         except (TypeError, ValueError, OverflowError):
                             vals.append(_NAN)
         except Exception:
