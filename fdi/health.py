@@ -11,8 +11,9 @@ They isolate a sensor at once, without waiting for the parity test (PX4's
   ``lo < u < hi`` per sensor, so that the check costs one chained comparison.
 - ``"stuck"``: ``stuck_count`` identical consecutive raw values.
 
-The scalar functions serve :meth:`fdi.monitor.Monitor.step`, the vector one the block path;
-they decide identically (comparisons only, no arithmetic).
+:meth:`fdi.monitor.Monitor.step` runs the same comparisons inline per sample (speed);
+:func:`first_trigger` finds the first sample of a block at which any of them fires. They
+decide identically: comparisons and counting only, no arithmetic.
 """
 
 from __future__ import annotations
@@ -72,19 +73,19 @@ def value_reason(v: float, lo: float, hi: float) -> str | None:
     return "nonfinite" if not math.isfinite(v) else "range"
 
 
-def first_trigger(col: np.ndarray, lo: float, hi: float, last: float, run0: int,
-                  stuck_count: int) -> tuple[int, np.ndarray]:
-    """First row of a column (all samples valid) at which a value or stuck check fires.
+def first_trigger(X: np.ndarray, lo: np.ndarray, hi: np.ndarray, last: np.ndarray,
+                  run0: np.ndarray, stuck_count: int) -> tuple[int, np.ndarray | None]:
+    """First row of a block (every sample valid) at which a value or stuck check fires.
 
     Parameters
     ----------
-    col : ndarray, shape (L,)
-        Raw values of one sensor.
-    lo, hi : float
+    X : ndarray, shape (L, m)
+        Raw values of the m checked sensors.
+    lo, hi : ndarray, shape (m,)
         Raw bounds.
-    last : float
-        The sensor's previous raw value.
-    run0 : int
+    last : ndarray, shape (m,)
+        Each sensor's previous raw value.
+    run0 : ndarray of int, shape (m,)
         Identical consecutive values up to and including ``last``.
     stuck_count : int
 
@@ -92,19 +93,22 @@ def first_trigger(col: np.ndarray, lo: float, hi: float, last: float, run0: int,
     -------
     row : int
         First triggering row, L when none.
-    run : ndarray of int, shape (L,)
-        Identical-run length at each row (as the scalar path counts it).
+    run : ndarray of int, shape (L, m), or None
+        Identical-run length at each row as the scalar path counts it (None: every run is
+        1, no value repeats).
     """
-    L = col.shape[0]
-    bad = ~((lo < col) & (col < hi))
-    prev = np.empty(L)
-    if L:
-        prev[0] = last
-        prev[1:] = col[:-1]
-    eq = col == prev
-    i = np.arange(L)
-    lastne = np.maximum.accumulate(np.where(eq, -1, i)) if L else i
-    run = np.where(lastne < 0, run0 + i + 1, i - lastne + 1)
-    trig = bad | (run >= stuck_count)
-    row = int(np.argmax(trig)) if trig.any() else L
-    return row, run
+    L = X.shape[0]
+    if (lo < X.min(axis=0)).all() and (X.max(axis=0) < hi).all():
+        trig = np.zeros(L, bool)                            # fast path (NaN fails it)
+    else:
+        trig = (~((lo < X) & (X < hi))).any(axis=1)
+    eq = np.empty(X.shape, bool)
+    eq[0] = X[0] == last
+    np.equal(X[1:], X[:-1], out=eq[1:])
+    run = None
+    if eq.any():
+        ii = np.arange(L)[:, None]
+        lastne = np.maximum.accumulate(np.where(eq, -1, ii), axis=0)
+        run = np.where(lastne < 0, run0[None, :] + ii + 1, ii - lastne + 1)
+        trig |= (run >= stuck_count).any(axis=1)
+    return (int(np.argmax(trig)) if trig.any() else L), run

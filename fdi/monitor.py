@@ -48,7 +48,7 @@ from fdi.answer import CAPABILITIES, Answer, BlockResult, Event
 from fdi.calfile import Calibration
 from fdi.detector import default_thresholds
 from fdi.errors import ConfigError
-from fdi.health import health_limits
+from fdi.health import first_trigger, health_limits
 from fdi.isolation import isolate, magnitude
 from fdi.reconstruction import SetCache, SetModel
 from fdi.settings import MonitorSettings, Thresholds
@@ -612,28 +612,16 @@ class Monitor:
         if e == 0:
             return r0
         # health checks (values, stuck) on every healthy sensor at once
+        run = None
         if idx:
-            X = Ub[:e] if len(il) == n else Ub[:e, il]
             lim = self._lim
-            lo = np.array([lim.lo[i] for i in il])
-            hi = np.array([lim.hi[i] for i in il])
-            if (lo < X.min(axis=0)).all() and (X.max(axis=0) < hi).all():
-                trig = np.zeros(e, bool)                    # fast path (NaN fails it)
-            else:
-                trig = (~((lo < X) & (X < hi))).any(axis=1)
-            eq = np.empty(X.shape, bool)
-            eq[0] = X[0] == np.array([self._last[i] for i in il])
-            np.equal(X[1:], X[:-1], out=eq[1:])
-            if eq.any():
-                ii = np.arange(e)[:, None]
-                lastne = np.maximum.accumulate(np.where(eq, -1, ii), axis=0)
-                run0 = np.array([self._run[i] for i in il])[None, :]
-                run = np.where(lastne < 0, run0 + ii + 1, ii - lastne + 1)
-                trig |= (run >= lim.stuck_count).any(axis=1)
-            else:
-                run = None
-            if trig.any():
-                e = int(np.argmax(trig))
+            row, run = first_trigger(Ub[:e] if len(il) == n else Ub[:e, il],
+                                     np.array([lim.lo[i] for i in il]),
+                                     np.array([lim.hi[i] for i in il]),
+                                     np.array([self._last[i] for i in il]),
+                                     np.array([self._run[i] for i in il]), lim.stuck_count)
+            if row < e:
+                e = row
                 if e == 0:
                     return r0
         cols = [Ub[:e, i] for i in range(n)]
