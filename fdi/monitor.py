@@ -99,7 +99,7 @@ class Monitor:
         bsd = np.array([c.bias_sd for c in s.sensors], float)
         self.cache = SetCache(s.H, self._sf, self._bias, self._sigma, cin, self.thresholds, md,
                               bsd)
-        self.cache.precompute(max(self.n - 1, 0))
+        self.cache.precompute(max(self.n - 2, 0))        # bounded step time through two isolations
         self._lim = health_limits(self.settings, kind, self._sf, self._bias)
         th = self.thresholds
         self._scales = tuple(int(w) for w in th.scales)
