@@ -20,7 +20,6 @@ Pipeline (:func:`decode_frames`), every frame ends in exactly one bucket of the
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from operator import itemgetter
 
 import cantools
 import numpy as np
@@ -58,7 +57,10 @@ class RawFrames:
     arbitration_id : ndarray of int64, shape (M,)
     extended : ndarray of bool, shape (M,)
     channel : ndarray of object, shape (M,)
-    data : list of bytes, length M
+    payload : ndarray of uint8, shape (sum of lengths,)
+        All payloads, concatenated in frame order.
+    lengths : ndarray of int64, shape (M,)
+        Payload length of each frame (bytes).
     frame_type : ndarray of int8, shape (M,)
         :data:`FRAME_DATA`, :data:`FRAME_ERROR` or :data:`FRAME_REMOTE`.
     """
@@ -67,19 +69,34 @@ class RawFrames:
     arbitration_id: np.ndarray
     extended: np.ndarray
     channel: np.ndarray
-    data: list[bytes]
+    payload: np.ndarray
+    lengths: np.ndarray
     frame_type: np.ndarray
-    _lengths: np.ndarray | None = field(default=None, repr=False)
+    _offsets: np.ndarray | None = field(default=None, repr=False)
 
     def __len__(self) -> int:
         return int(self.t.shape[0])
 
     @property
-    def lengths(self) -> np.ndarray:
-        """Payload length of each frame (bytes), shape (M,)."""
-        if self._lengths is None or self._lengths.shape[0] != len(self.data):
-            self._lengths = np.fromiter(map(len, self.data), np.int64, len(self.data))
-        return self._lengths
+    def offsets(self) -> np.ndarray:
+        """Start of each frame's payload in :attr:`payload`, shape (M,)."""
+        if self._offsets is None:
+            off = np.zeros(len(self), np.int64)
+            np.cumsum(self.lengths[:-1], out=off[1:])
+            self._offsets = off
+        return self._offsets
+
+    def block(self, idx: np.ndarray, length: int) -> np.ndarray:
+        """Payloads of frames ``idx`` (all of ``length`` bytes) as an (K, length) block."""
+        if idx.size == 0:
+            return np.zeros((0, length), np.uint8)
+        pos = self.offsets[idx][:, None] + np.arange(length)
+        return self.payload[pos]
+
+    def data(self, i: int) -> bytes:
+        """Payload of frame ``i``."""
+        o = int(self.offsets[i])
+        return self.payload[o:o + int(self.lengths[i])].tobytes()
 
     @classmethod
     def from_messages(cls, messages: list) -> RawFrames:
@@ -88,10 +105,12 @@ class RawFrames:
               else FRAME_DATA for m in messages]
         ch = np.empty(len(messages), dtype=object)
         ch[:] = [m.channel for m in messages]
+        data = [bytes(m.data or b"") for m in messages]
         return cls(t=np.array([m.timestamp for m in messages], dtype=float),
                    arbitration_id=np.array([m.arbitration_id for m in messages], np.int64),
                    extended=np.array([m.is_extended_id for m in messages], bool),
-                   channel=ch, data=[bytes(m.data or b"") for m in messages],
+                   channel=ch, payload=np.frombuffer(b"".join(data), np.uint8),
+                   lengths=np.array([len(d) for d in data], np.int64),
                    frame_type=np.array(ft, np.int8))
 
 
@@ -230,22 +249,13 @@ class _SlotFrames:
     valid: np.ndarray        # (K, m)
 
 
-def _stack(data: list[bytes], idx: np.ndarray, length: int) -> np.ndarray:
-    if idx.size == 0:
-        return np.zeros((0, length), np.uint8)
-    if idx.size == 1:
-        return np.frombuffer(bytes(data[int(idx[0])]), np.uint8).reshape(1, length)
-    buf = b"".join(itemgetter(*idx.tolist())(data))
-    return np.frombuffer(buf, dtype=np.uint8).reshape(-1, length)
-
-
 def _decode_slot(slot: Slot, frames: RawFrames, idx: np.ndarray, j1939: bool,
                  max_counter_delta: int, acct: FrameAccounting) -> _SlotFrames:
     lay = slot.layout
     ok = frames.lengths[idx] == lay.length
     acct.reject("wrong_length", int(np.count_nonzero(~ok)))
     idx = idx[ok]
-    block = _stack(frames.data, idx, lay.length)
+    block = frames.block(idx, lay.length)
     if slot.crc is not None and idx.size:
         good = crc8_j1850_block(block[:, :-1]) == block[:, -1]
         acct.reject("crc", int(np.count_nonzero(~good)))

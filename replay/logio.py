@@ -222,7 +222,8 @@ class _Gather:
         self.arb: list[int] = []
         self.ext: list[bool] = []
         self.ch: list[Any] = []
-        self.data: list[bytes] = []
+        self.data = bytearray()
+        self.lengths: list[int] = []
         self.special: list[tuple[int, int]] = []
 
     def frames(self) -> RawFrames:
@@ -240,7 +241,8 @@ class _Gather:
         return RawFrames(t=np.array(self.t, dtype=float),
                          arbitration_id=np.array(self.arb, dtype=np.int64),
                          extended=np.array(self.ext, dtype=bool), channel=ch,
-                         data=self.data, frame_type=ft)
+                         payload=np.frombuffer(self.data, np.uint8).copy(),
+                         lengths=np.array(self.lengths, dtype=np.int64), frame_type=ft)
 
 
 _CH = re.compile(r"^v?can(\d+)$")
@@ -259,9 +261,10 @@ def _norm_channel(c: Any) -> Any:
 
 def _consume(it: Iterator[can.Message], g: _Gather, lines: _Lines | None,
              acct: FrameAccounting, bar: Any) -> None:
-    t_app, a_app, e_app, c_app, d_app = (g.t.append, g.arb.append, g.ext.append,
-                                         g.ch.append, g.data.append)
+    t_app, a_app, e_app, c_app, l_app = (g.t.append, g.arb.append, g.ext.append,
+                                         g.ch.append, g.lengths.append)
     s_app = g.special.append
+    buf = g.data
     if lines is None:
         # the hot path: one pass over python-can's messages, plain appends, in chunks
         # (the progress bar moves between chunks)
@@ -274,7 +277,9 @@ def _consume(it: Iterator[can.Message], g: _Gather, lines: _Lines | None,
                 a_app(msg.arbitration_id)
                 e_app(msg.is_extended_id)
                 c_app(msg.channel)
-                d_app(msg.data)
+                x = msg.data
+                buf += x
+                l_app(len(x))
             got = len(g.t) - n0
             if bar is not None:
                 bar.update(got)
@@ -296,7 +301,9 @@ def _consume(it: Iterator[can.Message], g: _Gather, lines: _Lines | None,
         a_app(msg.arbitration_id)
         e_app(msg.is_extended_id)
         c_app(msg.channel)
-        d_app(msg.data)
+        x = msg.data
+        buf += x
+        l_app(len(x))
         if bar is not None and not len(g.t) & 0xFFFF:
             bar.update(0x10000)
 

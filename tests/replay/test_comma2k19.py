@@ -68,9 +68,8 @@ def test_vectorised_yaw_rate_equals_cantools_on_every_frame(tmp_path, frames):
     s = decode_frames(raw, load_dbc(cmap.dbc), cmap, acct, sample_rate_hz=83.0)
     db = cantools.database.load_file(str(DBC))
     msg = db.get_message_by_frame_id(36)
-    ref = [(m_t, msg.decode(d, decode_choices=False)["YAW_RATE"])
-           for m_t, a, ch, d in zip(raw.t, raw.arbitration_id, raw.channel, raw.data,
-                                    strict=True) if a == 36 and ch == 0]
+    ref = [(raw.t[i], msg.decode(raw.data(i), decode_choices=False)["YAW_RATE"])
+           for i in range(len(raw)) if raw.arbitration_id[i] == 36 and raw.channel[i] == 0]
     assert acct.rejected.get("duplicate", 0) == 0
     assert len(ref) == s.t.size
     np.testing.assert_array_equal(s.t, [r[0] for r in ref])
