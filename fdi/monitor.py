@@ -73,10 +73,17 @@ class Monitor:
         ``"gyro"`` or ``"accel"``.
     settings : MonitorSettings, optional
 
+    Raises
+    ------
+    ConfigError
+        Thresholds made for another kind or number of sensors.
+
     Notes
     -----
     :meth:`step` never raises: bad numbers, wrong lengths and odd types mark sensors (or the
-    sample) and the monitor carries on.
+    sample) and the monitor carries on. The models of every healthy set down to n − 2
+    sensors are built here (no SVD in the step path); smaller sets are built the first time
+    they occur and cached (``self.cache``, keyed by the bitmask of healthy sensors).
     """
 
     def __init__(self, cal: Calibration, thresholds: Thresholds | None = None, *,
@@ -86,6 +93,9 @@ class Monitor:
         self.cal = cal
         self.settings = settings or MonitorSettings()
         self.thresholds = thresholds or default_thresholds(cal, kind=kind)
+        if self.thresholds.kind != kind:
+            raise ConfigError(f"thresholds are for {self.thresholds.kind} sensors, the monitor "
+                              f"watches {kind} sensors")
         if self.thresholds.n != s.n:
             raise ConfigError(f"thresholds are for {self.thresholds.n} sensors, the "
                               f"calibration has {s.n} {kind} sensors")
