@@ -212,7 +212,6 @@ def build_set_model(H: np.ndarray, sf: np.ndarray, bias: np.ndarray, noise_cov: 
         A = np.zeros((0, 0))
         U = np.zeros((0, m))
         kappa = 1.0
-    W = np.linalg.inv(Sig) if m else np.eye(n)
     if full:
         Wu = np.zeros((n, n))
         Wu[np.ix_(list(idx), list(idx))] = np.linalg.inv(Sig[np.ix_(list(idx), list(idx))])
@@ -223,7 +222,6 @@ def build_set_model(H: np.ndarray, sf: np.ndarray, bias: np.ndarray, noise_cov: 
         G = np.zeros((3, n))
         cov = np.full((3, 3), np.nan)
         osd = np.full(3, np.nan)
-    del W
     if not full:
         cap = "none"
     elif df == 0:
