@@ -207,14 +207,18 @@ def test_truncated_blf_reported_and_kept(tmp_path):
         read_log(q, CAL, strict=True, progress=False)
 
 
-def test_corrupt_blf_container_reported(tmp_path):
-    f = simulate_flight(CAL, 2.0, seed=7)
+def test_corrupt_blf_container_reported_and_frames_before_kept(tmp_path):
+    f = simulate_flight(CAL, 12.0, seed=7)  # several BLF containers
     p = tmp_path / "a.blf"
     write_flight_log(f, p)
     b = bytearray(p.read_bytes())
     b[len(b) // 2: len(b) // 2 + 64] = b"\xff" * 64
     p.write_bytes(bytes(b))
-    _, fr = read_log(p, CAL, progress=False)
+    f2, fr = read_log(p, CAL, progress=False)
     assert fr["errors"] and fr["errors"][0]["kind"] == "reader_error" and fr["balanced"]
+    assert 0 < fr["read"] < f.valid.sum(), fr["read"]
+    assert fr["errors"][0]["where"] == f"after frame {fr['read']}"
+    k = f2.t.size
+    np.testing.assert_allclose(f2.raw[f2.valid], f.raw[:k][f2.valid], rtol=6e-8)
     with pytest.raises(ReplayError, match="reader failed"):
         read_log(p, CAL, strict=True, progress=False)
