@@ -274,7 +274,10 @@ class Monitor:
                 else:
                     run[i] = 1
                     last[i] = v
-                lvt[i] = t
+                # latest valid time: a timestamp that goes backwards (or is NaN) must not
+                # reset the stale clock of every sensor
+                if t > lvt[i] or lvt[i] != lvt[i]:
+                    lvt[i] = t
             elif t - lvt[i] > lim.stale_timeout_s:
                 events.append(Event(t, i + 1, "health", "stale", t - lvt[i],
                                     lim.stale_timeout_s))
@@ -754,10 +757,12 @@ class Monitor:
             thrs[:, :e] = np.array(list(mdl.thr) + ([mdl.cusum_h] if self._cusum else []))[:, None]
         sl = slice(r0, r0 + e)
         # health bookkeeping of the committed rows
+        t_latest = float(np.fmax.reduce(ta[r0:r0 + e]))   # same rule as in _step
         for k, i in enumerate(il):
             self._run[i] = int(run[e - 1, k]) if run is not None else 1
             self._last[i] = float(Ub[e - 1, i])
-            self._lvt[i] = float(ta[r0 + e - 1])
+            if t_latest > self._lvt[i] or self._lvt[i] != self._lvt[i]:
+                self._lvt[i] = t_latest
         if w is None:
             out.omega[:, sl] = _NAN
         else:

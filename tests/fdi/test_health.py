@@ -153,3 +153,22 @@ def test_step_never_raises(edits):
     for i in set(range(6)) - touched:
         assert last.healthy[i] or last.status[i] == "isolated", last.status
     assert math.isfinite(float(np.nansum(last.omega)))
+
+
+def test_backward_timestamp_does_not_make_every_sensor_stale():
+    # found by hypothesis: t jumps back to 0, then a sample with no valid sensor
+    t, raw = healthy_block(60, seed=3)
+    t = t.copy()
+    t[21] = 0.0
+    valid = np.ones_like(raw, dtype=bool)
+    valid[22] = False
+    for run_block in (False, True):
+        mon = Monitor(CAL)
+        if run_block:
+            res = mon.run(t, raw, valid)
+            healthy = res.healthy[-1]
+        else:
+            for k in range(60):
+                a = mon.step(t[k], raw[k], valid[k])
+            healthy = a.healthy
+        assert healthy.all(), (run_block, healthy)
