@@ -51,6 +51,7 @@ from calibration.session import Session, Step
 from calibration.turntable import MOUNTS
 from fdi.errors import ConfigError, FileFormatError
 from fdi.geometry import Configuration
+from fdi.jsonio import read_json_object, to_jsonable
 from fdi.units import DEG, DPS, RAW_UNITS
 
 __all__ = ["MIN_STEP_SAMPLES", "SESSION_SCHEMA", "TABLE_COLUMNS", "load_session",
@@ -62,21 +63,6 @@ MIN_STEP_SAMPLES = 10
 TABLE_COLUMNS = ("t", "step", "inner_deg", "outer_deg", "inner_rate_dps", "outer_rate_dps")
 """The fixed leading columns of ``samples.csv``."""
 _KINDS = ("gyro", "accel")
-
-
-def _jsonable(obj: Any) -> Any:
-    """Numpy values and tuples to plain JSON types; non-finite floats to null."""
-    if isinstance(obj, np.ndarray):
-        return _jsonable(obj.tolist())
-    if isinstance(obj, np.generic):
-        return _jsonable(obj.item())
-    if isinstance(obj, Mapping):
-        return {str(k): _jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, list | tuple):
-        return [_jsonable(v) for v in obj]
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return None
-    return obj
 
 
 def _mount_name(session: Session, st: Step) -> str:
@@ -128,7 +114,7 @@ def save_session(session: Session, directory: str | Path) -> Path:
                    "mat_pb": np.asarray(s.mat_pb, float).tolist(), "label": s.label,
                    "pair": None if s.pair is None else int(s.pair)} for s in session.steps],
         "samples": {"file": "samples.csv", "columns": columns, "rows": int(session.t.size)},
-        "meta": _jsonable(dict(session.meta)),
+        "meta": to_jsonable(dict(session.meta)),
     }
     (d / "manifest.json").write_text(json.dumps(manifest, indent=1) + "\n", encoding="utf-8")
     parts = [session.t[:, None], session.step[:, None].astype(float),
@@ -236,24 +222,8 @@ def load_session(directory: str | Path) -> Session:
     if not d.is_dir():
         raise FileFormatError(str(d), "no such session directory (expected a directory with "
                               "manifest.json and samples.csv)")
-    try:
-        text = mpath.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise m.fail(f"cannot read ({exc.strerror}); a session directory holds manifest.json "
-                     "and samples.csv") from None
-    try:
-        doc = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise FileFormatError(str(mpath), f"not valid JSON ({exc.msg})",
-                              line=exc.lineno) from None
-    if not isinstance(doc, dict):
-        raise m.fail("expected a JSON object")
-    schema = doc.get("schema")
-    if not isinstance(schema, str) or not schema.startswith("rimu.session/"):
-        raise m.fail(f"expected '{SESSION_SCHEMA}', got {schema!r}", "schema")
-    if schema != SESSION_SCHEMA:
-        raise m.fail(f"unsupported version {schema!r}; this rimu reads '{SESSION_SCHEMA}'",
-                     "schema")
+    doc = read_json_object(mpath, SESSION_SCHEMA, hint="; a session directory holds "
+                           "manifest.json and samples.csv")
     fs = m.number(m.get(doc, "sample_rate_hz", "sample_rate_hz"), "sample_rate_hz",
                   positive=True)
     lat = m.number(m.get(doc, "latitude_deg", "latitude_deg"), "latitude_deg")

@@ -24,6 +24,7 @@ from typing import Any
 from calibration.effects import EFFECTS
 from fdi.calfile import CALIBRATION_SCHEMA, Calibration, calibration_from_dict
 from fdi.errors import FileFormatError
+from fdi.jsonio import read_json_object
 
 __all__ = ["TRUTH_SCHEMA", "load_truth", "save_truth", "truth_to_dict"]
 
@@ -81,22 +82,7 @@ def load_truth(path: str | Path) -> tuple[Calibration, dict[str, float],
         Missing file, bad JSON, wrong schema or version, bad field (named).
     """
     p = str(path)
-    try:
-        text = Path(path).read_text(encoding="utf-8")
-    except OSError as exc:
-        raise FileFormatError(p, f"cannot read ({exc.strerror})") from None
-    try:
-        doc = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise FileFormatError(p, f"not valid JSON ({exc.msg})", line=exc.lineno) from None
-    if not isinstance(doc, dict):
-        raise FileFormatError(p, "expected a JSON object")
-    schema = doc.get("schema")
-    if not isinstance(schema, str) or not schema.startswith("rimu.truth/"):
-        raise FileFormatError(p, f"expected '{TRUTH_SCHEMA}', got {schema!r}", field="schema")
-    if schema != TRUTH_SCHEMA:
-        raise FileFormatError(p, f"unsupported version {schema!r}; this rimu reads "
-                              f"'{TRUTH_SCHEMA}'", field="schema")
+    doc = read_json_object(path, TRUTH_SCHEMA)
     effects_raw = doc.get("effects", {})
     if not isinstance(effects_raw, dict):
         raise FileFormatError(p, "expected an object {name: value}", field="effects")

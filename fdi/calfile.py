@@ -43,6 +43,7 @@ from typing import Any
 import numpy as np
 
 from fdi.errors import ConfigError, FileFormatError
+from fdi.jsonio import read_json_object, to_jsonable
 from fdi.units import (
     input_unit_factor,
     scale_factor_from_si,
@@ -289,26 +290,12 @@ class Calibration:
             doc["earth_rate_dph_sd"] = self.earth_rate_dph_sd
         if self.latitude_deg is not None:
             doc["latitude_deg"] = self.latitude_deg
-        doc["extra"] = _jsonable(dict(self.extra))
+        doc["extra"] = to_jsonable(dict(self.extra))
         return doc
 
     def save(self, path: str | Path) -> None:
         """Write the calibration as JSON."""
         Path(path).write_text(json.dumps(self.to_dict(), indent=1) + "\n", encoding="utf-8")
-
-
-def _jsonable(obj: Any) -> Any:
-    if isinstance(obj, np.ndarray):
-        return obj.tolist()
-    if isinstance(obj, np.generic):
-        return obj.item()
-    if isinstance(obj, Mapping):
-        return {str(k): _jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, list | tuple):
-        return [_jsonable(v) for v in obj]
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return None
-    return obj
 
 
 def _sensor_to_dict(c: SensorCal) -> dict[str, Any]:
@@ -381,16 +368,7 @@ def load_calibration(path: str | Path) -> Calibration:
         Missing file, bad JSON, wrong schema or version, missing or malformed field,
         unknown unit; the message names the file and the field.
     """
-    p = str(path)
-    try:
-        text = Path(path).read_text(encoding="utf-8")
-    except OSError as exc:
-        raise FileFormatError(p, f"cannot read ({exc.strerror})") from None
-    try:
-        doc = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise FileFormatError(p, f"not valid JSON ({exc.msg})", line=exc.lineno) from None
-    return calibration_from_dict(doc, p)
+    return calibration_from_dict(read_json_object(path), str(path))
 
 
 def calibration_from_dict(doc: Mapping[str, Any], path: str = "<calibration>") -> Calibration:

@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from fdi.errors import ConfigError, FileFormatError
+from fdi.jsonio import read_json_object
 
 __all__ = [
     "DETECTORS",
@@ -140,16 +141,7 @@ def load_thresholds(path: str | Path) -> Thresholds:
     FileFormatError
         Missing file, bad JSON, wrong schema/version or a bad field (named in the message).
     """
-    p = str(path)
-    try:
-        text = Path(path).read_text(encoding="utf-8")
-    except OSError as exc:
-        raise FileFormatError(p, f"cannot read ({exc.strerror})") from None
-    try:
-        doc = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise FileFormatError(p, f"not valid JSON ({exc.msg})", line=exc.lineno) from None
-    return thresholds_from_dict(doc, p)
+    return thresholds_from_dict(read_json_object(path), str(path))
 
 
 def thresholds_from_dict(doc: Any, path: str = "<thresholds>") -> Thresholds:

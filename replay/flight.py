@@ -70,6 +70,7 @@ import numpy as np
 
 from fdi.calfile import Calibration
 from fdi.errors import ConfigError, FileFormatError
+from fdi.jsonio import read_json_object, to_jsonable
 from replay.faults import Fault, fault_from_dict
 from replay.motion import body_rates
 
@@ -507,44 +508,7 @@ def write_truth_sidecar(flight: Flight, path: str | Path) -> None:
         doc["rates_unit"] = "rad/s"
     else:
         doc.pop("rates_file", None)
-    p.write_text(json.dumps(_jsonable(doc), indent=1) + "\n", encoding="utf-8")
-
-
-def _jsonable(obj: Any) -> Any:
-    if isinstance(obj, np.ndarray):
-        return obj.tolist()
-    if isinstance(obj, np.generic):
-        return obj.item()
-    if isinstance(obj, Mapping):
-        return {str(k): _jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, list | tuple):
-        return [_jsonable(v) for v in obj]
-    return obj
-
-
-def _read_json(path: Path, schema: str) -> dict[str, Any]:
-    p = str(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise FileFormatError(p, f"cannot read ({exc.strerror})") from None
-    try:
-        doc = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise FileFormatError(p, f"not valid JSON ({exc.msg})", line=exc.lineno) from None
-    if not isinstance(doc, dict):
-        raise FileFormatError(p, "expected a JSON object")
-    got = doc.get("schema")
-    if not isinstance(got, str):
-        raise FileFormatError(p, f"missing; expected {schema!r}", field="schema")
-    name, _, ver = got.partition("/")
-    want_name, _, want_ver = schema.partition("/")
-    if name != want_name:
-        raise FileFormatError(p, f"expected {schema!r}, got {got!r}", field="schema")
-    if ver != want_ver:
-        raise FileFormatError(p, f"version {ver!r} not supported (this rimu reads "
-                                 f"{schema!r})", field="schema")
-    return doc
+    p.write_text(json.dumps(to_jsonable(doc), indent=1) + "\n", encoding="utf-8")
 
 
 def read_truth_sidecar(path: str | Path, *, samples: int | None = None
@@ -557,7 +521,7 @@ def read_truth_sidecar(path: str | Path, *, samples: int | None = None
         Naming the file and the field (or the rates file and its shape).
     """
     p = Path(path)
-    doc = _read_json(p, FLIGHT_TRUTH_SCHEMA)
+    doc = read_json_object(p, FLIGHT_TRUTH_SCHEMA)
     raw_faults = doc.get("faults", [])
     if not isinstance(raw_faults, list):
         raise FileFormatError(str(p), "expected a list", field="faults")
@@ -656,7 +620,7 @@ def load_flight_dir(directory: str | Path) -> Flight:
     """
     d = Path(directory)
     mpath = d / "manifest.json"
-    man = _read_json(mpath, FLIGHT_SCHEMA)
+    man = read_json_object(mpath, FLIGHT_SCHEMA)
     mp = str(mpath)
     fs = man.get("sample_rate_hz")
     if isinstance(fs, bool) or not isinstance(fs, int | float) or not math.isfinite(fs) \

@@ -294,7 +294,7 @@ def test_empty_cells_and_crlf(tmp_path):
     (["0,1,2", "0.01,1,2,3"], None, "samples.csv:3: 4 cells, expected 3"),
     (["0,1,2", ",1,2"], None, "samples.csv:3, field 't': empty time"),
     (["0,1,2", "-1,1,2"], None, "samples.csv:3, field 't': time goes backwards"),
-    (["0,1,2"], {"schema": "rimu.flight/2"}, "field 'schema': version '2'"),
+    (["0,1,2"], {"schema": "rimu.flight/2"}, "field 'schema': unsupported version 'rimu.flight/2'"),
     (["0,1,2"], {"schema": "rimu.session/1"}, "field 'schema': expected 'rimu.flight/1'"),
     (["0,1,2"], {"sample_rate_hz": -1}, "field 'sample_rate_hz'"),
     (["0,1,2"], {"sensor_names": "ab"}, "field 'sensor_names'"),
