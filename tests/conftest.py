@@ -1,6 +1,15 @@
 """Shared pytest configuration: ``--slow`` enables the Monte Carlo tests."""
 
+import os
+
 import pytest
+from hypothesis import settings
+
+# CI runs the property tests with a fixed derandomised seed, so that a CI verdict can be
+# reproduced; local runs keep exploring new examples.
+settings.register_profile("ci", derandomize=True)
+if os.environ.get("CI"):
+    settings.load_profile("ci")
 
 
 def pytest_addoption(parser: pytest.Parser) -> None:
