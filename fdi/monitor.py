@@ -537,7 +537,10 @@ class Monitor:
         n, K = self.n, self.K
         try:
             ta = np.asarray(t, dtype=float).reshape(-1)
-            ra = np.asarray(raw, dtype=float)
+            ra = np.asarray(raw)
+            if ra.dtype.kind not in "fiub":         # complex, object, text: as step() does
+                raise TypeError(ra.dtype)
+            ra = ra.astype(float, copy=False)
             va = None if valid is None else np.asarray(valid, dtype=bool)
             shaped = (ra.ndim == 2 and ra.shape == (ta.shape[0], n)
                       and (va is None or va.shape == ra.shape))
