@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from calibration.calibrate import BIAS_METHODS, calibrate
+from calibration.calibrate import BIAS_METHODS, NOISE_MODELS, calibrate
 from fdi.calfile import Calibration, SensorSet
 from fdi.errors import ConfigError
 from fdi.parity import parity_matrix
@@ -30,6 +30,10 @@ def configure(p: argparse.ArgumentParser) -> None:
     p.add_argument("--bias-method", choices=BIAS_METHODS, default="model",
                    help="gyro bias in the file: explicit Earth-rate model (default) or seed "
                         "000's average over whole outer-axis turns; both are printed")
+    p.add_argument("--noise-model", choices=NOISE_MODELS, default="auto",
+                   help="uncertainties: 'auto' (default) adds a Gauss-Markov bias process "
+                        "common to each sensor set when the residual spectrum shows one "
+                        "(coloured noise, likelihood-ratio test); 'white' assumes white noise")
     p.add_argument("--no-denoise", action="store_true",
                    help="fit the Earth rate to the raw outputs, not the wavelet-denoised ones")
     p.add_argument("--plot", metavar="DIR",
@@ -63,6 +67,31 @@ def _set_summary(s: SensorSet, V_sd: object) -> list[str]:
         if sd is not None and sd.shape == Vc.shape:
             line += "  sd [" + " ".join(f"{x:.5f}" for x in sd[k]) + "]"
         out.append(line)
+    return out
+
+
+def _noise_lines(nm: object) -> list[str]:
+    """What the noise model did, per sensor set (``extra["noise_model"]``)."""
+    if not isinstance(nm, dict):
+        return []
+    out = [f"noise model: {nm.get('method', '?')}"]
+    for kind in ("gyro", "accel"):
+        r = nm.get(kind)
+        if not isinstance(r, dict):
+            continue
+        if not r.get("applied"):
+            lr = r.get("likelihood_ratio")
+            out.append(f"  {kind}: white noise kept"
+                       + (f" (likelihood ratio {lr:.2f} <= 3.84)" if lr is not None else ""))
+            continue
+        unit, f = ("deg/h", input_unit_factor("deg/h")) if kind == "gyro" else \
+            ("mg", input_unit_factor("mg"))
+        sdf = r.get("sd_factor", {})
+        out.append(f"  {kind}: Gauss-Markov bias {r['bias_instability'] / f:.3g} {unit}, "
+                   f"correlation {r['correlation_s']:.3g} s (likelihood ratio "
+                   f"{r['likelihood_ratio']:.1f}); sd factors over white noise:")
+        for name in ("bias", "scale_factor", "misalignment"):
+            out.append(f"    {name:<13s}" + " ".join(f"{x:.2f}" for x in sdf.get(name, [])))
     return out
 
 
@@ -100,6 +129,7 @@ def summary_text(cal: Calibration) -> str:
                         " deg)" if er else "")
                      + (" - not resolved at this noise level (below 3 sd)"
                         if cal.earth_rate_dph < 3 * (cal.earth_rate_dph_sd or 0.0) else ""))
+    lines.extend(_noise_lines(ex.get("noise_model")))
     lines.extend(f"warning: {w}" for w in ex.get("warnings", []))
     return "\n".join(lines)
 
@@ -108,7 +138,8 @@ def run(args: argparse.Namespace) -> int:
     from calibration.session_io import load_session
 
     session = load_session(args.session)
-    cal = calibrate(session, bias_method=args.bias_method, denoise=not args.no_denoise)
+    cal = calibrate(session, bias_method=args.bias_method, denoise=not args.no_denoise,
+                    noise_model=args.noise_model)
     out = Path(args.out)
     if out.parent and not out.parent.exists():
         raise ConfigError(f"{args.out}: directory {out.parent} does not exist")

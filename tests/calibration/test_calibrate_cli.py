@@ -54,6 +54,36 @@ def test_bias_method_turns_and_no_denoise(tetrad_dir, tmp_path, capsys):
                                ex["gyro_bias"]["turns"], rtol=1e-12)
 
 
+def test_noise_model_option_and_summary(tmp_path, capsys):
+    """A session with 1 deg/h bias instability: 'auto' (default) prints the fitted
+    Gauss-Markov bias and the sd factors; '--noise-model white' keeps the white sds."""
+    from calibration.presets import preset
+    from calibration.simulate import NoiseModel, simulate_session
+    from fdi.units import DPH
+
+    seq, truth, _ = preset("tetrad-paper")
+    s = simulate_session(None, seq, truth, seed=1,
+                         noise=NoiseModel(bias_instability={"gyro": 1.0 * DPH}))
+    d = tmp_path / "coloured"
+    save_session(s, d)
+    docs = {}
+    for mode in ("auto", "white"):
+        out = tmp_path / f"{mode}.json"
+        code, text, err = _run(capsys, "calibrate", d, "--out", out, "--noise-model", mode)
+        assert code == 0, err
+        assert f"noise model: {mode}:" in text
+        docs[mode] = json.loads(out.read_text())
+    assert "gyro: Gauss-Markov bias" in _run(capsys, "calibrate", d, "--out",
+                                             tmp_path / "x.json")[1]
+    assert docs["auto"]["extra"]["noise_model"]["gyro"]["applied"] is True
+    sd_a = np.array([e["bias_sd"] for e in docs["auto"]["sensors"]["gyro"]])
+    sd_w = np.array([e["bias_sd"] for e in docs["white"]["sensors"]["gyro"]])
+    np.testing.assert_allclose(
+        sd_a / sd_w, docs["auto"]["extra"]["noise_model"]["gyro"]["sd_factor"]["bias"],
+        rtol=1e-6, err_msg="bias sd factor in the file")
+    assert np.all(sd_a > sd_w)
+
+
 def _one_line_error(capsys, *argv):
     code, _, err = _run(capsys, *argv)
     assert code != 0
