@@ -335,11 +335,11 @@ def sequence_from_dict(doc: dict[str, Any], path: str = "<sequence>") -> Sequenc
     pos_default = _num(path, doc.get("position_duration_s", 20.0), "position_duration_s",
                        positive=True)
     mount_default = doc.get("mount", "x_inner_y_up")
-    if mount_default not in MOUNTS:
+    if not isinstance(mount_default, str) or mount_default not in MOUNTS:
         raise FileFormatError(path, f"unknown mounting {mount_default!r}; expected one of "
                               f"{sorted(MOUNTS)}", field="mount")
     ppv = doc.get("printed_position_vector", "specific_force")
-    if ppv not in ("specific_force", "gravity"):
+    if not isinstance(ppv, str) or ppv not in ("specific_force", "gravity"):
         raise FileFormatError(path, f"expected 'specific_force' or 'gravity', got {ppv!r}",
                               field="printed_position_vector")
     raw_steps = doc.get("step")
@@ -356,7 +356,7 @@ def sequence_from_dict(doc: dict[str, Any], path: str = "<sequence>") -> Sequenc
             raise FileFormatError(path, f"unknown key; expected one of {sorted(_STEP_KEYS)}",
                                   field=bad[0], step=i)
         mount = d.get("mount", mount_default)
-        if mount not in MOUNTS:
+        if not isinstance(mount, str) or mount not in MOUNTS:
             raise FileFormatError(path, f"unknown mounting {mount!r}; expected one of "
                                   f"{sorted(MOUNTS)}", field="mount", step=i)
         inner = _num(path, d.get("inner_deg", 0.0), "inner_deg", i) * DEG

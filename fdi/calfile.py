@@ -396,10 +396,16 @@ def calibration_from_dict(doc: Mapping[str, Any], path: str = "<calibration>") -
         n = len(cals)
         cov = r.array(r.get(noise, kind, "noise_covariance"), f"noise_covariance.{kind}", (n, n))
         groups, mats = [], []
-        for j, g in enumerate(r.get(doc.get("misalignment_matrices", {}), kind,
-                                    "misalignment_matrices", [])):
+        mm = r.get(doc.get("misalignment_matrices", {}), kind, "misalignment_matrices", [])
+        if not isinstance(mm, list):
+            raise r.fail(f"misalignment_matrices.{kind}", "expected a list")
+        for j, g in enumerate(mm):
             f = f"misalignment_matrices.{kind}[{j + 1}]"
-            idx = [int(i) - 1 for i in r.get(g, "sensors", f)]
+            sens = r.get(g, "sensors", f)
+            if not isinstance(sens, list) or not all(
+                    isinstance(i, int) and not isinstance(i, bool) for i in sens):
+                raise r.fail(f + ".sensors", f"expected a list of sensor numbers, got {sens!r}")
+            idx = [i - 1 for i in sens]
             if any(i < 0 or i >= n for i in idx):
                 raise r.fail(f + ".sensors", f"sensor numbers must be 1..{n}")
             groups.append(tuple(idx))
@@ -422,8 +428,14 @@ def calibration_from_dict(doc: Mapping[str, Any], path: str = "<calibration>") -
         earth_rate_dph=None if er is None else r.number(er, "earth_rate_dph"),
         earth_rate_dph_sd=None if ers is None else r.number(ers, "earth_rate_dph_sd"),
         latitude_deg=None if lat is None else r.number(lat, "latitude_deg"),
-        extra=dict(doc.get("extra", {}) or {}),
+        extra=dict(_mapping(r, doc.get("extra", {}) or {}, "extra")),
     )
+
+
+def _mapping(r: _Reader, v: Any, field: str) -> Mapping[str, Any]:
+    if not isinstance(v, Mapping):
+        raise r.fail(field, f"expected an object, got {v!r}")
+    return v
 
 
 def _sensor_from_dict(r: _Reader, e: Any, where: str) -> SensorCal:
@@ -443,6 +455,11 @@ def _sensor_from_dict(r: _Reader, e: Any, where: str) -> SensorCal:
         sfsd_si = scale_factor_sd_to_si(sf, sfsd, str(sfu))
     except ConfigError as exc:
         raise r.fail(where + ".scale_factor_unit", str(exc)) from None
+    except (OverflowError, ZeroDivisionError):
+        sf_si = sfsd_si = math.inf
+    if not (math.isfinite(sf_si) and math.isfinite(sfsd_si) and sf_si > 0):
+        raise r.fail(where + ".scale_factor", f"{sf!r} (sd {sfsd!r}) {sfu} is out of range "
+                     "in SI units")
     try:
         bf = input_unit_factor(str(bu))
     except ConfigError as exc:

@@ -196,16 +196,21 @@ def load_configuration(spec: str | Path) -> Configuration:
             raise FileFormatError(str(path), "missing 'axis = [x, y, z]'", field=f"{where}.axis")
         ax = s["axis"]
         if (not isinstance(ax, list) or len(ax) != 3
-                or not all(isinstance(v, int | float) for v in ax)):
-            raise FileFormatError(str(path), f"expected three numbers, got {ax!r}",
+                or not all(isinstance(v, int | float) and not isinstance(v, bool)
+                           and math.isfinite(v) for v in ax)):
+            raise FileFormatError(str(path), f"expected three finite numbers, got {ax!r}",
                                   field=f"{where}.axis")
-        norm = math.sqrt(sum(float(v) ** 2 for v in ax))
+        norm = math.hypot(*(float(v) for v in ax))
         if abs(norm - 1.0) > _UNIT_TOL:
             raise FileFormatError(str(path), f"axis norm is {norm:.6f}, expected 1",
                                   field=f"{where}.axis")
         axes.append([float(v) for v in ax])
         names.append(str(s.get("name", f"s{i + 1}")))
-        group_keys.append(s.get("group", 0))
+        g = s.get("group", 0)
+        if isinstance(g, bool) or not isinstance(g, str | int):
+            raise FileFormatError(str(path), f"expected a string or an integer, got {g!r}",
+                                  field=f"{where}.group")
+        group_keys.append(g)
     order: dict[object, list[int]] = {}
     for i, g in enumerate(group_keys):
         order.setdefault(g, []).append(i)
