@@ -166,12 +166,13 @@ def _config_from(m: _M, d: Any, kind: str) -> Configuration:
     if H.ndim != 2 or H.shape[1] != 3:
         raise m.fail(f"expected shape n×3, got {H.shape}", f + ".axes")
     names = d.get("sensor_names") or [f"s{i + 1}" for i in range(H.shape[0])]
-    if not isinstance(names, list) or len(names) != H.shape[0]:
+    if (not isinstance(names, list) or len(names) != H.shape[0]
+            or not all(isinstance(n, str) and n for n in names)):
         raise m.fail(f"expected {H.shape[0]} names", f + ".sensor_names")
     groups = d.get("groups") or [list(range(1, H.shape[0] + 1))]
     try:
         g0 = tuple(tuple(int(i) - 1 for i in g) for g in groups)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise m.fail("expected lists of 1-based sensor numbers", f + ".groups") from None
     try:
         return Configuration(str(d.get("name", kind)), H, tuple(str(n) for n in names), g0)
@@ -182,7 +183,7 @@ def _config_from(m: _M, d: Any, kind: str) -> Configuration:
 def _bad_cell(csv: Path, ncols: int, data_row: int | None) -> tuple[int, int | None, str]:
     """Scan the file (error path only): (line, column index or None, text) of the first
     unparseable cell, or of data row ``data_row`` (0-based, blank lines skipped)."""
-    with csv.open(encoding="utf-8") as fh:
+    with csv.open(encoding="utf-8", errors="replace") as fh:
         next(fh, None)
         r = -1
         for lineno, line in enumerate(fh, start=2):
@@ -242,7 +243,7 @@ def load_session(directory: str | Path) -> Session:
         if kind == "accel" and acfg is None:
             continue
         u = m.get(units, kind, f"raw_units.{kind}")
-        if u not in RAW_UNITS:
+        if not isinstance(u, str) or u not in RAW_UNITS:
             raise m.fail(f"unknown unit {u!r}; expected one of {', '.join(sorted(RAW_UNITS))}",
                          f"raw_units.{kind}")
         raw_units[kind] = u
@@ -285,14 +286,19 @@ def load_session(directory: str | Path) -> Session:
 
     samp = m.get(doc, "samples", "samples")
     fname = m.get(samp, "file", "samples.file")
-    csv = d / str(fname)
+    if not isinstance(fname, str) or not fname.strip():
+        raise m.fail(f"expected a file name, got {fname!r}", "samples.file")
+    csv = d / fname
     cpath = str(csv)
     try:
         with csv.open(encoding="utf-8") as fh:
             header = fh.readline()
     except OSError as exc:
-        raise FileFormatError(cpath, f"cannot read ({exc.strerror}); the manifest names it "
-                              "as the sample file") from None
+        raise FileFormatError(cpath, f"cannot read ({exc.strerror}); {mpath.name} names it "
+                              "as the sample file", field="samples.file") from None
+    except UnicodeDecodeError as exc:
+        raise FileFormatError(cpath, f"not UTF-8 text ({exc.reason} at byte {exc.start})",
+                              line=1) from None
     cols = [c.strip() for c in header.strip().split(",")]
     need = list(TABLE_COLUMNS) + [f"gyro.{n}" for n in gcfg.sensor_names]
     if acfg is not None:
@@ -300,7 +306,8 @@ def load_session(directory: str | Path) -> Session:
     for c in need:
         if c not in cols:
             raise FileFormatError(cpath, f"missing column; the header must hold "
-                                  f"{', '.join(need)}", line=1, field=c)
+                                  f"{', '.join(need)} (as {mpath.name} says)", line=1,
+                                  field=c)
     try:
         data = np.loadtxt(csv, delimiter=",", skiprows=1, dtype=float, ndmin=2)
     except ValueError:
@@ -315,7 +322,8 @@ def load_session(directory: str | Path) -> Session:
     rows = samp.get("rows") if isinstance(samp, Mapping) else None
     if isinstance(rows, int) and not isinstance(rows, bool) and rows != data.shape[0]:
         raise FileFormatError(cpath, f"holds {data.shape[0]} sample rows, the manifest says "
-                              f"{rows} (truncated or edited file?)", field="samples.rows")
+                              f"{rows} (truncated or edited file? see {mpath.name})",
+                              field="samples.rows")
     pos = {c: i for i, c in enumerate(cols)}
     step_col = data[:, pos["step"]]
     ok_step = np.isfinite(step_col)
@@ -349,7 +357,10 @@ def load_session(directory: str | Path) -> Session:
             raise FileFormatError(cpath, f"step has {c} samples, expected at least "
                                   f"{MIN_STEP_SAMPLES}", field="step", step=st.index)
 
-    meta = dict(doc.get("meta") or {})
+    meta_doc = doc.get("meta") or {}
+    if not isinstance(meta_doc, Mapping):
+        raise m.fail(f"expected an object, got {meta_doc!r}", "meta")
+    meta = dict(meta_doc)
     meta["mounts"] = mounts
     raw_a = None
     if acfg is not None:

@@ -177,6 +177,9 @@ def load_channel_map(path: str | Path) -> ChannelMap:
         doc = tomllib.loads(p.read_text(encoding="utf-8"))
     except OSError as exc:
         raise FileFormatError(ps, f"cannot read ({exc.strerror})") from None
+    except UnicodeDecodeError as exc:
+        raise FileFormatError(ps, f"not UTF-8 text ({exc.reason} at byte {exc.start})") \
+            from None
     except tomllib.TOMLDecodeError as exc:
         raise FileFormatError(ps, f"not valid TOML ({exc})") from None
     schema = doc.get("schema")

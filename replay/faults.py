@@ -116,7 +116,7 @@ def fault_from_dict(d: Mapping[str, Any], where: str = "fault") -> Fault:
         onset = float(d["onset"])
         dur = d.get("duration")
         duration = None if dur is None else float(dur)
-    except (KeyError, TypeError, ValueError) as exc:
+    except (KeyError, TypeError, ValueError, OverflowError) as exc:
         raise ConfigError(f"{where}: expected kind, sensor, size, onset, duration "
                           f"({type(exc).__name__}: {exc})") from None
     if kind not in FAULT_KINDS:

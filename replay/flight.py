@@ -536,12 +536,21 @@ def read_truth_sidecar(path: str | Path, *, samples: int | None = None
     rates = None
     rf = doc.get("rates_file")
     if rf is not None:
-        rp = p.with_name(str(rf))
+        if not isinstance(rf, str) or not rf or Path(rf).name != rf:
+            raise FileFormatError(str(p), f"expected a file name beside it, got {rf!r}",
+                                  field="rates_file")
+        rp = p.with_name(rf)
         try:
             rates = np.load(rp, allow_pickle=False)
-        except (OSError, ValueError) as exc:
-            raise FileFormatError(str(rp), f"cannot read true rates ({exc})",
+        except Exception as exc:        # a damaged .npy header fails in many ways (EOFError,
+            # ValueError, SyntaxError, tokenize.TokenError from its literal header, ...)
+            why = exc.strerror if isinstance(exc, OSError) else f"{type(exc).__name__}: {exc}"
+            raise FileFormatError(str(rp), f"cannot read the true rates {p.name} names "
+                                  f"({why})",
                                   field="rates_file") from None
+        if rates.dtype.kind not in "fiu":
+            raise FileFormatError(str(rp), f"expected numbers, got dtype {rates.dtype}",
+                                  field="rates_file")
         if rates.ndim != 2 or rates.shape[1] != 3 or (samples is not None
                                                        and rates.shape[0] != samples):
             want = f"({samples}, 3)" if samples is not None else "(N, 3)"
@@ -635,22 +644,29 @@ def load_flight_dir(directory: str | Path) -> Flight:
         raise FileFormatError(mp, f"expected ['t', *sensor_names], got {columns!r}",
                               field="columns")
     kind = str(man.get("kind", "gyro"))
-    vals, missing = _load_samples(d / str(man.get("samples_file", "samples.csv")),
-                                  len(columns), columns)
+    sfile = man.get("samples_file", "samples.csv")
+    if not isinstance(sfile, str) or not sfile.strip():
+        raise FileFormatError(mp, f"expected a file name, got {sfile!r}", field="samples_file")
+    spath = d / sfile
+    sp = str(spath)
+    if not spath.is_file():
+        raise FileFormatError(sp, f"cannot read (no such file); {mpath.name} names it",
+                              field="samples_file")
+    vals, missing = _load_samples(spath, len(columns), columns)
     if "samples" in man and man["samples"] != vals.shape[0]:
-        raise FileFormatError(mp, f"says {man['samples']} samples, samples file has "
-                                  f"{vals.shape[0]}", field="samples")
+        raise FileFormatError(mp, f"says {man['samples']!r} samples, {spath.name} has "
+                                  f"{vals.shape[0]} (truncated or edited?)", field="samples")
     t = vals[:, 0].copy()
     raw = vals[:, 1:].copy()
     valid = ~missing[:, 1:]
     raw[~valid] = np.nan
     if t.size and not np.all(np.isfinite(t)):
         j = int(np.flatnonzero(~np.isfinite(t))[0])
-        raise FileFormatError(str(d / "samples.csv"), "non-finite time", line=j + 2,
+        raise FileFormatError(sp, "non-finite time", line=j + 2,
                               field="t")
     if t.size > 1 and np.any(np.diff(t) < 0):
         j = int(np.flatnonzero(np.diff(t) < 0)[0]) + 1
-        raise FileFormatError(str(d / "samples.csv"), "time goes backwards", line=j + 2,
+        raise FileFormatError(sp, "time goes backwards", line=j + 2,
                               field="t")
     faults: tuple[Fault, ...] = ()
     truth: dict[str, Any] = {}

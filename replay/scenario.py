@@ -66,6 +66,9 @@ def load_scenario(path: str | Path, cal: Calibration, *,
         doc = tomllib.loads(p.read_text(encoding="utf-8"))
     except OSError as exc:
         raise FileFormatError(ps, f"cannot read ({exc.strerror})") from None
+    except UnicodeDecodeError as exc:
+        raise FileFormatError(ps, f"not UTF-8 text ({exc.reason} at byte {exc.start})") \
+            from None
     except tomllib.TOMLDecodeError as exc:
         raise FileFormatError(ps, f"not valid TOML ({exc})") from None
     if doc.get("schema") != SCENARIO_SCHEMA:
