@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from calibration.calibrate import BIAS_METHODS, NOISE_MODELS, calibrate
+from calibration.residuals import GM_LR_THRESHOLD
 from fdi.calfile import Calibration, SensorSet
 from fdi.errors import ConfigError
 from fdi.parity import parity_matrix
@@ -81,8 +82,8 @@ def _noise_lines(nm: object) -> list[str]:
             continue
         if not r.get("applied"):
             lr = r.get("likelihood_ratio")
-            out.append(f"  {kind}: white noise kept"
-                       + (f" (likelihood ratio {lr:.2f} <= 3.84)" if lr is not None else ""))
+            why = f" (likelihood ratio {lr:.2f} <= {GM_LR_THRESHOLD})" if lr is not None else ""
+            out.append(f"  {kind}: white noise kept{why}")
             continue
         unit, f = ("deg/h", input_unit_factor("deg/h")) if kind == "gyro" else \
             ("mg", input_unit_factor("mg"))
