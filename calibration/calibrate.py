@@ -56,6 +56,8 @@ Keys of ``Calibration.extra`` written here::
     noise_model                {"method": str, "gyro"/"accel": {"applied", "bias_instability"
                                 (SI), "correlation_s", "likelihood_ratio", "sd_factor":
                                 {"bias", "scale_factor", "misalignment": (n,)}}}
+                               (sd_factor: sd with the model / white sd; misalignment: the
+                               larger of the two angles' factors)
     gyro_bias                  {"unit", "model", "model_sd", and when there are whole outer
                                 turns "turns", "turns_sd", "turns_steps", "turns_per_step",
                                 "vertical_correction"}   (values in "unit")
