@@ -353,8 +353,13 @@ def read_frames(path: str | Path, *, strict: bool = False,
             try:
                 reader = can.LogReader(str(p))
             except (ValueError, NotImplementedError, ImportError) as exc:
-                raise FileFormatError(str(p), f"no CAN log reader for this file ({exc})") \
-                    from None
+                if isinstance(exc, ValueError) and sfx in can.io.player.MESSAGE_READERS:
+                    # a known format whose header is damaged (e.g. a BLF header size)
+                    _reader_error(acct, p, 0, exc, strict)
+                    reader = None
+                else:
+                    raise FileFormatError(str(p), f"no CAN log reader for this file ({exc})") \
+                        from None
             except Exception as exc:
                 _reader_error(acct, p, 0, exc, strict)
                 reader = None
