@@ -300,6 +300,10 @@ class Calibration:
 
 def _sensor_to_dict(c: SensorCal) -> dict[str, Any]:
     bf = input_unit_factor(c.bias_unit)
+    if not (math.isfinite(c.scale_factor) and c.scale_factor > 0):
+        # would divide by zero in a raw-per-input unit, and no loader accepts it back
+        raise ConfigError(f"sensor {c.name}: scale factor {c.scale_factor!r} (SI) is not a "
+                          "positive finite number; refusing to write it")
     return {
         "name": c.name,
         "axis": c.axis.tolist(),

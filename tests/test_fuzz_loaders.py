@@ -424,3 +424,25 @@ def test_pristine_files_load(pristine):
         res = _load(lambda loader=loader: loader(pristine), pristine / rel)
         assert not isinstance(res, RimuError), f"{rel}: {res}"
     assert np.isfinite(load_calibration(pristine / "cal.json").gyro.H).all()
+
+
+def test_writer_refuses_a_scale_factor_the_loader_would_refuse(tmp_path):
+    """Regression: a session with one -1e300 raw sample calibrated to a zero scale factor and
+    ``Calibration.save`` died in the unit conversion (ZeroDivisionError, a traceback from
+    ``rimu calibrate``); the writer now raises a one-line ConfigError."""
+    from dataclasses import replace
+
+    from fdi.calfile import Calibration, SensorSet
+    from fdi.errors import ConfigError
+    from thresholds.synthetic import synthetic_calibration
+
+    cal = synthetic_calibration("tetrad", seed=1)
+    s = cal.gyro
+    for bad in (0.0, float("inf"), float("nan")):
+        sens = (replace(s.sensors[0], scale_factor=bad, scale_factor_unit="mV/(deg/s)"),
+                *s.sensors[1:])
+        c2 = Calibration(cal.configuration, {"gyro": SensorSet("gyro", sens,
+                                                                s.noise_covariance)},
+                         cal.sample_rate_hz)
+        with pytest.raises(ConfigError, match="scale factor"):
+            c2.save(tmp_path / "c.json")
