@@ -92,12 +92,25 @@ def _run(argv: list[str]) -> subprocess.CompletedProcess:
                           text=True, timeout=120, cwd=ROOT)
 
 
+SLOW = {"calibrate_missing", "simulate_calibration_config", "simulate_flight_truth",
+        "monitor_file_samples", "replay_map"}
+"""Cases run only with ``--slow`` (each is an interpreter start, about a second)."""
+
+
+def _wanted(config) -> set[str]:
+    return set(CASES) if config.getoption("--slow") else set(CASES) - SLOW
+
+
 @pytest.fixture(scope="module")
-def results(tmp_path_factory) -> dict[str, tuple[subprocess.CompletedProcess, str]]:
+def results(tmp_path_factory, pytestconfig) -> dict[str, tuple[subprocess.CompletedProcess,
+                                                                str]]:
     f = _files(tmp_path_factory.mktemp("cli"))
     jobs = {}
+    wanted = _wanted(pytestconfig)
     with ThreadPoolExecutor(2) as pool:
         for name, (argv, fname) in CASES.items():
+            if name not in wanted:
+                continue
             args = [a.format(d=f["d"], cal=f["cal"]) for a in argv]
             jobs[name] = (pool.submit(_run, args), fname)
         for name, argv in LENIENT.items():
@@ -106,7 +119,8 @@ def results(tmp_path_factory) -> dict[str, tuple[subprocess.CompletedProcess, st
         return {k: (fut.result(), fname) for k, (fut, fname) in jobs.items()}
 
 
-@pytest.mark.parametrize("case", sorted(CASES))
+@pytest.mark.parametrize("case", [pytest.param(c, marks=pytest.mark.slow) if c in SLOW else c
+                                  for c in sorted(CASES)])
 def test_bad_file_gives_one_line_and_exit_2(results, case):
     proc, fname = results[case]
     err = proc.stderr

@@ -107,7 +107,7 @@ def wellformed(draw):
     return cal, th, t, raw, valid, chunk
 
 
-@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow,
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow,
                                                                   HealthCheck.data_too_large])
 @given(wellformed())
 def test_run_equals_step_on_wellformed_blocks_with_bad_numbers(case):
@@ -274,7 +274,7 @@ def _check_shapes(res, n: int, K: int) -> None:
         assert res.parity.shape == (N, max(n - 3, 0))
 
 
-@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow,
+@settings(max_examples=100, deadline=None, suppress_health_check=[HealthCheck.too_slow,
                                                                    HealthCheck.data_too_large])
 @given(garbage())
 def test_run_never_raises_on_garbage(case):
