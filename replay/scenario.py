@@ -166,7 +166,8 @@ def apply_faults(t: np.ndarray, raw: np.ndarray, valid: np.ndarray,
         elif f.kind == "scale":
             raw[m, i] += f.size * (sf[i] * raw[m, i] - b[i]) / sf[i]
         elif f.kind == "noise":
-            extra = math.sqrt(max(f.size ** 2 - 1.0, 0.0)) * sd[i] / sf[i]
+            # s*s, not s**2: a huge factor gives inf (marked by the monitor), not OverflowError
+            extra = math.sqrt(max(f.size * f.size - 1.0, 0.0)) * sd[i] / sf[i]
             raw[m, i] += extra * rng.standard_normal(int(m.sum()))
         elif f.kind == "stuck":
             before = np.flatnonzero(~m & (t < f.onset) & valid[:, i])

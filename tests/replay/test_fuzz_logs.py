@@ -252,3 +252,21 @@ def test_blf_with_damaged_header_is_reported_not_refused(logs, work):
     with pytest.raises(ReplayError, match=r"header\.blf"):
         read_frames(p, strict=True, progress=False)
     _check(p)
+
+
+def test_scenario_with_huge_noise_factor_injects_instead_of_raising(tmp_path):
+    """Regression: ``size = "1e308x"`` on a noise fault raised OverflowError (``size ** 2``)
+    out of ``rimu replay --inject``; now the sensor gets non-finite samples, which the
+    monitor marks."""
+    from replay.flight import simulate_flight
+    from replay.scenario import inject, load_scenario
+
+    p = tmp_path / "s.toml"
+    p.write_text('schema = "rimu.scenario/1"\n[[faults]]\nkind = "noise"\nsensor = 2\n'
+                 'size = "1e308x"\nonset = 0.1\nduration = 0.2\n')
+    faults, seed = load_scenario(p, CAL)
+    f = simulate_flight(CAL, 0.5, seed=1)
+    f2 = inject(f, faults, CAL, seed=seed, source=str(p))
+    hit = (f.t >= 0.1 - 1e-12) & (f.t < 0.3 - 1e-12)
+    assert not np.isfinite(f2.raw[hit, 1]).any()
+    np.testing.assert_array_equal(f2.raw[~hit], f.raw[~hit])
