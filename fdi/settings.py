@@ -144,6 +144,10 @@ def load_thresholds(path: str | Path) -> Thresholds:
     return thresholds_from_dict(read_json_object(path), str(path))
 
 
+MAX_SCALE = 1 << 20
+"""Longest window (samples) a thresholds file may ask for (2^20: about 3 h at 100 Hz)."""
+
+
 def thresholds_from_dict(doc: Any, path: str = "<thresholds>") -> Thresholds:
     """Build :class:`Thresholds` from its JSON dictionary (see :func:`load_thresholds`)."""
     if not isinstance(doc, dict):
@@ -186,8 +190,11 @@ def thresholds_from_dict(doc: Any, path: str = "<thresholds>") -> Thresholds:
     if kind not in ("gyro", "accel"):
         raise FileFormatError(path, f"expected 'gyro' or 'accel', got {kind!r}", field="kind")
     scales = nums("scales")
-    if any(s < 1 or s != int(s) for s in scales):
-        raise FileFormatError(path, "expected positive integers", field="scales")
+    if any(s < 1 or s != int(s) or s > MAX_SCALE for s in scales):
+        # the monitor keeps a ring of max(scales) sums: 1e308 would hang it
+        bad = next(x for x in scales if x < 1 or x != int(x) or x > MAX_SCALE)
+        raise FileFormatError(path, f"expected positive integers up to {MAX_SCALE}, got "
+                              f"{bad:g}", field="scales")
     k = len(scales)
     for key in ("alpha", "variance_factor", "threshold"):
         if len(nums(key)) != k:

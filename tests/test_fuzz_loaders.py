@@ -446,3 +446,15 @@ def test_writer_refuses_a_scale_factor_the_loader_would_refuse(tmp_path):
                          cal.sample_rate_hz)
         with pytest.raises(ConfigError, match="scale factor"):
             c2.save(tmp_path / "c.json")
+
+
+def test_thresholds_with_a_huge_window_are_refused(pristine, work):
+    """Regression: ``scales = [..., 1e308]`` passed the loader (finite, integral) and the
+    monitor then tried to allocate a ring of 1e308 window sums."""
+    d = _fresh(pristine, work)
+    p = d / "thresholds.json"
+    doc = json.loads(p.read_text())
+    doc["scales"][-1] = 1e308
+    p.write_text(json.dumps(doc))
+    res = _load(lambda: load_thresholds(p), p, field="scales")
+    assert isinstance(res, FileFormatError) and "1e+308" in str(res), res
