@@ -399,6 +399,7 @@ def calibration_from_dict(doc: Mapping[str, Any], path: str = "<calibration>") -
                      for i, e in enumerate(entries))
         n = len(cals)
         cov = r.array(r.get(noise, kind, "noise_covariance"), f"noise_covariance.{kind}", (n, n))
+        _check_covariance(r, cov, f"noise_covariance.{kind}")
         groups, mats = [], []
         mm = r.get(doc.get("misalignment_matrices", {}), kind, "misalignment_matrices", [])
         if not isinstance(mm, list):
@@ -436,6 +437,19 @@ def calibration_from_dict(doc: Mapping[str, Any], path: str = "<calibration>") -
     )
 
 
+def _check_covariance(r: _Reader, cov: np.ndarray, field: str) -> None:
+    """A noise covariance must be symmetric positive definite (the monitor whitens by it)."""
+    scale = float(np.max(np.abs(cov))) if cov.size else 0.0
+    if not np.allclose(cov, cov.T, rtol=1e-9, atol=1e-12 * scale):
+        raise r.fail(field, "expected a symmetric matrix")
+    try:
+        np.linalg.cholesky(cov)
+    except np.linalg.LinAlgError:
+        raise r.fail(field, "expected a positive definite matrix") from None
+    if not np.linalg.cond(cov) < 1e12:
+        raise r.fail(field, "nearly singular (condition number above 1e12)")
+
+
 def _mapping(r: _Reader, v: Any, field: str) -> Mapping[str, Any]:
     if not isinstance(v, Mapping):
         raise r.fail(field, f"expected an object, got {v!r}")
@@ -470,6 +484,9 @@ def _sensor_from_dict(r: _Reader, e: Any, where: str) -> SensorCal:
         raise r.fail(where + ".bias_unit", str(exc)) from None
     bias = r.number(r.get(e, "bias", where), where + ".bias") * bf
     bias_sd = r.number(r.get(e, "bias_sd", where), where + ".bias_sd") * bf
+    if not (bias_sd >= 0 and math.isfinite(bias_sd * bias_sd)):
+        raise r.fail(where + ".bias_sd", f"expected a standard deviation (≥ 0, squarable), "
+                     f"got {bias_sd / bf!r}")
     mis_sd = r.array(r.get(e, "misalignment_mrad_sd", where), where + ".misalignment_mrad_sd",
                      (2,)) * 1e-3
     r.array(r.get(e, "misalignment_mrad", where), where + ".misalignment_mrad", (2,))

@@ -159,7 +159,9 @@ def _generate_proj(U: np.ndarray) -> str:
 
 
 def _compile(src: str, name: str, vec: bool) -> Any:
-    ns: dict[str, Any] = {"MAX": _vmax if vec else max}
+    # _c() writes non-finite constants as inf / nan (repr): give those names their values
+    ns: dict[str, Any] = {"MAX": _vmax if vec else max, "inf": float("inf"),
+                          "nan": float("nan")}
     exec(compile(src, f"<rimu {name}>", "exec"), ns)
     return ns[name]
 

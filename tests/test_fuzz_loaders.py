@@ -458,3 +458,44 @@ def test_thresholds_with_a_huge_window_are_refused(pristine, work):
     p.write_text(json.dumps(doc))
     res = _load(lambda: load_thresholds(p), p, field="scales")
     assert isinstance(res, FileFormatError) and "1e+308" in str(res), res
+
+
+@pytest.mark.parametrize("edit, field", [
+    (lambda d: d["noise_covariance"]["gyro"][0].__setitem__(0, -1.0), "noise_covariance.gyro"),
+    (lambda d: d["noise_covariance"]["gyro"][1].__setitem__(1, 1e308), "noise_covariance.gyro"),
+    (lambda d: d["noise_covariance"]["gyro"][0].__setitem__(2, 1e-3), "noise_covariance.gyro"),
+    (lambda d: d["sensors"]["gyro"][0].__setitem__("bias_sd", 1e308), "bias_sd"),
+    (lambda d: d["sensors"]["gyro"][0].__setitem__("bias_sd", -1.0), "bias_sd"),
+])
+def test_calibration_the_monitor_cannot_use_is_refused_by_the_loader(pristine, work, edit,
+                                                                        field):
+    """Regression: these loaded, then ``Monitor(cal)`` died in numpy (LinAlgError: not
+    positive definite / singular / eigenvalues did not converge) -- a traceback from
+    ``rimu monitor-file`` and ``rimu replay``."""
+    d = _fresh(pristine, work)
+    p = d / "cal.json"
+    doc = json.loads(p.read_text())
+    edit(doc)
+    p.write_text(json.dumps(doc))
+    res = _load(lambda: load_calibration(p), p, field=field)
+    assert isinstance(res, FileFormatError), res
+
+
+def test_monitor_runs_with_an_infinite_input_error_covariance(pristine):
+    """Regression: an input_error_cov entry of 1e308 made a kernel constant inf, and the
+    generated kernel source failed with NameError: name 'inf' is not defined (out of
+    Monitor.run; Monitor.step reported an internal error)."""
+    from fdi.monitor import Monitor
+
+    doc = json.loads((pristine / "cal.json").read_text())
+    doc["sensors"]["gyro"][0]["input_error_cov"][0][0] = 1e308
+    from fdi.calfile import calibration_from_dict
+
+    cal = calibration_from_dict(doc, "cal.json")
+    n = cal.gyro.n
+    raw = np.tile(np.linspace(1.0, 2.0, n), (20, 1)) + np.arange(20)[:, None] * 1e-3
+    mon = Monitor(cal)
+    res = mon.run(np.arange(20) / 100.0, raw)
+    a = Monitor(cal).step(0.0, raw[0])
+    assert not any("internal error" in e.reason for e in a.events), a.events
+    assert len(res) == 20
