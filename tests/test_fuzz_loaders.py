@@ -499,3 +499,47 @@ def test_monitor_runs_with_an_infinite_input_error_covariance(pristine):
     a = Monitor(cal).step(0.0, raw[0])
     assert not any("internal error" in e.reason for e in a.events), a.events
     assert len(res) == 20
+
+
+def _numeric_paths(doc, prefix=()):
+    if isinstance(doc, dict):
+        for k, v in doc.items():
+            yield from _numeric_paths(v, (*prefix, k))
+    elif isinstance(doc, list):
+        for k, v in enumerate(doc):
+            yield from _numeric_paths(v, (*prefix, k))
+    elif isinstance(doc, int | float) and not isinstance(doc, bool):
+        yield prefix
+
+
+@FUZZ
+@given(data=st.data())
+def test_any_calibration_the_loader_accepts_runs_the_monitor(pristine, work, data):
+    """Extreme numbers in any numeric field: refused by the loader, or the monitor runs."""
+    from fdi.monitor import Monitor
+
+    p0 = pristine / "cal.json"
+    doc = json.loads(p0.read_text())
+    for _ in range(data.draw(st.integers(1, 3), label="edits")):
+        path = data.draw(st.sampled_from(list(_numeric_paths(doc))), label="path")
+        parent = doc
+        for k in path[:-1]:
+            parent = parent[k]
+        parent[path[-1]] = data.draw(st.sampled_from([0, -1, 1e308, -1e308, 1e-308, 1e300,
+                                                      5e-324, 1e30, -1e-30]), label="value")
+    d = _fresh(pristine, work)
+    p = d / "cal.json"
+    p.write_text(json.dumps(doc))
+    cal = _load(lambda: load_calibration(p), p)
+    if isinstance(cal, RimuError):
+        return
+    try:
+        mon = Monitor(cal)
+    except RimuError:
+        return
+    n = cal.gyro.n
+    raw = np.tile(np.linspace(1.0, 2.0, n), (30, 1)) + np.arange(30)[:, None] * 1e-3
+    res = mon.run(np.arange(30) / 100.0, raw)
+    assert len(res) == 30
+    a = Monitor(cal).step(0.0, raw[0])
+    assert not any("internal error" in e.reason for e in a.events), a.events
