@@ -119,7 +119,7 @@ def test_run_equals_step_on_wellformed_blocks_with_bad_numbers(case):
     assert_identical(answers, res)
 
 
-@settings(max_examples=15, deadline=None, suppress_health_check=[HealthCheck.too_slow,
+@settings(max_examples=10, deadline=None, suppress_health_check=[HealthCheck.too_slow,
                                                                   HealthCheck.data_too_large])
 @given(wellformed(), st.integers(1, 5))
 def test_run_in_pieces_equals_one_run(case, pieces):
@@ -290,7 +290,7 @@ def test_run_never_raises_on_garbage(case):
     assert np.all(np.isfinite(res2.omega[res2.capability != "none"])), res2.omega
 
 
-@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow,
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow,
                                                                   HealthCheck.data_too_large])
 @given(garbage())
 def test_run_equals_step_on_row_iterable_garbage(case):
