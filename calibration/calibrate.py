@@ -139,6 +139,34 @@ def _check_finite(source: str, kind: str, raw: np.ndarray, step: np.ndarray) -> 
                                f"(sensor {col + 1}, sample {i + 1}); expected finite numbers")
 
 
+def _check_gains(source: str, kind: str, a: np.ndarray, names: tuple[str, ...]) -> None:
+    """Refuse gains a = h̃/SF that cannot be split (zero or non-finite |a|).
+
+    A sensor that does not respond to the known input (stuck, or swamped by a corrupt
+    sample such as 1e300) gives |a| ≈ 0 or inf: no scale factor exists.
+    """
+    with np.errstate(over="ignore", invalid="ignore"):
+        na = np.linalg.norm(a, axis=1)
+    bad = ~np.isfinite(na) | (na <= 0) | ~np.all(np.isfinite(a), axis=1)
+    big = np.isfinite(na) & (na > 0)
+    if big.any():
+        bad |= na < 1e-9 * np.median(na[big])
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise CalibrationError(
+            f"{source}: {kind} sensor {i + 1} ({names[i]}): estimated gain |h/SF| = {na[i]:.3g} "
+            "cannot give a scale factor; expected a sensor that follows the table input "
+            "(look for stuck or corrupt samples)")
+
+
+def _check_axes(source: str, kind: str, Ht: np.ndarray) -> None:
+    """Refuse calibrated axes that do not span 3-D space."""
+    rank = int(np.linalg.matrix_rank(Ht, tol=1e-6))
+    if rank < 3:
+        raise CalibrationError(f"{source}: the calibrated {kind} axes span only {rank} "
+                               "dimension(s); expected 3 (look for stuck or corrupt samples)")
+
+
 def _pairs(session: Session, pos: dict[int, int]) -> list[tuple[int, int]]:
     """Rate-step pairs as step positions (first occurrence minus its partner)."""
     rate = [s for s in session.steps if s.kind == "rate"]
@@ -377,6 +405,7 @@ def calibrate(session: Session, *, bias_method: str = "model", denoise: bool = T
     u0 = np.nan_to_num(u_seg)
     theta = P_model @ u0                                   # (4, n)
     a, c = theta[:3].T, theta[3]
+    _check_gains(src, "gyro", a, session.gyro_config.sensor_names)
     inv_cnt = np.where(cnt_seg > 0, 1.0 / np.maximum(cnt_seg, 1), 0.0)
     Q_model = (P_model * inv_cnt) @ P_model.T
 
@@ -430,6 +459,7 @@ def calibrate(session: Session, *, bias_method: str = "model", denoise: bool = T
             scale_factor_unit=gyro_sfu, bias_unit=gyro_bu,
             residual_rms=float(np.sqrt(np.mean(resid[:, i] ** 2)))))
     Ht = np.array([cc.axis for cc in cals])
+    _check_axes(src, "gyro", Ht)
     groups = session.gyro_config.groups
     gyro_set = SensorSet("gyro", tuple(cals), Sigma, groups,
                          group_misalignment_matrices(session.gyro_config.H, Ht, groups),
@@ -564,6 +594,7 @@ def _accelerometers(session: Session, fb: np.ndarray, nums: list[int], pos: dict
     Sigma_raw = noise_covariance(r_raw, dof_used=4)
     Q = (mp.op / cnt) @ mp.op.T
     H0 = session.accel_config.H
+    _check_gains(src, "accel", mp.a, session.accel_config.sensor_names)
     ex, crec = None, {}
     if noise_model == "auto":
         seg_start, seg_len = _segment_times(session.t, seg, cnt, fs)
@@ -586,6 +617,7 @@ def _accelerometers(session: Session, fb: np.ndarray, nums: list[int], pos: dict
             raw_unit=session.accel_raw_unit, scale_factor_unit=sfu, bias_unit=bu,
             residual_rms=float(np.sqrt(np.mean(resid[:, i] ** 2)))))
     Ht = np.array([cc.axis for cc in cals])
+    _check_axes(src, "accel", Ht)
     groups = session.accel_config.groups
     extra["residual_steps"]["accel"] = residual_step_stats(
         resid, session.step[m], pos_steps, [steps[pos[k]].label for k in pos_steps],
