@@ -61,7 +61,6 @@ Angles: rad inside; rates: rad/s inside; times: s.
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -71,6 +70,7 @@ import numpy as np
 from calibration.session import Step
 from calibration.turntable import MOUNTS, body_inputs
 from fdi.errors import FileFormatError
+from fdi.fileio import read_toml_object
 from fdi.units import DEG, DPS
 
 __all__ = [
@@ -281,10 +281,7 @@ def load_sequence(name_or_path: str | Path, *, table_rate_dps: float | None = No
     if not path.is_file():
         raise FileFormatError(p, "no such sequence file; built-in sequences are "
                               + ", ".join(sorted(BUILTIN_SEQUENCES)))
-    try:
-        doc = tomllib.loads(path.read_text(encoding="utf-8"))
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise FileFormatError(p, f"not valid TOML ({exc})") from None
+    doc = read_toml_object(path)
     overrides = {"table_rate_dps": table_rate_dps, "turns": turns,
                  "position_duration_s": position_duration_s}
     for k, v in overrides.items():

@@ -50,8 +50,8 @@ import numpy as np
 from calibration.session import Session, Step
 from calibration.turntable import MOUNTS
 from fdi.errors import ConfigError, FileFormatError
+from fdi.fileio import read_json_object, to_jsonable
 from fdi.geometry import Configuration
-from fdi.jsonio import read_json_object, to_jsonable
 from fdi.units import DEG, DPS, RAW_UNITS
 
 __all__ = ["MIN_STEP_SAMPLES", "SESSION_SCHEMA", "TABLE_COLUMNS", "load_session",

@@ -24,7 +24,7 @@ from typing import Any
 from calibration.effects import EFFECTS
 from fdi.calfile import CALIBRATION_SCHEMA, Calibration, calibration_from_dict
 from fdi.errors import FileFormatError
-from fdi.jsonio import read_json_object
+from fdi.fileio import read_json_object
 
 __all__ = ["TRUTH_SCHEMA", "load_truth", "save_truth", "truth_to_dict"]
 

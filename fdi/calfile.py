@@ -43,7 +43,7 @@ from typing import Any
 import numpy as np
 
 from fdi.errors import ConfigError, FileFormatError
-from fdi.jsonio import read_json_object, to_jsonable
+from fdi.fileio import read_json_object, to_jsonable
 from fdi.units import (
     input_unit_factor,
     scale_factor_from_si,

@@ -9,7 +9,6 @@ arrays.
 from __future__ import annotations
 
 import math
-import tomllib
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -17,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from fdi.errors import ConfigError, FileFormatError
+from fdi.fileio import read_toml_object
 
 __all__ = [
     "COLLINEAR_COS",
@@ -179,10 +179,7 @@ def load_configuration(spec: str | Path) -> Configuration:
     if not path.is_file():
         raise FileFormatError(str(path), "no such configuration file; built-in names are "
                               + ", ".join(sorted(NAMED_CONFIGURATIONS)))
-    try:
-        doc = tomllib.loads(path.read_text(encoding="utf-8"))
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise FileFormatError(str(path), f"not valid TOML ({exc})") from None
+    doc = read_toml_object(path)
     sensors = doc.get("sensor")
     if not isinstance(sensors, list) or not sensors:
         raise FileFormatError(str(path), "expected one or more [[sensor]] tables",

@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from fdi.errors import ConfigError, FileFormatError
-from fdi.jsonio import read_json_object
+from fdi.fileio import read_json_object
 
 __all__ = [
     "DETECTORS",

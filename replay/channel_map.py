@@ -34,7 +34,6 @@ bytes before it. Rolling counters increase by one (mod 2^bits) per frame of a me
 from __future__ import annotations
 
 import math
-import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -44,6 +43,7 @@ import numpy as np
 
 from fdi.calfile import Calibration
 from fdi.errors import ConfigError, FileFormatError
+from fdi.fileio import read_toml_object
 from fdi.units import INPUT_UNITS, RAW_UNITS
 from replay.frames import DEFAULT_DBC, imu_message_name
 
@@ -173,19 +173,7 @@ def load_channel_map(path: str | Path) -> ChannelMap:
     """
     p = Path(path)
     ps = str(p)
-    try:
-        doc = tomllib.loads(p.read_text(encoding="utf-8"))
-    except OSError as exc:
-        raise FileFormatError(ps, f"cannot read ({exc.strerror})") from None
-    except UnicodeDecodeError as exc:
-        raise FileFormatError(ps, f"not UTF-8 text ({exc.reason} at byte {exc.start})") \
-            from None
-    except tomllib.TOMLDecodeError as exc:
-        raise FileFormatError(ps, f"not valid TOML ({exc})") from None
-    schema = doc.get("schema")
-    if schema != CHANNEL_MAP_SCHEMA:
-        raise FileFormatError(ps, f"expected '{CHANNEL_MAP_SCHEMA}', got {schema!r}",
-                              field="schema")
+    doc = read_toml_object(p, CHANNEL_MAP_SCHEMA)
     kind = doc.get("kind", "gyro")
     if kind not in ("gyro", "accel"):
         raise FileFormatError(ps, f"expected 'gyro' or 'accel', got {kind!r}", field="kind")

@@ -70,7 +70,7 @@ import numpy as np
 
 from fdi.calfile import Calibration
 from fdi.errors import ConfigError, FileFormatError
-from fdi.jsonio import read_json_object, to_jsonable
+from fdi.fileio import read_json_object, to_jsonable
 from replay.faults import Fault, fault_from_dict
 from replay.motion import body_rates
 

@@ -34,7 +34,6 @@ dropout   no sample (``valid = False``, raw NaN)
 from __future__ import annotations
 
 import math
-import tomllib
 from collections.abc import Mapping, Sequence
 from dataclasses import replace
 from pathlib import Path
@@ -44,6 +43,7 @@ import numpy as np
 
 from fdi.calfile import Calibration
 from fdi.errors import ConfigError, FileFormatError
+from fdi.fileio import read_toml_object
 from replay.faults import Fault, parse_fault
 
 __all__ = ["SCENARIO_SCHEMA", "apply_faults", "inject", "load_scenario"]
@@ -62,18 +62,7 @@ def load_scenario(path: str | Path, cal: Calibration, *,
     """
     p = Path(path)
     ps = str(p)
-    try:
-        doc = tomllib.loads(p.read_text(encoding="utf-8"))
-    except OSError as exc:
-        raise FileFormatError(ps, f"cannot read ({exc.strerror})") from None
-    except UnicodeDecodeError as exc:
-        raise FileFormatError(ps, f"not UTF-8 text ({exc.reason} at byte {exc.start})") \
-            from None
-    except tomllib.TOMLDecodeError as exc:
-        raise FileFormatError(ps, f"not valid TOML ({exc})") from None
-    if doc.get("schema") != SCENARIO_SCHEMA:
-        raise FileFormatError(ps, f"expected '{SCENARIO_SCHEMA}', got {doc.get('schema')!r}",
-                              field="schema")
+    doc = read_toml_object(p, SCENARIO_SCHEMA)
     seed = doc.get("seed", 0)
     if isinstance(seed, bool) or not isinstance(seed, int):
         raise FileFormatError(ps, f"expected an integer, got {seed!r}", field="seed")

@@ -1,14 +1,16 @@
-"""Reading and writing rimu's versioned JSON files: one place for the loud errors.
+"""Reading rimu's JSON and TOML files and writing JSON: one place for the loud errors.
 
-Every JSON file rimu writes is an object with ``"schema": "rimu.<name>/<version>"``.
-:func:`read_json_object` reads one and checks that header, naming the file (and the line
-for syntax errors); :func:`to_jsonable` turns numpy values into plain JSON types.
+Every file rimu writes is an object with ``"schema": "rimu.<name>/<version>"``.
+:func:`read_json_object` and :func:`read_toml_object` read one and check that header,
+naming the file (and the line for JSON syntax errors); :func:`to_jsonable` turns numpy
+values into plain JSON types.
 """
 
 from __future__ import annotations
 
 import json
 import math
+import tomllib
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -17,7 +19,7 @@ import numpy as np
 
 from fdi.errors import FileFormatError
 
-__all__ = ["check_schema", "read_json_object", "to_jsonable"]
+__all__ = ["check_schema", "read_json_object", "read_toml_object", "to_jsonable"]
 
 
 def to_jsonable(obj: Any) -> Any:
@@ -83,6 +85,29 @@ def read_json_object(path: str | Path, schema: str | None = None, *,
         raise FileFormatError(p, f"not valid JSON ({exc.msg})", line=exc.lineno) from None
     if not isinstance(doc, dict):
         raise FileFormatError(p, "expected a JSON object")
+    if schema is not None:
+        check_schema(doc, p, schema)
+    return doc
+
+
+def read_toml_object(path: str | Path, schema: str | None = None) -> dict[str, Any]:
+    """Read a TOML document from ``path``; with ``schema``, also check its header.
+
+    Raises
+    ------
+    FileFormatError
+        Unreadable file, not UTF-8, invalid TOML, wrong schema.
+    """
+    p = str(path)
+    try:
+        doc = tomllib.loads(Path(path).read_text(encoding="utf-8"))
+    except OSError as exc:
+        raise FileFormatError(p, f"cannot read ({exc.strerror})") from None
+    except UnicodeDecodeError as exc:
+        raise FileFormatError(p, f"not UTF-8 text ({exc.reason} at byte {exc.start})") \
+            from None
+    except tomllib.TOMLDecodeError as exc:
+        raise FileFormatError(p, f"not valid TOML ({exc})") from None
     if schema is not None:
         check_schema(doc, p, schema)
     return doc
