@@ -24,9 +24,10 @@ Every key that holds a physical quantity says its unit in its name. Top level::
     printed_position_vector = "specific_force"   # or "gravity": how `printed` reads
                                                  # for position steps (see below)
 
-then one ``[[step]]`` table per step, numbered from 1 in file order::
+then one ``[[steps]]`` table per step, numbered from 1 in file order (the older spelling
+``[[step]]`` is still read, with a deprecation warning)::
 
-    [[step]]
+    [[steps]]
     label = "Table 1 row 7"          # optional free text
     kind = "rate"                    # optional: "rate" if a rate is non-zero, else "position"
     mount = "x_inner_y_up"           # optional, overrides the default
@@ -70,7 +71,7 @@ import numpy as np
 from calibration.session import Step
 from calibration.turntable import MOUNTS, body_inputs
 from fdi.errors import FileFormatError
-from fdi.fileio import read_toml_object
+from fdi.fileio import Fields
 from fdi.units import DEG, DPS
 
 __all__ = [
@@ -91,13 +92,6 @@ BUILTIN_SEQUENCES: dict[str, str] = {
     "tetrad-paper": "tetrad_paper.toml",
 }
 """Built-in sequence names and their files in :data:`SEQUENCES_DIR`."""
-
-_TOP_KEYS = {"schema", "name", "description", "table_rate_dps", "turns",
-             "position_duration_s", "mount", "printed_position_vector", "step"}
-_STEP_KEYS = {"label", "kind", "mount", "inner_deg", "outer_deg", "inner_rate_w",
-              "inner_rate_dps", "outer_rate_w", "outer_rate_dps", "turns", "duration_s",
-              "pair", "printed", "printed_agrees", "note"}
-
 
 @dataclass(frozen=True)
 class SequenceStep:
@@ -268,8 +262,8 @@ def load_sequence(name_or_path: str | Path, *, table_rate_dps: float | None = No
     Raises
     ------
     FileFormatError
-        Missing file, bad TOML, wrong schema, or a bad field; the message names the file,
-        the step and the field, and says what was expected.
+        Missing file, bad TOML, wrong schema, or a bad or unknown field; the message names
+        the file, the line, the step and the field, and says what was expected.
     """
     key = str(name_or_path)
     alias = key.replace("_", "-")
@@ -277,162 +271,125 @@ def load_sequence(name_or_path: str | Path, *, table_rate_dps: float | None = No
         path = SEQUENCES_DIR / BUILTIN_SEQUENCES[alias]
     else:
         path = Path(name_or_path)
-    p = str(path)
     if not path.is_file():
-        raise FileFormatError(p, "no such sequence file; built-in sequences are "
+        raise FileFormatError(str(path), "no such sequence file; built-in sequences are "
                               + ", ".join(sorted(BUILTIN_SEQUENCES)))
-    doc = read_toml_object(path)
+    r = Fields.from_toml(path)
     overrides = {"table_rate_dps": table_rate_dps, "turns": turns,
                  "position_duration_s": position_duration_s}
-    for k, v in overrides.items():
-        if v is not None:
-            doc[k] = v
-    doc.setdefault("name", path.stem.replace("_", "-"))
-    return sequence_from_dict(doc, p)
-
-
-def _num(path: str, v: Any, field: str, step: int | None = None, *,
-         positive: bool = False) -> float:
-    if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
-        raise FileFormatError(path, f"expected a finite number, got {v!r}", field=field,
-                              step=step)
-    if positive and v <= 0:
-        raise FileFormatError(path, f"expected a positive number, got {v!r}", field=field,
-                              step=step)
-    return float(v)
-
-
-def _rate(path: str, d: dict[str, Any], axis: str, w_dps: float, step: int) -> float:
-    kw, kd = f"{axis}_rate_w", f"{axis}_rate_dps"
-    if kw in d and kd in d:
-        raise FileFormatError(path, f"give either '{kw}' or '{kd}', not both", field=kw,
-                              step=step)
-    if kw in d:
-        return _num(path, d[kw], kw, step) * w_dps * DPS
-    if kd in d:
-        return _num(path, d[kd], kd, step) * DPS
-    return 0.0
+    return _sequence(r, path.stem.replace("_", "-"),
+                     {k: v for k, v in overrides.items() if v is not None})
 
 
 def sequence_from_dict(doc: dict[str, Any], path: str = "<sequence>") -> Sequence:
     """Build a :class:`Sequence` from its parsed TOML document (see the module docstring)."""
-    schema = doc.get("schema", SEQUENCE_SCHEMA)
-    if not isinstance(schema, str) or not schema.startswith("rimu.sequence/"):
-        raise FileFormatError(path, f"expected '{SEQUENCE_SCHEMA}', got {schema!r}",
-                              field="schema")
-    if schema != SEQUENCE_SCHEMA:
-        raise FileFormatError(path, f"unsupported version {schema!r}; this rimu reads "
-                              f"'{SEQUENCE_SCHEMA}'", field="schema")
-    unknown = sorted(set(doc) - _TOP_KEYS)
-    if unknown:
-        raise FileFormatError(path, f"unknown key; expected one of {sorted(_TOP_KEYS)}",
-                              field=unknown[0])
-    w_dps = _num(path, doc.get("table_rate_dps", 10.0), "table_rate_dps", positive=True)
-    turns_default = _num(path, doc.get("turns", 1), "turns", positive=True)
-    pos_default = _num(path, doc.get("position_duration_s", 20.0), "position_duration_s",
-                       positive=True)
-    mount_default = doc.get("mount", "x_inner_y_up")
-    if not isinstance(mount_default, str) or mount_default not in MOUNTS:
-        raise FileFormatError(path, f"unknown mounting {mount_default!r}; expected one of "
-                              f"{sorted(MOUNTS)}", field="mount")
-    ppv = doc.get("printed_position_vector", "specific_force")
-    if not isinstance(ppv, str) or ppv not in ("specific_force", "gravity"):
-        raise FileFormatError(path, f"expected 'specific_force' or 'gravity', got {ppv!r}",
-                              field="printed_position_vector")
-    raw_steps = doc.get("step")
-    if not isinstance(raw_steps, list) or not raw_steps:
-        raise FileFormatError(path, "expected one or more [[step]] tables", field="step")
+    return _sequence(Fields(doc, path), "sequence", {})
 
-    steps: list[dict[str, Any]] = []
-    any_pair = any(isinstance(d, dict) and "pair" in d for d in raw_steps)
-    for i, d in enumerate(raw_steps, start=1):
-        if not isinstance(d, dict):
-            raise FileFormatError(path, "expected a table", field="step", step=i)
-        bad = sorted(set(d) - _STEP_KEYS)
-        if bad:
-            raise FileFormatError(path, f"unknown key; expected one of {sorted(_STEP_KEYS)}",
-                                  field=bad[0], step=i)
-        mount = d.get("mount", mount_default)
-        if not isinstance(mount, str) or mount not in MOUNTS:
-            raise FileFormatError(path, f"unknown mounting {mount!r}; expected one of "
-                                  f"{sorted(MOUNTS)}", field="mount", step=i)
-        inner = _num(path, d.get("inner_deg", 0.0), "inner_deg", i) * DEG
-        outer = _num(path, d.get("outer_deg", 0.0), "outer_deg", i) * DEG
-        wi = _rate(path, d, "inner", w_dps, i)
-        wo = _rate(path, d, "outer", w_dps, i)
-        turning = wi != 0.0 or wo != 0.0
-        kind = d.get("kind", "rate" if turning else "position")
-        if kind not in ("rate", "position"):
-            raise FileFormatError(path, f"expected 'rate' or 'position', got {kind!r}",
-                                  field="kind", step=i)
-        if kind == "rate" and not turning:
-            raise FileFormatError(path, "a rate step needs a non-zero inner or outer rate "
-                                  "(inner_rate_w, inner_rate_dps, outer_rate_w or "
-                                  "outer_rate_dps)", field="kind", step=i)
-        if kind == "position" and turning:
-            raise FileFormatError(path, "a position step must have zero rates", field="kind",
-                                  step=i)
-        if "turns" in d and "duration_s" in d:
-            raise FileFormatError(path, "give either 'turns' or 'duration_s', not both",
-                                  field="turns", step=i)
-        if "duration_s" in d:
-            duration = _num(path, d["duration_s"], "duration_s", i, positive=True)
-        elif kind == "position":
-            if "turns" in d:
-                raise FileFormatError(path, "a position step has no turns; give "
-                                      "'duration_s'", field="turns", step=i)
-            duration = pos_default
-        else:
-            if wi != 0.0 and wo != 0.0:
-                raise FileFormatError(path, "both axes turn: give 'duration_s' (turns are "
-                                      "ambiguous)", field="duration_s", step=i)
-            n_turns = _num(path, d.get("turns", turns_default), "turns", i, positive=True)
-            duration = n_turns * 2.0 * math.pi / abs(wi or wo)
-        pair = d.get("pair")
-        if pair is not None and (isinstance(pair, bool) or not isinstance(pair, int)):
-            raise FileFormatError(path, f"expected a step number, got {pair!r}", field="pair",
-                                  step=i)
-        printed = d.get("printed")
-        if printed is not None:
-            if (not isinstance(printed, list) or len(printed) != 3):
-                raise FileFormatError(path, f"expected three numbers, got {printed!r}",
-                                      field="printed", step=i)
-            printed = tuple(_num(path, v, "printed", i) for v in printed)
-        agrees = d.get("printed_agrees", True)
-        if not isinstance(agrees, bool):
-            raise FileFormatError(path, f"expected true or false, got {agrees!r}",
-                                  field="printed_agrees", step=i)
-        steps.append(dict(index=i, kind=kind, inner=inner, outer=outer, inner_rate=wi,
-                          outer_rate=wo, mount=mount, duration_s=duration, pair=pair,
-                          label=str(d.get("label", "")), printed=printed,
-                          printed_agrees=agrees, note=str(d.get("note", ""))))
 
-    n = len(steps)
+def _sequence(r: Fields, default_name: str, overrides: dict[str, float]) -> Sequence:
+    """The whole file: top-level defaults, then the steps, then the pairs."""
+    r.schema(SEQUENCE_SCHEMA, default=SEQUENCE_SCHEMA)
+    top = {k: r.number(k, d, positive=True) for k, d in
+           (("table_rate_dps", 10.0), ("turns", 1.0), ("position_duration_s", 20.0))}
+    for k, v in overrides.items():
+        top[k] = _positive_override(r, k, v)
+    mount = r.choice("mount", sorted(MOUNTS), "x_inner_y_up")
+    ppv = r.choice("printed_position_vector", ("specific_force", "gravity"),
+                   "specific_force")
+    tables = r.tables(r.table_name("steps"))
+    any_pair = any("pair" in t for t in tables)
+    steps = [_step(t.with_step(i), i, top, mount) for i, t in enumerate(tables, start=1)]
     if not any_pair:
-        rate_idx = [s["index"] for s in steps if s["kind"] == "rate"]
-        for a, b in zip(rate_idx[0::2], rate_idx[1::2], strict=False):
-            steps[a - 1]["pair"] = b
-            steps[b - 1]["pair"] = a
-    for s in steps:
-        j = s["pair"]
-        if j is None:
-            continue
-        i = s["index"]
-        if not 1 <= j <= n or j == i:
-            raise FileFormatError(path, f"expected another step number in 1..{n}, got {j}",
-                                  field="pair", step=i)
-        if s["kind"] != "rate" or steps[j - 1]["kind"] != "rate":
-            raise FileFormatError(path, f"pairs join two rate steps; step {i} is "
-                                  f"{s['kind']}, step {j} is {steps[j - 1]['kind']}",
-                                  field="pair", step=i)
-        if steps[j - 1]["pair"] != i:
-            raise FileFormatError(path, f"pair must be mutual: step {i} pairs {j} but step "
-                                  f"{j} pairs {steps[j - 1]['pair']}", field="pair", step=i)
-    return Sequence(
-        name=str(doc.get("name", "sequence")),
-        steps=tuple(SequenceStep(**s) for s in steps),
-        table_rate=w_dps * DPS,
-        description=str(doc.get("description", "")),
-        source=path,
-        printed_position_vector=ppv,
-    )
+        _pair_in_order(steps)
+    for st, t in zip(steps, tables, strict=True):
+        _check_pair(t.with_step(st["index"]), st, steps)
+    seq = Sequence(
+        name=r.string("name", default_name), steps=tuple(SequenceStep(**s) for s in steps),
+        table_rate=top["table_rate_dps"] * DPS,
+        description=r.string("description", "", nonempty=False),
+        source=r.path, printed_position_vector=ppv)
+    r.finish()
+    return seq
+
+
+def _positive_override(r: Fields, key: str, v: float) -> float:
+    if not (isinstance(v, int | float) and math.isfinite(v) and v > 0):
+        raise r.error(key, f"expected a positive number, got {v!r} (given as an override)")
+    return float(v)
+
+
+def _rate(d: Fields, axis: str, w_dps: float) -> float:
+    """The rate of one table axis (rad/s) from ``<axis>_rate_w`` or ``<axis>_rate_dps``."""
+    kw, kd = f"{axis}_rate_w", f"{axis}_rate_dps"
+    w, dps = d.number(kw, None), d.number(kd, None)
+    if w is not None and dps is not None:
+        raise d.error(kw, f"give either '{kw}' or '{kd}', not both")
+    if w is not None:
+        return w * w_dps * DPS
+    return 0.0 if dps is None else dps * DPS
+
+
+def _step(d: Fields, i: int, top: dict[str, float], mount_default: str) -> dict[str, Any]:
+    """One ``[[steps]]`` table (fields named by bare key and step number)."""
+    wi = _rate(d, "inner", top["table_rate_dps"])
+    wo = _rate(d, "outer", top["table_rate_dps"])
+    turning = wi != 0.0 or wo != 0.0
+    kind = d.choice("kind", ("rate", "position"), "rate" if turning else "position")
+    if kind == "rate" and not turning:
+        raise d.error("kind", "a rate step needs a non-zero inner or outer rate "
+                      "(inner_rate_w, inner_rate_dps, outer_rate_w or outer_rate_dps)")
+    if kind == "position" and turning:
+        raise d.error("kind", "a position step must have zero rates")
+    printed = d.array("printed", (3,), None)
+    step = dict(
+        index=i, kind=kind, inner=d.number("inner_deg", 0.0) * DEG,
+        outer=d.number("outer_deg", 0.0) * DEG, inner_rate=wi, outer_rate=wo,
+        mount=d.choice("mount", sorted(MOUNTS), mount_default),
+        duration_s=_duration(d, kind, wi, wo, top), pair=d.integer("pair", None),
+        label=d.string("label", "", nonempty=False),
+        printed=None if printed is None else tuple(float(v) for v in printed),
+        printed_agrees=d.boolean("printed_agrees", True),
+        note=d.string("note", "", nonempty=False))
+    d.finish()
+    return step
+
+
+def _duration(d: Fields, kind: str, wi: float, wo: float, top: dict[str, float]) -> float:
+    """Step length (s): ``duration_s``, or whole turns of the turning axis, or the default."""
+    turns = d.number("turns", None, positive=True)
+    dur = d.number("duration_s", None, positive=True)
+    if turns is not None and dur is not None:
+        raise d.error("turns", "give either 'turns' or 'duration_s', not both")
+    if dur is not None:
+        return dur
+    if kind == "position":
+        if turns is not None:
+            raise d.error("turns", "a position step has no turns; give 'duration_s'")
+        return top["position_duration_s"]
+    if wi != 0.0 and wo != 0.0:
+        raise d.error("duration_s", "both axes turn: give 'duration_s' (turns are ambiguous)")
+    return (turns or top["turns"]) * 2.0 * math.pi / abs(wi or wo)
+
+
+def _pair_in_order(steps: list[dict[str, Any]]) -> None:
+    """No step names a pair: rate steps pair in file order (1st with 2nd, 3rd with 4th)."""
+    rate_idx = [s["index"] for s in steps if s["kind"] == "rate"]
+    for a, b in zip(rate_idx[0::2], rate_idx[1::2], strict=False):
+        steps[a - 1]["pair"] = b
+        steps[b - 1]["pair"] = a
+
+
+def _check_pair(d: Fields, s: dict[str, Any], steps: list[dict[str, Any]]) -> None:
+    """Pairs join two different rate steps, mutually."""
+    j, i, n = s["pair"], s["index"], len(steps)
+    if j is None:
+        return
+    if not 1 <= j <= n or j == i:
+        raise d.error("pair", f"expected another step number in 1..{n}, got {j}")
+    other = steps[j - 1]
+    if s["kind"] != "rate" or other["kind"] != "rate":
+        raise d.error("pair", f"pairs join two rate steps; step {i} is {s['kind']}, step "
+                      f"{j} is {other['kind']}")
+    if other["pair"] != i:
+        raise d.error("pair", f"pair must be mutual: step {i} pairs {j} but step {j} pairs "
+                      f"{other['pair']}")

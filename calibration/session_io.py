@@ -40,8 +40,6 @@ Loading parses with numpy's C reader (a 16-step 100 Hz session, 58k rows, in abo
 from __future__ import annotations
 
 import json
-import math
-from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -50,7 +48,7 @@ import numpy as np
 from calibration.session import Session, Step
 from calibration.turntable import MOUNTS
 from fdi.errors import ConfigError, FileFormatError
-from fdi.fileio import read_json_object, to_jsonable
+from fdi.fileio import Fields, to_jsonable
 from fdi.geometry import Configuration
 from fdi.units import DEG, DPS, RAW_UNITS
 
@@ -131,53 +129,215 @@ def save_session(session: Session, directory: str | Path) -> Path:
 
 
 # -- reading ------------------------------------------------------------------------------
-class _M:
-    """Manifest field access naming the file and field on every error."""
+def load_session(directory: str | Path) -> Session:
+    """Read and validate a session directory.
 
-    def __init__(self, path: str) -> None:
-        self.path = path
+    Raises
+    ------
+    FileFormatError
+        Missing file, bad JSON, wrong schema or version, missing, malformed or unknown
+        manifest field, unknown raw unit, missing column, non-numeric or non-finite sample,
+        a step number not in the manifest, a step with fewer than :data:`MIN_STEP_SAMPLES`
+        samples. The message names the file, the line, the step and the field, and what
+        was expected.
+    """
+    d = Path(directory)
+    if not d.is_dir():
+        raise FileFormatError(str(d), "no such session directory (expected a directory with "
+                              "manifest.json and samples.csv)")
+    r = Fields.from_json(d / "manifest.json", SESSION_SCHEMA, hint="; a session directory "
+                         "holds manifest.json and samples.csv")
+    fs = r.number("sample_rate_hz", positive=True)
+    lat = r.number("latitude_deg", lo=-90.0, hi=90.0)
+    grav = r.number("gravity_mps2", None, positive=True)
+    gcfg, acfg = _configurations(r.mapping("configuration"))
+    units = _raw_units(r.mapping("raw_units"), acfg is not None)
+    steps, mounts = _steps(r.tables("steps"))
+    table = _SampleTable.read(d, r.mapping("samples"))
+    meta = r.free("meta", {})
+    r.finish()
+    gcols = [f"gyro.{n}" for n in gcfg.sensor_names]
+    acols = [] if acfg is None else [f"accel.{n}" for n in acfg.sensor_names]
+    table.require([*TABLE_COLUMNS, *gcols, *acols])
+    step_no = table.check(steps)
+    meta["mounts"] = mounts
+    return Session(
+        gyro_config=gcfg, accel_config=acfg, sample_rate_hz=fs, latitude_deg=lat,
+        steps=steps, t=table.column("t").copy(), step=step_no,
+        inner=table.column("inner_deg") * DEG, outer=table.column("outer_deg") * DEG,
+        inner_rate=table.column("inner_rate_dps") * DPS,
+        outer_rate=table.column("outer_rate_dps") * DPS, raw_gyro=table.columns(gcols),
+        raw_accel=table.columns(acols) if acols else None, gyro_raw_unit=units["gyro"],
+        accel_raw_unit=units.get("accel", "raw"), gravity=grav, source=str(d), meta=meta)
 
-    def fail(self, msg: str, field: str | None = None, step: int | None = None
-             ) -> FileFormatError:
-        return FileFormatError(self.path, msg, field=field, step=step)
 
-    def get(self, d: Any, key: str, field: str, step: int | None = None) -> Any:
-        if not isinstance(d, Mapping):
-            raise self.fail("expected an object", field.rsplit(".", 1)[0], step)
-        if key not in d:
-            raise self.fail("missing", field, step)
-        return d[key]
-
-    def number(self, v: Any, field: str, *, positive: bool = False) -> float:
-        if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
-            raise self.fail(f"expected a finite number, got {v!r}", field)
-        if positive and v <= 0:
-            raise self.fail(f"expected a positive number, got {v!r}", field)
-        return float(v)
+def _configurations(c: Fields) -> tuple[Configuration, Configuration | None]:
+    """``configuration.gyro`` and the optional ``configuration.accel``."""
+    gcfg = _configuration(c.mapping("gyro"), "gyro")
+    acc = c.mapping("accel", None)
+    acfg = None if acc is None else _configuration(acc, "accel")
+    c.finish()
+    return gcfg, acfg
 
 
-def _config_from(m: _M, d: Any, kind: str) -> Configuration:
-    f = f"configuration.{kind}"
-    axes = m.get(d, "axes", f + ".axes")
-    try:
-        H = np.array(axes, dtype=float)
-    except (TypeError, ValueError):
-        raise m.fail("expected a list of [x, y, z] axes", f + ".axes") from None
-    if H.ndim != 2 or H.shape[1] != 3:
-        raise m.fail(f"expected shape n×3, got {H.shape}", f + ".axes")
-    names = d.get("sensor_names") or [f"s{i + 1}" for i in range(H.shape[0])]
-    if (not isinstance(names, list) or len(names) != H.shape[0]
-            or not all(isinstance(n, str) and n for n in names)):
-        raise m.fail(f"expected {H.shape[0]} names", f + ".sensor_names")
-    groups = d.get("groups") or [list(range(1, H.shape[0] + 1))]
+def _configuration(c: Fields, kind: str) -> Configuration:
+    H = c.array("axes", (None, 3))
+    n = H.shape[0]
+    names = c.get("sensor_names", None) or [f"s{i + 1}" for i in range(n)]
+    if (not isinstance(names, list) or len(names) != n
+            or not all(isinstance(x, str) and x for x in names)):
+        raise c.error("sensor_names", f"expected {n} names")
+    groups = c.get("groups", None) or [list(range(1, n + 1))]
     try:
         g0 = tuple(tuple(int(i) - 1 for i in g) for g in groups)
     except (TypeError, ValueError, OverflowError):
-        raise m.fail("expected lists of 1-based sensor numbers", f + ".groups") from None
+        raise c.error("groups", "expected lists of 1-based sensor numbers") from None
+    name = str(c.get("name", kind))
+    c.finish()
     try:
-        return Configuration(str(d.get("name", kind)), H, tuple(str(n) for n in names), g0)
+        return Configuration(name, H, tuple(names), g0)
     except ConfigError as exc:
-        raise m.fail(str(exc), f) from None
+        raise c.error(None, str(exc)) from None
+
+
+def _raw_units(u: Fields, with_accel: bool) -> dict[str, str]:
+    """``raw_units``: one of :data:`fdi.units.RAW_UNITS` per sensor kind present."""
+    units = {kind: u.choice(kind, sorted(RAW_UNITS)) for kind in _KINDS
+             if kind == "gyro" or with_accel}
+    u.finish(accept=_KINDS)
+    return units
+
+
+def _steps(tables: list[Fields]) -> tuple[tuple[Step, ...], dict[str, str]]:
+    """The manifest's steps (unique numbers, rotation matrices, pairs within the manifest)
+    and their mounting names."""
+    steps: list[Step] = []
+    mounts: dict[str, str] = {}
+    for s in tables:
+        idx = s.integer("index", lo=1)
+        if str(idx) in mounts:
+            raise s.error("index", f"expected a unique step number >= 1, got {idx!r}")
+        s = s.with_step(idx)
+        steps.append(Step(index=idx, kind=s.choice("kind", ("rate", "position")),
+                          mat_pb=_rotation(s), label=str(s.get("label", "")),
+                          pair=s.integer("pair", None)))
+        mounts[str(idx)] = str(s.get("mount", "custom"))
+        s.finish()
+    for st, s in zip(steps, tables, strict=True):
+        if st.pair is not None and str(st.pair) not in mounts:
+            raise s.with_step(st.index).error("pair", f"pair {st.pair} is not a step of "
+                                              "this manifest")
+    return tuple(steps), mounts
+
+
+def _rotation(s: Fields) -> np.ndarray:
+    try:
+        R = s.array("mat_pb", (3, 3))
+    except FileFormatError:
+        R = None
+    if (R is None or not np.allclose(R.T @ R, np.eye(3), atol=1e-6)
+            or np.linalg.det(R) < 0):
+        raise s.error("mat_pb", "expected a 3×3 rotation matrix (body axes as columns in "
+                      "plate coordinates)")
+    return R
+
+
+class _SampleTable:
+    """``samples.csv``: the header and the numbers, with errors naming line and column."""
+
+    def __init__(self, csv: Path, cols: list[str], data: np.ndarray, manifest: str) -> None:
+        self.csv, self.path, self.cols, self.data = csv, str(csv), cols, data
+        self.manifest = manifest
+        self.pos = {c: i for i, c in enumerate(cols)}
+
+    @classmethod
+    def read(cls, d: Path, samp: Fields) -> _SampleTable:
+        """Read the file the ``samples`` object names; check ``samples.rows``."""
+        csv = d / samp.string("file")
+        rows = samp.get("rows", None)
+        samp.finish(accept=("columns",))
+        mname = Path(samp.path).name
+        cols = cls._header(csv, mname)
+        try:
+            data = np.loadtxt(csv, delimiter=",", skiprows=1, dtype=float, ndmin=2)
+        except ValueError:
+            line, j, what = _bad_cell(csv, len(cols), None)
+            if j is None:
+                raise FileFormatError(str(csv), f"malformed row: {what}", line=line) from None
+            raise FileFormatError(str(csv), f"expected a number, got {what!r}", line=line,
+                                  field=cols[j]) from None
+        if data.shape[1] != len(cols):
+            raise FileFormatError(str(csv), f"rows hold {data.shape[1]} values, the header "
+                                  f"{len(cols)}", line=2)
+        if isinstance(rows, int) and not isinstance(rows, bool) and rows != data.shape[0]:
+            raise FileFormatError(str(csv), f"holds {data.shape[0]} sample rows, the manifest "
+                                  f"says {rows} (truncated or edited file? see {mname})",
+                                  field="samples.rows")
+        return cls(csv, cols, data, mname)
+
+    @staticmethod
+    def _header(csv: Path, mname: str) -> list[str]:
+        try:
+            with csv.open(encoding="utf-8") as fh:
+                header = fh.readline()
+        except OSError as exc:
+            raise FileFormatError(str(csv), f"cannot read ({exc.strerror}); {mname} names it "
+                                  "as the sample file", field="samples.file") from None
+        except UnicodeDecodeError as exc:
+            raise FileFormatError(str(csv), f"not UTF-8 text ({exc.reason} at byte "
+                                  f"{exc.start})", line=1) from None
+        return [c.strip() for c in header.strip().split(",")]
+
+    def require(self, need: list[str]) -> None:
+        """Every column of ``need`` present, every value in them finite."""
+        for c in need:
+            if c not in self.pos:
+                raise FileFormatError(self.path, f"missing column; the header must hold "
+                                      f"{', '.join(need)} (as {self.manifest} says)", line=1,
+                                      field=c)
+        bad = ~np.isfinite(self.data[:, [self.pos[c] for c in need]])
+        if bad.any():
+            r, jj = np.argwhere(bad)[0]
+            sc = self.data[r, self.pos["step"]]
+            st = int(sc) if np.isfinite(sc) and sc == round(sc) else None
+            raise self.error(int(r), f"expected a finite number, got "
+                             f"{self.data[r, self.pos[need[jj]]]!r}", need[jj], st)
+
+    def error(self, row: int, message: str, column: str, step: int | None = None
+              ) -> FileFormatError:
+        """The error at data row ``row`` (0-based), naming its line in the file."""
+        line, _, _ = _bad_cell(self.csv, len(self.cols), row)
+        return FileFormatError(self.path, message, line=line, field=column, step=step)
+
+    def column(self, name: str) -> np.ndarray:
+        return self.data[:, self.pos[name]]
+
+    def columns(self, names: list[str]) -> np.ndarray:
+        return self.data[:, [self.pos[c] for c in names]]
+
+    def check(self, steps: tuple[Step, ...]) -> np.ndarray:
+        """Step numbers of the manifest, time increasing, enough samples per step;
+        returns the step column as integers."""
+        step_col = self.column("step")
+        steps_arr = np.rint(step_col).astype(np.int64)
+        known = np.array(sorted(s.index for s in steps))
+        wrong = (steps_arr != step_col) | ~np.isin(steps_arr, known)
+        if wrong.any():
+            r = int(np.flatnonzero(wrong)[0])
+            raise self.error(r, f"step {step_col[r]:g} is not a step of the manifest (steps "
+                             f"{known.min()}..{known.max()})", "step")
+        t = self.column("t")
+        if t.size > 1 and np.any(np.diff(t) <= 0):
+            r = int(np.flatnonzero(np.diff(t) <= 0)[0]) + 1
+            raise self.error(r, "time must increase from row to row", "t",
+                             int(steps_arr[r]))
+        counts = np.bincount(steps_arr, minlength=int(known.max()) + 1)
+        for st in steps:
+            c = int(counts[st.index])
+            if c < MIN_STEP_SAMPLES:
+                raise FileFormatError(self.path, f"step has {c} samples, expected at least "
+                                      f"{MIN_STEP_SAMPLES}", field="step", step=st.index)
+        return steps_arr
 
 
 def _bad_cell(csv: Path, ncols: int, data_row: int | None) -> tuple[int, int | None, str]:
@@ -204,174 +364,3 @@ def _bad_cell(csv: Path, ncols: int, data_row: int | None) -> tuple[int, int | N
                 except ValueError:
                     return lineno, j, c
     return 0, None, ""
-
-
-def load_session(directory: str | Path) -> Session:
-    """Read and validate a session directory.
-
-    Raises
-    ------
-    FileFormatError
-        Missing file, bad JSON, wrong schema or version, missing or malformed manifest
-        field, unknown raw unit, missing column, non-numeric or non-finite sample, a step
-        number not in the manifest, a step with fewer than :data:`MIN_STEP_SAMPLES` samples.
-        The message names the file, the line, the step and the field, and what was expected.
-    """
-    d = Path(directory)
-    mpath = d / "manifest.json"
-    m = _M(str(mpath))
-    if not d.is_dir():
-        raise FileFormatError(str(d), "no such session directory (expected a directory with "
-                              "manifest.json and samples.csv)")
-    doc = read_json_object(mpath, SESSION_SCHEMA, hint="; a session directory holds "
-                           "manifest.json and samples.csv")
-    fs = m.number(m.get(doc, "sample_rate_hz", "sample_rate_hz"), "sample_rate_hz",
-                  positive=True)
-    lat = m.number(m.get(doc, "latitude_deg", "latitude_deg"), "latitude_deg")
-    if not -90.0 <= lat <= 90.0:
-        raise m.fail(f"expected a latitude in [-90, 90], got {lat}", "latitude_deg")
-    grav = doc.get("gravity_mps2")
-    grav = None if grav is None else m.number(grav, "gravity_mps2", positive=True)
-    conf = m.get(doc, "configuration", "configuration")
-    gcfg = _config_from(m, m.get(conf, "gyro", "configuration.gyro"), "gyro")
-    acfg = None
-    if isinstance(conf, Mapping) and conf.get("accel") is not None:
-        acfg = _config_from(m, conf["accel"], "accel")
-    units = m.get(doc, "raw_units", "raw_units")
-    raw_units = {}
-    for kind in _KINDS:
-        if kind == "accel" and acfg is None:
-            continue
-        u = m.get(units, kind, f"raw_units.{kind}")
-        if not isinstance(u, str) or u not in RAW_UNITS:
-            raise m.fail(f"unknown unit {u!r}; expected one of {', '.join(sorted(RAW_UNITS))}",
-                         f"raw_units.{kind}")
-        raw_units[kind] = u
-
-    steps_doc = m.get(doc, "steps", "steps")
-    if not isinstance(steps_doc, list) or not steps_doc:
-        raise m.fail("expected a non-empty list of steps", "steps")
-    steps: list[Step] = []
-    mounts: dict[str, str] = {}
-    seen: set[int] = set()
-    for k, s in enumerate(steps_doc, start=1):
-        if not isinstance(s, Mapping):
-            raise m.fail("expected an object", f"steps[{k}]")
-        idx = s.get("index")
-        if isinstance(idx, bool) or not isinstance(idx, int) or idx < 1 or idx in seen:
-            raise m.fail(f"expected a unique step number >= 1, got {idx!r}",
-                         f"steps[{k}].index")
-        seen.add(idx)
-        kind = s.get("kind")
-        if kind not in ("rate", "position"):
-            raise m.fail(f"expected 'rate' or 'position', got {kind!r}", "kind", idx)
-        try:
-            R = np.array(m.get(s, "mat_pb", "mat_pb", idx), dtype=float)
-        except (TypeError, ValueError):
-            raise m.fail("expected a 3×3 matrix", "mat_pb", idx) from None
-        if (R.shape != (3, 3) or not np.all(np.isfinite(R))
-                or not np.allclose(R.T @ R, np.eye(3), atol=1e-6)
-                or np.linalg.det(R) < 0):
-            raise m.fail("expected a 3×3 rotation matrix (body axes as columns in plate "
-                         "coordinates)", "mat_pb", idx)
-        pair = s.get("pair")
-        if pair is not None and (isinstance(pair, bool) or not isinstance(pair, int)):
-            raise m.fail(f"expected a step number or null, got {pair!r}", "pair", idx)
-        steps.append(Step(index=idx, kind=kind, mat_pb=R, label=str(s.get("label", "")),
-                          pair=pair))
-        mounts[str(idx)] = str(s.get("mount", "custom"))
-    for st in steps:
-        if st.pair is not None and st.pair not in seen:
-            raise m.fail(f"pair {st.pair} is not a step of this manifest", "pair", st.index)
-
-    samp = m.get(doc, "samples", "samples")
-    fname = m.get(samp, "file", "samples.file")
-    if not isinstance(fname, str) or not fname.strip():
-        raise m.fail(f"expected a file name, got {fname!r}", "samples.file")
-    csv = d / fname
-    cpath = str(csv)
-    try:
-        with csv.open(encoding="utf-8") as fh:
-            header = fh.readline()
-    except OSError as exc:
-        raise FileFormatError(cpath, f"cannot read ({exc.strerror}); {mpath.name} names it "
-                              "as the sample file", field="samples.file") from None
-    except UnicodeDecodeError as exc:
-        raise FileFormatError(cpath, f"not UTF-8 text ({exc.reason} at byte {exc.start})",
-                              line=1) from None
-    cols = [c.strip() for c in header.strip().split(",")]
-    need = list(TABLE_COLUMNS) + [f"gyro.{n}" for n in gcfg.sensor_names]
-    if acfg is not None:
-        need += [f"accel.{n}" for n in acfg.sensor_names]
-    for c in need:
-        if c not in cols:
-            raise FileFormatError(cpath, f"missing column; the header must hold "
-                                  f"{', '.join(need)} (as {mpath.name} says)", line=1,
-                                  field=c)
-    try:
-        data = np.loadtxt(csv, delimiter=",", skiprows=1, dtype=float, ndmin=2)
-    except ValueError:
-        line, j, what = _bad_cell(csv, len(cols), None)
-        if j is None:
-            raise FileFormatError(cpath, f"malformed row: {what}", line=line) from None
-        raise FileFormatError(cpath, f"expected a number, got {what!r}", line=line,
-                              field=cols[j]) from None
-    if data.shape[1] != len(cols):
-        raise FileFormatError(cpath, f"rows hold {data.shape[1]} values, the header "
-                              f"{len(cols)}", line=2)
-    rows = samp.get("rows") if isinstance(samp, Mapping) else None
-    if isinstance(rows, int) and not isinstance(rows, bool) and rows != data.shape[0]:
-        raise FileFormatError(cpath, f"holds {data.shape[0]} sample rows, the manifest says "
-                              f"{rows} (truncated or edited file? see {mpath.name})",
-                              field="samples.rows")
-    pos = {c: i for i, c in enumerate(cols)}
-    step_col = data[:, pos["step"]]
-    ok_step = np.isfinite(step_col)
-    bad = ~np.isfinite(data[:, [pos[c] for c in need]])
-    if bad.any():
-        r, jj = np.argwhere(bad)[0]
-        line, _, _ = _bad_cell(csv, len(cols), int(r))
-        st = int(step_col[r]) if ok_step[r] and step_col[r] == round(step_col[r]) else None
-        raise FileFormatError(cpath, f"expected a finite number, got "
-                              f"{data[r, pos[need[jj]]]!r}", line=line, field=need[jj],
-                              step=st)
-    steps_arr = np.rint(step_col).astype(np.int64)
-    known = np.array(sorted(seen))
-    wrong = (steps_arr != step_col) | ~np.isin(steps_arr, known)
-    if wrong.any():
-        r = int(np.flatnonzero(wrong)[0])
-        line, _, _ = _bad_cell(csv, len(cols), r)
-        raise FileFormatError(cpath, f"step {step_col[r]:g} is not a step of the manifest "
-                              f"(steps {known.min()}..{known.max()})", line=line,
-                              field="step")
-    t = data[:, pos["t"]]
-    if t.size > 1 and np.any(np.diff(t) <= 0):
-        r = int(np.flatnonzero(np.diff(t) <= 0)[0]) + 1
-        line, _, _ = _bad_cell(csv, len(cols), r)
-        raise FileFormatError(cpath, "time must increase from row to row", line=line,
-                              field="t", step=int(steps_arr[r]))
-    counts = np.bincount(steps_arr, minlength=int(known.max()) + 1)
-    for st in steps:
-        c = int(counts[st.index])
-        if c < MIN_STEP_SAMPLES:
-            raise FileFormatError(cpath, f"step has {c} samples, expected at least "
-                                  f"{MIN_STEP_SAMPLES}", field="step", step=st.index)
-
-    meta_doc = doc.get("meta") or {}
-    if not isinstance(meta_doc, Mapping):
-        raise m.fail(f"expected an object, got {meta_doc!r}", "meta")
-    meta = dict(meta_doc)
-    meta["mounts"] = mounts
-    raw_a = None
-    if acfg is not None:
-        raw_a = data[:, [pos[f"accel.{n}"] for n in acfg.sensor_names]]
-    return Session(
-        gyro_config=gcfg, accel_config=acfg, sample_rate_hz=fs, latitude_deg=lat,
-        steps=tuple(steps), t=t.copy(), step=steps_arr,
-        inner=data[:, pos["inner_deg"]] * DEG, outer=data[:, pos["outer_deg"]] * DEG,
-        inner_rate=data[:, pos["inner_rate_dps"]] * DPS,
-        outer_rate=data[:, pos["outer_rate_dps"]] * DPS,
-        raw_gyro=data[:, [pos[f"gyro.{n}"] for n in gcfg.sensor_names]],
-        raw_accel=raw_a, gyro_raw_unit=raw_units["gyro"],
-        accel_raw_unit=raw_units.get("accel", "raw"), gravity=grav, source=str(d),
-        meta=meta)

@@ -35,15 +35,15 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from fdi.errors import ConfigError, FileFormatError
-from fdi.fileio import read_json_object, to_jsonable
+from fdi.errors import ConfigError
+from fdi.fileio import Fields, read_json_object, to_jsonable
 from fdi.units import (
     input_unit_factor,
     scale_factor_from_si,
@@ -324,43 +324,8 @@ def _sensor_to_dict(c: SensorCal) -> dict[str, Any]:
 
 
 # -- reading ---------------------------------------------------------------------------
-class _Reader:
-    """Field access that names the file and the field on every error."""
-
-    def __init__(self, path: str) -> None:
-        self.path = path
-
-    def fail(self, field: str, msg: str) -> FileFormatError:
-        return FileFormatError(self.path, msg, field=field)
-
-    def get(self, d: Mapping[str, Any], key: str, where: str, default: Any = ...) -> Any:
-        if not isinstance(d, Mapping):
-            raise self.fail(where, "expected an object")
-        if key not in d:
-            if default is not ...:
-                return default
-            raise self.fail(f"{where}.{key}" if where else key, "missing")
-        return d[key]
-
-    def number(self, v: Any, field: str, *, positive: bool = False) -> float:
-        if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
-            raise self.fail(field, f"expected a finite number, got {v!r}")
-        if positive and v <= 0:
-            raise self.fail(field, f"expected a positive number, got {v!r}")
-        return float(v)
-
-    def array(self, v: Any, field: str, shape: Sequence[int | None]) -> np.ndarray:
-        try:
-            a = np.array(v, dtype=float)
-        except (TypeError, ValueError):
-            raise self.fail(field, "expected an array of numbers") from None
-        if a.ndim != len(shape) or any(s is not None and s != d for s, d in zip(shape, a.shape,
-                                                                                 strict=True)):
-            want = "×".join("n" if s is None else str(s) for s in shape)
-            raise self.fail(field, f"expected shape {want}, got {a.shape}")
-        if not np.all(np.isfinite(a)):
-            raise self.fail(field, "non-finite value")
-        return a
+_WRITTEN_ONLY = ("parity", "parity_accel")
+"""Top-level keys the writer adds for other tools (derived from the axes; not read back)."""
 
 
 def load_calibration(path: str | Path) -> Calibration:
@@ -369,136 +334,129 @@ def load_calibration(path: str | Path) -> Calibration:
     Raises
     ------
     FileFormatError
-        Missing file, bad JSON, wrong schema or version, missing or malformed field,
-        unknown unit; the message names the file and the field.
+        Missing file, bad JSON, wrong schema or version, missing, malformed or unknown
+        field, unknown unit; the message names the file and the field.
     """
     return calibration_from_dict(read_json_object(path), str(path))
 
 
 def calibration_from_dict(doc: Mapping[str, Any], path: str = "<calibration>") -> Calibration:
     """Build a :class:`Calibration` from its JSON dictionary (see :func:`load_calibration`)."""
-    r = _Reader(path)
-    schema = r.get(doc, "schema", "")
-    if not isinstance(schema, str) or not schema.startswith("rimu.calibration/"):
-        raise r.fail("schema", f"expected '{CALIBRATION_SCHEMA}', got {schema!r}")
-    if schema != CALIBRATION_SCHEMA:
-        raise r.fail("schema", f"unsupported version {schema!r}; this rimu reads "
-                     f"'{CALIBRATION_SCHEMA}'")
-    rate = r.number(r.get(doc, "sample_rate_hz", ""), "sample_rate_hz", positive=True)
-    sensors = r.get(doc, "sensors", "")
-    if not isinstance(sensors, Mapping) or not sensors:
-        raise r.fail("sensors", "expected an object with 'gyro' and/or 'accel' lists")
-    noise = r.get(doc, "noise_covariance", "")
-    sets: dict[str, SensorSet] = {}
-    for kind, entries in sensors.items():
-        if kind not in KINDS:
-            raise r.fail(f"sensors.{kind}", f"unknown sensor kind; expected one of {KINDS}")
-        if not isinstance(entries, list) or not entries:
-            raise r.fail(f"sensors.{kind}", "expected a non-empty list")
-        cals = tuple(_sensor_from_dict(r, e, f"sensors.{kind}[{i + 1}]")
-                     for i, e in enumerate(entries))
-        n = len(cals)
-        cov = r.array(r.get(noise, kind, "noise_covariance"), f"noise_covariance.{kind}", (n, n))
-        _check_covariance(r, cov, f"noise_covariance.{kind}")
-        groups, mats = [], []
-        mm = r.get(doc.get("misalignment_matrices", {}), kind, "misalignment_matrices", [])
-        if not isinstance(mm, list):
-            raise r.fail(f"misalignment_matrices.{kind}", "expected a list")
-        for j, g in enumerate(mm):
-            f = f"misalignment_matrices.{kind}[{j + 1}]"
-            sens = r.get(g, "sensors", f)
-            if not isinstance(sens, list) or not all(
-                    isinstance(i, int) and not isinstance(i, bool) for i in sens):
-                raise r.fail(f + ".sensors", f"expected a list of sensor numbers, got {sens!r}")
-            idx = [i - 1 for i in sens]
-            if any(i < 0 or i >= n for i in idx):
-                raise r.fail(f + ".sensors", f"sensor numbers must be 1..{n}")
-            groups.append(tuple(idx))
-            mats.append(r.array(r.get(g, "M", f), f + ".M", (len(idx), None)))
-        allan = None
-        al = doc.get("allan", {}).get(kind) if isinstance(doc.get("allan"), Mapping) else None
-        if al is not None:
-            taus = r.array(r.get(al, "tau_s", f"allan.{kind}"), f"allan.{kind}.tau_s", (None,))
-            adev = r.array(r.get(al, "adev", f"allan.{kind}"), f"allan.{kind}.adev",
-                           (len(taus), n))
-            allan = AllanTable(taus, adev)
-        sets[kind] = SensorSet(kind, cals, cov, tuple(groups), tuple(mats), allan)
-    er = doc.get("earth_rate_dph")
-    ers = doc.get("earth_rate_dph_sd")
-    lat = doc.get("latitude_deg")
-    return Calibration(
-        configuration=str(doc.get("configuration", "")),
-        sets=sets,
-        sample_rate_hz=rate,
-        earth_rate_dph=None if er is None else r.number(er, "earth_rate_dph"),
-        earth_rate_dph_sd=None if ers is None else r.number(ers, "earth_rate_dph_sd"),
-        latitude_deg=None if lat is None else r.number(lat, "latitude_deg"),
-        extra=dict(_mapping(r, doc.get("extra", {}) or {}, "extra")),
-    )
+    r = Fields(doc, path)
+    r.schema(CALIBRATION_SCHEMA)
+    rate = r.number("sample_rate_hz", positive=True)
+    sensors = r.mapping("sensors")
+    noise = r.mapping("noise_covariance")
+    mm = r.mapping("misalignment_matrices", {})
+    allan = r.mapping("allan", {})
+    if not sensors.keys():
+        raise r.error("sensors", "expected an object with 'gyro' and/or 'accel' lists")
+    sets = {kind: _sensor_set(sensors, noise, mm, allan, kind)
+            for kind in KINDS if kind in sensors}
+    sensors.finish()
+    noise.accept("unit", "sample_rate_hz")
+    for sub in (noise, mm, allan):
+        sub.finish(accept=sets)
+    cal = Calibration(
+        configuration=str(r.get("configuration", "")), sets=sets, sample_rate_hz=rate,
+        earth_rate_dph=r.number("earth_rate_dph", None),
+        earth_rate_dph_sd=r.number("earth_rate_dph_sd", None),
+        latitude_deg=r.number("latitude_deg", None), extra=r.free("extra", {}))
+    r.finish(accept=_WRITTEN_ONLY)
+    return cal
 
 
-def _check_covariance(r: _Reader, cov: np.ndarray, field: str) -> None:
+def _sensor_set(sensors: Fields, noise: Fields, mm: Fields, allan: Fields,
+                kind: str) -> SensorSet:
+    """One kind's sensors, noise covariance, misalignment matrices and Allan table."""
+    cals = tuple(_sensor_from(e) for e in sensors.tables(kind))
+    n = len(cals)
+    cov = noise.array(kind, (n, n))
+    _check_covariance(noise, cov, kind)
+    groups, mats = [], []
+    for g in mm.tables(kind, [], nonempty=False):
+        sens = g.get("sensors")
+        if not isinstance(sens, list) or not all(
+                isinstance(i, int) and not isinstance(i, bool) for i in sens):
+            raise g.error("sensors", f"expected a list of sensor numbers, got {sens!r}")
+        if any(not 1 <= i <= n for i in sens):
+            raise g.error("sensors", f"sensor numbers must be 1..{n}")
+        groups.append(tuple(i - 1 for i in sens))
+        mats.append(g.array("M", (len(sens), None)))
+        g.finish()
+    table = None
+    al = allan.mapping(kind, None)
+    if al is not None:
+        taus = al.array("tau_s", (None,))
+        table = AllanTable(taus, al.array("adev", (len(taus), n)))
+        al.finish(accept=("unit",))
+    return SensorSet(kind, cals, cov, tuple(groups), tuple(mats), table)
+
+
+def _check_covariance(r: Fields, cov: np.ndarray, key: str) -> None:
     """A noise covariance must be symmetric positive definite (the monitor whitens by it)."""
     scale = float(np.max(np.abs(cov))) if cov.size else 0.0
     if not np.allclose(cov, cov.T, rtol=1e-9, atol=1e-12 * scale):
-        raise r.fail(field, "expected a symmetric matrix")
+        raise r.error(key, "expected a symmetric matrix")
     try:
         np.linalg.cholesky(cov)
     except np.linalg.LinAlgError:
-        raise r.fail(field, "expected a positive definite matrix") from None
+        raise r.error(key, "expected a positive definite matrix") from None
     if not np.linalg.cond(cov) < 1e12:
-        raise r.fail(field, "nearly singular (condition number above 1e12)")
+        raise r.error(key, "nearly singular (condition number above 1e12)")
 
 
-def _mapping(r: _Reader, v: Any, field: str) -> Mapping[str, Any]:
-    if not isinstance(v, Mapping):
-        raise r.fail(field, f"expected an object, got {v!r}")
-    return v
+def _unit_axis(e: Fields, key: str) -> np.ndarray:
+    a = e.array(key, (3,))
+    if abs(np.linalg.norm(a) - 1.0) > 1e-6:
+        raise e.error(key, f"expected a unit vector, norm is {np.linalg.norm(a)}")
+    return a / np.linalg.norm(a)
 
 
-def _sensor_from_dict(r: _Reader, e: Any, where: str) -> SensorCal:
-    if not isinstance(e, Mapping):
-        raise r.fail(where, "expected an object")
-    axis = r.array(r.get(e, "axis", where), where + ".axis", (3,))
-    nom = r.array(r.get(e, "axis_nominal", where), where + ".axis_nominal", (3,))
-    for f, a in (("axis", axis), ("axis_nominal", nom)):
-        if abs(np.linalg.norm(a) - 1.0) > 1e-6:
-            raise r.fail(f"{where}.{f}", f"expected a unit vector, norm is {np.linalg.norm(a)}")
-    sfu = r.get(e, "scale_factor_unit", where)
-    bu = r.get(e, "bias_unit", where)
-    sf = r.number(r.get(e, "scale_factor", where), where + ".scale_factor", positive=True)
-    sfsd = r.number(r.get(e, "scale_factor_sd", where), where + ".scale_factor_sd")
+def _scale_factor_si(e: Fields) -> tuple[float, float, str]:
+    """(SF, SF sd) in SI and the file's unit; refused when out of range in SI."""
+    sfu = e.string("scale_factor_unit")
+    sf = e.number("scale_factor", positive=True)
+    sfsd = e.number("scale_factor_sd")
     try:
-        sf_si = scale_factor_to_si(sf, str(sfu))
-        sfsd_si = scale_factor_sd_to_si(sf, sfsd, str(sfu))
+        sf_si = scale_factor_to_si(sf, sfu)
+        sfsd_si = scale_factor_sd_to_si(sf, sfsd, sfu)
     except ConfigError as exc:
-        raise r.fail(where + ".scale_factor_unit", str(exc)) from None
+        raise e.error("scale_factor_unit", str(exc)) from None
     except (OverflowError, ZeroDivisionError):
         sf_si = sfsd_si = math.inf
     if not (math.isfinite(sf_si) and math.isfinite(sfsd_si) and sf_si > 0):
-        raise r.fail(where + ".scale_factor", f"{sf!r} (sd {sfsd!r}) {sfu} is out of range "
-                     "in SI units")
-    try:
-        bf = input_unit_factor(str(bu))
-    except ConfigError as exc:
-        raise r.fail(where + ".bias_unit", str(exc)) from None
-    bias = r.number(r.get(e, "bias", where), where + ".bias") * bf
-    bias_sd = r.number(r.get(e, "bias_sd", where), where + ".bias_sd") * bf
-    if not (bias_sd >= 0 and math.isfinite(bias_sd * bias_sd)):
-        raise r.fail(where + ".bias_sd", f"expected a standard deviation (≥ 0, squarable), "
-                     f"got {bias_sd / bf!r}")
-    mis_sd = r.array(r.get(e, "misalignment_mrad_sd", where), where + ".misalignment_mrad_sd",
-                     (2,)) * 1e-3
-    r.array(r.get(e, "misalignment_mrad", where), where + ".misalignment_mrad", (2,))
-    cov = r.array(e.get("input_error_cov", np.zeros((3, 3)).tolist()),
-                  where + ".input_error_cov", (3, 3))
-    rr = e.get("residual_rms")
-    return SensorCal(
-        name=str(r.get(e, "name", where)),
-        axis=axis / np.linalg.norm(axis), axis_nominal=nom / np.linalg.norm(nom),
-        scale_factor=sf_si, scale_factor_sd=sfsd_si, bias=bias, bias_sd=bias_sd,
-        input_error_cov=cov, misalignment_sd=mis_sd,
-        raw_unit=str(e.get("raw_unit", "raw")), scale_factor_unit=str(sfu), bias_unit=str(bu),
-        residual_rms=float("nan") if rr is None else r.number(rr, where + ".residual_rms"),
-    )
+        raise e.error("scale_factor", f"{sf!r} (sd {sfsd!r}) {sfu} is out of range in SI "
+                      "units")
+    return sf_si, sfsd_si, sfu
 
+
+def _bias_si(e: Fields) -> tuple[float, float, str]:
+    """(bias, bias sd) in SI and the file's unit."""
+    bu = e.string("bias_unit")
+    try:
+        bf = input_unit_factor(bu)
+    except ConfigError as exc:
+        raise e.error("bias_unit", str(exc)) from None
+    bias = e.number("bias") * bf
+    bias_sd = e.number("bias_sd") * bf
+    if not (bias_sd >= 0 and math.isfinite(bias_sd * bias_sd)):
+        raise e.error("bias_sd", f"expected a standard deviation (≥ 0, squarable), got "
+                      f"{bias_sd / bf!r}")
+    return bias, bias_sd, bu
+
+
+def _sensor_from(e: Fields) -> SensorCal:
+    axis, nom = _unit_axis(e, "axis"), _unit_axis(e, "axis_nominal")
+    sf, sf_sd, sfu = _scale_factor_si(e)
+    bias, bias_sd, bu = _bias_si(e)
+    e.array("misalignment_mrad", (2,))              # derived from the axes; checked only
+    c = SensorCal(
+        name=str(e.get("name")), axis=axis, axis_nominal=nom, scale_factor=sf,
+        scale_factor_sd=sf_sd, bias=bias, bias_sd=bias_sd,
+        input_error_cov=e.array("input_error_cov", (3, 3), np.zeros((3, 3))),
+        misalignment_sd=e.array("misalignment_mrad_sd", (2,)) * 1e-3,
+        raw_unit=str(e.get("raw_unit", "raw")), scale_factor_unit=sfu, bias_unit=bu,
+        residual_rms=e.number("residual_rms", float("nan")))
+    e.finish()
+    return c

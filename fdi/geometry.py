@@ -16,10 +16,11 @@ from pathlib import Path
 import numpy as np
 
 from fdi.errors import ConfigError, FileFormatError
-from fdi.fileio import read_toml_object
+from fdi.fileio import Fields
 
 __all__ = [
     "COLLINEAR_COS",
+    "CONFIGURATION_SCHEMA",
     "NAMED_CONFIGURATIONS",
     "CollinearSensorsWarning",
     "Configuration",
@@ -29,6 +30,7 @@ __all__ = [
     "triad",
 ]
 
+CONFIGURATION_SCHEMA = "rimu.configuration/1"
 COLLINEAR_COS = 0.9999
 """|cos| between two input axes above which they cannot be told apart (0.81° apart)."""
 
@@ -154,21 +156,24 @@ NAMED_CONFIGURATIONS = {"cone6": cone6, "tetrad": tetrad, "triad": triad}
 def load_configuration(spec: str | Path) -> Configuration:
     """A built-in configuration by name, or one read from a TOML file.
 
-    The TOML file holds an optional ``name`` and one ``[[sensor]]`` table per sensor with
-    ``axis = [x, y, z]`` (unit vector, MB frame), an optional ``name`` and an optional
-    ``group`` (any string or integer; sensors with the same group share one misalignment
-    matrix M). For example::
+    The TOML file holds an optional ``schema = "rimu.configuration/1"``, an optional
+    ``name`` and one ``[[sensors]]`` table per sensor with ``axis = [x, y, z]`` (unit
+    vector, MB frame), an optional ``name`` and an optional ``group`` (any string or
+    integer; sensors with the same group share one misalignment matrix M). For example::
 
+        schema = "rimu.configuration/1"
         name = "skewed-five"
-        [[sensor]]
+        [[sensors]]
         name = "a"
         axis = [0.0, 0.0, 1.0]
         group = 1
 
+    The older table name ``[[sensor]]`` is still read, with a :class:`DeprecationWarning`.
+
     Raises
     ------
     FileFormatError
-        The file is missing, not TOML, or a field is wrong (the message names it).
+        The file is missing, not TOML, a field is wrong or unknown (the message names it).
     ConfigError
         The geometry is invalid (non-unit axis, rank < 3, fewer than 4 sensors in a file).
     """
@@ -179,37 +184,30 @@ def load_configuration(spec: str | Path) -> Configuration:
     if not path.is_file():
         raise FileFormatError(str(path), "no such configuration file; built-in names are "
                               + ", ".join(sorted(NAMED_CONFIGURATIONS)))
-    doc = read_toml_object(path)
-    sensors = doc.get("sensor")
-    if not isinstance(sensors, list) or not sensors:
-        raise FileFormatError(str(path), "expected one or more [[sensor]] tables",
-                              field="sensor")
+    r = Fields.from_toml(path, CONFIGURATION_SCHEMA, schema_default=CONFIGURATION_SCHEMA)
+    table = r.table_name("sensors")
+    sensors = r.tables(table)
     if len(sensors) < 4:
         raise ConfigError(f"{path}: a redundant set needs n >= 4 sensors, got {len(sensors)}")
     axes, names, group_keys = [], [], []
-    for i, s in enumerate(sensors):
-        where = f"sensor[{i + 1}]"
-        if not isinstance(s, dict) or "axis" not in s:
-            raise FileFormatError(str(path), "missing 'axis = [x, y, z]'", field=f"{where}.axis")
-        ax = s["axis"]
-        if (not isinstance(ax, list) or len(ax) != 3
-                or not all(isinstance(v, int | float) and not isinstance(v, bool)
-                           and math.isfinite(v) for v in ax)):
-            raise FileFormatError(str(path), f"expected three finite numbers, got {ax!r}",
-                                  field=f"{where}.axis")
-        norm = math.hypot(*(float(v) for v in ax))
+    for i, s in enumerate(sensors, start=1):
+        axes.append(s.array("axis", (3,)))
+        norm = float(np.linalg.norm(axes[-1]))
         if abs(norm - 1.0) > _UNIT_TOL:
-            raise FileFormatError(str(path), f"axis norm is {norm:.6f}, expected 1",
-                                  field=f"{where}.axis")
-        axes.append([float(v) for v in ax])
-        names.append(str(s.get("name", f"s{i + 1}")))
+            raise s.error("axis", f"axis norm is {norm:.6f}, expected 1")
+        names.append(s.string("name", f"s{i}"))
         g = s.get("group", 0)
         if isinstance(g, bool) or not isinstance(g, str | int):
-            raise FileFormatError(str(path), f"expected a string or an integer, got {g!r}",
-                                  field=f"{where}.group")
+            raise s.error("group", f"expected a string or an integer, got {g!r}")
         group_keys.append(g)
+        s.finish()
+    name = r.string("name", path.stem)
+    r.finish()
     order: dict[object, list[int]] = {}
     for i, g in enumerate(group_keys):
         order.setdefault(g, []).append(i)
     groups = tuple(tuple(v) for v in order.values())
-    return Configuration(str(doc.get("name", path.stem)), np.array(axes), tuple(names), groups)
+    try:
+        return Configuration(name, np.array(axes), tuple(names), groups)
+    except ConfigError as exc:
+        raise FileFormatError(str(path), str(exc).removeprefix(f"{name}: ")) from None

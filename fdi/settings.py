@@ -13,8 +13,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from fdi.errors import ConfigError, FileFormatError
-from fdi.fileio import read_json_object
+from fdi.errors import ConfigError
+from fdi.fileio import Fields, read_json_object
 
 __all__ = [
     "DETECTORS",
@@ -150,79 +150,42 @@ MAX_SCALE = 1 << 20
 
 def thresholds_from_dict(doc: Any, path: str = "<thresholds>") -> Thresholds:
     """Build :class:`Thresholds` from its JSON dictionary (see :func:`load_thresholds`)."""
-    if not isinstance(doc, dict):
-        raise FileFormatError(path, "expected a JSON object")
-    schema = doc.get("schema")
-    if not isinstance(schema, str) or not schema.startswith("rimu.thresholds/"):
-        raise FileFormatError(path, f"expected '{THRESHOLDS_SCHEMA}', got {schema!r}",
-                              field="schema")
-    if schema != THRESHOLDS_SCHEMA:
-        raise FileFormatError(path, f"unsupported version {schema!r}; this rimu reads "
-                              f"'{THRESHOLDS_SCHEMA}'", field="schema")
-
-    def num(key: str, *, positive: bool = False, default: Any = ...) -> float:
-        if key not in doc:
-            if default is not ...:
-                return default
-            raise FileFormatError(path, "missing", field=key)
-        v = doc[key]
-        if v is None and default is not ...:
-            return default
-        if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
-            raise FileFormatError(path, f"expected a finite number, got {v!r}", field=key)
-        if positive and v <= 0:
-            raise FileFormatError(path, f"expected a positive number, got {v!r}", field=key)
-        return float(v)
-
-    def nums(key: str) -> tuple[float, ...]:
-        v = doc.get(key)
-        if not isinstance(v, list) or not v:
-            raise FileFormatError(path, "expected a non-empty list of numbers", field=key)
-        out = []
-        for j, x in enumerate(v):
-            if isinstance(x, bool) or not isinstance(x, int | float) or not math.isfinite(x):
-                raise FileFormatError(path, f"expected a finite number, got {x!r}",
-                                      field=f"{key}[{j + 1}]")
-            out.append(float(x))
-        return tuple(out)
-
-    kind = doc.get("kind")
-    if kind not in ("gyro", "accel"):
-        raise FileFormatError(path, f"expected 'gyro' or 'accel', got {kind!r}", field="kind")
-    scales = nums("scales")
-    if any(s < 1 or s != int(s) or s > MAX_SCALE for s in scales):
-        # the monitor keeps a ring of max(scales) sums: 1e308 would hang it
-        bad = next(x for x in scales if x < 1 or x != int(x) or x > MAX_SCALE)
-        raise FileFormatError(path, f"expected positive integers up to {MAX_SCALE}, got "
-                              f"{bad:g}", field="scales")
+    r = Fields(doc, path)
+    r.schema(THRESHOLDS_SCHEMA)
+    scales = r.numbers("scales")
+    bad = [x for x in scales if x < 1 or x != int(x) or x > MAX_SCALE]
+    if bad:         # the monitor keeps a ring of max(scales) sums: 1e308 would hang it
+        raise r.error("scales", f"expected positive integers up to {MAX_SCALE}, got "
+                      f"{bad[0]:g}")
     k = len(scales)
-    for key in ("alpha", "variance_factor", "threshold"):
-        if len(nums(key)) != k:
-            raise FileFormatError(path, f"expected {k} entries (one per scale)", field=key)
-    alpha = nums("alpha")
-    if any(not 0 < a < 1 for a in alpha):
-        raise FileFormatError(path, "expected probabilities in (0, 1)", field="alpha")
-    vf = nums("variance_factor")
-    if any(f <= 0 for f in vf):
-        raise FileFormatError(path, "expected positive factors", field="variance_factor")
-    n = num("n", positive=True)
-    if n != int(n):
-        raise FileFormatError(path, "expected an integer", field="n")
-    md = num("missed_detection", positive=True, default=1e-3)
-    if md >= 1:
-        raise FileFormatError(path, "expected a probability in (0, 1)", field="missed_detection")
-    det = doc.get("detector", "windows")
-    if det not in DETECTORS:
-        raise FileFormatError(path, f"expected one of {DETECTORS}, got {det!r}",
-                              field="detector")
-    return Thresholds(
-        kind=str(kind), detector=str(det), n=int(n),
-        sample_rate_hz=num("sample_rate_hz", positive=True),
-        false_alarms_per_hour=num("false_alarms_per_hour", positive=True),
-        scales=tuple(int(s) for s in scales), alpha=alpha, variance_factor=vf,
-        threshold=nums("threshold"), cusum_drift=num("cusum_drift", positive=True, default=0.5),
-        cusum_threshold=num("cusum_threshold", default=float("nan")),
-        missed_detection=md, notes=str(doc.get("notes", "")))
+    fields = dict(
+        kind=r.choice("kind", ("gyro", "accel")), n=r.integer("n", lo=1),
+        detector=r.choice("detector", DETECTORS, "windows"),
+        sample_rate_hz=r.number("sample_rate_hz", positive=True),
+        false_alarms_per_hour=r.number("false_alarms_per_hour", positive=True),
+        scales=tuple(int(s) for s in scales), alpha=_probabilities(r, "alpha", k),
+        variance_factor=r.numbers("variance_factor", length=k, positive=True),
+        threshold=r.numbers("threshold", length=k),
+        cusum_drift=r.number("cusum_drift", 0.5, positive=True),
+        cusum_threshold=r.number("cusum_threshold", float("nan")),
+        missed_detection=_probabilities(r, "missed_detection", None),
+        notes=r.string("notes", "", nonempty=False))
+    r.finish()
+    if fields["detector"] != "windows" and not fields["cusum_threshold"] > 0:
+        raise r.error("cusum_threshold", f"a {fields['detector']!r} detector needs a positive "
+                      "CUSUM threshold")
+    try:
+        return Thresholds(**fields)
+    except ConfigError as exc:          # a combination __post_init__ refuses
+        raise r.error(None, str(exc).removeprefix("thresholds: ")) from None
+
+
+def _probabilities(r: Fields, key: str, k: int | None) -> Any:
+    """``k`` probabilities in (0, 1) (k None: one, default 1e-3)."""
+    p = r.numbers(key, length=k) if k is not None else (r.number(key, 1e-3),)
+    if any(not 0 < a < 1 for a in p):
+        raise r.error(key, "expected a probability in (0, 1)")
+    return p if k is not None else p[0]
 
 
 @dataclass(frozen=True)

@@ -34,16 +34,14 @@ bytes before it. Rolling counters increase by one (mod 2^bits) per frame of a me
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
 from fdi.calfile import Calibration
-from fdi.errors import ConfigError, FileFormatError
-from fdi.fileio import read_toml_object
+from fdi.errors import ConfigError
+from fdi.fileio import Fields
 from fdi.units import INPUT_UNITS, RAW_UNITS
 from replay.frames import DEFAULT_DBC, imu_message_name
 
@@ -154,95 +152,57 @@ def default_channel_map(n: int, kind: str = "gyro", *,
                       source="<shipped rimu_imu.dbc>")
 
 
-def _opt_str(d: Mapping[str, Any], key: str, path: str, where: str) -> str | None:
-    v = d.get(key)
-    if v is None:
-        return None
-    if not isinstance(v, str) or not v:
-        raise FileFormatError(path, "expected a non-empty string", field=f"{where}.{key}")
-    return v
-
-
 def load_channel_map(path: str | Path) -> ChannelMap:
     """Read and validate a ``rimu.channel_map/1`` TOML file.
 
     Raises
     ------
     FileFormatError
-        Missing file, bad TOML, wrong schema, missing or malformed field (named).
+        Missing file, bad TOML, wrong schema, missing, malformed or unknown field (named,
+        with its line).
     """
     p = Path(path)
-    ps = str(p)
-    doc = read_toml_object(p, CHANNEL_MAP_SCHEMA)
-    kind = doc.get("kind", "gyro")
-    if kind not in ("gyro", "accel"):
-        raise FileFormatError(ps, f"expected 'gyro' or 'accel', got {kind!r}", field="kind")
-    dbc = doc.get("dbc")
-    if dbc is not None and not isinstance(dbc, str):
-        raise FileFormatError(ps, "expected a file name", field="dbc")
-    j1939 = doc.get("j1939", False)
-    if not isinstance(j1939, bool):
-        raise FileFormatError(ps, "expected true or false", field="j1939")
-    tol = doc.get("time_tolerance_s")
-    if tol is not None and (isinstance(tol, bool) or not isinstance(tol, int | float)
-                            or not math.isfinite(tol) or tol <= 0):
-        raise FileFormatError(ps, f"expected a positive number, got {tol!r}",
-                              field="time_tolerance_s")
-    mcd = doc.get("max_counter_delta", 3)
-    if isinstance(mcd, bool) or not isinstance(mcd, int) or mcd < 1:
-        raise FileFormatError(ps, f"expected an integer >= 1, got {mcd!r}",
-                              field="max_counter_delta")
-    entries = doc.get("sensors")
-    if not isinstance(entries, list) or not entries:
-        raise FileFormatError(ps, "expected a non-empty [[sensors]] list", field="sensors")
-    sensors = []
-    for i, e in enumerate(entries):
-        w = f"sensors[{i + 1}]"
-        if not isinstance(e, Mapping):
-            raise FileFormatError(ps, "expected a table", field=w)
-        for key in ("message", "signal"):
-            if not isinstance(e.get(key), str) or not e.get(key):
-                raise FileFormatError(ps, "missing or not a string", field=f"{w}.{key}")
-        unit = e.get("unit", "raw")
-        if not isinstance(unit, str) or (unit not in RAW_UNITS and unit not in INPUT_UNITS):
-            known = ", ".join(sorted(RAW_UNITS | set(INPUT_UNITS)))
-            raise FileFormatError(ps, f"unknown unit {unit!r}; expected one of {known}",
-                                  field=f"{w}.unit")
-        ax = e.get("axis_nominal")
-        axis = None
-        if ax is not None:
-            try:
-                axis = np.array(ax, dtype=float)
-            except (TypeError, ValueError):
-                raise FileFormatError(ps, "expected 3 numbers", field=f"{w}.axis_nominal") \
-                    from None
-            if axis.shape != (3,) or not np.all(np.isfinite(axis)) or \
-                    np.linalg.norm(axis) == 0:
-                raise FileFormatError(ps, "expected 3 finite numbers, not all zero",
-                                      field=f"{w}.axis_nominal")
-            axis = axis / np.linalg.norm(axis)
-        sa = e.get("source_address")
-        if sa is not None and (isinstance(sa, bool) or not isinstance(sa, int)
-                               or not 0 <= sa <= 0xFF):
-            raise FileFormatError(ps, f"expected 0..255, got {sa!r}",
-                                  field=f"{w}.source_address")
-        if j1939 and sa is None:
-            raise FileFormatError(ps, "a J1939 map needs each sensor's source address",
-                                  field=f"{w}.source_address")
-        ch = e.get("channel")
-        if ch is not None and (isinstance(ch, bool) or not isinstance(ch, int | str)):
-            raise FileFormatError(ps, "expected a channel number or name", field=f"{w}.channel")
-        sensors.append(SensorChannel(
-            name=str(e.get("name", f"{kind}{i + 1}")), message=e["message"],
-            signal=e["signal"], unit=unit, axis_nominal=axis, source_address=sa, channel=ch,
-            counter_signal=_opt_str(e, "counter_signal", ps, w),
-            crc_signal=_opt_str(e, "crc_signal", ps, w),
-            sample_counter_signal=_opt_str(e, "sample_counter_signal", ps, w),
-            status_signal=_opt_str(e, "status_signal", ps, w)))
-    return ChannelMap(tuple(sensors), kind=kind,
-                      dbc=None if dbc is None else (p.parent / dbc),
-                      j1939=j1939, time_tolerance_s=None if tol is None else float(tol),
-                      max_counter_delta=mcd, source=ps)
+    r = Fields.from_toml(p, CHANNEL_MAP_SCHEMA)
+    kind = r.choice("kind", ("gyro", "accel"), "gyro")
+    j1939 = r.boolean("j1939", False)
+    dbc = r.string("dbc", None)
+    tol = r.number("time_tolerance_s", None, positive=True)
+    cmap = ChannelMap(
+        tuple(_sensor_channel(e, f"{kind}{k}", j1939)
+              for k, e in enumerate(r.tables("sensors"), start=1)), kind=kind,
+        dbc=None if dbc is None else (p.parent / dbc), j1939=j1939,
+        time_tolerance_s=tol, max_counter_delta=r.integer("max_counter_delta", 3, lo=1),
+        source=str(p))
+    r.finish()
+    return cmap
+
+
+def _sensor_channel(e: Fields, default_name: str, j1939: bool) -> SensorChannel:
+    """One ``[[sensors]]`` table."""
+    unit = e.string("unit", "raw")
+    if unit not in RAW_UNITS and unit not in INPUT_UNITS:
+        known = ", ".join(sorted(RAW_UNITS | set(INPUT_UNITS)))
+        raise e.error("unit", f"unknown unit {unit!r}; expected one of {known}")
+    axis = e.array("axis_nominal", (3,), None)
+    if axis is not None:
+        if np.linalg.norm(axis) == 0:
+            raise e.error("axis_nominal", "expected 3 finite numbers, not all zero")
+        axis = axis / np.linalg.norm(axis)
+    sa = e.integer("source_address", None, lo=0, hi=0xFF)
+    if j1939 and sa is None:
+        raise e.error("source_address", "a J1939 map needs each sensor's source address")
+    ch = e.get("channel", None)
+    if ch is not None and (isinstance(ch, bool) or not isinstance(ch, int | str)):
+        raise e.error("channel", "expected a channel number or name")
+    sc = SensorChannel(
+        name=e.string("name", default_name), message=e.string("message"),
+        signal=e.string("signal"), unit=unit, axis_nominal=axis, source_address=sa,
+        channel=ch, counter_signal=e.string("counter_signal", None),
+        crc_signal=e.string("crc_signal", None),
+        sample_counter_signal=e.string("sample_counter_signal", None),
+        status_signal=e.string("status_signal", None))
+    e.finish()
+    return sc
 
 
 def check_against_calibration(cmap: ChannelMap, cal: Calibration) -> None:

@@ -70,7 +70,7 @@ import numpy as np
 
 from fdi.calfile import Calibration
 from fdi.errors import ConfigError, FileFormatError
-from fdi.fileio import read_json_object, to_jsonable
+from fdi.fileio import Fields, read_json_object, to_jsonable
 from replay.faults import Fault, fault_from_dict
 from replay.motion import body_rates
 
@@ -629,33 +629,28 @@ def load_flight_dir(directory: str | Path) -> Flight:
     """
     d = Path(directory)
     mpath = d / "manifest.json"
-    man = read_json_object(mpath, FLIGHT_SCHEMA)
-    mp = str(mpath)
-    fs = man.get("sample_rate_hz")
-    if isinstance(fs, bool) or not isinstance(fs, int | float) or not math.isfinite(fs) \
-            or fs <= 0:
-        raise FileFormatError(mp, f"expected a positive number, got {fs!r}",
-                              field="sample_rate_hz")
-    names = man.get("sensor_names")
+    m = Fields.from_json(mpath, FLIGHT_SCHEMA)
+    fs = m.number("sample_rate_hz", positive=True)
+    names = m.get("sensor_names")
     if not isinstance(names, list) or not names or not all(isinstance(x, str) for x in names):
-        raise FileFormatError(mp, "expected a non-empty list of strings", field="sensor_names")
-    columns = man.get("columns", ["t", *names])
+        raise m.error("sensor_names", "expected a non-empty list of strings")
+    columns = m.get("columns", ["t", *names])
     if columns != ["t", *names]:
-        raise FileFormatError(mp, f"expected ['t', *sensor_names], got {columns!r}",
-                              field="columns")
-    kind = str(man.get("kind", "gyro"))
-    sfile = man.get("samples_file", "samples.csv")
-    if not isinstance(sfile, str) or not sfile.strip():
-        raise FileFormatError(mp, f"expected a file name, got {sfile!r}", field="samples_file")
-    spath = d / sfile
+        raise m.error("columns", f"expected ['t', *sensor_names], got {columns!r}")
+    kind = m.choice("kind", ("gyro", "accel"), "gyro")
+    raw_unit = m.string("raw_unit", "raw")
+    n_samples = m.get("samples", None)
+    spath = d / m.string("samples_file", "samples.csv")
+    m.string("source", "", nonempty=False)
+    m.finish()
     sp = str(spath)
     if not spath.is_file():
         raise FileFormatError(sp, f"cannot read (no such file); {mpath.name} names it",
                               field="samples_file")
     vals, missing = _load_samples(spath, len(columns), columns)
-    if "samples" in man and man["samples"] != vals.shape[0]:
-        raise FileFormatError(mp, f"says {man['samples']!r} samples, {spath.name} has "
-                                  f"{vals.shape[0]} (truncated or edited?)", field="samples")
+    if n_samples is not None and n_samples != vals.shape[0]:
+        raise m.error("samples", f"says {n_samples!r} samples, {spath.name} has "
+                      f"{vals.shape[0]} (truncated or edited?)")
     t = vals[:, 0].copy()
     raw = vals[:, 1:].copy()
     valid = ~missing[:, 1:]
@@ -674,5 +669,5 @@ def load_flight_dir(directory: str | Path) -> Flight:
     if (d / "truth.json").exists():
         faults, truth, rates = read_truth_sidecar(d / "truth.json", samples=t.shape[0])
     return Flight(t=t, raw=raw, valid=valid, sample_rate_hz=float(fs),
-                  sensor_names=tuple(names), raw_unit=str(man.get("raw_unit", "raw")),
+                  sensor_names=tuple(names), raw_unit=raw_unit,
                   omega_true=rates, faults=faults, truth=truth, source=str(d), kind=kind)

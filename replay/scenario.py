@@ -34,7 +34,7 @@ dropout   no sample (``valid = False``, raw NaN)
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -42,8 +42,8 @@ from typing import Any
 import numpy as np
 
 from fdi.calfile import Calibration
-from fdi.errors import ConfigError, FileFormatError
-from fdi.fileio import read_toml_object
+from fdi.errors import ConfigError
+from fdi.fileio import Fields
 from replay.faults import Fault, parse_fault
 
 __all__ = ["SCENARIO_SCHEMA", "apply_faults", "inject", "load_scenario"]
@@ -58,48 +58,33 @@ def load_scenario(path: str | Path, cal: Calibration, *,
     Raises
     ------
     FileFormatError
-        Naming the file and the field (``faults[2].size``).
+        Naming the file, the line and the field (``faults[2].size``); unknown keys too.
     """
-    p = Path(path)
-    ps = str(p)
-    doc = read_toml_object(p, SCENARIO_SCHEMA)
-    seed = doc.get("seed", 0)
-    if isinstance(seed, bool) or not isinstance(seed, int):
-        raise FileFormatError(ps, f"expected an integer, got {seed!r}", field="seed")
-    entries = doc.get("faults")
-    if not isinstance(entries, list) or not entries:
-        raise FileFormatError(ps, "expected a non-empty [[faults]] list", field="faults")
+    r = Fields.from_toml(path, SCENARIO_SCHEMA)
+    seed = r.integer("seed", 0)
     n = cal.kind(kind).n
-    faults = []
-    for j, e in enumerate(entries):
-        w = f"faults[{j + 1}]"
-        if not isinstance(e, Mapping):
-            raise FileFormatError(ps, "expected a table", field=w)
-        if "spec" in e:
-            spec = e["spec"]
-            if not isinstance(spec, str):
-                raise FileFormatError(ps, "expected a string", field=f"{w}.spec")
-        else:
-            for key in ("sensor", "kind", "onset"):
-                if key not in e:
-                    raise FileFormatError(ps, "missing", field=f"{w}.{key}")
-            size = e.get("size", "")
-            dur = e.get("duration")
-            spec = f"{e['kind']}:{e['sensor']}:{size}:{e['onset']}"
-            if dur is not None:
-                spec += f":{dur}"
-        try:
-            f = parse_fault(spec, cal, kind=kind)
-        except ConfigError as exc:
-            raise FileFormatError(ps, str(exc), field=w) from None
-        if not 1 <= f.sensor <= n:
-            raise FileFormatError(ps, f"sensor {f.sensor} out of range 1..{n}",
-                                  field=f"{w}.sensor")
-        if f.kind == "noise" and f.size < 1.0:
-            raise FileFormatError(ps, "a recording's noise can only be multiplied by ≥ 1",
-                                  field=f"{w}.size")
-        faults.append(f)
-    return tuple(faults), int(seed)
+    faults = tuple(_fault(e, cal, kind, n) for e in r.tables("faults"))
+    r.finish()
+    return faults, seed
+
+
+def _fault(e: Fields, cal: Calibration, kind: str, n: int) -> Fault:
+    """One ``[[faults]]`` table: ``spec = "KIND:SENSOR:SIZE:ONSET[:DURATION]"`` or its parts."""
+    spec = e.string("spec", None)
+    if spec is None:
+        parts = [e.get("kind"), e.get("sensor"), e.get("size", ""), e.get("onset")]
+        dur = e.get("duration", None)
+        spec = ":".join(str(v) for v in parts + ([] if dur is None else [dur]))
+    e.finish()
+    try:
+        f = parse_fault(spec, cal, kind=kind)
+    except ConfigError as exc:
+        raise e.error(None, str(exc)) from None
+    if not 1 <= f.sensor <= n:
+        raise e.error("sensor", f"sensor {f.sensor} out of range 1..{n}")
+    if f.kind == "noise" and f.size < 1.0:
+        raise e.error("size", "a recording's noise can only be multiplied by ≥ 1")
+    return f
 
 
 def apply_faults(t: np.ndarray, raw: np.ndarray, valid: np.ndarray,

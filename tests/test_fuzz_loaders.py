@@ -95,7 +95,7 @@ def pristine(tmp_path_factory) -> Path:
     (d / "scenario.toml").write_text(SCENARIO)
     rows = cone6().H[:5]
     (d / "config.toml").write_text("name = 'five'\n" + "".join(
-        f"[[sensor]]\nname = 's{i}'\naxis = {[float(v) for v in r]!r}\ngroup = {i // 3}\n"
+        f"[[sensors]]\nname = 's{i}'\naxis = {[float(v) for v in r]!r}\ngroup = {i // 3}\n"
         for i, r in enumerate(rows)))
     return d
 

@@ -18,7 +18,7 @@ TINY_SEQUENCE_DOC = {
     "turns": 0.25,
     "position_duration_s": 0.5,
     "mount": "x_inner_z_up",
-    "step": [
+    "steps": [
         {"label": "level", "inner_deg": 0.0},
         {"label": "tilted", "inner_deg": 90.0},
         {"label": "+w table", "outer_rate_w": 1},

@@ -103,13 +103,13 @@ def test_session_inputs_follow_the_sequence(name):
 
 def _doc(**steps_and_top):
     doc = {"schema": "rimu.sequence/1", "table_rate_dps": 10.0,
-           "step": [{"outer_rate_w": 1}, {"outer_rate_w": -1}]}
+           "steps": [{"outer_rate_w": 1}, {"outer_rate_w": -1}]}
     doc.update(steps_and_top)
     return doc
 
 
 def test_default_pairing_and_overrides(tmp_path):
-    seq = sequence_from_dict(_doc(step=[{"inner_deg": 0.0}, {"outer_rate_w": 1},
+    seq = sequence_from_dict(_doc(steps=[{"inner_deg": 0.0}, {"outer_rate_w": 1},
                                         {"outer_rate_dps": -10.0}, {"inner_rate_w": 2},
                                         {"inner_rate_w": -2, "duration_s": 5.0}]))
     assert seq.pairs() == ((2, 3), (4, 5))
@@ -119,7 +119,7 @@ def test_default_pairing_and_overrides(tmp_path):
     assert seq.steps[4].duration_s == 5.0
     p = tmp_path / "s.toml"
     p.write_text('schema = "rimu.sequence/1"\ntable_rate_dps = 10.0\nturns = 2\n'
-                 '[[step]]\nouter_rate_w = 1\n[[step]]\nouter_rate_w = -1\n')
+                 '[[steps]]\nouter_rate_w = 1\n[[steps]]\nouter_rate_w = -1\n')
     s2 = load_sequence(p, table_rate_dps=20.0, turns=1)
     assert s2.steps[0].outer_rate == pytest.approx(20.0 * DPS)
     assert s2.steps[0].duration_s == pytest.approx(18.0)
@@ -128,28 +128,28 @@ def test_default_pairing_and_overrides(tmp_path):
 
 BAD = [
     ("unknown top key", {"speed": 1}, None, "speed"),
-    ("unknown step key", {"step": [{"outer_rate_deg": 1}]}, 1, "outer_rate_deg"),
-    ("both rate keys", {"step": [{"outer_rate_w": 1, "outer_rate_dps": 10}]}, 1,
+    ("unknown step key", {"steps": [{"outer_rate_deg": 1}]}, 1, "outer_rate_deg"),
+    ("both rate keys", {"steps": [{"outer_rate_w": 1, "outer_rate_dps": 10}]}, 1,
      "outer_rate_w"),
-    ("non-number", {"step": [{"inner_deg": "ten"}]}, 1, "inner_deg"),
-    ("rate without rate", {"step": [{"kind": "rate"}]}, 1, "kind"),
-    ("position with rate", {"step": [{"kind": "position", "inner_rate_w": 1}]}, 1, "kind"),
-    ("bad kind", {"step": [{"kind": "spin", "inner_rate_w": 1}]}, 1, "kind"),
-    ("unknown mount", {"step": [{"outer_rate_w": 1}, {"mount": "upside", "outer_rate_w": -1}]},
+    ("non-number", {"steps": [{"inner_deg": "ten"}]}, 1, "inner_deg"),
+    ("rate without rate", {"steps": [{"kind": "rate"}]}, 1, "kind"),
+    ("position with rate", {"steps": [{"kind": "position", "inner_rate_w": 1}]}, 1, "kind"),
+    ("bad kind", {"steps": [{"kind": "spin", "inner_rate_w": 1}]}, 1, "kind"),
+    ("unknown mount", {"steps": [{"outer_rate_w": 1}, {"mount": "upside", "outer_rate_w": -1}]},
      2, "mount"),
-    ("both axes turn, turns", {"step": [{"outer_rate_w": 1, "inner_rate_w": 1}]}, 1,
+    ("both axes turn, turns", {"steps": [{"outer_rate_w": 1, "inner_rate_w": 1}]}, 1,
      "duration_s"),
-    ("turns and duration", {"step": [{"outer_rate_w": 1, "turns": 1, "duration_s": 3}]}, 1,
+    ("turns and duration", {"steps": [{"outer_rate_w": 1, "turns": 1, "duration_s": 3}]}, 1,
      "turns"),
-    ("negative duration", {"step": [{"outer_rate_w": 1, "duration_s": -3}]}, 1, "duration_s"),
-    ("pair not mutual", {"step": [{"outer_rate_w": 1, "pair": 2}, {"outer_rate_w": -1},
+    ("negative duration", {"steps": [{"outer_rate_w": 1, "duration_s": -3}]}, 1, "duration_s"),
+    ("pair not mutual", {"steps": [{"outer_rate_w": 1, "pair": 2}, {"outer_rate_w": -1},
                                   {"outer_rate_w": -1, "pair": 1}]}, 1, "pair"),
-    ("pair to position", {"step": [{"outer_rate_w": 1, "pair": 2}, {"pair": 1}]}, 1, "pair"),
-    ("pair out of range", {"step": [{"outer_rate_w": 1, "pair": 9}]}, 1, "pair"),
-    ("printed not 3", {"step": [{"outer_rate_w": 1, "printed": [1, 0]}]}, 1, "printed"),
+    ("pair to position", {"steps": [{"outer_rate_w": 1, "pair": 2}, {"pair": 1}]}, 1, "pair"),
+    ("pair out of range", {"steps": [{"outer_rate_w": 1, "pair": 9}]}, 1, "pair"),
+    ("printed not 3", {"steps": [{"outer_rate_w": 1, "printed": [1, 0]}]}, 1, "printed"),
     ("wrong schema", {"schema": "rimu.session/1"}, None, "schema"),
     ("wrong version", {"schema": "rimu.sequence/9"}, None, "schema"),
-    ("no steps", {"step": []}, None, "step"),
+    ("no steps", {"steps": []}, None, "steps"),
     ("bad table rate", {"table_rate_dps": 0}, None, "table_rate_dps"),
 ]
 
@@ -173,3 +173,25 @@ def test_loader_file_errors(tmp_path):
     p.write_text("[[step]\nouter_rate_w = 1\n")
     with pytest.raises(FileFormatError, match="not valid TOML"):
         load_sequence(p)
+
+
+def test_old_step_table_name_still_loads_with_a_deprecation_warning(tmp_path):
+    """Issue 10: one spelling of arrays of tables across formats ([[steps]] like
+    [[sensors]] and [[faults]]); the old [[step]] keeps working, with a warning."""
+    p = tmp_path / "old.toml"
+    p.write_text('schema = "rimu.sequence/1"\n[[step]]\nouter_rate_w = 1\n'
+                 '[[step]]\nouter_rate_w = -1\n')
+    with pytest.warns(DeprecationWarning, match=r"\[\[step\]\] is deprecated"):
+        seq = load_sequence(p)
+    assert seq.pairs() == ((1, 2),)
+
+
+def test_errors_in_a_file_name_the_line(tmp_path):
+    p = tmp_path / "typo.toml"
+    p.write_text('schema = "rimu.sequence/1"\n[[steps]]\nouter_rate_w = 1\n'
+                 '[[steps]]\nouter_rate_w = -1\nmonut = "x_inner_y_up"\n')
+    with pytest.raises(FileFormatError) as ei:
+        load_sequence(p)
+    e = ei.value
+    assert (e.line, e.step, e.field) == (6, 2, "monut"), str(e)
+    assert "did you mean 'mount'?" in str(e)

@@ -227,10 +227,10 @@ def test_cli_random_parameters_and_custom_sequence(tmp_path, capsys):
     seq = tmp_path / "seq.toml"
     seq.write_text('schema = "rimu.sequence/1"\ntable_rate_dps = 60.0\n'
                    'mount = "x_inner_y_up"\n'
-                   '[[step]]\ninner_rate_w = 1\n[[step]]\ninner_rate_w = -1\n'
-                   '[[step]]\nouter_rate_w = 1\n[[step]]\nouter_rate_w = -1\n'
-                   '[[step]]\ninner_deg = 90\nouter_rate_w = 1\n'
-                   '[[step]]\ninner_deg = 90\nouter_rate_w = -1\n')
+                   '[[steps]]\ninner_rate_w = 1\n[[steps]]\ninner_rate_w = -1\n'
+                   '[[steps]]\nouter_rate_w = 1\n[[steps]]\nouter_rate_w = -1\n'
+                   '[[steps]]\ninner_deg = 90\nouter_rate_w = 1\n'
+                   '[[steps]]\ninner_deg = 90\nouter_rate_w = -1\n')
     rc = main(["simulate", "calibration", "--config", "tetrad", "--out", str(tmp_path / "t"),
                "--sequence", str(seq), "--latitude-deg", "48.1"])
     assert rc == 0
@@ -272,3 +272,15 @@ def test_cli_errors_one_line_exit_2(tmp_path, capsys, argv):
     assert rc == 2
     assert err.startswith("rimu: error:") and err.count("\n") == 1, err
     shutil.rmtree(tmp_path / "x", ignore_errors=True)
+
+
+@pytest.mark.parametrize(("edit", "field", "step"), [
+    (lambda d: d.update(latitude=1.0), "latitude", None),
+    (lambda d: d["steps"][1].update(lable="x"), "lable", 2),
+    (lambda d: d["samples"].update(row=3), "samples.row", None),
+    (lambda d: d["steps"][1].update(index=1), "steps[2].index", None),
+])
+def test_unknown_or_duplicate_manifest_keys_are_refused(saved, edit, field, step):
+    _edit_manifest(saved, edit)
+    e = _load_err(saved)
+    assert (e.field, e.step) == (field, step), str(e)

@@ -92,3 +92,19 @@ def test_not_json(tmp_path):
     p.write_text("{\n  nope")
     with pytest.raises(FileFormatError, match=r"bad.json:2: not valid JSON"):
         load_calibration(p)
+
+
+@pytest.mark.parametrize(("mutate", "field"), [
+    (lambda d: d.update(earth_rate_dhp=15.0), "earth_rate_dhp"),
+    (lambda d: d["sensors"]["gyro"][0].update(bias_units="deg/h"), "sensors.gyro[1].bias_units"),
+    (lambda d: d["sensors"].update(gyros=d["sensors"]["gyro"]), "sensors.gyros"),
+])
+def test_unknown_keys_are_refused(tmp_path, mutate, field):
+    """Issue 10: unknown keys are refused everywhere, with the closest known key."""
+    doc = _cal().to_dict()
+    mutate(doc)
+    p = tmp_path / "bad.json"
+    p.write_text(json.dumps(doc))
+    with pytest.raises(FileFormatError) as err:
+        load_calibration(p)
+    assert err.value.field == field and "unknown key; did you mean" in str(err.value)

@@ -140,3 +140,19 @@ def test_bad_map_names_the_field(tmp_path, text, field):
     with pytest.raises(FileFormatError) as e:
         load_channel_map(p)
     assert e.value.field == field
+
+
+def test_a_misspelt_key_is_refused_not_ignored(tmp_path):
+    """Issue 10 regression: ``axis_nomnal`` was silently ignored, which switched off the
+    check that sensor i of the map is sensor i of the calibration."""
+    p = tmp_path / "m.toml"
+    p.write_text('schema = "rimu.channel_map/1"\n[[sensors]]\nmessage = "M"\nsignal = "A"\n'
+                 'axis_nomnal = [0, 0, 1]\n')
+    with pytest.raises(FileFormatError) as e:
+        load_channel_map(p)
+    assert (e.value.field, e.value.line) == ("sensors[1].axis_nomnal", 5), str(e.value)
+    assert "did you mean 'axis_nominal'?" in str(e.value)
+    p.write_text('schema = "rimu.channel_map/1"\ntime_tolerence_s = 0.01\n'
+                 '[[sensors]]\nmessage = "M"\nsignal = "A"\n')
+    with pytest.raises(FileFormatError, match="did you mean 'time_tolerance_s'"):
+        load_channel_map(p)

@@ -106,3 +106,19 @@ def test_dict_round_trip_and_errors():
         fault_from_dict({**g.to_dict(), "kind": "boom"})
     with pytest.raises(ConfigError, match="sensor must be"):
         fault_from_dict({**g.to_dict(), "sensor": 0})
+
+
+def test_scenario_unknown_key_is_refused(tmp_path):
+    """Every loader refuses keys it does not know (a typo would otherwise change nothing)."""
+    from fdi.errors import FileFormatError
+    from replay.scenario import load_scenario
+    from thresholds.synthetic import synthetic_calibration
+
+    cal = synthetic_calibration("tetrad", seed=1)
+    p = tmp_path / "s.toml"
+    p.write_text('schema = "rimu.scenario/1"\n[[faults]]\nsensor = 2\nkind = "step"\n'
+                 'size = "1dps"\nonset = 1.0\nduraton = 2.0\n')
+    with pytest.raises(FileFormatError) as e:
+        load_scenario(p, cal)
+    assert (e.value.field, e.value.line) == ("faults[1].duraton", 7), str(e.value)
+    assert "did you mean 'duration'?" in str(e.value)

@@ -27,7 +27,8 @@ def test_round_trip_and_schema(tmp_path):
 
 @pytest.mark.parametrize(("key", "value"), [("schema", "rimu.thresholds/2"), ("alpha", [2.0]),
                                            ("n", None), ("kind", "magnetometer"),
-                                           ("variance_factor", [1.0, "x"])])
+                                           ("variance_factor", [1.0, "x"]),
+                                           ("false_alarm_per_hour", 1.0)])
 def test_bad_files_name_the_field(tmp_path, key, value):
     doc = compute_thresholds(CAL, scales=0).to_dict()
     if value is None:
@@ -39,6 +40,18 @@ def test_bad_files_name_the_field(tmp_path, key, value):
     with pytest.raises(FileFormatError) as ei:
         load_thresholds(p)
     assert ei.value.field is not None and ei.value.field.startswith(key)
+
+
+def test_cusum_detector_without_threshold_names_the_field(tmp_path):
+    """Regression: the combination was refused by Thresholds.__post_init__ with a
+    ConfigError that did not name the file."""
+    doc = compute_thresholds(CAL, scales=0).to_dict()
+    doc["detector"] = "cusum"
+    p = tmp_path / "bad.json"
+    p.write_text(json.dumps(doc))
+    with pytest.raises(FileFormatError) as ei:
+        load_thresholds(p)
+    assert ei.value.field == "cusum_threshold" and "bad.json" in str(ei.value)
 
 
 def test_variance_factors_from_residuals_via_allantools():
