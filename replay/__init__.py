@@ -3,13 +3,9 @@
 from replay.accounting import FrameAccounting
 from replay.channel_map import ChannelMap, default_channel_map, load_channel_map
 from replay.faults import FAULT_KINDS, Fault, parse_fault
-from replay.flight import (
-    Flight,
-    iter_flight,
-    load_flight_dir,
-    save_flight_dir,
-    simulate_flight,
-)
+from replay.flight_data import AuxChannels, Flight
+from replay.flight_io import load_flight_dir, save_flight_dir
+from replay.flight_sim import iter_flight, simulate_flight
 from replay.live import StreamDecoder, run_live
 from replay.logio import read_frames, read_log, write_flight_log
 from replay.report import REPORT_SCHEMA, build_report, format_report
@@ -18,6 +14,7 @@ from replay.scenario import apply_faults, inject, load_scenario
 __all__ = [
     "FAULT_KINDS",
     "REPORT_SCHEMA",
+    "AuxChannels",
     "ChannelMap",
     "Fault",
     "Flight",

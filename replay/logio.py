@@ -155,7 +155,7 @@ def write_flight_log(flight: Any, path: str | Path, *, dbc: str | Path | None = 
             writer.on_message_received(can.Message(
                 timestamp=float(ts[j]), arbitration_id=int(fid[j]), is_extended_id=False,
                 data=payloads[j], channel=channel, dlc=8))
-    from replay.flight import write_truth_sidecar
+    from replay.flight_io import write_truth_sidecar
 
     truth = dict(flight.truth)
     truth["can_log"] = {"file": p.name, "format": _suffix(p),
@@ -478,7 +478,8 @@ def samples_to_flight(samples: Samples, cal: Calibration, cmap: ChannelMap, *,
     Flight time = frame time − first frame time + sidecar ``t_start_s``. True rates are
     taken at ``round(t·fs)`` of the sidecar's sample grid.
     """
-    from replay.flight import Flight, read_truth_sidecar
+    from replay.flight_data import Flight
+    from replay.flight_io import read_truth_sidecar
 
     s = cal.kind(cmap.kind)
     fs = float(cal.sample_rate_hz)

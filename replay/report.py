@@ -45,7 +45,7 @@ import numpy as np
 
 from fdi.calfile import Calibration
 from fdi.units import DPS
-from replay.flight import Flight
+from replay.flight_data import Flight
 
 __all__ = ["ALARM_TYPES", "REPORT_SCHEMA", "build_report", "format_report", "format_summary"]
 

@@ -20,10 +20,14 @@ __all__ = ["COMMANDS", "build_parser", "main"]
 COMMANDS: dict[str, str] = {
     "calibrate": "rimu.commands.calibrate",
     "demo": "rimu.commands.demo",
+    "diagnose": "rimu.commands.diagnose",
+    "evaluate": "rimu.commands.evaluate",
+    "ingest": "rimu.commands.ingest",
     "monitor": "rimu.commands.monitor",
     "monitor-file": "rimu.commands.monitor_file",
     "parity": "rimu.commands.parity",
     "replay": "rimu.commands.replay",
+    "tune": "rimu.commands.tune",
 }
 """Top-level sub-commands and their modules."""
 
