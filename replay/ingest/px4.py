@@ -8,9 +8,11 @@ interpolation (counted in the stream's notes). A log without ``sensor_gyro`` but
 ``vehicle_imu`` gives rates from its delta angles: ``delta_angle / delta_angle_dt``
 (the mean rate over each integration interval, stamped at the interval's end).
 
-pyulog flags a corrupt file (``file_corruption``) and resynchronises; rimu then refuses
-the log unless asked to salvage, and keeps the samples up to the last sample time before
-the first data pyulog could not read (found by reading the file's prefixes).
+Damage: pyulog stops silently where the file is cut (or where a corrupt header claims more
+bytes than the file has), and flags other corruption (``file_corruption``) while
+resynchronising over it. rimu watches pyulog's reads to find where it stopped short, and
+for flagged corruption finds the offset by reading prefixes of the file; it then refuses
+the log unless asked to salvage, and keeps the samples read before the damage.
 """
 
 from __future__ import annotations
@@ -42,15 +44,48 @@ def looks_like_ulog(path: str | Path) -> bool:
         return False
 
 
+class _TrackedBytes(io.BytesIO):
+    """The file's bytes, remembering pyulog's last two reads (start, asked, got)."""
+
+    def __init__(self, data: bytes) -> None:
+        super().__init__(data)
+        self.reads: list[tuple[int, int, int]] = []
+
+    def read(self, size: int | None = -1) -> bytes:
+        start = self.tell()
+        out = super().read(size)
+        if size is not None and size >= 0:
+            self.reads = [*self.reads[-1:], (start, size, len(out))]
+        return out
+
+
+def _short_read(fh: _TrackedBytes) -> tuple[int, str] | None:
+    """Where pyulog stopped early: a message header or body cut short (truncation, or a
+    corrupt header whose size runs past the end)."""
+    if not fh.reads:
+        return None
+    start, asked, got = fh.reads[-1]
+    if got >= asked or (got == 0 and asked == 3):
+        return None                  # a clean end: the next header read found nothing
+    if asked == 3:
+        return start, f"file ends inside a message header ({got} of 3 bytes)"
+    hdr = fh.reads[0][0] if len(fh.reads) > 1 else start
+    return hdr, (f"message at this offset says {asked} bytes, the file has {got} after its "
+                 f"header (truncated, or a corrupt header)")
+
+
 def _load(p: str) -> Any:
     from pyulog import ULog
 
+    try:
+        data = Path(p).read_bytes()
+    except OSError as exc:
+        raise FileFormatError(p, f"cannot read ({exc.strerror})") from None
+    fh = _TrackedBytes(data)
     sink = io.StringIO()
     try:
         with contextlib.redirect_stdout(sink), contextlib.redirect_stderr(sink):
-            return ULog(p, list(TOPICS)), sink.getvalue()
-    except OSError as exc:
-        raise FileFormatError(p, f"cannot read ({exc.strerror})") from None
+            return ULog(fh, list(TOPICS)), fh, data
     except Exception as exc:        # pyulog raises ULogException, struct.error, ...
         raise FileFormatError(p, f"not a readable ULog file ({type(exc).__name__}: "
                                  f"{exc})") from None
@@ -166,19 +201,23 @@ def read_px4(path: str | Path, *, salvage: bool = False) -> LogRead:
         (without ``salvage``) naming the byte offset.
     """
     p = str(path)
-    u, _ = _load(p)
+    u, fh, data = _load(p)
     streams, meta = _streams(u)
-    if not streams or all(s.size == 0 for s in streams):
-        raise FileFormatError(p, "no sensor_gyro or vehicle_imu data in the log")
     meta["start_timestamp_us"] = int(u.start_timestamp)
     meta["dropouts"] = len(u.dropouts)
     dmg = None
     if u.file_corruption:
-        data = Path(p).read_bytes()
         offset, last = _cut_time(p, data)
         streams = [s.take(s.t <= last) for s in streams]
-        dmg = Damage(p, "corrupt or truncated ULog data (pyulog could not read it)",
+        dmg = Damage(p, "corrupt ULog data (pyulog skipped bytes it could not read)",
                      offset=offset, samples_before=sum(s.size for s in streams))
-        if not salvage:
-            raise dmg.error()
+    else:
+        short = _short_read(fh)
+        if short is not None:
+            dmg = Damage(p, short[1], offset=short[0],
+                         samples_before=sum(s.size for s in streams))
+    if dmg is not None and not salvage:
+        raise dmg.error()
+    if not streams or all(s.size == 0 for s in streams):
+        raise FileFormatError(p, "no sensor_gyro or vehicle_imu data in the log")
     return LogRead(p, "px4", tuple(streams), dmg, meta)

@@ -87,3 +87,41 @@ def small_imu_data(n: int = 200, k: int = 2, seed: int = 0
     accels = [(rng.normal(0, 0.2, (n, 3)) + down).astype(np.float32).astype(float)
               for _ in range(k)]
     return t, gyros, accels
+
+
+# -- ULog ------------------------------------------------------------------------------
+_GYRO_FMT = ("sensor_gyro:uint64_t timestamp;uint64_t timestamp_sample;uint32_t device_id;"
+             "float x;float y;float z;float temperature;uint32_t error_count;")
+_ACCEL_FMT = ("sensor_accel:uint64_t timestamp;uint64_t timestamp_sample;uint32_t device_id;"
+              "float x;float y;float z;float temperature;uint32_t error_count;")
+
+
+def write_ulog(path: Path, t_us: list[np.ndarray], gyros: list[np.ndarray],
+               accels: list[np.ndarray], temps: list[np.ndarray],
+               device_ids: list[int]) -> None:
+    """Write a ULog file with ``sensor_gyro`` / ``sensor_accel`` instances 0..k-1 through
+    pyulog's own objects and ``ULog.write_ulog``."""
+    from pyulog import ULog
+
+    u = ULog(None)
+    u._start_timestamp = int(min(t[0] for t in t_us))
+    hdr = ULog._MessageHeader()
+    for fmt in (_GYRO_FMT, _ACCEL_FMT):
+        mf = ULog.MessageFormat(fmt.encode(), hdr)
+        u._message_formats[mf.name] = mf
+    msg_id = 0
+    for name, values in (("sensor_gyro", gyros), ("sensor_accel", accels)):
+        for k, (t, v, temp, dev) in enumerate(zip(t_us, values, temps, device_ids,
+                                                  strict=True)):
+            add = ULog._MessageAddLogged(struct.pack("<BH", k, msg_id) + name.encode(), hdr,
+                                         u._message_formats)
+            rec = np.zeros(t.size, add.dtype)
+            rec["timestamp"] = t + 50
+            rec["timestamp_sample"] = t
+            rec["device_id"] = dev
+            rec["x"], rec["y"], rec["z"] = v[:, 0], v[:, 1], v[:, 2]
+            rec["temperature"] = temp
+            add.buffer = bytearray(rec.tobytes())
+            u._data_list.append(ULog.Data(add))
+            msg_id += 1
+    u.write_ulog(str(path))
