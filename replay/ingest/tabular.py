@@ -211,9 +211,9 @@ def read_rda_table(path: str | Path, obj: str | None = None) -> Table:
 
     p = str(path)
     try:
-        parsed = rdata.parser.parse_file(p)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
+            parsed = rdata.parser.parse_file(p)
             conv = rdata.conversion.convert(parsed)
     except OSError as exc:
         if exc.errno is not None:
