@@ -28,7 +28,8 @@ from calibration.residuals import (
 from fdi.parity import parity_matrix
 
 __all__ = ["NOISE_METHOD", "ColouredNoise", "SensorEstimate", "Uncertainty", "coloured_noise",
-           "noise_record", "parity_sd", "segment_times", "set_uncertainty", "split_all"]
+           "noise_record", "parity_sd", "segment_times", "set_uncertainty", "split_all",
+           "split_with_cov"]
 
 NOISE_METHOD = {
     "white": "white: covariances sigma^2 op diag(1/N) op^T from the per-sample residual "
@@ -77,11 +78,27 @@ def split_all(a: np.ndarray, c: np.ndarray, Q: np.ndarray, Sigma_raw: np.ndarray
     extra_cov : ndarray, shape (n, k, k), optional
         Coloured-noise part of each sensor's covariance, added to ``Σ_ii·Q``.
     """
+    C = np.array([Sigma_raw[i, i] * Q[:4, :4] for i in range(a.shape[0])])
+    if extra_cov is not None:
+        C = C + np.asarray(extra_cov)[:, :4, :4]
+    return split_with_cov(a, c, C, H0)
+
+
+def split_with_cov(a: np.ndarray, c: np.ndarray, C: np.ndarray,
+                   H0: np.ndarray) -> list[SensorEstimate]:
+    """Per sensor: SF, h̃, angles, bias and their sds from (a, c) and their covariance.
+
+    Parameters
+    ----------
+    a : ndarray, shape (n, 3)
+    c : ndarray, shape (n,)
+    C : ndarray, shape (n, 4, 4)
+        Covariance of each sensor's ``(a, c)`` (raw units).
+    H0 : ndarray, shape (n, 3)
+    """
     out = []
     for i in range(a.shape[0]):
-        Ci = Sigma_raw[i, i] * Q[:4, :4]
-        if extra_cov is not None:
-            Ci = Ci + extra_cov[i][:4, :4]
+        Ci = C[i]
         g = split_gain(a[i], Ci[:3, :3], H0[i])
         sf = g.scale_factor
         jb = np.concatenate([c[i] * g.jac[0], [sf]])                # b = c/|a|
