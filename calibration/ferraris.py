@@ -183,6 +183,23 @@ def _chi2(resid: np.ndarray, C: np.ndarray, dof: int) -> float:
     return float(resid @ np.linalg.pinv(C, rcond=1e-10, hermitian=True) @ resid) / dof
 
 
+def _tilt_var(a: np.ndarray, C_a: np.ndarray, F: np.ndarray,
+              opt: FerrarisOptions) -> np.ndarray:
+    """Variance (raw²) of the six position means of one accelerometer from position tilt.
+
+    ``g²·(δ²·|(I − e eᵀ)·a|² + δ⁴·(a·e)²)`` per position; ``|(I − e eᵀ)·a|²`` is estimated
+    without the bias that the estimate's own scatter ``C_a`` puts into it.
+    """
+    d = np.deg2rad(opt.position_sd_deg)
+    out = np.zeros(F.shape[0])
+    for k, f in enumerate(F):
+        e = f / np.linalg.norm(f)
+        Pe = np.eye(3) - np.outer(e, e)
+        perp = max(_perp(e, a) - float(np.trace(Pe @ C_a @ Pe)), 0.0)
+        out[k] = opt.gravity**2 * (d**2 * perp + d**4 * (e @ a) ** 2)
+    return out
+
+
 def _accel_fit(m: _Means, opt: FerrarisOptions, F: np.ndarray, source: str
                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(θ (4, 3), cov (3, 4, 4), σ² raw (3, 3), χ²/dof (3,)) of the accelerometers.
@@ -194,18 +211,19 @@ def _accel_fit(m: _Means, opt: FerrarisOptions, F: np.ndarray, source: str
     """
     mp = multiposition(m.u_accel, m.count, F, step_numbers=list(range(1, 7)), source=source)
     Sigma = noise_covariance(m.resid_accel, dof_used=6)
-    d = np.deg2rad(opt.position_sd_deg)
-    E = F / np.linalg.norm(F, axis=1, keepdims=True)
     X = np.hstack([F, np.ones((6, 1))])
     theta, cov, chi2 = np.zeros((4, 3)), [], []
     for i in range(3):
-        v = Sigma[i, i] / m.count + opt.gravity**2 * np.array(
-            [d**2 * _perp(e, mp.a[i]) + d**4 * (e @ mp.a[i]) ** 2 for e in E])
-        Xw = X / v[:, None]
-        C = np.linalg.inv(X.T @ Xw)                                   # (XᵀV⁻¹X)⁻¹
-        theta[:, i] = C @ Xw.T @ m.u_accel[:, i]
+        a, C_a = mp.a[i], np.zeros((3, 3))
+        for _ in range(2):                       # the tilt terms need a: two passes
+            v = Sigma[i, i] / m.count + _tilt_var(a, C_a, F, opt)
+            Xw = X / v[:, None]
+            C = np.linalg.inv(X.T @ Xw)                               # (XᵀV⁻¹X)⁻¹
+            th = C @ Xw.T @ m.u_accel[:, i]
+            a, C_a = th[:3], C[:3, :3]
+        theta[:, i] = th
         cov.append(C)
-        r = m.u_accel[:, i] - X @ theta[:, i]
+        r = m.u_accel[:, i] - X @ th
         chi2.append(float(r @ (r / v)) / 2)
     return theta, np.array(cov), Sigma, np.array(chi2)
 
