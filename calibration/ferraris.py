@@ -150,7 +150,8 @@ class _Means:
     resid_accel: np.ndarray
 
 
-def _means(s: FerrarisSession) -> _Means:
+def _check_session(s: FerrarisSession) -> None:
+    """Every section present, long enough, with finite samples."""
     missing = [k for k in SECTIONS if k not in s.sections]
     if missing:
         raise CalibrationError(f"{s.source}: sections {', '.join(missing)} missing; expected "
@@ -160,12 +161,16 @@ def _means(s: FerrarisSession) -> _Means:
         raise CalibrationError(f"{s.source}: section {few[0]} has "
                                f"{len(s.sections[few[0]])} samples; expected at least "
                                f"{MIN_SECTION_SAMPLES}")
+    used = np.concatenate([s.sections[k] for k in SECTIONS])
     for kind, raw in (("gyro", s.gyro), ("accel", s.accel)):
-        used = np.concatenate([s.sections[k] for k in SECTIONS])
-        if not np.all(np.isfinite(raw[used])):
-            i = int(used[~np.all(np.isfinite(raw[used]), axis=1)][0])
-            raise CalibrationError(f"{s.source}: non-finite {kind} sample (row {i + 1}); "
-                                   "expected finite numbers")
+        bad = ~np.all(np.isfinite(raw[used]), axis=1)
+        if bad.any():
+            raise CalibrationError(f"{s.source}: non-finite {kind} sample (row "
+                                   f"{int(used[bad][0]) + 1}); expected finite numbers")
+
+
+def _means(s: FerrarisSession) -> _Means:
+    _check_session(s)
     idx = [s.sections[k] for k in POSITIONS]
     ug = np.array([s.gyro[i].mean(axis=0) for i in idx])
     ua = np.array([s.accel[i].mean(axis=0) for i in idx])

@@ -36,29 +36,34 @@ def _read_csv(path: str) -> tuple[np.ndarray, list[str] | None]:
         raise FileFormatError(path, f"cannot read: {e.strerror or e}") from None
     with f:
         rows = csv.reader(f)
-        header = [h.strip() for h in next(rows, [])]
-        missing = [c for c in COLUMNS if c not in header]
-        if missing:
-            raise FileFormatError(path, f"missing column(s) {', '.join(missing)}; expected a "
-                                  f"header with {', '.join(COLUMNS)}", line=1,
-                                  field=missing[0])
-        cols = [header.index(c) for c in COLUMNS]
-        part = header.index("part") if "part" in header else None
+        cols, part = _columns(path, [h.strip() for h in next(rows, [])])
         data, labels = [], []
         for ln, row in enumerate(rows, start=2):
-            if not row:
-                continue
-            try:
-                data.append([float(row[j]) for j in cols])
-            except (ValueError, IndexError):
-                bad = next((c for c, j in zip(COLUMNS, cols, strict=True)
-                            if j >= len(row) or not _is_float(row[j])), COLUMNS[0])
-                raise FileFormatError(path, "expected a number", line=ln, field=bad) from None
-            if part is not None:
-                labels.append(row[part].strip() if part < len(row) else "")
+            if row:
+                data.append(_numbers(path, ln, row, cols))
+                if part is not None:
+                    labels.append(row[part].strip() if part < len(row) else "")
     if not data:
         raise FileFormatError(path, "no samples; expected rows after the header", line=2)
     return np.array(data), (labels if part is not None else None)
+
+
+def _columns(path: str, header: list[str]) -> tuple[list[int], int | None]:
+    """Positions of :data:`COLUMNS` and of ``part`` (None when absent) in the header."""
+    missing = [c for c in COLUMNS if c not in header]
+    if missing:
+        raise FileFormatError(path, f"missing column(s) {', '.join(missing)}; expected a "
+                              f"header with {', '.join(COLUMNS)}", line=1, field=missing[0])
+    return [header.index(c) for c in COLUMNS], (header.index("part") if "part" in header
+                                                 else None)
+
+
+def _numbers(path: str, line: int, row: list[str], cols: list[int]) -> list[float]:
+    """The :data:`COLUMNS` values of one row, or the one-line error naming the field."""
+    for c, j in zip(COLUMNS, cols, strict=True):
+        if j >= len(row) or not _is_float(row[j]):
+            raise FileFormatError(path, "expected a number", line=line, field=c)
+    return [float(row[j]) for j in cols]
 
 
 def _is_float(s: str) -> bool:
