@@ -7,7 +7,6 @@ Kept beside :mod:`rimu.commands.calibrate`, which only adds the options
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
 import numpy as np
@@ -88,6 +87,9 @@ def ferraris_command(args: argparse.Namespace) -> int:
 
     if args.sample_rate_hz is None:
         raise ConfigError("--ferraris needs --sample-rate-hz (the CSV does not hold it)")
+    if args.session is not None or args.compare or args.plot:
+        raise ConfigError("--ferraris takes no session directory, --compare or --plot "
+                          "(those are for turntable sessions)")
     s = load_ferraris(args.ferraris, args.sample_rate_hz, sections=args.sections,
                       gyro_raw_unit=args.raw_unit, accel_raw_unit=args.raw_unit)
     opt = FerrarisOptions(rotation_deg=args.rotation_deg, gravity=args.gravity,
@@ -100,6 +102,4 @@ def ferraris_command(args: argparse.Namespace) -> int:
     cal.save(out)
     print("\n".join(summary_lines(cal)))
     print(f"wrote {out}")
-    if getattr(args, "compare", None):
-        print(json.dumps({"note": "--compare is for turntable sessions with a truth sidecar"}))
     return 0

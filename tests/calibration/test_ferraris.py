@@ -236,3 +236,9 @@ def test_cli_ferraris_errors(tmp_path, capsys):
     assert rc == 2 and len(err.splitlines()) == 1 and "bad.csv" in err
     rc = main(["calibrate", "--ferraris", str(bad), "--out", str(tmp_path / "c.json")])
     assert rc == 2 and "--sample-rate-hz" in capsys.readouterr().err
+    rc = main(["calibrate", "--ferraris", str(bad), "--sample-rate-hz", "100", "--compare",
+               "t.json", "--out", str(tmp_path / "c.json")])
+    assert rc == 2 and "--compare" in capsys.readouterr().err
+    rc = main(["calibrate", "--out", str(tmp_path / "c.json")])
+    err = capsys.readouterr().err
+    assert rc == 2 and "session directory" in err and len(err.strip().splitlines()) == 1
