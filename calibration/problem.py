@@ -14,7 +14,8 @@ per-sample columns ``z`` (N, m), shared by every sensor of the set. The gyro mod
 ``(a, c, β)`` jointly by least squares over the segment means of the bias steps, weighted
 by their sample counts (a problem without regressors keeps the papers' two-stage estimator:
 rate test, then offsets). A sensor-dependent regressor is written as several shared
-columns (e.g. the three components of the specific force for a g-sensitivity vector).
+columns (e.g. the three components of the specific force for a g-sensitivity vector), or
+fitted once per sensor with that sensor's column, keeping that sensor's result.
 """
 
 from __future__ import annotations
