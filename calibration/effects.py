@@ -20,6 +20,10 @@ session:
 - ``bias_drift`` D (°/h), gyros: linear bias drift, ``s_i += D·t/T`` (T the session length):
   the bias is the truth bias at the start and truth + D at the end.
 - ``no_earth_rate`` (flag, 1 = on), all gyros: Earth rate is not applied.
+- ``temperature`` k (°/h per °C), gyros: ``s_i += k·(T(t) − T₀)`` with the session's
+  temperature warming up from T₀ = :data:`TEMP_START_DEGC` by :data:`TEMP_RISE_DEGC` with
+  time constant :data:`TEMP_TAU_S` (:func:`temperature_profile`); the simulated session
+  carries ``T(t)`` as its per-set temperature column whenever the knob is given (also 0).
 """
 
 from __future__ import annotations
@@ -28,20 +32,43 @@ import math
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 
+import numpy as np
+
 from fdi.errors import ConfigError
 
 __all__ = [
     "EFFECTS",
+    "TEMP_RISE_DEGC",
+    "TEMP_START_DEGC",
+    "TEMP_TAU_S",
     "WARMUP_TAU_S",
     "Effect",
     "effects_help",
     "parse_effect_sensors",
     "parse_effects",
     "resolve_effect_sensors",
+    "temperature_profile",
 ]
 
 WARMUP_TAU_S = 300.0
 """Time constant of the ``warmup`` bias transient (s)."""
+
+TEMP_START_DEGC = 20.0
+"""Temperature at the start of a simulated session (°C), the reference of ``temperature``."""
+TEMP_RISE_DEGC = 15.0
+"""Warm-up rise of the simulated temperature (°C)."""
+TEMP_TAU_S = 600.0
+"""Time constant of the simulated temperature warm-up (s)."""
+
+
+def temperature_profile(t_s: np.ndarray) -> np.ndarray:
+    """Simulated temperature (°C) at times ``t_s`` (s) from the session start, same shape.
+
+    ``T(t) = T₀ + ΔT·(1 − exp(−t/τ))`` with :data:`TEMP_START_DEGC`,
+    :data:`TEMP_RISE_DEGC` and :data:`TEMP_TAU_S`.
+    """
+    t = np.asarray(t_s, float)
+    return TEMP_START_DEGC + TEMP_RISE_DEGC * -np.expm1(-t / TEMP_TAU_S)
 
 
 @dataclass(frozen=True)
@@ -87,6 +114,10 @@ EFFECTS: dict[str, Effect] = {e.name: e for e in (
            "end of the session"),
     Effect("no_earth_rate", "flag (1 = on)", ("gyro",),
            "Earth rate is not applied to the gyros", flag=True, all_sensors=True),
+    Effect("temperature", "deg/h per degC", ("gyro",),
+           f"gyro bias += k * (T - {TEMP_START_DEGC:g} degC), T warming up by "
+           f"{TEMP_RISE_DEGC:g} degC with time constant {TEMP_TAU_S:g} s; the session "
+           "records T as its temperature column"),
 )}
 """The effects, by name."""
 

@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from calibration.turntable import body_inputs
+from fdi.errors import ConfigError
 from fdi.geometry import Configuration
 
 __all__ = ["Session", "Step"]
@@ -76,6 +77,11 @@ class Session:
         Local gravity (m/s²); normal gravity at the latitude when None.
     source : str
         Where the session came from (path or ``"<memory>"``), for error messages.
+    meta : dict
+        Free record (the simulator's seed, sequence, effects).
+    temperature_degC : ndarray, shape (N,) or (N, n), or None
+        Temperature (°C): one column for the whole set, or one per sensor (n = n_g, or
+        n_g + n_a with the gyros first). None: not recorded.
     """
 
     gyro_config: Configuration
@@ -96,6 +102,32 @@ class Session:
     gravity: float | None = None
     source: str = "<memory>"
     meta: dict = field(default_factory=dict)
+    temperature_degC: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        if self.temperature_degC is None:
+            return
+        T = np.asarray(self.temperature_degC, float)
+        N = np.shape(self.t)[0]
+        n_g = np.shape(self.raw_gyro)[1]
+        n_a = 0 if self.raw_accel is None else np.shape(self.raw_accel)[1]
+        if T.shape[:1] != (N,) or T.ndim > 2 or (T.ndim == 2
+                                                  and T.shape[1] not in (n_g, n_g + n_a)):
+            raise ConfigError(f"{self.source}: temperature_degC of shape {T.shape}; expected "
+                              f"({N},), ({N}, {n_g}) or ({N}, {n_g + n_a})")
+        if not np.all(np.isfinite(T)):
+            i = int(np.flatnonzero(~np.all(np.isfinite(T.reshape(N, -1)), axis=1))[0])
+            raise ConfigError(f"{self.source}: temperature_degC sample {i + 1} is not finite; "
+                              "expected finite temperatures (deg C)")
+        object.__setattr__(self, "temperature_degC", T)
+
+    def gyro_temperature_degC(self) -> np.ndarray | None:
+        """Temperature at each gyro, shape (N, n_g) (°C), or None when not recorded."""
+        if self.temperature_degC is None:
+            return None
+        T = self.temperature_degC
+        n_g = np.shape(self.raw_gyro)[1]
+        return np.repeat(T[:, None], n_g, axis=1) if T.ndim == 1 else T[:, :n_g]
 
     def step_slice(self, index: int) -> np.ndarray:
         """Boolean mask of the samples of step ``index`` (1-based)."""

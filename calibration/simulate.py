@@ -32,7 +32,15 @@ from pathlib import Path
 import numpy as np
 from scipy.signal import lfilter
 
-from calibration.effects import EFFECTS, WARMUP_TAU_S, resolve_effect_sensors
+from calibration.effects import (
+    EFFECTS,
+    TEMP_RISE_DEGC,
+    TEMP_START_DEGC,
+    TEMP_TAU_S,
+    WARMUP_TAU_S,
+    resolve_effect_sensors,
+    temperature_profile,
+)
 from calibration.sequence import Sequence
 from calibration.session import Session
 from calibration.session_io import MIN_STEP_SAMPLES
@@ -42,8 +50,10 @@ from fdi.errors import ConfigError
 from fdi.geometry import Configuration, load_configuration
 from fdi.units import DPH, EARTH_RATE_DPH, G0
 
-__all__ = ["NoiseModel", "configuration_of", "save_simulation", "simulate_session",
-           "true_raw_means", "truth_of_session"]
+__all__ = ["EffectContext", "NoiseDraw", "NoiseModel", "SimSetup", "TimeBase", "accel_outputs",
+           "configuration_of", "draw_noise", "gyro_outputs", "sampled_inputs",
+           "save_simulation", "sim_setup", "simulate_session", "time_base", "true_raw_means",
+           "truth_of_session"]
 
 
 @dataclass(frozen=True)
@@ -101,6 +111,293 @@ def _std_normal_to_cov(z: np.ndarray, cov: np.ndarray) -> np.ndarray:
     return z @ L.T
 
 
+@dataclass(frozen=True)
+class SimSetup:
+    """What a simulation simulates: configurations, truth sets, rate, place, effects.
+
+    Attributes
+    ----------
+    gyro_config, accel_config : Configuration (accel: or None)
+    gyros, accels : SensorSet (accels: or None)
+        True parameters.
+    sample_rate_hz, latitude_deg, latitude_rad : float
+    gravity : float
+        Local gravity (m/s²).
+    effects : dict of name to value
+    touched : dict of name to 1-based sensors
+        Active effects (value ≠ 0) and the sensors they touch.
+    """
+
+    gyro_config: Configuration
+    accel_config: Configuration | None
+    gyros: SensorSet
+    accels: SensorSet | None
+    sample_rate_hz: float
+    latitude_deg: float
+    latitude_rad: float
+    gravity: float
+    effects: dict[str, float]
+    touched: dict[str, tuple[int, ...]]
+
+
+def _configurations(config: Configuration | str | None, truth: Calibration,
+                    accel_config: Configuration | None
+                    ) -> tuple[Configuration, Configuration | None]:
+    """Nominal gyro and accelerometer configurations, checked against the truth."""
+    gset = truth.kind("gyro")
+    aset = truth.sets.get("accel")
+    if config is None:
+        gcfg = configuration_of(gset, truth.configuration or "truth")
+    elif isinstance(config, Configuration):
+        gcfg = config
+    else:
+        gcfg = load_configuration(config)
+    if gcfg.n != gset.n:
+        raise ConfigError(f"configuration {gcfg.name!r} has {gcfg.n} gyros, the truth has "
+                          f"{gset.n}")
+    acfg = None if aset is None else configuration_of(aset, gcfg.name)
+    if accel_config is not None:
+        if aset is None or accel_config.n != aset.n:
+            raise ConfigError(f"accelerometer configuration {accel_config.name!r} has "
+                              f"{accel_config.n} sensors, the truth has "
+                              f"{0 if aset is None else aset.n}")
+        acfg = accel_config
+    return gcfg, acfg
+
+
+def sim_setup(config: Configuration | str | None, truth: Calibration, *,
+              effects: Mapping[str, float] | None = None,
+              effect_sensors: Mapping[str, Iterable[int]] | Iterable[int] | None = None,
+              sample_rate_hz: float | None = None, latitude_deg: float | None = None,
+              gravity: float | None = None,
+              accel_config: Configuration | None = None) -> SimSetup:
+    """Check and resolve the arguments of :func:`simulate_session` (stage 1).
+
+    Raises
+    ------
+    ConfigError
+        Inconsistent configuration and truth, no latitude, bad effect or sensor number.
+    """
+    gset = truth.kind("gyro")
+    aset = truth.sets.get("accel")
+    gcfg, acfg = _configurations(config, truth, accel_config)
+    fs = float(sample_rate_hz or truth.sample_rate_hz)
+    if not fs > 0:
+        raise ConfigError(f"sample rate must be positive, got {fs}")
+    lat_deg = latitude_deg if latitude_deg is not None else truth.latitude_deg
+    if lat_deg is None:
+        raise ConfigError("no latitude: give latitude_deg or put it in the truth")
+    lat = np.deg2rad(float(lat_deg))
+    g = gravity_local(lat) if gravity is None else float(gravity)
+    eff = {k: float(v) for k, v in (effects or {}).items()}
+    n_by_kind = {"gyro": gset.n, "accel": 0 if aset is None else aset.n}
+    touched = resolve_effect_sensors(eff, effect_sensors, n_by_kind)
+    return SimSetup(gyro_config=gcfg, accel_config=acfg, gyros=gset, accels=aset,
+                    sample_rate_hz=fs, latitude_deg=float(lat_deg), latitude_rad=float(lat),
+                    gravity=g, effects=eff, touched=touched)
+
+
+@dataclass(frozen=True)
+class TimeBase:
+    """Samples of a sequence: time, step, table angles and rates (stage 2).
+
+    Attributes
+    ----------
+    counts : tuple of int
+        Samples per step.
+    t, tau : ndarray, shape (N,)
+        Time since the session start and since the step start (s).
+    step : ndarray of int, shape (N,)
+    inner, outer, inner_rate, outer_rate : ndarray, shape (N,)
+        Table angles (rad) and rates (rad/s).
+    """
+
+    counts: tuple[int, ...]
+    t: np.ndarray
+    tau: np.ndarray
+    step: np.ndarray
+    inner: np.ndarray
+    outer: np.ndarray
+    inner_rate: np.ndarray
+    outer_rate: np.ndarray
+
+    @property
+    def n_samples(self) -> int:
+        """N."""
+        return self.t.size
+
+
+def time_base(sequence: Sequence, fs: float) -> TimeBase:
+    """Each step ``round(duration_s·fs)`` samples at ``t = k/fs``, angles from the step start.
+
+    Raises
+    ------
+    ConfigError
+        A step shorter than :data:`calibration.session_io.MIN_STEP_SAMPLES` samples.
+    """
+    counts = [round(s.duration_s * fs) for s in sequence.steps]
+    for s, n in zip(sequence.steps, counts, strict=True):
+        if n < MIN_STEP_SAMPLES:
+            raise ConfigError(f"sequence {sequence.name!r} step {s.index} lasts {s.duration_s:g} s"
+                              f", {n} samples at {fs:g} Hz; a step needs at least "
+                              f"{MIN_STEP_SAMPLES}")
+    N = int(sum(counts))
+    step = np.repeat([s.index for s in sequence.steps], counts).astype(np.int64)
+    inner, outer = np.zeros(N), np.zeros(N)
+    wi, wo = np.zeros(N), np.zeros(N)
+    tau_all = np.zeros(N)
+    start = 0
+    for s, n in zip(sequence.steps, counts, strict=True):
+        sl = slice(start, start + n)
+        tau = np.arange(n) / fs
+        tau_all[sl] = tau
+        inner[sl], outer[sl] = s.angles_at(tau)
+        wi[sl], wo[sl] = s.inner_rate, s.outer_rate
+        start += n
+    return TimeBase(counts=tuple(counts), t=np.arange(N) / fs, tau=tau_all, step=step,
+                    inner=inner, outer=outer, inner_rate=wi, outer_rate=wo)
+
+
+def sampled_inputs(sequence: Sequence, tb: TimeBase, lat: float, g: float,
+                   skew: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Body inputs (ω_table, ω_earth, f_b), each (N, 3), with the input ``skew`` s late."""
+    N = tb.n_samples
+    wt, we, fb = np.zeros((N, 3)), np.zeros((N, 3)), np.zeros((N, 3))
+    start = 0
+    for s, n in zip(sequence.steps, tb.counts, strict=True):
+        sl = slice(start, start + n)
+        a_i, a_o = s.angles_at(tb.tau[sl] - skew)
+        wt[sl], we[sl], fb[sl] = body_inputs(a_i, a_o, tb.inner_rate[sl], tb.outer_rate[sl],
+                                             s.mat_pb, lat, g)
+        start += n
+    return wt, we, fb
+
+
+@dataclass(frozen=True)
+class NoiseDraw:
+    """The noise of every sensor (stage 3), SI, per kind: ``{"gyro": (N, n), ...}``.
+
+    Attributes
+    ----------
+    white : dict of kind to ndarray
+        White noise with the truth's per-sample covariance (zeros when switched off).
+    slow : dict of kind to ndarray
+        Gauss-Markov bias instability plus bias random walk.
+    """
+
+    white: dict[str, np.ndarray]
+    slow: dict[str, np.ndarray]
+
+
+def _slow_noise(rng: np.random.Generator, noise: NoiseModel, kind: str, N: int, n: int,
+                fs: float) -> np.ndarray:
+    extra = np.zeros((N, n))
+    sd = float(noise.bias_instability.get(kind, 0.0))
+    if sd > 0:
+        phi = np.exp(-1.0 / (fs * noise.bias_correlation_s))
+        w = rng.standard_normal((N, n)) * sd * np.sqrt(1 - phi**2)
+        x0 = rng.standard_normal(n) * sd
+        extra += lfilter([1.0], [1.0, -phi], w, axis=0, zi=(phi * x0)[None, :])[0]
+    q = float(noise.random_walk.get(kind, 0.0))
+    if q > 0:
+        extra += np.cumsum(rng.standard_normal((N, n)) * q / np.sqrt(fs), axis=0)
+    return extra
+
+
+def draw_noise(setup: SimSetup, noise: NoiseModel, N: int, seed: int | None) -> NoiseDraw:
+    """White noise of the gyros, then the accelerometers, then the slow processes."""
+    rng = np.random.default_rng(seed)
+    kinds = [(k, s) for k, s in (("gyro", setup.gyros), ("accel", setup.accels))
+             if s is not None]
+    white = {}
+    for kind, sset in kinds:
+        z = rng.standard_normal((N, sset.n))
+        white[kind] = _std_normal_to_cov(z, sset.noise_covariance) if noise.white else 0.0 * z
+    slow = {kind: _slow_noise(rng, noise, kind, N, sset.n, setup.sample_rate_hz)
+            for kind, sset in kinds}
+    return NoiseDraw(white=white, slow=slow)
+
+
+@dataclass(frozen=True)
+class EffectContext:
+    """What the gyro effects read: time, session length, table rate, specific force."""
+
+    t: np.ndarray
+    duration_s: float
+    table_rate: float
+    f_along: np.ndarray
+
+
+def _asymmetry(s: np.ndarray, v: float, c: EffectContext) -> np.ndarray:
+    return s * (1.0 + 0.5 * v * np.sign(s))
+
+
+def _nonlinearity(s: np.ndarray, v: float, c: EffectContext) -> np.ndarray:
+    return s + v * s**2 / c.table_rate
+
+
+def _g_sensitivity(s: np.ndarray, v: float, c: EffectContext) -> np.ndarray:
+    return s + v * DPH * c.f_along / G0
+
+
+def _warmup(s: np.ndarray, v: float, c: EffectContext) -> np.ndarray:
+    return s + v * DPH * np.exp(-c.t / WARMUP_TAU_S)[:, None]
+
+
+def _bias_drift(s: np.ndarray, v: float, c: EffectContext) -> np.ndarray:
+    return s + v * DPH * (c.t / c.duration_s)[:, None]
+
+
+def _temperature(s: np.ndarray, v: float, c: EffectContext) -> np.ndarray:
+    return s + v * DPH * (temperature_profile(c.t) - TEMP_START_DEGC)[:, None]
+
+
+_GYRO_EFFECTS = (("scale_asymmetry", _asymmetry), ("scale_nonlinearity", _nonlinearity),
+                 ("g_sensitivity", _g_sensitivity), ("warmup", _warmup),
+                 ("bias_drift", _bias_drift), ("temperature", _temperature))
+"""Gyro effects in the order they are applied (``time_skew``, ``no_earth_rate`` act on
+the inputs)."""
+
+
+def gyro_outputs(setup: SimSetup, sequence: Sequence, tb: TimeBase,
+                 base: tuple[np.ndarray, ...], skewed: tuple[np.ndarray, ...],
+                 draw: NoiseDraw) -> np.ndarray:
+    """Raw gyro outputs with the effects (stage 4), shape (N, n_g)."""
+    gset, eff, touched = setup.gyros, setup.effects, setup.touched
+    Hg = gset.H
+    earth = 0.0 if eff.get("no_earth_rate", 0.0) else 1.0
+
+    def sel(name: str) -> np.ndarray:
+        return np.isin(np.arange(1, gset.n + 1), touched.get(name, ()))
+
+    sg = (base[0] + earth * base[1]) @ Hg.T             # input along the true axes
+    f_g = base[2] @ Hg.T                                 # specific force along h̃_i
+    if skewed is not base:
+        m = sel("time_skew")
+        sg[:, m] = ((skewed[0] + earth * skewed[1]) @ Hg.T)[:, m]
+        f_g[:, m] = (skewed[2] @ Hg.T)[:, m]
+    ctx = EffectContext(t=tb.t, duration_s=tb.n_samples / setup.sample_rate_hz,
+                        table_rate=sequence.table_rate, f_along=f_g)
+    for name, fn in _GYRO_EFFECTS:
+        if name in touched:
+            m = sel(name)
+            sg[:, m] = fn(sg[:, m], eff[name], dataclasses.replace(ctx, f_along=f_g[:, m]))
+    return (sg + gset.biases + draw.white["gyro"] + draw.slow["gyro"]) / gset.scale_factors
+
+
+def accel_outputs(setup: SimSetup, base: tuple[np.ndarray, ...],
+                  skewed: tuple[np.ndarray, ...], draw: NoiseDraw) -> np.ndarray | None:
+    """Raw accelerometer outputs (stage 5), shape (N, n_a), or None without them."""
+    aset = setup.accels
+    if aset is None:
+        return None
+    sa = base[2] @ aset.H.T
+    if skewed is not base:
+        m = np.isin(np.arange(1, aset.n + 1), setup.touched["time_skew"])
+        sa[:, m] = (skewed[2] @ aset.H.T)[:, m]
+    return (sa + aset.biases + draw.white["accel"] + draw.slow["accel"]) / aset.scale_factors
+
+
 def simulate_session(config: Configuration | str | None, sequence: Sequence,
                      truth: Calibration, *, seed: int | None = 0,
                      effects: Mapping[str, float] | None = None,
@@ -109,6 +406,9 @@ def simulate_session(config: Configuration | str | None, sequence: Sequence,
                      latitude_deg: float | None = None, gravity: float | None = None,
                      accel_config: Configuration | None = None) -> Session:
     """Simulate the raw outputs of every sensor over a test sequence.
+
+    Stages: :func:`sim_setup`, :func:`time_base`, :func:`sampled_inputs`,
+    :func:`draw_noise`, :func:`gyro_outputs`, :func:`accel_outputs`, then the session.
 
     Parameters
     ----------
@@ -122,7 +422,8 @@ def simulate_session(config: Configuration | str | None, sequence: Sequence,
     seed : int or None
         Seed of ``np.random.default_rng``.
     effects : mapping of name to value, optional
-        See :mod:`calibration.effects` (units there); all off by default.
+        See :mod:`calibration.effects` (units there); all off by default. With
+        ``temperature`` given (any value), the session carries the temperature profile.
     effect_sensors : mapping of name to 1-based sensors, or sensors for every effect
         Default: every sensor of the kinds each effect acts on.
     noise : NoiseModel, optional
@@ -149,141 +450,15 @@ def simulate_session(config: Configuration | str | None, sequence: Sequence,
         Inconsistent configuration and truth, no latitude, bad effect or sensor number.
     """
     noise = NoiseModel() if noise is None else noise
-    gset = truth.kind("gyro")
-    aset = truth.sets.get("accel")
-    if config is None:
-        gcfg = configuration_of(gset, truth.configuration or "truth")
-    elif isinstance(config, Configuration):
-        gcfg = config
-    else:
-        gcfg = load_configuration(config)
-    if gcfg.n != gset.n:
-        raise ConfigError(f"configuration {gcfg.name!r} has {gcfg.n} gyros, the truth has "
-                          f"{gset.n}")
-    acfg = None if aset is None else configuration_of(aset, gcfg.name)
-    if accel_config is not None:
-        if aset is None or accel_config.n != aset.n:
-            raise ConfigError(f"accelerometer configuration {accel_config.name!r} has "
-                              f"{accel_config.n} sensors, the truth has "
-                              f"{0 if aset is None else aset.n}")
-        acfg = accel_config
-    fs = float(sample_rate_hz or truth.sample_rate_hz)
-    if not fs > 0:
-        raise ConfigError(f"sample rate must be positive, got {fs}")
-    lat_deg = latitude_deg if latitude_deg is not None else truth.latitude_deg
-    if lat_deg is None:
-        raise ConfigError("no latitude: give latitude_deg or put it in the truth")
-    lat = np.deg2rad(float(lat_deg))
-    g = gravity_local(lat) if gravity is None else float(gravity)
-    effects = {k: float(v) for k, v in (effects or {}).items()}
-    n_by_kind = {"gyro": gset.n, "accel": 0 if aset is None else aset.n}
-    touched = resolve_effect_sensors(effects, effect_sensors, n_by_kind)
-
-    # -- time base and table motion, step by step ------------------------------------
-    counts = [round(s.duration_s * fs) for s in sequence.steps]
-    for s, n in zip(sequence.steps, counts, strict=True):
-        if n < MIN_STEP_SAMPLES:
-            raise ConfigError(f"sequence {sequence.name!r} step {s.index} lasts {s.duration_s:g} s"
-                              f", {n} samples at {fs:g} Hz; a step needs at least "
-                              f"{MIN_STEP_SAMPLES}")
-    N = int(sum(counts))
-    t = np.arange(N) / fs
-    step = np.repeat([s.index for s in sequence.steps], counts).astype(np.int64)
-    inner, outer = np.zeros(N), np.zeros(N)
-    wi, wo = np.zeros(N), np.zeros(N)
-    tau_all = np.zeros(N)
-    start = 0
-    for s, n in zip(sequence.steps, counts, strict=True):
-        sl = slice(start, start + n)
-        tau = np.arange(n) / fs
-        tau_all[sl] = tau
-        inner[sl], outer[sl] = s.angles_at(tau)
-        wi[sl], wo[sl] = s.inner_rate, s.outer_rate
-        start += n
-
-    def inputs(skew: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Body inputs (ω_table, ω_earth, f_b) with the input sampled ``skew`` s late."""
-        wt, we, fb = np.zeros((N, 3)), np.zeros((N, 3)), np.zeros((N, 3))
-        start = 0
-        for s, n in zip(sequence.steps, counts, strict=True):
-            sl = slice(start, start + n)
-            a_i, a_o = s.angles_at(tau_all[sl] - skew)
-            wt[sl], we[sl], fb[sl] = body_inputs(a_i, a_o, wi[sl], wo[sl], s.mat_pb, lat, g)
-            start += n
-        return wt, we, fb
-
-    rng = np.random.default_rng(seed)
-    white = {}
-    for kind, sset in (("gyro", gset), ("accel", aset)):
-        if sset is None:
-            continue
-        z = rng.standard_normal((N, sset.n))
-        white[kind] = _std_normal_to_cov(z, sset.noise_covariance) if noise.white else 0.0 * z
-    slow = {}
-    for kind, sset in (("gyro", gset), ("accel", aset)):
-        if sset is None:
-            continue
-        extra = np.zeros((N, sset.n))
-        sd = float(noise.bias_instability.get(kind, 0.0))
-        if sd > 0:
-            phi = np.exp(-1.0 / (fs * noise.bias_correlation_s))
-            w = rng.standard_normal((N, sset.n)) * sd * np.sqrt(1 - phi**2)
-            x0 = rng.standard_normal(sset.n) * sd
-            extra += lfilter([1.0], [1.0, -phi], w, axis=0,
-                             zi=(phi * x0)[None, :])[0]
-        q = float(noise.random_walk.get(kind, 0.0))
-        if q > 0:
-            extra += np.cumsum(rng.standard_normal((N, sset.n)) * q / np.sqrt(fs), axis=0)
-        slow[kind] = extra
-
-    base = inputs(0.0)
-    skew = effects.get("time_skew", 0.0) if "time_skew" in touched else 0.0
-    skewed = inputs(skew) if skew != 0.0 else base
-    T = N / fs
-    w_ref = sequence.table_rate
-
-    # -- gyros ------------------------------------------------------------------------
-    Hg, sfg, bg = gset.H, gset.scale_factors, gset.biases
-    earth = 0.0 if effects.get("no_earth_rate", 0.0) else 1.0
-
-    def sel(name: str) -> np.ndarray:
-        return np.isin(np.arange(1, gset.n + 1), touched.get(name, ()))
-
-    sg = (base[0] + earth * base[1]) @ Hg.T             # input along the true axes
-    f_g = base[2] @ Hg.T                                 # specific force along h̃_i
-    if skew != 0.0:
-        m = sel("time_skew")
-        sg[:, m] = ((skewed[0] + earth * skewed[1]) @ Hg.T)[:, m]
-        f_g[:, m] = (skewed[2] @ Hg.T)[:, m]
-
-    if "scale_asymmetry" in touched:
-        m = sel("scale_asymmetry")
-        a = effects["scale_asymmetry"]
-        sg[:, m] = sg[:, m] * (1.0 + 0.5 * a * np.sign(sg[:, m]))
-    if "scale_nonlinearity" in touched:
-        m = sel("scale_nonlinearity")
-        sg[:, m] = sg[:, m] + effects["scale_nonlinearity"] * sg[:, m] ** 2 / w_ref
-    if "g_sensitivity" in touched:
-        m = sel("g_sensitivity")
-        sg[:, m] += effects["g_sensitivity"] * DPH * f_g[:, m] / G0
-    if "warmup" in touched:
-        m = sel("warmup")
-        sg[:, m] += effects["warmup"] * DPH * np.exp(-t / WARMUP_TAU_S)[:, None]
-    if "bias_drift" in touched:
-        m = sel("bias_drift")
-        sg[:, m] += effects["bias_drift"] * DPH * (t / T)[:, None]
-    raw_g = (sg + bg + white["gyro"] + slow["gyro"]) / sfg
-
-    # -- accelerometers -----------------------------------------------------------------
-    raw_a = None
-    if aset is not None:
-        Ha = aset.H
-        sa = base[2] @ Ha.T
-        if "time_skew" in touched and skew != 0.0:
-            m = np.isin(np.arange(1, aset.n + 1), touched["time_skew"])
-            sa[:, m] = (skewed[2] @ Ha.T)[:, m]
-        raw_a = (sa + aset.biases + white["accel"] + slow["accel"]) / aset.scale_factors
-
+    su = sim_setup(config, truth, effects=effects, effect_sensors=effect_sensors,
+                   sample_rate_hz=sample_rate_hz, latitude_deg=latitude_deg, gravity=gravity,
+                   accel_config=accel_config)
+    tb = time_base(sequence, su.sample_rate_hz)
+    draw = draw_noise(su, noise, tb.n_samples, seed)
+    base = sampled_inputs(sequence, tb, su.latitude_rad, su.gravity)
+    skew = su.effects.get("time_skew", 0.0) if "time_skew" in su.touched else 0.0
+    skewed = sampled_inputs(sequence, tb, su.latitude_rad, su.gravity, skew) \
+        if skew != 0.0 else base
     meta = {
         "generator": "calibration.simulate.simulate_session",
         "sequence": sequence.name,
@@ -291,18 +466,21 @@ def simulate_session(config: Configuration | str | None, sequence: Sequence,
         "table_rate_dps": sequence.table_rate_dps,
         "seed": seed,
         "mounts": {str(s.index): s.mount for s in sequence.steps},
-        "effects": dict(effects),
-        "effect_sensors": {k: list(v) for k, v in touched.items()},
-        "effect_units": {k: EFFECTS[k].unit for k in effects},
+        "effects": dict(su.effects),
+        "effect_sensors": {k: list(v) for k, v in su.touched.items()},
+        "effect_units": {k: EFFECTS[k].unit for k in su.effects},
         "noise": noise.to_dict(),
     }
     return Session(
-        gyro_config=gcfg, accel_config=acfg, sample_rate_hz=fs,
-        latitude_deg=float(lat_deg), steps=sequence.session_steps(), t=t, step=step,
-        inner=inner, outer=outer, inner_rate=wi, outer_rate=wo, raw_gyro=raw_g,
-        raw_accel=raw_a, gyro_raw_unit=_raw_unit(gset),
-        accel_raw_unit=_raw_unit(aset) if aset is not None else "raw",
-        gravity=g, source="<simulated>", meta=meta)
+        gyro_config=su.gyro_config, accel_config=su.accel_config,
+        sample_rate_hz=su.sample_rate_hz, latitude_deg=su.latitude_deg,
+        steps=sequence.session_steps(), t=tb.t, step=tb.step, inner=tb.inner,
+        outer=tb.outer, inner_rate=tb.inner_rate, outer_rate=tb.outer_rate,
+        raw_gyro=gyro_outputs(su, sequence, tb, base, skewed, draw),
+        raw_accel=accel_outputs(su, base, skewed, draw), gyro_raw_unit=_raw_unit(su.gyros),
+        accel_raw_unit=_raw_unit(su.accels) if su.accels is not None else "raw",
+        gravity=su.gravity, source="<simulated>", meta=meta,
+        temperature_degC=temperature_profile(tb.t) if "temperature" in su.effects else None)
 
 
 def true_raw_means(session: Session, truth: Calibration, *,
@@ -352,6 +530,10 @@ def truth_of_session(session: Session, truth: Calibration
     if "bias_drift" in effects:
         details["bias_drift"] = {"session_duration_s": float(session.t.size
                                                              / session.sample_rate_hz)}
+    if "temperature" in meta.get("effects", {}):
+        details["temperature"] = {"profile": "T0 + rise*(1 - exp(-t/tau))",
+                                  "start_degC": TEMP_START_DEGC, "rise_degC": TEMP_RISE_DEGC,
+                                  "tau_s": TEMP_TAU_S, "reference_degC": TEMP_START_DEGC}
     extra = dict(truth.extra)
     extra.update({"sequence": meta.get("sequence"), "seed": meta.get("seed"),
                   "noise": meta.get("noise")})

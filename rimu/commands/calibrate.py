@@ -18,12 +18,15 @@ from fdi.calfile import Calibration, SensorSet
 from fdi.errors import ConfigError
 from fdi.parity import parity_matrix
 from fdi.units import input_unit_factor, scale_factor_from_si, scale_factor_sd_from_si
+from rimu.commands.calibrate_ferraris import add_arguments as add_ferraris_arguments
+from rimu.commands.calibrate_ferraris import ferraris_command
 
 HELP = "calibrate redundant gyros/accelerometers from a turntable session"
 
 
 def configure(p: argparse.ArgumentParser) -> None:
-    p.add_argument("session", help="session directory (manifest.json + samples.csv)")
+    p.add_argument("session", nargs="?",
+                   help="session directory (manifest.json + samples.csv)")
     p.add_argument("--out", required=True, metavar="FILE",
                    help="calibration file to write (rimu.calibration/1 JSON)")
     p.add_argument("--compare", metavar="TRUTH",
@@ -39,6 +42,7 @@ def configure(p: argparse.ArgumentParser) -> None:
                    help="fit the Earth rate to the raw outputs, not the wavelet-denoised ones")
     p.add_argument("--plot", metavar="DIR",
                    help="write PNG plots (per-step residuals, Earth-rate fit) into DIR")
+    add_ferraris_arguments(p)
 
 
 def _set_summary(s: SensorSet, V_sd: object) -> list[str]:
@@ -138,6 +142,10 @@ def summary_text(cal: Calibration) -> str:
 def run(args: argparse.Namespace) -> int:
     from calibration.session_io import load_session
 
+    if args.ferraris:
+        return ferraris_command(args)
+    if args.session is None:
+        raise ConfigError("rimu calibrate: give a session directory (or --ferraris CSV)")
     session = load_session(args.session)
     cal = calibrate(session, bias_method=args.bias_method, denoise=not args.no_denoise,
                     noise_model=args.noise_model)

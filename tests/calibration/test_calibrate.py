@@ -1,10 +1,11 @@
-"""calibrate(): exact recovery on noise-free sessions, honest errors on one noisy session,
+"""calibrate(): exact recovery on noise-free sessions, honest errors over seeds,
 seed 000's parity vectors, the file fields, and the bad-input errors of the estimators."""
 
 import json
 
 import numpy as np
 import pytest
+import scipy.stats
 from _sessions import session, with_changes
 
 from calibration.calibrate import MIN_STEP_SAMPLES, calibrate
@@ -34,21 +35,48 @@ def test_noise_free_session_recovers_every_parameter(name):
             np.testing.assert_allclose(Me, Mt, atol=1e-10, err_msg=f"{kind} M per subsystem")
 
 
+SEEDS_FAST = range(8)
+"""Seeds of the default-run honesty checks (100 seeds: test_calibrate_mc.py, --slow)."""
+
+
+def _pooled_z(name):
+    """z = error/σ of every compared parameter (and v_c for the tetrad) over SEEDS_FAST."""
+    z, sessions = [], []
+    for seed in SEEDS_FAST:
+        s, truth = session(name, seed=seed)
+        cal = calibrate(s, allan=False)
+        rows = compare(cal, truth)
+        assert {r.kind for r in rows} == set(truth.sets) | {"site"}
+        # cone: the Earth rate (Ω_h ≈ 12 °/h against σ ≈ 8 °/h) is Rice-biased, see the MC test
+        z.extend(r.z for r in rows if not (name == "cone-paper" and r.kind == "site"))
+        if name == "tetrad-paper":
+            Vc, Vt = parity_matrix(cal.gyro.H)[0], parity_matrix(truth.gyro.H)[0]
+            z.extend((Vc - Vt) / np.asarray(cal.extra["parity_calibrated_sd"])[0])
+        sessions.append((s, truth, cal))
+    return np.array(z), sessions
+
+
 @pytest.mark.parametrize("name", ["tetrad-paper", "cone-paper"])
-def test_one_noisy_session_every_parameter_within_three_sigma(name):
-    s, truth = session(name, seed=0)
-    cal = calibrate(s)
-    rows = compare(cal, truth)
-    kinds = {r.kind for r in rows}
-    assert kinds == set(truth.sets) | {"site"}
-    for r in rows:
-        assert abs(r.z) < 3, f"{r.kind} {r.sensor} {r.parameter}: error/sd = {r.z:.2f}"
-    # the per-sample noise covariance is recovered (white noise, >= 36k samples per kind)
+def test_noisy_sessions_errors_within_their_sigma_over_seeds(name):
+    """Over 8 seeds, every parameter's error/σ pooled: no more |z| > 3 than the binomial
+    99.9 % quantile for honest σ (p = 0.27 %), RMS of z within 0.8-1.2 (MC sd of the RMS
+    of ~200-400 normal values ≈ 0.04-0.05, widened for the correlation of the parameters
+    within a session)."""
+    z, sessions = _pooled_z(name)
+    lim = scipy.stats.binom.ppf(0.999, z.size, 0.0027)
+    assert np.sum(np.abs(z) > 3) <= lim, (np.sum(np.abs(z) > 3), lim)
+    rms = float(np.sqrt(np.mean(z**2)))
+    assert 0.8 < rms < 1.2, rms
+    # the per-sample noise covariance is recovered (white noise, >= 36k samples per kind:
+    # sd of the estimated sd ≈ 0.4 %)
+    _, truth, cal = sessions[0]
     for kind in truth.sets:
         np.testing.assert_allclose(cal.kind(kind).noise_sd, truth.kind(kind).noise_sd,
                                    rtol=0.02, err_msg=f"{kind} noise sd")
-        chi = np.asarray(cal.extra["rate_test"]["chi2_dof"])
-        assert np.all(chi < 6), "step-difference scatter explained by white noise"
+    chi = np.array([c.extra["rate_test"]["chi2_dof"] for _, _, c in sessions])
+    # chi2/dof of the step differences: mean over seeds and sensors near 1 (white noise)
+    dof = sessions[0][2].extra["rate_test"]["R_rad_s"].shape[0] - 3
+    assert abs(chi.mean() - 1) < 4 * np.sqrt(2 / dof / chi.size), chi.mean()
 
 
 def test_parity_vectors_of_seed_000():
@@ -56,13 +84,11 @@ def test_parity_vectors_of_seed_000():
     cal = calibrate(s)
     np.testing.assert_allclose(parity_matrix(cal.gyro.H_nominal)[0], EQ24, atol=5e-6,
                                err_msg="v (Eq. 24)")
-    Vc = parity_matrix(cal.gyro.H)[0]
     sd = np.asarray(cal.extra["parity_calibrated_sd"])[0]
     assert np.all(sd > 0) and np.all(sd < 1e-4)
-    Vt = parity_matrix(truth.gyro.H)[0]
-    assert np.all(np.abs(Vc - Vt) < 3 * sd), f"v_c {Vc} vs truth {Vt}, sd {sd}"
-    # Eq. 25 is printed to 5 decimals: half a unit of the last digit on top of 3 sd
-    assert np.all(np.abs(Vc - EQ25) < 3 * sd + 5e-6), f"v_c {Vc} vs Eq. 25, sd {sd}"
+    # the preset's true axes are seed 000's (Eq. 26): its v_c is Eq. 25 to the printed
+    # 5 decimals; the estimate's honesty over seeds is in the pooled test above
+    np.testing.assert_allclose(parity_matrix(truth.gyro.H)[0], EQ25, atol=5e-6 + 1e-7)
 
 
 def test_file_has_every_field_the_issue_lists(tmp_path):

@@ -1,0 +1,105 @@
+"""``rimu calibrate --ferraris CSV ... --out CAL``: known-angle rotation (Ferraris) sessions.
+
+Kept beside :mod:`rimu.commands.calibrate`, which only adds the options
+(:func:`add_arguments`) and hands over (:func:`ferraris_command`).
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+
+from fdi.errors import ConfigError
+from fdi.units import G0
+
+__all__ = ["add_arguments", "ferraris_command", "summary_lines"]
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    """The ``--ferraris`` options of ``rimu calibrate``."""
+    g = p.add_argument_group("Ferraris sessions (static positions + known-angle rotations)")
+    g.add_argument("--ferraris", metavar="CSV",
+                   help="calibrate a Ferraris session instead of a turntable session: CSV "
+                        "with gyr_x..z, acc_x..z and a 'part' column (x_p ... z_rot), or with "
+                        "--sections")
+    g.add_argument("--sections", metavar="JSON",
+                   help="section list {\"x_p\": {\"start\": i, \"end\": j}, ...} (0-based rows, "
+                        "end exclusive) for a CSV without a 'part' column")
+    g.add_argument("--sample-rate-hz", type=float, metavar="HZ",
+                   help="sample rate of the Ferraris CSV (required with --ferraris)")
+    g.add_argument("--rotation-deg", type=float, default=-360.0,
+                   help="nominal rotation angle about each axis (default -360: clockwise "
+                        "seen from above, imucal's convention)")
+    g.add_argument("--gravity", type=float, default=G0,
+                   help=f"local gravity in m/s^2 (default {G0})")
+    g.add_argument("--position-sd-deg", type=float, default=1.0,
+                   help="sd of each tilt component of a position or rotation axis (default 1)")
+    g.add_argument("--angle-sd-deg", type=float, default=1.0,
+                   help="sd of each rotation angle (default 1)")
+    g.add_argument("--latitude-deg", type=float, default=None,
+                   help="latitude: removes the vertical Earth rate from the static gyro "
+                        "means (default: counted as an uncertainty)")
+    g.add_argument("--raw-unit", default="count",
+                   help="unit of the raw outputs in the CSV (default count)")
+
+
+def summary_lines(cal) -> list[str]:
+    """Readable result: per sensor SF, bias, axis with sds, imucal's matrices."""
+    from fdi.units import input_unit_factor
+
+    fe = cal.extra["ferraris"]
+    out = [f"Ferraris calibration of {cal.extra['source']} ({cal.sample_rate_hz:g} Hz; "
+           f"rotation {fe['rotation_deg']:g} deg, position sd {fe['position_sd_deg']:g} deg, "
+           f"angle sd {fe['angle_sd_deg']:g} deg, gravity {fe['gravity_m_s2']:g} m/s^2)"]
+    for kind, per in (("gyro", "deg/s"), ("accel", "m/s^2")):
+        s = cal.sets[kind]
+        f = input_unit_factor(per) if kind == "gyro" else 1.0
+        out.append(f"{kind}: counts per {per} (imucal K), bias in counts (imucal b), axis "
+                   "(imucal R row), misalignment mrad")
+        for c in s.sensors:
+            k = f / c.scale_factor
+            m, msd = 1e3 * c.misalignment, 1e3 * np.asarray(c.misalignment_sd)
+            out.append(
+                f"  {c.name}  K {k:.6g} ± {k * c.scale_factor_sd / c.scale_factor:.2g}"
+                f"   b {c.bias / c.scale_factor:+.5g} ± {c.bias_sd / c.scale_factor:.2g}"
+                f"   axis [{' '.join(f'{x:+.5f}' for x in c.axis)}]"
+                f"   misalignment ({m[0]:+.2f} ± {msd[0]:.2f}, {m[1]:+.2f} ± {msd[1]:.2f})")
+    k, ksd = (np.asarray(fe[x]) for x in ("g_sensitivity_raw_per_m_s2",
+                                           "g_sensitivity_raw_per_m_s2_sd"))
+    out.append("gyro g-sensitivity, counts per m/s^2 (imucal K_ga):")
+    out.extend("  " + "  ".join(f"{v:+.5f} ± {e:.5f}" for v, e in zip(r, re, strict=True))
+               for r, re in zip(k, ksd, strict=True))
+    c2 = fe["chi2_dof"]
+    out.append("static fits, chi2/dof (2 dof per sensor): accel "
+               + " ".join(f"{x:.2f}" for x in c2["accel"]) + "; gyro "
+               + " ".join(f"{x:.2f}" for x in c2["gyro"])
+               + "; rotations: 0 spare dof (their sd rests on --angle-sd-deg)")
+    out.extend(f"warning: {w}" for w in cal.extra.get("warnings", []))
+    return out
+
+
+def ferraris_command(args: argparse.Namespace) -> int:
+    """Run ``rimu calibrate --ferraris``: load, calibrate, write, print."""
+    from calibration.ferraris import FerrarisOptions, ferraris_calibrate
+    from calibration.ferraris_io import load_ferraris
+
+    if args.sample_rate_hz is None:
+        raise ConfigError("--ferraris needs --sample-rate-hz (the CSV does not hold it)")
+    if args.session is not None or args.compare or args.plot:
+        raise ConfigError("--ferraris takes no session directory, --compare or --plot "
+                          "(those are for turntable sessions)")
+    s = load_ferraris(args.ferraris, args.sample_rate_hz, sections=args.sections,
+                      gyro_raw_unit=args.raw_unit, accel_raw_unit=args.raw_unit)
+    opt = FerrarisOptions(rotation_deg=args.rotation_deg, gravity=args.gravity,
+                          position_sd_deg=args.position_sd_deg,
+                          angle_sd_deg=args.angle_sd_deg, latitude_deg=args.latitude_deg)
+    cal = ferraris_calibrate(s, opt)
+    out = Path(args.out)
+    if out.parent and not out.parent.exists():
+        raise ConfigError(f"{args.out}: directory {out.parent} does not exist")
+    cal.save(out)
+    print("\n".join(summary_lines(cal)))
+    print(f"wrote {out}")
+    return 0
