@@ -102,22 +102,35 @@ _ISOLATE = 0                                # CAPABILITY_CODE["isolate"]
 _NONE = 3                                   # CAPABILITY_CODE["none"]
 
 
-@njit(cache=True)
-def compensate(u, sensors, mats, df, has_omega, y, p, z, w) -> float:
-    """y = SF·u − b, p = V·y, z = A·p, ω̂ = G·y of the sensors in the set; returns ρ.
+@njit(cache=True, error_model="numpy")
+def members(sensors):
+    """Indices of the sensors in the set, ascending, shape (m,)."""
+    m = 0
+    for i in range(sensors.shape[0]):
+        if sensors[i, IN_SET] != 0.0:
+            m += 1
+    idx = np.empty(m, np.int64)
+    m = 0
+    for i in range(sensors.shape[0]):
+        if sensors[i, IN_SET] != 0.0:
+            idx[m] = i
+            m += 1
+    return idx
+
+
+@njit(cache=True, error_model="numpy")
+def compensate(raw, r, idx, sensors, mats, df, has_omega, y, p, z, w) -> float:
+    """y = SF·u − b, p = V·y, z = A·p, ω̂ = G·y of the sensors ``idx`` of row r; returns ρ.
 
     Sums run over the sensors of the set in ascending order (left to right). Without three
     independent sensors ω̂ is NaN and ρ is 0.
     """
-    n = sensors.shape[0]
-    for i in range(n):
-        if sensors[i, IN_SET] != 0.0:
-            y[i] = sensors[i, SF] * u[i] - sensors[i, BIAS]
+    for i in idx:
+        y[i] = sensors[i, SF] * raw[r, i] - sensors[i, BIAS]
     for j in range(df):
         acc = 0.0
-        for i in range(n):
-            if sensors[i, IN_SET] != 0.0:
-                acc = acc + mats[j, i] * y[i]
+        for i in idx:
+            acc = acc + mats[j, i] * y[i]
         p[j] = acc
     a0 = df + 3
     for j in range(df):
@@ -132,25 +145,23 @@ def compensate(u, sensors, mats, df, has_omega, y, p, z, w) -> float:
         return 0.0
     for a in range(3):
         acc = 0.0
-        for i in range(n):
-            if sensors[i, IN_SET] != 0.0:
-                acc = acc + mats[df + a, i] * y[i]
+        for i in idx:
+            acc = acc + mats[df + a, i] * y[i]
         w[a] = acc
     q0, q1, q2 = w[0] * w[0], w[1] * w[1], w[2] * w[2]
     q3, q4, q5 = w[0] * w[1], w[0] * w[2], w[1] * w[2]
     rho = 0.0
-    for i in range(n):
-        if sensors[i, IN_SET] != 0.0:
-            c = RHO_COEF0
-            s = (sensors[i, c] * q0 + sensors[i, c + 1] * q1 + sensors[i, c + 2] * q2
-                 + sensors[i, c + 3] * q3 + sensors[i, c + 4] * q4 + sensors[i, c + 5] * q5)
-            if s > rho:
-                rho = s
+    c = RHO_COEF0
+    for i in idx:
+        s = (sensors[i, c] * q0 + sensors[i, c + 1] * q1 + sensors[i, c + 2] * q2
+             + sensors[i, c + 3] * q3 + sensors[i, c + 4] * q4 + sensors[i, c + 5] * q5)
+        if s > rho:
+            rho = s
     return rho
 
 
-@njit(cache=True)
-def health_checks(t, u, ok, sensors, fconst, iconst, sensor, counters) -> int:
+@njit(cache=True, error_model="numpy")
+def health_checks(t, raw, r, ok, sensors, fconst, iconst, sensor, counters) -> int:
     """Health verdict per sensor of the set (``counters[HEALTH0 + i]``); returns how many
     failed. Each sensor's check reads only its own history, so the order of isolation does
     not change the verdicts."""
@@ -161,7 +172,7 @@ def health_checks(t, u, ok, sensors, fconst, iconst, sensor, counters) -> int:
         if sensors[i, IN_SET] == 0.0:
             continue
         if ok[i]:
-            v = u[i]
+            v = raw[r, i]
             if not (sensors[i, LO] < v and v < sensors[i, HI]):
                 counters[HEALTH0 + i] = HEALTH_RANGE if math.isfinite(v) else HEALTH_NONFINITE
                 failed += 1
@@ -185,8 +196,8 @@ def health_checks(t, u, ok, sensors, fconst, iconst, sensor, counters) -> int:
     return failed
 
 
-@njit(cache=True)
-def readmission_check(t, u, ok, sensors, mats, iconst, sensor, counters, dwell_s,
+@njit(cache=True, error_model="numpy")
+def readmission_check(t, raw, r, ok, idx, sensors, mats, iconst, sensor, counters, dwell_s,
                       y, p, z, w) -> int:
     """First isolated sensor that behaved for ``dwell_s`` (−1: none).
 
@@ -199,11 +210,11 @@ def readmission_check(t, u, ok, sensors, mats, iconst, sensor, counters, dwell_s
     for i in range(n):
         if sensors[i, IN_SET] != 0.0 and not ok[i]:
             return -1
-    compensate(u, sensors, mats, iconst[DF], True, y, p, z, w)
+    compensate(raw, r, idx, sensors, mats, iconst[DF], True, y, p, z, w)
     for i in range(n):
         if sensors[i, IN_SET] != 0.0:
             continue
-        v = u[i]
+        v = raw[r, i]
         good = ok[i] and sensors[i, LO] < v and v < sensors[i, HI] and v != sensor[i, LAST_RAW]
         if good:
             yi = sensors[i, SF] * v - sensors[i, BIAS]
@@ -222,7 +233,7 @@ def readmission_check(t, u, ok, sensors, mats, iconst, sensor, counters, dwell_s
     return -1
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def detection_machine(alarm, clear, fired, iconst, counters) -> int:
     """Detection state machine for one complete sample; returns the stop code.
 
@@ -252,14 +263,14 @@ def detection_machine(alarm, clear, fired, iconst, counters) -> int:
     return code
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def protection_level(fconst, rho) -> float:
     """PL(ρ) = a·sqrt(1 + bρ) + c·sqrt(d + eρ) (rad/s), :mod:`fdi.integrity`."""
     return (fconst[PL_A] * math.sqrt(1.0 + fconst[PL_B] * rho)
             + fconst[PL_C] * math.sqrt(fconst[PL_D] + fconst[PL_E] * rho))
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _untested_row(row, scales, fconst, iconst, K, parity0):
     """Statistics NaN, base thresholds, parity NaN: a sample without a parity test."""
     nw = iconst[N_WINDOWS]
@@ -273,7 +284,7 @@ def _untested_row(row, scales, fconst, iconst, K, parity0):
         row[j] = np.nan
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def advance(t, raw, valid, r0, r1, sensors, scales, mats, fconst, iconst, windows, cusum,
             sensor, counters, out, dwell_s) -> None:
     """Run samples r0 … r1−1 until one needs the monitor; see the module docstring.
@@ -313,24 +324,24 @@ def advance(t, raw, valid, r0, r1, sensors, scales, mats, fconst, iconst, window
     p = np.zeros(max(df, 1))
     z = np.zeros(max(df, 1))
     w = np.zeros(3)
+    idx = members(sensors)
     phase = counters[PHASE]
     counters[PHASE] = PHASE_HEALTH
     for r in range(r0, r1):
         tr = t[r]
-        u = raw[r]
         ok = valid[r] if has_valid else valid[0]
         if phase == PHASE_HEALTH:
             if counters[STARTED] == 0:
                 counters[STARTED] = 1
                 for i in range(n):
                     sensor[i, LAST_VALID_T] = tr
-            if health_checks(tr, u, ok, sensors, fconst, iconst, sensor, counters) > 0:
+            if health_checks(tr, raw, r, ok, sensors, fconst, iconst, sensor, counters) > 0:
                 counters[STOP_ROW] = r
                 counters[STOP_CODE] = STOP_HEALTH
                 return
         if phase <= PHASE_READMIT and iconst[READMISSION] != 0:
-            k = readmission_check(tr, u, ok, sensors, mats, iconst, sensor, counters, dwell_s,
-                                  y, p, z, w)
+            k = readmission_check(tr, raw, r, ok, idx, sensors, mats, iconst, sensor, counters,
+                                  dwell_s, y, p, z, w)
             if k >= 0:
                 counters[READMIT_SENSOR] = k
                 counters[STOP_ROW] = r
@@ -339,8 +350,8 @@ def advance(t, raw, valid, r0, r1, sensors, scales, mats, fconst, iconst, window
         phase = PHASE_HEALTH
         row = out[r]
         complete = True
-        for i in range(n):
-            if sensors[i, IN_SET] != 0.0 and not ok[i]:
+        for i in idx:
+            if not ok[i]:
                 complete = False
         if not complete:
             _untested_row(row, scales, fconst, iconst, K, parity0)
@@ -348,7 +359,7 @@ def advance(t, raw, valid, r0, r1, sensors, scales, mats, fconst, iconst, window
             counters[STOP_ROW] = r
             counters[STOP_CODE] = STOP_INCOMPLETE
             return
-        rho = compensate(u, sensors, mats, df, has_omega, y, p, z, w)
+        rho = compensate(raw, r, idx, sensors, mats, df, has_omega, y, p, z, w)
         row[OMEGA0] = w[0]
         row[OMEGA0 + 1] = w[1]
         row[OMEGA0 + 2] = w[2]
@@ -384,8 +395,8 @@ def advance(t, raw, valid, r0, r1, sensors, scales, mats, fconst, iconst, window
     counters[STOP_CODE] = STOP_NONE
 
 
-@njit(cache=True)
-def reconstruct_row(u, sensors, mats, iconst, fconst, row) -> None:
+@njit(cache=True, error_model="numpy")
+def reconstruct_row(raw, r, sensors, mats, iconst, fconst, row) -> None:
     """ω̂ of one sample from the sensors of a set (row[OMEGA0 …]) and its protection level
     (row[PROTECTION]); used for incomplete samples and right after an isolation."""
     n = sensors.shape[0]
@@ -394,7 +405,8 @@ def reconstruct_row(u, sensors, mats, iconst, fconst, row) -> None:
     p = np.zeros(max(df, 1))
     z = np.zeros(max(df, 1))
     w = np.zeros(3)
-    rho = compensate(u, sensors, mats, df, iconst[HAS_OMEGA] != 0, y, p, z, w)
+    rho = compensate(raw, r, members(sensors), sensors, mats, df, iconst[HAS_OMEGA] != 0,
+                     y, p, z, w)
     row[OMEGA0] = w[0]
     row[OMEGA0 + 1] = w[1]
     row[OMEGA0 + 2] = w[2]

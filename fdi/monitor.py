@@ -279,9 +279,9 @@ class Monitor:
                 continue
             osd = None
             if code == S.STOP_INCOMPLETE:
-                osd = self._on_incomplete(raw[stop], valid[stop if has_valid else 0], out[stop])
+                osd = self._on_incomplete(raw, stop, valid[stop if has_valid else 0], out[stop])
             else:
-                self._on_detection(tr, code, raw[stop], out[stop], events)
+                self._on_detection(tr, code, raw, stop, out[stop], events)
             if rows is not None:
                 rows.fill(stop, stop + 1, self, osd)
             r = stop + 1
@@ -322,18 +322,19 @@ class Monitor:
                             self.settings.readmit_dwell_s))
         self._set_model(self._mask | (1 << i))
 
-    def _on_incomplete(self, u: np.ndarray, ok: np.ndarray, row: np.ndarray) -> np.ndarray:
+    def _on_incomplete(self, raw: np.ndarray, r: int, ok: np.ndarray, row: np.ndarray
+                       ) -> np.ndarray:
         """ω̂ from the sensors present; the kernel wrote the untested statistics."""
         present = 0
         for i in self._model.idx:
             if ok[i]:
                 present |= 1 << i
         ks = self._kernel_set(present)
-        reconstruct_row(u, ks.sensors, ks.mats, ks.iconst, ks.fconst, row)
+        reconstruct_row(raw, r, ks.sensors, ks.mats, ks.iconst, ks.fconst, row)
         row[S.PROTECTION] = _INF
         return self.cache.get(present).omega_sd
 
-    def _on_detection(self, t: float, code: int, u: np.ndarray, row: np.ndarray,
+    def _on_detection(self, t: float, code: int, raw: np.ndarray, r: int, row: np.ndarray,
                       events: list[Event]) -> None:
         """Name a detection and/or isolate; ω̂ and PL of the sample from the new set."""
         mdl = self._model
@@ -349,7 +350,7 @@ class Monitor:
             events.append(Event(t, sensor, "isolated", reason, stat, thr, scale, mag))
             self._isolate(sensor - 1, "isolated")
             ks = self._kset
-            reconstruct_row(u, ks.sensors, ks.mats, ks.iconst, ks.fconst, row)
+            reconstruct_row(raw, r, ks.sensors, ks.mats, ks.iconst, ks.fconst, row)
 
     def _attribute(self, mdl: SetModel, fired: int) -> tuple[int, float | None, str,
                                                             int | None]:

@@ -31,7 +31,7 @@ from fdi.state import (
 __all__ = ["window_update"]
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def window_update(z: np.ndarray, rho: float, df: int, windows: np.ndarray,
                   counters: np.ndarray, scales: np.ndarray, K: int, row: np.ndarray
                   ) -> tuple[bool, bool, int, float]:
@@ -74,7 +74,8 @@ def window_update(z: np.ndarray, rho: float, df: int, windows: np.ndarray,
     if pos == R:
         pos = 0
     counters[RING_POS] = pos
-    windows[pos, :] = cur
+    for j in range(df + 1):
+        windows[pos, j] = cur[j]
     alarm = False
     clear = True
     fired = -1
