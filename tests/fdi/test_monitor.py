@@ -179,7 +179,9 @@ def test_magnitude_estimate_within_3_sigma():
 
 
 def test_reconstruction_covariance_is_honest_after_isolation():
-    """MC: empirical covariance of ω̂ − ω within 10 % of the reported covariance."""
+    """MC: empirical covariance of ω̂ − ω equals the reported one within 3 Monte Carlo sd
+    (white errors: a variance ratio over n samples has sd sqrt(2/n), 0.7 % here; an
+    off-diagonal whitened entry sd sqrt(1/n))."""
     N = 40_000
     cal = synthetic_calibration("cone6", seed=5, noise_sd_spread=0.3)
     om = manoeuvre(N, 3, amp=0.5)
@@ -195,10 +197,12 @@ def test_reconstruction_covariance_is_honest_after_isolation():
     rep = mon.model.cov
     assert mon.model.m == 5
     np.testing.assert_allclose(res.omega_sd[sl][0], np.sqrt(np.diag(rep)))
-    np.testing.assert_allclose(np.diag(emp), np.diag(rep), rtol=0.10, err_msg="variance")
+    n = err.shape[0]
+    tol = 3.0 * np.sqrt(2.0 / n)
+    np.testing.assert_allclose(np.diag(emp) / np.diag(rep), 1.0, atol=tol, err_msg="variance")
     # the whole matrix: whitened empirical covariance close to I
     L = np.linalg.cholesky(np.linalg.inv(rep))
-    np.testing.assert_allclose(L.T @ emp @ L, np.eye(3), atol=0.10, err_msg="whitened cov")
+    np.testing.assert_allclose(L.T @ emp @ L, np.eye(3), atol=tol, err_msg="whitened cov")
 
 
 def test_protection_level_covers_undetected_faults():
