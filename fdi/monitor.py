@@ -109,12 +109,14 @@ class Monitor:
         self._all_valid = np.ones((1, self.n), bool)
         self._row = np.empty((1, self._layout.width(True)))
         self._t1 = np.empty(1)
+        self._dwell_s = float(self.settings.readmit_dwell_s)
         self.reset()
 
     # ------------------------------------------------------------------ state
     def reset(self) -> None:
         """Back to the state after construction (all sensors healthy, empty windows)."""
         self._state = S.DetectorState(self.n, max(self._scales) + 1)
+        self._state.counters[S.HAS_PARITY] = 1
         self._status = ["ok"] * self.n
         self._length_bad = False
         self._set_model(self._full_mask)
@@ -223,70 +225,81 @@ class Monitor:
         u, ok = self._parse(raw, valid, t, events)
         self._t1[0] = t
         row = self._row
-        osd = self._advance(self._t1, u, ok, ok is not self._all_valid, row, True, events,
-                            None)
-        lay = self._layout
-        r = row[0]
-        if self._state.counters[S.DETECTED]:
+        c = self._state.counters
+        has_valid = ok is not self._all_valid
+        c[S.HAS_VALID] = has_valid
+        c[S.PHASE] = S.PHASE_HEALTH                          # (HAS_PARITY stays 1 between runs)
+        stop, code = self._kernel(self._t1, u, ok, 0, 1, row)
+        osd = None
+        if code != S.STOP_NONE:                              # rare: the monitor's turn
+            r, osd = self._handle(stop, code, self._t1, u, ok, has_valid, row, events, None)
+            if r == 0:
+                osd = self._advance(self._t1, u, ok, has_valid, row, events, None)
+        r = row[0].copy()
+        o, s0, t0, p0 = S.OMEGA0, S.STATS0, self._layout.thresholds0, self._layout.parity0
+        if c[S.DETECTED]:
             status = tuple("detected" if s == "ok" else s for s in self._status)
         else:
             status = tuple(self._status)
-        return Answer(t, r[S.OMEGA0:S.OMEGA0 + 3].copy(),
-                      self._model.omega_sd if osd is None else osd,
-                      self._healthy_array(self._mask), status, r[lay.parity0:].copy(),
-                      r[S.STATS0:lay.thresholds0].copy(), r[lay.thresholds0:lay.parity0].copy(),
+        return Answer(t, r[o:o + 3], self._model.omega_sd if osd is None else osd,
+                      self._healthy_array(self._mask), status, r[p0:], r[s0:t0], r[t0:p0],
                       tuple(events), self._model.capability, float(r[S.PROTECTION]))
 
     # ------------------------------------------------------------------ the loop
     def _advance(self, t: np.ndarray, raw: np.ndarray, valid: np.ndarray, has_valid: bool,
-                 out: np.ndarray, parity: bool, events: list[Event], rows: _Rows | None,
+                 out: np.ndarray, events: list[Event], rows: _Rows | None,
                  chunk: int = _CHUNK) -> np.ndarray | None:
         """Run the kernel over every row, handling the samples it hands back.
+
+        The counters HAS_VALID, HAS_PARITY and PHASE must be set by the caller.
 
         Returns the ω̂ standard deviation of the last row when it differs from the model's
         (an incomplete sample), else None.
         """
-        st = self._state
-        c = st.counters
-        c[S.HAS_VALID] = has_valid
-        c[S.HAS_PARITY] = parity
-        c[S.PHASE] = S.PHASE_HEALTH
         N = t.shape[0]
         r = 0
         osd = None
-        dwell = float(self.settings.readmit_dwell_s)
         while r < N:
-            ks = self._kset
-            end = min(N, r + chunk)
-            advance(t, raw, valid, r, end, ks.sensors, ks.scales, ks.mats, ks.fconst,
-                    ks.iconst, st.windows, st.cusum, st.sensor, c, out, dwell)
-            stop, code = int(c[S.STOP_ROW]), int(c[S.STOP_CODE])
+            stop, code = self._kernel(t, raw, valid, r, min(N, r + chunk), out)
             if rows is not None:
                 rows.fill(r, stop, self)
-            if code == S.STOP_NONE:
-                r = stop
-                continue
-            tr = float(t[stop])
-            if code == S.STOP_HEALTH:
-                self._on_health(tr, raw[stop], events)
-                c[S.PHASE] = S.PHASE_READMIT
-                r = stop
-                continue
-            if code == S.STOP_READMIT:
-                self._on_readmit(tr, int(c[S.READMIT_SENSOR]), events)
-                c[S.PHASE] = S.PHASE_PARITY
-                r = stop
-                continue
-            osd = None
-            if code == S.STOP_INCOMPLETE:
-                osd = self._on_incomplete(raw, stop, valid[stop if has_valid else 0], out[stop])
-            else:
-                self._on_detection(tr, code, raw, stop, out[stop], events)
-            if rows is not None:
-                rows.fill(stop, stop + 1, self, osd)
-            r = stop + 1
-        last_incomplete = c[S.STOP_CODE] == S.STOP_INCOMPLETE and int(c[S.STOP_ROW]) == N - 1
-        return osd if last_incomplete else None
+            r, osd = self._handle(stop, code, t, raw, valid, has_valid, out, events, rows)
+        return osd
+
+    def _kernel(self, t: np.ndarray, raw: np.ndarray, valid: np.ndarray, r0: int, r1: int,
+                out: np.ndarray) -> tuple[int, int]:
+        """One call of the compiled kernel; returns where and why it stopped."""
+        ks, st = self._kset, self._state
+        c = st.counters
+        advance(t, raw, valid, r0, r1, ks.sensors, ks.scales, ks.mats, ks.fconst, ks.iconst,
+                st.windows, st.cusum, st.sensor, c, out, self._dwell_s)
+        return int(c[S.STOP_ROW]), int(c[S.STOP_CODE])
+
+    def _handle(self, stop: int, code: int, t: np.ndarray, raw: np.ndarray, valid: np.ndarray,
+                has_valid: bool, out: np.ndarray, events: list[Event], rows: _Rows | None
+                ) -> tuple[int, np.ndarray | None]:
+        """Handle the sample the kernel stopped at; returns the next row and the sample's
+        ω̂ sd when it is not the model's (incomplete sample)."""
+        if code == S.STOP_NONE:
+            return stop, None
+        c = self._state.counters
+        tr = float(t[stop])
+        if code == S.STOP_HEALTH:
+            self._on_health(tr, raw[stop], events)
+            c[S.PHASE] = S.PHASE_READMIT
+            return stop, None
+        if code == S.STOP_READMIT:
+            self._on_readmit(tr, int(c[S.READMIT_SENSOR]), events)
+            c[S.PHASE] = S.PHASE_PARITY
+            return stop, None
+        osd = None
+        if code == S.STOP_INCOMPLETE:
+            osd = self._on_incomplete(raw, stop, valid[stop if has_valid else 0], out[stop])
+        else:
+            self._on_detection(tr, code, raw, stop, out[stop], events)
+        if rows is not None:
+            rows.fill(stop, stop + 1, self, osd)
+        return stop + 1, osd
 
     # ------------------------------------------------------------------ stops
     def _isolate(self, i: int, reason: str) -> None:
@@ -414,8 +427,15 @@ class Monitor:
         events: list[Event] = []
         if N:
             self._length_bad = False
-            self._advance(ta, ra, self._all_valid if va is None else va, va is not None, out,
-                          parity, events, rows, max(1, int(chunk)))
+            c = self._state.counters
+            c[S.HAS_VALID] = va is not None
+            c[S.HAS_PARITY] = parity
+            c[S.PHASE] = S.PHASE_HEALTH
+            try:
+                self._advance(ta, ra, self._all_valid if va is None else va, va is not None,
+                              out, events, rows, max(1, int(chunk)))
+            finally:
+                c[S.HAS_PARITY] = 1                          # step() always fills the parity
         return rows.result(ta, out, self._layout, parity, events)
 
     def _run_rows(self, t: Any, raw: Any, valid: Any, parity: bool) -> BlockResult:
