@@ -44,6 +44,7 @@ from fdi.settings import MonitorSettings, Thresholds
 __all__ = ["Monitor"]
 
 _NAN = float("nan")
+_F64 = np.dtype(np.float64)
 _INF = float("inf")
 _CHUNK = 1 << 16
 _CAP_CODE = {c: k for k, c in enumerate(CAPABILITIES)}
@@ -163,6 +164,10 @@ class Monitor:
                ) -> tuple[np.ndarray, np.ndarray]:
         """One sample as a (1, n) float64 row and a (1, n) bool row; never raises."""
         n = self.n
+        if (valid is None and type(raw) is np.ndarray and raw.dtype is _F64
+                and raw.shape == (n,) and raw.flags.c_contiguous):
+            self._length_bad = False                         # the common case, quickly
+            return raw.reshape(1, n), self._all_valid
         vals: np.ndarray | None = None
         try:
             if type(raw) is np.ndarray and raw.shape == (n,) and raw.dtype.kind == "f":
