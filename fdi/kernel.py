@@ -285,6 +285,32 @@ def _untested_row(row, scales, fconst, iconst, K, parity0):
 
 
 @njit(cache=True, error_model="numpy")
+def parity_tests(z, rho, p, df, sensors, scales, mats, fconst, iconst, windows, cusum,
+                 counters, K, parity0, row) -> int:
+    """Windows, CUSUM bank, parity output and state machine of one complete sample;
+    returns the stop code (a detection or an isolation)."""
+    nw = iconst[N_WINDOWS]
+    alarm, clear, fired, best = window_update(z, rho, df, windows, counters, scales, K, row)
+    if iconst[HAS_CUSUM] != 0:
+        g = cusum_update(z, rho, df, sensors, mats, fconst, cusum)
+        h = fconst[CUSUM_H]
+        row[STATS0 + nw] = g
+        row[STATS0 + K + nw] = h
+        if g > h:
+            alarm = True
+            if g / h > best:
+                fired = nw
+        if g >= fconst[CUSUM_CLEAR]:
+            clear = False
+    if counters[HAS_PARITY] != 0:
+        for j in range(df):
+            row[parity0 + j] = p[j]
+        for j in range(parity0 + df, row.shape[0]):
+            row[j] = np.nan
+    return detection_machine(alarm, clear, fired, iconst, counters)
+
+
+@njit(cache=True, error_model="numpy")
 def advance(t, raw, valid, r0, r1, sensors, scales, mats, fconst, iconst, windows, cusum,
             sensor, counters, out, dwell_s) -> None:
     """Run samples r0 … r1−1 until one needs the monitor; see the module docstring.
@@ -314,11 +340,8 @@ def advance(t, raw, valid, r0, r1, sensors, scales, mats, fconst, iconst, window
     n = sensors.shape[0]
     df = iconst[DF]
     has_omega = iconst[HAS_OMEGA] != 0
-    has_cusum = iconst[HAS_CUSUM] != 0
-    nw = iconst[N_WINDOWS]
-    K = nw + (1 if has_cusum else 0)
+    K = iconst[N_WINDOWS] + (1 if iconst[HAS_CUSUM] != 0 else 0)
     parity0 = STATS0 + 2 * K
-    has_parity = counters[HAS_PARITY] != 0
     has_valid = counters[HAS_VALID] != 0
     y = np.zeros(n)
     p = np.zeros(max(df, 1))
@@ -363,28 +386,11 @@ def advance(t, raw, valid, r0, r1, sensors, scales, mats, fconst, iconst, window
         row[OMEGA0] = w[0]
         row[OMEGA0 + 1] = w[1]
         row[OMEGA0 + 2] = w[2]
-        code = STOP_NONE
         if df > 0:
-            alarm, clear, fired, best = window_update(z, rho, df, windows, counters, scales,
-                                                      K, row)
-            if has_cusum:
-                g = cusum_update(z, rho, df, sensors, mats, fconst, cusum)
-                h = fconst[CUSUM_H]
-                row[STATS0 + nw] = g
-                row[STATS0 + K + nw] = h
-                if g > h:
-                    alarm = True
-                    if g / h > best:
-                        fired = nw
-                if g >= fconst[CUSUM_CLEAR]:
-                    clear = False
-            if has_parity:
-                for j in range(df):
-                    row[parity0 + j] = p[j]
-                for j in range(parity0 + df, row.shape[0]):
-                    row[j] = np.nan
-            code = detection_machine(alarm, clear, fired, iconst, counters)
+            code = parity_tests(z, rho, p, df, sensors, scales, mats, fconst, iconst, windows,
+                                cusum, counters, K, parity0, row)
         else:
+            code = STOP_NONE
             _untested_row(row, scales, fconst, iconst, K, parity0)
         row[PROTECTION] = protection_level(fconst, rho)
         if code != STOP_NONE:

@@ -168,36 +168,40 @@ class Monitor:
                 and raw.shape == (n,) and raw.flags.c_contiguous):
             self._length_bad = False                         # the common case, quickly
             return raw.reshape(1, n), self._all_valid
-        vals: np.ndarray | None = None
-        try:
-            if type(raw) is np.ndarray and raw.shape == (n,) and raw.dtype.kind == "f":
-                vals = raw.astype(np.float64, copy=False)
-            else:
-                seq = list(raw)
-                if len(seq) == n:
-                    vals = np.array([_to_float(x) for x in seq], np.float64)
-        except Exception:
-            vals = None
-        ok: np.ndarray | None
-        if valid is None:
-            ok = self._all_valid
-        else:
-            try:
-                if type(valid) is np.ndarray and valid.shape == (n,):
-                    ok = valid.astype(bool, copy=False)
-                else:
-                    lst = [bool(v) for v in valid]
-                    ok = np.array(lst, bool) if len(lst) == n else None
-            except Exception:
-                ok = None
+        vals = self._parse_values(raw)
+        ok = self._all_valid if valid is None else self._parse_valid(valid)
         if vals is None or ok is None:
             if not self._length_bad:
                 events.append(Event(t, None, "health", "length"))
             self._length_bad = True
             return np.full((1, n), _NAN), np.zeros((1, n), bool)
         self._length_bad = False
-        return (np.ascontiguousarray(vals).reshape(1, n),
-                np.ascontiguousarray(ok).reshape(1, n))
+        return vals, ok
+
+    def _parse_values(self, raw: Any) -> np.ndarray | None:
+        """Raw values as a (1, n) float64 row (NaN for what is not a real number), None when
+        there are not n of them."""
+        n = self.n
+        try:
+            if type(raw) is np.ndarray and raw.shape == (n,) and raw.dtype.kind == "f":
+                return np.ascontiguousarray(raw, np.float64).reshape(1, n)
+            seq = list(raw)
+        except Exception:
+            return None
+        if len(seq) != n:
+            return None
+        return np.array([_to_float(x) for x in seq], np.float64).reshape(1, n)
+
+    def _parse_valid(self, valid: Any) -> np.ndarray | None:
+        """The valid flags as a (1, n) bool row, None when there are not n of them."""
+        n = self.n
+        try:
+            if type(valid) is np.ndarray and valid.shape == (n,):
+                return np.ascontiguousarray(valid.astype(bool, copy=False)).reshape(1, n)
+            ok = [bool(v) for v in valid]
+        except Exception:
+            return None
+        return np.array(ok, bool).reshape(1, n) if len(ok) == n else None
 
     # ------------------------------------------------------------------ step
     def step(self, t: float, raw: Any, valid: Any = None) -> Answer:

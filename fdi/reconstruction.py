@@ -127,6 +127,50 @@ class SetModel:
         return np.array([(self.mask >> i) & 1 == 1 for i in range(self.V.shape[1])])
 
 
+def _whitening(V: np.ndarray, Sig: np.ndarray, idx: tuple[int, ...], bias_sd: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray, float, float]:
+    """Whitening A (lower triangular, A·VΣVᵀ·Aᵀ = I), whitened parity columns U and the
+    calibration (κ) and bias (β) uncertainty constants of the set."""
+    df = V.shape[0]
+    if df == 0:
+        return np.zeros((0, 0)), np.zeros((0, len(idx))), 1.0, 0.0
+    R = np.linalg.cholesky(V @ Sig @ V.T)
+    A = np.tril(np.linalg.solve(R, np.eye(df)))
+    U = (A @ V)[:, list(idx)]
+    Dg = V @ np.diag(np.diag(Sig)) @ V.T
+    kappa = float(np.linalg.eigvalsh(A @ Dg @ A.T).max())
+    Bg = V @ np.diag(np.asarray(bias_sd, float) ** 2) @ V.T
+    beta = float(max(np.linalg.eigvalsh(A @ Bg @ A.T).max(), 0.0))
+    return A, U, kappa, beta
+
+
+def _reconstruction(H: np.ndarray, healthy: np.ndarray, Sig: np.ndarray,
+                    idx: tuple[int, ...], full: bool
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Weighted least-squares G, its white-noise covariance GΣGᵀ and the sd per axis."""
+    n = H.shape[0]
+    if not full:
+        return np.zeros((3, n)), np.full((3, 3), np.nan), np.full(3, np.nan)
+    Wu = np.zeros((n, n))
+    Wu[np.ix_(list(idx), list(idx))] = np.linalg.inv(Sig[np.ix_(list(idx), list(idx))])
+    G = reconstruction_matrix(H, healthy, Wu)
+    cov = G @ Sig @ G.T
+    return G, cov, np.sqrt(np.diag(cov))
+
+
+def _capability(V: np.ndarray, Sig: np.ndarray, idx: tuple[int, ...], full: bool,
+                df: int) -> str:
+    """What the set can do: isolate, detect, reconstruct or none."""
+    if not full:
+        return "none"
+    if df == 0:
+        return "reconstruct"
+    if df == 1:
+        return "detect"
+    iso = isolability(V[:, list(idx)], Sig[np.ix_(list(idx), list(idx))])
+    return "isolate" if iso["can_isolate"] else "detect"
+
+
 def build_set_model(H: np.ndarray, sf: np.ndarray, bias: np.ndarray, noise_cov: np.ndarray,
                     input_error_cov: np.ndarray, mask: int, thresholds: Thresholds,
                     missed_detection: float, bias_sd: np.ndarray | None = None) -> SetModel:
@@ -160,40 +204,9 @@ def build_set_model(H: np.ndarray, sf: np.ndarray, bias: np.ndarray, noise_cov: 
     V = parity_matrix(H, healthy) if df > 0 else np.zeros((0, n))
     V = V[:df] if V.shape[0] > df else V
     Sig = np.asarray(noise_cov, float)
-    if df > 0:
-        S = V @ Sig @ V.T
-        R = np.linalg.cholesky(S)
-        A = np.linalg.solve(R, np.eye(df))
-        A = np.tril(A)
-        U = (A @ V)[:, list(idx)]
-        Dg = V @ np.diag(np.diag(Sig)) @ V.T
-        kappa = float(np.linalg.eigvalsh(A @ Dg @ A.T).max())
-        Bg = V @ np.diag(np.asarray(bias_sd, float) ** 2) @ V.T
-        beta = float(max(np.linalg.eigvalsh(A @ Bg @ A.T).max(), 0.0))
-    else:
-        beta = 0.0
-        A = np.zeros((0, 0))
-        U = np.zeros((0, m))
-        kappa = 1.0
-    if full:
-        Wu = np.zeros((n, n))
-        Wu[np.ix_(list(idx), list(idx))] = np.linalg.inv(Sig[np.ix_(list(idx), list(idx))])
-        G = reconstruction_matrix(H, healthy, Wu)
-        cov = G @ Sig @ G.T
-        osd = np.sqrt(np.diag(cov))
-    else:
-        G = np.zeros((3, n))
-        cov = np.full((3, 3), np.nan)
-        osd = np.full(3, np.nan)
-    if not full:
-        cap = "none"
-    elif df == 0:
-        cap = "reconstruct"
-    elif df == 1:
-        cap = "detect"
-    else:
-        iso = isolability(V[:, list(idx)], Sig[np.ix_(list(idx), list(idx))])
-        cap = "isolate" if iso["can_isolate"] else "detect"
+    A, U, kappa, beta = _whitening(V, Sig, idx, bias_sd)
+    G, cov, osd = _reconstruction(H, healthy, Sig, idx, full)
+    cap = _capability(V, Sig, idx, full, df)
     # calibration uncertainty: ρ_i = ω̂ᵀ C_i ω̂ / Σ_ii on (ω0², ω1², ω2², ω0ω1, ω0ω2, ω1ω2)
     C = np.asarray(input_error_cov, float) / np.diag(Sig)[:, None, None]
     coef = np.stack([C[:, 0, 0], C[:, 1, 1], C[:, 2, 2], 2 * C[:, 0, 1], 2 * C[:, 0, 2],
