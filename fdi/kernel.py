@@ -102,7 +102,7 @@ _ISOLATE = 0                                # CAPABILITY_CODE["isolate"]
 _NONE = 3                                   # CAPABILITY_CODE["none"]
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def members(sensors):
     """Indices of the sensors in the set, ascending, shape (m,)."""
     m = 0
@@ -118,7 +118,7 @@ def members(sensors):
     return idx
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def compensate(raw, r, idx, sensors, mats, df, has_omega, y, p, z, w) -> float:
     """y = SF·u − b, p = V·y, z = A·p, ω̂ = G·y of the sensors ``idx`` of row r; returns ρ.
 
@@ -160,8 +160,8 @@ def compensate(raw, r, idx, sensors, mats, df, has_omega, y, p, z, w) -> float:
     return rho
 
 
-@njit(cache=True, error_model="numpy")
-def health_checks(t, raw, r, ok, sensors, fconst, iconst, sensor, counters) -> int:
+@njit(cache=True, error_model="numpy", inline="always")
+def health_checks(t, raw, r, valid, vr, sensors, fconst, iconst, sensor, counters) -> int:
     """Health verdict per sensor of the set (``counters[HEALTH0 + i]``); returns how many
     failed. Each sensor's check reads only its own history, so the order of isolation does
     not change the verdicts."""
@@ -171,7 +171,7 @@ def health_checks(t, raw, r, ok, sensors, fconst, iconst, sensor, counters) -> i
         counters[HEALTH0 + i] = HEALTH_OK
         if sensors[i, IN_SET] == 0.0:
             continue
-        if ok[i]:
+        if valid[vr, i]:
             v = raw[r, i]
             if not (sensors[i, LO] < v and v < sensors[i, HI]):
                 counters[HEALTH0 + i] = HEALTH_RANGE if math.isfinite(v) else HEALTH_NONFINITE
@@ -197,7 +197,7 @@ def health_checks(t, raw, r, ok, sensors, fconst, iconst, sensor, counters) -> i
 
 
 @njit(cache=True, error_model="numpy")
-def readmission_check(t, raw, r, ok, idx, sensors, mats, iconst, sensor, counters, dwell_s,
+def readmission_check(t, raw, r, valid, vr, idx, sensors, mats, iconst, sensor, counters, dwell_s,
                       y, p, z, w) -> int:
     """First isolated sensor that behaved for ``dwell_s`` (−1: none).
 
@@ -208,14 +208,15 @@ def readmission_check(t, raw, r, ok, idx, sensors, mats, iconst, sensor, counter
         return -1
     n = sensors.shape[0]
     for i in range(n):
-        if sensors[i, IN_SET] != 0.0 and not ok[i]:
+        if sensors[i, IN_SET] != 0.0 and not valid[vr, i]:
             return -1
     compensate(raw, r, idx, sensors, mats, iconst[DF], True, y, p, z, w)
     for i in range(n):
         if sensors[i, IN_SET] != 0.0:
             continue
         v = raw[r, i]
-        good = ok[i] and sensors[i, LO] < v and v < sensors[i, HI] and v != sensor[i, LAST_RAW]
+        good = (valid[vr, i] and sensors[i, LO] < v and v < sensors[i, HI]
+                and v != sensor[i, LAST_RAW])
         if good:
             yi = sensors[i, SF] * v - sensors[i, BIAS]
             hw = (sensors[i, AXIS0] * w[0] + sensors[i, AXIS0 + 1] * w[1]
@@ -233,7 +234,7 @@ def readmission_check(t, raw, r, ok, idx, sensors, mats, iconst, sensor, counter
     return -1
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def detection_machine(alarm, clear, fired, iconst, counters) -> int:
     """Detection state machine for one complete sample; returns the stop code.
 
@@ -263,39 +264,39 @@ def detection_machine(alarm, clear, fired, iconst, counters) -> int:
     return code
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def protection_level(fconst, rho) -> float:
     """PL(ρ) = a·sqrt(1 + bρ) + c·sqrt(d + eρ) (rad/s), :mod:`fdi.integrity`."""
     return (fconst[PL_A] * math.sqrt(1.0 + fconst[PL_B] * rho)
             + fconst[PL_C] * math.sqrt(fconst[PL_D] + fconst[PL_E] * rho))
 
 
-@njit(cache=True, error_model="numpy")
-def _untested_row(row, scales, fconst, iconst, K, parity0):
+@njit(cache=True, error_model="numpy", inline="always")
+def _untested_row(out, r, scales, fconst, iconst, K, parity0):
     """Statistics NaN, base thresholds, parity NaN: a sample without a parity test."""
     nw = iconst[N_WINDOWS]
     for k in range(nw):
-        row[STATS0 + k] = np.nan
-        row[STATS0 + K + k] = scales[k, THRESHOLD]
+        out[r, STATS0 + k] = np.nan
+        out[r, STATS0 + K + k] = scales[k, THRESHOLD]
     if K > nw:
-        row[STATS0 + nw] = np.nan
-        row[STATS0 + K + nw] = fconst[CUSUM_H]
-    for j in range(parity0, row.shape[0]):
-        row[j] = np.nan
+        out[r, STATS0 + nw] = np.nan
+        out[r, STATS0 + K + nw] = fconst[CUSUM_H]
+    for j in range(parity0, out.shape[1]):
+        out[r, j] = np.nan
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def parity_tests(z, rho, p, df, sensors, scales, mats, fconst, iconst, windows, cusum,
-                 counters, K, parity0, row) -> int:
+                 counters, K, parity0, out, r) -> int:
     """Windows, CUSUM bank, parity output and state machine of one complete sample;
     returns the stop code (a detection or an isolation)."""
     nw = iconst[N_WINDOWS]
-    alarm, clear, fired, best = window_update(z, rho, df, windows, counters, scales, K, row)
+    alarm, clear, fired, best = window_update(z, rho, df, windows, counters, scales, K, out, r)
     if iconst[HAS_CUSUM] != 0:
         g = cusum_update(z, rho, df, sensors, mats, fconst, cusum)
         h = fconst[CUSUM_H]
-        row[STATS0 + nw] = g
-        row[STATS0 + K + nw] = h
+        out[r, STATS0 + nw] = g
+        out[r, STATS0 + K + nw] = h
         if g > h:
             alarm = True
             if g / h > best:
@@ -304,9 +305,9 @@ def parity_tests(z, rho, p, df, sensors, scales, mats, fconst, iconst, windows, 
             clear = False
     if counters[HAS_PARITY] != 0:
         for j in range(df):
-            row[parity0 + j] = p[j]
-        for j in range(parity0 + df, row.shape[0]):
-            row[j] = np.nan
+            out[r, parity0 + j] = p[j]
+        for j in range(parity0 + df, out.shape[1]):
+            out[r, j] = np.nan
     return detection_machine(alarm, clear, fired, iconst, counters)
 
 
@@ -352,47 +353,46 @@ def advance(t, raw, valid, r0, r1, sensors, scales, mats, fconst, iconst, window
     counters[PHASE] = PHASE_HEALTH
     for r in range(r0, r1):
         tr = t[r]
-        ok = valid[r] if has_valid else valid[0]
+        vr = r if has_valid else 0
         if phase == PHASE_HEALTH:
             if counters[STARTED] == 0:
                 counters[STARTED] = 1
                 for i in range(n):
                     sensor[i, LAST_VALID_T] = tr
-            if health_checks(tr, raw, r, ok, sensors, fconst, iconst, sensor, counters) > 0:
+            if health_checks(tr, raw, r, valid, vr, sensors, fconst, iconst, sensor, counters) > 0:
                 counters[STOP_ROW] = r
                 counters[STOP_CODE] = STOP_HEALTH
                 return
         if phase <= PHASE_READMIT and iconst[READMISSION] != 0:
-            k = readmission_check(tr, raw, r, ok, idx, sensors, mats, iconst, sensor, counters,
-                                  dwell_s, y, p, z, w)
+            k = readmission_check(tr, raw, r, valid, vr, idx, sensors, mats, iconst, sensor,
+                                  counters, dwell_s, y, p, z, w)
             if k >= 0:
                 counters[READMIT_SENSOR] = k
                 counters[STOP_ROW] = r
                 counters[STOP_CODE] = STOP_READMIT
                 return
         phase = PHASE_HEALTH
-        row = out[r]
         complete = True
         for i in idx:
-            if not ok[i]:
+            if not valid[vr, i]:
                 complete = False
         if not complete:
-            _untested_row(row, scales, fconst, iconst, K, parity0)
-            row[PROTECTION] = np.inf
+            _untested_row(out, r, scales, fconst, iconst, K, parity0)
+            out[r, PROTECTION] = np.inf
             counters[STOP_ROW] = r
             counters[STOP_CODE] = STOP_INCOMPLETE
             return
         rho = compensate(raw, r, idx, sensors, mats, df, has_omega, y, p, z, w)
-        row[OMEGA0] = w[0]
-        row[OMEGA0 + 1] = w[1]
-        row[OMEGA0 + 2] = w[2]
+        out[r, OMEGA0] = w[0]
+        out[r, OMEGA0 + 1] = w[1]
+        out[r, OMEGA0 + 2] = w[2]
         if df > 0:
             code = parity_tests(z, rho, p, df, sensors, scales, mats, fconst, iconst, windows,
-                                cusum, counters, K, parity0, row)
+                                cusum, counters, K, parity0, out, r)
         else:
             code = STOP_NONE
-            _untested_row(row, scales, fconst, iconst, K, parity0)
-        row[PROTECTION] = protection_level(fconst, rho)
+            _untested_row(out, r, scales, fconst, iconst, K, parity0)
+        out[r, PROTECTION] = protection_level(fconst, rho)
         if code != STOP_NONE:
             counters[STOP_ROW] = r
             counters[STOP_CODE] = code

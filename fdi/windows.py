@@ -31,10 +31,10 @@ from fdi.state import (
 __all__ = ["window_update"]
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def window_update(z: np.ndarray, rho: float, df: int, windows: np.ndarray,
-                  counters: np.ndarray, scales: np.ndarray, K: int, row: np.ndarray
-                  ) -> tuple[bool, bool, int, float]:
+                  counters: np.ndarray, scales: np.ndarray, K: int, out: np.ndarray,
+                  r: int) -> tuple[bool, bool, int, float]:
     """Add one complete sample and test every window scale.
 
     Parameters
@@ -52,8 +52,10 @@ def window_update(z: np.ndarray, rho: float, df: int, windows: np.ndarray,
         Per-scale constants (:mod:`fdi.state`).
     K : int
         Statistics per sample (K_w, plus one for the CUSUM bank).
-    row : ndarray
-        Output row: statistics at STATS0 + k, thresholds at STATS0 + K + k.
+    out : ndarray, shape (N, width)
+        Output rows: statistics at STATS0 + k, thresholds at STATS0 + K + k.
+    r : int
+        Row of this sample.
 
     Returns
     -------
@@ -64,10 +66,9 @@ def window_update(z: np.ndarray, rho: float, df: int, windows: np.ndarray,
         Its D/T.
     """
     R = windows.shape[0] - 1
-    cur = windows[R]
     for j in range(df):
-        cur[j] = cur[j] + z[j]
-    cur[df] = cur[df] + rho
+        windows[R, j] = windows[R, j] + z[j]
+    windows[R, df] = windows[R, df] + rho
     count = counters[WINDOW_COUNT] + 1
     counters[WINDOW_COUNT] = count
     pos = counters[RING_POS] + 1
@@ -75,7 +76,7 @@ def window_update(z: np.ndarray, rho: float, df: int, windows: np.ndarray,
         pos = 0
     counters[RING_POS] = pos
     for j in range(df + 1):
-        windows[pos, j] = cur[j]
+        windows[pos, j] = windows[R, j]
     alarm = False
     clear = True
     fired = -1
@@ -86,15 +87,14 @@ def window_update(z: np.ndarray, rho: float, df: int, windows: np.ndarray,
             o = pos - w
             if o < 0:
                 o += R
-            old = windows[o]
-            d = cur[0] - old[0]
+            d = windows[R, 0] - windows[o, 0]
             acc = d * d
             for j in range(1, df):
-                d = cur[j] - old[j]
+                d = windows[R, j] - windows[o, j]
                 acc = acc + d * d
             D = acc * scales[k, CHI2_SCALE]
             T = scales[k, THRESHOLD] * (scales[k, OFFSET_GAIN]
-                                        + scales[k, RHO_GAIN] * (cur[df] - old[df]))
+                                        + scales[k, RHO_GAIN] * (windows[R, df] - windows[o, df]))
             if D > T:
                 alarm = True
                 if D / T > best:
@@ -105,6 +105,6 @@ def window_update(z: np.ndarray, rho: float, df: int, windows: np.ndarray,
         else:
             D = np.nan
             T = scales[k, THRESHOLD]
-        row[STATS0 + k] = D
-        row[STATS0 + K + k] = T
+        out[r, STATS0 + k] = D
+        out[r, STATS0 + K + k] = T
     return alarm, clear, fired, best
