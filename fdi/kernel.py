@@ -125,11 +125,13 @@ def compensate(raw, r, idx, sensors, mats, df, has_omega, y, p, z, w) -> float:
     Sums run over the sensors of the set in ascending order (left to right). Without three
     independent sensors ω̂ is NaN and ρ is 0.
     """
-    for i in idx:
+    for k_ in range(idx.shape[0]):
+        i = idx[k_]
         y[i] = sensors[i, SF] * raw[r, i] - sensors[i, BIAS]
     for j in range(df):
         acc = 0.0
-        for i in idx:
+        for k_ in range(idx.shape[0]):
+            i = idx[k_]
             acc = acc + mats[j, i] * y[i]
         p[j] = acc
     a0 = df + 3
@@ -145,14 +147,16 @@ def compensate(raw, r, idx, sensors, mats, df, has_omega, y, p, z, w) -> float:
         return 0.0
     for a in range(3):
         acc = 0.0
-        for i in idx:
+        for k_ in range(idx.shape[0]):
+            i = idx[k_]
             acc = acc + mats[df + a, i] * y[i]
         w[a] = acc
     q0, q1, q2 = w[0] * w[0], w[1] * w[1], w[2] * w[2]
     q3, q4, q5 = w[0] * w[1], w[0] * w[2], w[1] * w[2]
     rho = 0.0
     c = RHO_COEF0
-    for i in idx:
+    for k_ in range(idx.shape[0]):
+        i = idx[k_]
         s = (sensors[i, c] * q0 + sensors[i, c + 1] * q1 + sensors[i, c + 2] * q2
              + sensors[i, c + 3] * q3 + sensors[i, c + 4] * q4 + sensors[i, c + 5] * q5)
         if s > rho:
@@ -373,7 +377,8 @@ def advance(t, raw, valid, r0, r1, sensors, scales, mats, fconst, iconst, window
                 return
         phase = PHASE_HEALTH
         complete = True
-        for i in idx:
+        for k_ in range(idx.shape[0]):
+            i = idx[k_]
             if not valid[vr, i]:
                 complete = False
         if not complete:
