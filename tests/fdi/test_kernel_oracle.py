@@ -151,3 +151,20 @@ def test_subnormal_raw_values_are_plausible_numbers_not_faults():
     raw[100, 2] = 5e-324
     events = compare(cal, default_thresholds(cal), t, raw, None)
     assert not [e for e in events if e.type == "health"]
+
+
+def test_one_compiled_specialisation_whatever_the_input_types():
+    """float32/int/list/Fortran-ordered inputs and valid masks of any dtype reach the kernel
+    as float64/bool C arrays: numba compiles it once per process (CI time)."""
+    from fdi import kernel
+
+    cal, t, raw = _flight("tetrad", 20, seed=1)
+    mon = Monitor(cal)
+    mon.step(t[0], raw[0])
+    mon.step(t[1], raw[1].astype(np.float32), [1, 1, 0, 1])
+    mon.step(t[2], list(raw[2]))
+    mon.step(t[3], np.asfortranarray(raw[:4])[3], np.ones(4, np.int8))
+    mon.run(t[4:10], raw[4:10].astype(np.float32))
+    mon.run(t[10:], np.asfortranarray(raw[10:]), np.ones((10, 4), np.float64))
+    assert len(kernel.advance.signatures) == 1
+    assert len(kernel.reconstruct_row.signatures) <= 1
