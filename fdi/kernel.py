@@ -26,7 +26,9 @@ it reaches the arithmetic.
 
 from __future__ import annotations
 
+import hashlib
 import math
+from pathlib import Path
 
 import numpy as np
 from numba import njit
@@ -97,6 +99,8 @@ from fdi.state import (
 from fdi.windows import window_update
 
 __all__ = ["advance", "compensate", "reconstruct_row"]
+
+
 
 _ISOLATE = 0                                # CAPABILITY_CODE["isolate"]
 _NONE = 3                                   # CAPABILITY_CODE["none"]
@@ -315,8 +319,8 @@ def parity_tests(z, rho, p, df, sensors, scales, mats, fconst, iconst, windows, 
     return detection_machine(alarm, clear, fired, iconst, counters)
 
 
-@njit(cache=True, error_model="numpy")
-def advance(t, raw, valid, r0, r1, sensors, scales, mats, fconst, iconst, windows, cusum,
+@njit(error_model="numpy")
+def _advance(t, raw, valid, r0, r1, sensors, scales, mats, fconst, iconst, windows, cusum,
             sensor, counters, out, dwell_s) -> None:
     """Run samples r0 … r1−1 until one needs the monitor; see the module docstring.
 
@@ -406,8 +410,8 @@ def advance(t, raw, valid, r0, r1, sensors, scales, mats, fconst, iconst, window
     counters[STOP_CODE] = STOP_NONE
 
 
-@njit(cache=True, error_model="numpy")
-def reconstruct_row(raw, r, sensors, mats, iconst, fconst, row) -> None:
+@njit(error_model="numpy")
+def _reconstruct_row(raw, r, sensors, mats, iconst, fconst, row) -> None:
     """ω̂ of one sample from the sensors of a set (row[OMEGA0 …]) and its protection level
     (row[PROTECTION]); used for incomplete samples and right after an isolation."""
     n = sensors.shape[0]
@@ -422,3 +426,38 @@ def reconstruct_row(raw, r, sensors, mats, iconst, fconst, row) -> None:
     row[OMEGA0 + 1] = w[1]
     row[OMEGA0 + 2] = w[2]
     row[PROTECTION] = protection_level(fconst, rho)
+
+
+def _sources_digest() -> str:
+    """Digest of the sources compiled into the entry points (this module, the windows, the
+    CUSUM bank and the slot constants of :mod:`fdi.state`)."""
+    h = hashlib.sha256()
+    here = Path(__file__)
+    for name in ("kernel.py", "windows.py", "cusum.py", "state.py"):
+        h.update(here.with_name(name).read_bytes())
+    return h.hexdigest()
+
+
+def _entry_points(sources: str):
+    """The cached entry points. numba's cache checks the source of the file that holds a
+    cached function, not of what it calls; the digest of every source compiled in sits in
+    their closure, which numba's cache key includes, so an edit anywhere recompiles."""
+
+    @njit(cache=True, error_model="numpy")
+    def advance(t, raw, valid, r0, r1, sensors, scales, mats, fconst, iconst, windows, cusum,
+                sensor, counters, out, dwell_s):
+        sources  # noqa: B018
+        _advance(t, raw, valid, r0, r1, sensors, scales, mats, fconst, iconst, windows, cusum,
+                 sensor, counters, out, dwell_s)
+
+    @njit(cache=True, error_model="numpy")
+    def reconstruct_row(raw, r, sensors, mats, iconst, fconst, row):
+        sources  # noqa: B018
+        _reconstruct_row(raw, r, sensors, mats, iconst, fconst, row)
+
+    advance.__doc__ = _advance.__doc__
+    reconstruct_row.__doc__ = _reconstruct_row.__doc__
+    return advance, reconstruct_row
+
+
+advance, reconstruct_row = _entry_points(_sources_digest())
