@@ -11,9 +11,8 @@ They isolate a sensor at once, without waiting for the parity test (PX4's
   ``lo < u < hi`` per sensor, so that the check costs one chained comparison.
 - ``"stuck"``: ``stuck_count`` identical consecutive raw values.
 
-:meth:`fdi.monitor.Monitor.step` runs the same comparisons inline per sample (speed);
-:func:`first_trigger` finds the first sample of a block at which any of them fires. They
-decide identically: comparisons and counting only, no arithmetic.
+:func:`fdi.kernel.health_checks` runs them per sample inside the compiled monitor kernel;
+this module computes the limits.
 """
 
 from __future__ import annotations
@@ -25,7 +24,7 @@ import numpy as np
 
 from fdi.settings import MonitorSettings
 
-__all__ = ["HealthLimits", "first_trigger", "health_limits", "value_reason"]
+__all__ = ["HealthLimits", "health_limits", "value_reason"]
 
 DEFAULT_MAX_INPUT = {"gyro": 35.0, "accel": 160.0}
 """Measuring range used when none is configured: 2000 °/s, 16 g (SI)."""
@@ -71,44 +70,3 @@ def value_reason(v: float, lo: float, hi: float) -> str | None:
     if lo < v < hi:
         return None
     return "nonfinite" if not math.isfinite(v) else "range"
-
-
-def first_trigger(X: np.ndarray, lo: np.ndarray, hi: np.ndarray, last: np.ndarray,
-                  run0: np.ndarray, stuck_count: int) -> tuple[int, np.ndarray | None]:
-    """First row of a block (every sample valid) at which a value or stuck check fires.
-
-    Parameters
-    ----------
-    X : ndarray, shape (L, m)
-        Raw values of the m checked sensors.
-    lo, hi : ndarray, shape (m,)
-        Raw bounds.
-    last : ndarray, shape (m,)
-        Each sensor's previous raw value.
-    run0 : ndarray of int, shape (m,)
-        Identical consecutive values up to and including ``last``.
-    stuck_count : int
-
-    Returns
-    -------
-    row : int
-        First triggering row, L when none.
-    run : ndarray of int, shape (L, m), or None
-        Identical-run length at each row as the scalar path counts it (None: every run is
-        1, no value repeats).
-    """
-    L = X.shape[0]
-    if (lo < X.min(axis=0)).all() and (X.max(axis=0) < hi).all():
-        trig = np.zeros(L, bool)                            # fast path (NaN fails it)
-    else:
-        trig = (~((lo < X) & (X < hi))).any(axis=1)
-    eq = np.empty(X.shape, bool)
-    eq[0] = X[0] == last
-    np.equal(X[1:], X[:-1], out=eq[1:])
-    run = None
-    if eq.any():
-        ii = np.arange(L)[:, None]
-        lastne = np.maximum.accumulate(np.where(eq, -1, ii), axis=0)
-        run = np.where(lastne < 0, run0[None, :] + ii + 1, ii - lastne + 1)
-        trig |= (run >= stuck_count).any(axis=1)
-    return (int(np.argmax(trig)) if trig.any() else L), run

@@ -5,17 +5,15 @@ reconstruction matrix of the remaining set are computed once, the first time tha
 occurs, and cached by the bitmask of healthy sensors (:class:`SetCache`). The step path
 never does an SVD.
 
-The per-sample arithmetic of a set (compensation, parity, whitening, reconstruction and the
-calibration-uncertainty ratio ρ) is *generated* as straight-line Python source with the
-set's constants embedded, and compiled once. The same function object runs on Python
-floats (the step path) and on numpy columns of a block (the block path): one expression
-tree, elementwise IEEE operations in one order, hence bit-identical results.
+The per-sample arithmetic (compensation, parity, whitening, reconstruction and the
+calibration-uncertainty ratio ρ) runs in the compiled monitor kernel (:mod:`fdi.kernel`),
+which reads these matrices; :meth:`SetModel.compensate` is the same arithmetic in numpy
+for whole blocks (analysis code, not the monitor).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
 
@@ -25,27 +23,6 @@ from fdi.parity import isolability, parity_matrix, reconstruction_matrix
 from fdi.settings import Thresholds
 
 __all__ = ["SetCache", "SetModel", "build_set_model"]
-
-
-def _c(x: float) -> str:
-    """Exact source literal of a float."""
-    return f"({float(x)!r})"
-
-
-def _lincomb(coefs: list[float], names: list[str]) -> str:
-    """``((c0*x0 + c1*x1) + c2*x2) ...`` left to right."""
-    expr = f"{_c(coefs[0])} * {names[0]}"
-    for c, nm in zip(coefs[1:], names[1:], strict=True):
-        expr = f"({expr}) + {_c(c)} * {nm}"
-    return expr
-
-
-def _vmax(*args: Any) -> Any:
-    """Elementwise maximum of arrays (exact, order-free)."""
-    out = args[0]
-    for a in args[1:]:
-        out = np.maximum(out, a)
-    return out
 
 
 @dataclass(frozen=True, eq=False)
@@ -77,14 +54,17 @@ class SetModel:
     beta : float
         Bias-uncertainty constant: A·V·diag(bias_sd²)·Vᵀ·Aᵀ ≼ β·I (a constant parity offset
         that no window averages down).
-    thr, invwf, kof, one_bw : tuple of float, shape (K,)
-        Per scale: χ² threshold for df, 1/(w·f_w), κ/f_w and 1 + w·β/f_w.
+    thr, chi2_scale, rho_gain, offset_gain : tuple of float, shape (K,)
+        Per window scale w with variance factor f_w: the χ² threshold T_w for df, the
+        statistic's scale 1/(w·f_w), the gain κ/f_w of the window's summed ρ and the
+        constant-offset inflation 1 + w·β/f_w (threshold ``T_w·(offset_gain + rho_gain·Σρ)``).
     cusum_h : float
+        CUSUM decision threshold h (NaN without a CUSUM bank).
     pl : ProtectionLevel
-    kernel : callable
-        ``kernel(u_0, ..., u_{n-1}) -> (p, z, omega, rho)`` on floats or numpy columns.
-    proj : callable or None
-        ``proj(z_0, ...) -> r`` unit whitened projections per healthy sensor (CUSUM).
+    sf, bias : ndarray, shape (n,)
+        Scale factors (SI per raw unit) and biases (SI): y = sf·u − bias.
+    cal_coef : ndarray, shape (n, 6)
+        ρ_i = ω̂ᵀC_iω̂/Σ_ii as coefficients of (ω0², ω1², ω2², ω0ω1, ω0ω2, ω1ω2).
     """
 
     mask: int
@@ -99,71 +79,96 @@ class SetModel:
     omega_sd: np.ndarray
     kappa: float
     thr: tuple[float, ...]
-    invwf: tuple[float, ...]
-    kof: tuple[float, ...]
+    chi2_scale: tuple[float, ...]
+    rho_gain: tuple[float, ...]
     beta: float
-    one_bw: tuple[float, ...]
+    offset_gain: tuple[float, ...]
     cusum_h: float
     pl: ProtectionLevel
-    kernel: Any = field(repr=False)
-    kernel_vec: Any = field(repr=False)
-    proj: Any = field(repr=False, default=None)
-    source: str = field(repr=False, default="")
+    sf: np.ndarray = field(repr=False)
+    bias: np.ndarray = field(repr=False)
+    cal_coef: np.ndarray = field(repr=False)
 
     @property
     def m(self) -> int:
         """Number of healthy sensors."""
         return len(self.idx)
 
+    def compensate(self, raw: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray,
+                                                   np.ndarray]:
+        """Parity, whitened parity, reconstruction and ρ of a block, in numpy.
 
-def _generate(n: int, idx: tuple[int, ...], sf: np.ndarray, b: np.ndarray, V: np.ndarray,
-              A: np.ndarray, G: np.ndarray, cal_coef: np.ndarray, with_omega: bool) -> str:
-    args = ", ".join(f"u{i}" for i in range(n))
-    lines = [f"def kernel({args}):"]
-    for i in idx:                                          # compensation y = SF·u − b
-        lines.append(f"    y{i} = {_c(sf[i])} * u{i} - {_c(b[i])}")
-    ys = [f"y{i}" for i in idx]
+        Parameters
+        ----------
+        raw : ndarray, shape (N, n)
+            Raw outputs, every healthy sensor present.
+
+        Returns
+        -------
+        p, z : ndarray, shape (df, N)
+        omega : ndarray, shape (3, N)
+            rad/s (NaN without three independent sensors).
+        rho : ndarray, shape (N,)
+        """
+        y = (np.asarray(raw, float) * self.sf - self.bias).T
+        y = np.where(self.healthy_mask()[:, None], y, 0.0)
+        p = self.V @ y
+        z = self.A @ p
+        if self.capability == "none":
+            return p, z, np.full((3, y.shape[1]), np.nan), np.zeros(y.shape[1])
+        w = self.G @ y
+        q = np.stack([w[0] * w[0], w[1] * w[1], w[2] * w[2], w[0] * w[1], w[0] * w[2],
+                      w[1] * w[2]])
+        rho = np.maximum((self.cal_coef[list(self.idx)] @ q).max(axis=0), 0.0)
+        return p, z, w, rho
+
+    def healthy_mask(self) -> np.ndarray:
+        """Boolean mask of the healthy sensors, shape (n,)."""
+        return np.array([(self.mask >> i) & 1 == 1 for i in range(self.V.shape[1])])
+
+
+def _whitening(V: np.ndarray, Sig: np.ndarray, idx: tuple[int, ...], bias_sd: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray, float, float]:
+    """Whitening A (lower triangular, A·VΣVᵀ·Aᵀ = I), whitened parity columns U and the
+    calibration (κ) and bias (β) uncertainty constants of the set."""
     df = V.shape[0]
-    for j in range(df):                                    # parity p = V·y
-        lines.append(f"    p{j} = {_lincomb([V[j, i] for i in idx], ys)}")
-    for j in range(df):                                    # whitening z = A·p
-        ps = [f"p{k}" for k in range(j + 1)]
-        lines.append(f"    z{j} = {_lincomb([A[j, k] for k in range(j + 1)], ps)}")
-    if with_omega:
-        for a in range(3):                                 # reconstruction ω̂ = G·y
-            lines.append(f"    w{a} = {_lincomb([G[a, i] for i in idx], ys)}")
-        lines += ["    q0 = w0 * w0", "    q1 = w1 * w1", "    q2 = w2 * w2",
-                  "    q3 = w0 * w1", "    q4 = w0 * w2", "    q5 = w1 * w2"]
-        qs = [f"q{k}" for k in range(6)]
-        for k, i in enumerate(idx):                        # ρ_i = ω̂ᵀ C_i ω̂ / Σ_ii
-            lines.append(f"    s{k} = {_lincomb(list(cal_coef[i]), qs)}")
-        lines.append(f"    rho = MAX({', '.join(f's{k}' for k in range(len(idx)))}, 0.0)")
-        lines.append("    return (" + "".join(f"p{j}, " for j in range(df)) + "), ("
-                     + "".join(f"z{j}, " for j in range(df)) + "), (w0, w1, w2), rho")
-    else:
-        lines.append("    return (" + "".join(f"p{j}, " for j in range(df)) + "), ("
-                     + "".join(f"z{j}, " for j in range(df)) + "), None, 0.0")
-    return "\n".join(lines) + "\n"
+    if df == 0:
+        return np.zeros((0, 0)), np.zeros((0, len(idx))), 1.0, 0.0
+    R = np.linalg.cholesky(V @ Sig @ V.T)
+    A = np.tril(np.linalg.solve(R, np.eye(df)))
+    U = (A @ V)[:, list(idx)]
+    Dg = V @ np.diag(np.diag(Sig)) @ V.T
+    kappa = float(np.linalg.eigvalsh(A @ Dg @ A.T).max())
+    Bg = V @ np.diag(np.asarray(bias_sd, float) ** 2) @ V.T
+    beta = float(max(np.linalg.eigvalsh(A @ Bg @ A.T).max(), 0.0))
+    return A, U, kappa, beta
 
 
-def _generate_proj(U: np.ndarray) -> str:
-    df, m = U.shape
-    zs = [f"z{j}" for j in range(df)]
-    lines = [f"def proj({', '.join(zs)}):"]
-    norms = np.linalg.norm(U, axis=0)
-    for k in range(m):
-        un = U[:, k] / norms[k] if norms[k] > 0 else np.zeros(df)
-        lines.append(f"    r{k} = {_lincomb(list(un), zs)}")
-    lines.append("    return (" + "".join(f"r{k}, " for k in range(m)) + ")")
-    return "\n".join(lines) + "\n"
+def _reconstruction(H: np.ndarray, healthy: np.ndarray, Sig: np.ndarray,
+                    idx: tuple[int, ...], full: bool
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Weighted least-squares G, its white-noise covariance GΣGᵀ and the sd per axis."""
+    n = H.shape[0]
+    if not full:
+        return np.zeros((3, n)), np.full((3, 3), np.nan), np.full(3, np.nan)
+    Wu = np.zeros((n, n))
+    Wu[np.ix_(list(idx), list(idx))] = np.linalg.inv(Sig[np.ix_(list(idx), list(idx))])
+    G = reconstruction_matrix(H, healthy, Wu)
+    cov = G @ Sig @ G.T
+    return G, cov, np.sqrt(np.diag(cov))
 
 
-def _compile(src: str, name: str, vec: bool) -> Any:
-    # _c() writes non-finite constants as inf / nan (repr): give those names their values
-    ns: dict[str, Any] = {"MAX": _vmax if vec else max, "inf": float("inf"),
-                          "nan": float("nan")}
-    exec(compile(src, f"<rimu {name}>", "exec"), ns)
-    return ns[name]
+def _capability(V: np.ndarray, Sig: np.ndarray, idx: tuple[int, ...], full: bool,
+                df: int) -> str:
+    """What the set can do: isolate, detect, reconstruct or none."""
+    if not full:
+        return "none"
+    if df == 0:
+        return "reconstruct"
+    if df == 1:
+        return "detect"
+    iso = isolability(V[:, list(idx)], Sig[np.ix_(list(idx), list(idx))])
+    return "isolate" if iso["can_isolate"] else "detect"
 
 
 def build_set_model(H: np.ndarray, sf: np.ndarray, bias: np.ndarray, noise_cov: np.ndarray,
@@ -199,40 +204,9 @@ def build_set_model(H: np.ndarray, sf: np.ndarray, bias: np.ndarray, noise_cov: 
     V = parity_matrix(H, healthy) if df > 0 else np.zeros((0, n))
     V = V[:df] if V.shape[0] > df else V
     Sig = np.asarray(noise_cov, float)
-    if df > 0:
-        S = V @ Sig @ V.T
-        R = np.linalg.cholesky(S)
-        A = np.linalg.solve(R, np.eye(df))
-        A = np.tril(A)
-        U = (A @ V)[:, list(idx)]
-        Dg = V @ np.diag(np.diag(Sig)) @ V.T
-        kappa = float(np.linalg.eigvalsh(A @ Dg @ A.T).max())
-        Bg = V @ np.diag(np.asarray(bias_sd, float) ** 2) @ V.T
-        beta = float(max(np.linalg.eigvalsh(A @ Bg @ A.T).max(), 0.0))
-    else:
-        beta = 0.0
-        A = np.zeros((0, 0))
-        U = np.zeros((0, m))
-        kappa = 1.0
-    if full:
-        Wu = np.zeros((n, n))
-        Wu[np.ix_(list(idx), list(idx))] = np.linalg.inv(Sig[np.ix_(list(idx), list(idx))])
-        G = reconstruction_matrix(H, healthy, Wu)
-        cov = G @ Sig @ G.T
-        osd = np.sqrt(np.diag(cov))
-    else:
-        G = np.zeros((3, n))
-        cov = np.full((3, 3), np.nan)
-        osd = np.full(3, np.nan)
-    if not full:
-        cap = "none"
-    elif df == 0:
-        cap = "reconstruct"
-    elif df == 1:
-        cap = "detect"
-    else:
-        iso = isolability(V[:, list(idx)], Sig[np.ix_(list(idx), list(idx))])
-        cap = "isolate" if iso["can_isolate"] else "detect"
+    A, U, kappa, beta = _whitening(V, Sig, idx, bias_sd)
+    G, cov, osd = _reconstruction(H, healthy, Sig, idx, full)
+    cap = _capability(V, Sig, idx, full, df)
     # calibration uncertainty: ρ_i = ω̂ᵀ C_i ω̂ / Σ_ii on (ω0², ω1², ω2², ω0ω1, ω0ω2, ω1ω2)
     C = np.asarray(input_error_cov, float) / np.diag(Sig)[:, None, None]
     coef = np.stack([C[:, 0, 0], C[:, 1, 1], C[:, 2, 2], 2 * C[:, 0, 1], 2 * C[:, 0, 2],
@@ -240,29 +214,23 @@ def build_set_model(H: np.ndarray, sf: np.ndarray, bias: np.ndarray, noise_cov: 
     scales = thresholds.scales
     vf = thresholds.variance_factor
     thr = tuple(chi2_threshold(a, df) if df > 0 else float("inf") for a in thresholds.alpha)
-    invwf = tuple(1.0 / (w * f) for w, f in zip(scales, vf, strict=True))
-    kof = tuple(kappa / f for f in vf)
-    one_bw = tuple(1.0 + w * beta / f for w, f in zip(scales, vf, strict=True))
+    chi2_scale = tuple(1.0 / (w * f) for w, f in zip(scales, vf, strict=True))
+    rho_gain = tuple(kappa / f for f in vf)
+    offset_gain = tuple(1.0 + w * beta / f for w, f in zip(scales, vf, strict=True))
     h = float("nan")
     if df > 0 and thresholds.detector != "windows":
         h = cusum_threshold(thresholds.alpha[0], thresholds.cusum_drift, 2 * m)
     pl = protection_level_constants(U, G[:, list(idx)], Sig[np.ix_(list(idx), list(idx))],
                                     thr[0] if scales[0] == 1 else float("inf"), vf[0], kappa,
                                     missed_detection)
-    src = _generate(n, idx, sf, bias, V, A, G, coef, full)
-    kern = _compile(src, "kernel", vec=False)
-    kern_vec = _compile(src, "kernel", vec=True)
-    proj = None
-    psrc = ""
-    if df > 0:
-        psrc = _generate_proj(U)
-        proj = _compile(psrc, "proj", vec=False)
-    for a in (V, A, U, G, cov, osd):
+    sf = np.array(sf, float)
+    bias = np.array(bias, float)
+    for a in (V, A, U, G, cov, osd, sf, bias, coef):
         a.setflags(write=False)
     return SetModel(mask=mask, idx=idx, df=df, capability=cap, V=V, A=A, U=U, G=G, cov=cov,
-                    omega_sd=osd, kappa=kappa, thr=thr, invwf=invwf, kof=kof, beta=beta,
-                    one_bw=one_bw, cusum_h=h,
-                    pl=pl, kernel=kern, kernel_vec=kern_vec, proj=proj, source=src + psrc)
+                    omega_sd=osd, kappa=kappa, thr=thr, chi2_scale=chi2_scale,
+                    rho_gain=rho_gain, beta=beta, offset_gain=offset_gain, cusum_h=h, pl=pl,
+                    sf=sf, bias=bias, cal_coef=coef)
 
 
 class SetCache:

@@ -73,7 +73,7 @@ def oracle_detect(cal: Calibration, t: np.ndarray, raw: np.ndarray, sensor: int,
     mdl = mon.model
     t = np.asarray(t, float)
     raw = np.asarray(raw, float)
-    _, z, _, rho = mdl.kernel_vec(*[raw[:, i] for i in range(raw.shape[1])])
+    _, z, _, rho = mdl.compensate(raw)
     k = mdl.idx.index(sensor - 1)
     u = mdl.U[:, k] / np.linalg.norm(mdl.U[:, k])
     r = sum(u[j] * z[j] for j in range(mdl.df))

@@ -203,7 +203,8 @@ def test_tetrad_detects_steps_and_never_isolates(size):
 
 # -- reconstruction after isolation --------------------------------------------------------
 def test_cone6_reconstruction_error_matches_reported_covariance():
-    """After isolating a faulty sensor, var(ω̂ − ω) per axis within 10 % of the mean ω̂_sd².
+    """After isolating a faulty sensor, var(ω̂ − ω) per axis equals the mean ω̂_sd² within
+    3 Monte Carlo sd (sqrt(2/n) for a variance ratio of n white samples).
 
     The true sensors equal the calibration here (``truth=cal``), so the error is the
     remaining sensors' noise alone: the quantity the reported covariance describes. (With
@@ -214,7 +215,7 @@ def test_cone6_reconstruction_error_matches_reported_covariance():
     cal, _ = calibrated("cone6")
     mon = monitor("cone6")
     w0 = warmup_s("cone6")
-    ratios = []
+    ratios, sds = [], []
     for sensor in range(1, cal.gyro.n + 1):
         f = parse_fault(f"step:{sensor}:15sigma:{w0:.2f}", cal)
         fl = simulate_flight(cal, w0 + 60.0, seed=500 + sensor, faults=[f], truth=cal)
@@ -227,10 +228,11 @@ def test_cone6_reconstruction_error_matches_reported_covariance():
         err = res.omega[after] - fl.omega_true[after]
         assert np.all(np.isfinite(err))
         ratios.append(err.var(axis=0) / np.mean(res.omega_sd[after] ** 2, axis=0))
+        sds.append(np.sqrt(2.0 / err.shape[0]))
     r = np.array(ratios)
     _record("cone6 reconstruction var/reported var after isolation (per sensor, axis)",
             np.round(r, 3).tolist())
-    assert np.all(np.abs(r - 1.0) < 0.10), r
+    assert np.all(np.abs(r - 1.0) < 3.0 * np.array(sds)[:, None]), (r, sds)
 
 
 # -- two successive faults ------------------------------------------------------------------

@@ -4,7 +4,7 @@ the empirical false-alarm rate of each scale's statistic on simulated healthy da
 from __future__ import annotations
 
 import numpy as np
-from scipy import stats
+from scipy import special, stats
 
 from fdi.calfile import AllanTable
 from fdi.detector import (
@@ -20,9 +20,15 @@ from fdi.settings import MonitorSettings
 from thresholds.synthetic import raw_samples, synthetic_calibration
 
 
-def test_chi2_threshold_small_alpha():
-    assert chi2_threshold(1e-9, 3) == stats.chi2.isf(1e-9, 3)
-    assert np.isfinite(chi2_threshold(1e-20, 1))           # ppf(1 - alpha) would be inf
+def test_chi2_threshold_small_alpha_against_closed_forms():
+    """Closed forms, not the scipy call it wraps: χ²(2) tail exp(−T/2), so T = −2 ln α;
+    χ²(1) = N(0,1)², so T = (Φ⁻¹(α/2))² (from erfcinv). Down to α = 1e-20, where
+    ``ppf(1 − α)`` would be inf."""
+    for alpha in (1e-3, 1e-9, 1e-20):
+        np.testing.assert_allclose(chi2_threshold(alpha, 2), -2.0 * np.log(alpha), rtol=1e-10)
+        np.testing.assert_allclose(chi2_threshold(alpha, 1), 2.0 * special.erfcinv(alpha) ** 2,
+                                   rtol=1e-10)
+    assert chi2_threshold(0.5, 0) == np.inf
     assert alpha_per_sample(1e-3, 100.0) == 1e-3 / 360000.0
 
 

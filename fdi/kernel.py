@@ -1,0 +1,463 @@
+"""The monitor's per-sample recursion, compiled once (numba, ``cache=True``).
+
+:func:`advance` runs rows r0 … r1−1 of a block (one row for :meth:`fdi.monitor.Monitor.step`,
+many for :meth:`~fdi.monitor.Monitor.run`: the same machine code, hence bit-identical
+answers). Per sample, with the constants of the current healthy set (:mod:`fdi.state`):
+
+1. Health (:func:`health_checks`): a valid raw value outside lo < u < hi (``range``;
+   NaN/inf: ``nonfinite``), ``stuck_count`` identical values (``stuck``), no valid sample
+   for ``stale_timeout_s`` (``stale``). Any verdict stops the kernel: the monitor isolates
+   and resumes the same sample at re-admission.
+2. Re-admission (opt-in, :func:`readmission_check`): an isolated sensor that agrees with the
+   reconstruction (|y_i − h_iᵀω̂|² < 9 var) for ``readmit_dwell_s`` stops the kernel.
+3. A healthy sensor without a sample stops the kernel (the monitor reconstructs from the
+   sensors present; no parity test, infinite protection level).
+4. :func:`compensate`: y = SF·u − b, parity p = V·y, whitened parity z = A·p (Cov z = I),
+   ω̂ = G·y and ρ = max_i ω̂ᵀC_iω̂/Σ_ii (seed 001 Eq. 21 for the zeroed rows of H̃).
+5. Windows (:func:`fdi.windows.window_update`) and the CUSUM bank
+   (:func:`fdi.cusum.cusum_update`).
+6. Detection state machine (:func:`detection_machine`): a detection or an isolation stops
+   the kernel after the sample (the monitor attributes it, names the events, isolates).
+7. Protection level PL(ρ) = a·sqrt(1 + bρ) + c·sqrt(d + eρ) (:mod:`fdi.integrity`).
+
+The kernel never raises on numbers: every bad value is caught by the health checks before
+it reaches the arithmetic.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+from pathlib import Path
+
+import numpy as np
+from numba import njit
+
+from fdi.cusum import cusum_update
+from fdi.state import (
+    ALARM_RUN,
+    AXIS0,
+    BIAS,
+    CAPABILITY,
+    CLEAR_RUN,
+    CLEAR_SAMPLES,
+    CUSUM_CLEAR,
+    CUSUM_H,
+    DETECTED,
+    DETECTED_ROWS,
+    DF,
+    FIRED,
+    GOOD_SINCE_T,
+    H_P_H,
+    HAS_CUSUM,
+    HAS_OMEGA,
+    HAS_PARITY,
+    HAS_VALID,
+    HEALTH0,
+    HEALTH_NONFINITE,
+    HEALTH_OK,
+    HEALTH_RANGE,
+    HEALTH_STALE,
+    HEALTH_STUCK,
+    HI,
+    IN_SET,
+    LAST_RAW,
+    LAST_VALID_T,
+    LO,
+    N_WINDOWS,
+    OMEGA0,
+    PERSISTENCE,
+    PHASE,
+    PHASE_HEALTH,
+    PHASE_READMIT,
+    PL_A,
+    PL_B,
+    PL_C,
+    PL_D,
+    PL_E,
+    PROTECTION,
+    READMISSION,
+    READMIT_SENSOR,
+    RHO_COEF0,
+    SAME_RUN,
+    SF,
+    SIGMA_II,
+    STALE_TIMEOUT_S,
+    STARTED,
+    STATS0,
+    STOP_CODE,
+    STOP_DETECTED,
+    STOP_HEALTH,
+    STOP_INCOMPLETE,
+    STOP_ISOLATE,
+    STOP_NONE,
+    STOP_READMIT,
+    STOP_ROW,
+    STUCK_COUNT,
+    THRESHOLD,
+)
+from fdi.windows import window_update
+
+__all__ = ["advance", "compensate", "reconstruct_row"]
+
+
+
+_ISOLATE = 0                                # CAPABILITY_CODE["isolate"]
+_NONE = 3                                   # CAPABILITY_CODE["none"]
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def members(sensors):
+    """Indices of the sensors in the set, ascending, shape (m,)."""
+    m = 0
+    for i in range(sensors.shape[0]):
+        if sensors[i, IN_SET] != 0.0:
+            m += 1
+    idx = np.empty(m, np.int64)
+    m = 0
+    for i in range(sensors.shape[0]):
+        if sensors[i, IN_SET] != 0.0:
+            idx[m] = i
+            m += 1
+    return idx
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def compensate(raw, r, idx, sensors, mats, df, has_omega, y, p, z, w) -> float:
+    """y = SF·u − b, p = V·y, z = A·p, ω̂ = G·y of the sensors ``idx`` of row r; returns ρ.
+
+    Sums run over the sensors of the set in ascending order (left to right). Without three
+    independent sensors ω̂ is NaN and ρ is 0.
+    """
+    for k_ in range(idx.shape[0]):
+        i = idx[k_]
+        y[i] = sensors[i, SF] * raw[r, i] - sensors[i, BIAS]
+    for j in range(df):
+        acc = 0.0
+        for k_ in range(idx.shape[0]):
+            i = idx[k_]
+            acc = acc + mats[j, i] * y[i]
+        p[j] = acc
+    a0 = df + 3
+    for j in range(df):
+        acc = 0.0
+        for k in range(j + 1):
+            acc = acc + mats[a0 + j, k] * p[k]
+        z[j] = acc
+    if not has_omega:
+        w[0] = np.nan
+        w[1] = np.nan
+        w[2] = np.nan
+        return 0.0
+    for a in range(3):
+        acc = 0.0
+        for k_ in range(idx.shape[0]):
+            i = idx[k_]
+            acc = acc + mats[df + a, i] * y[i]
+        w[a] = acc
+    q0, q1, q2 = w[0] * w[0], w[1] * w[1], w[2] * w[2]
+    q3, q4, q5 = w[0] * w[1], w[0] * w[2], w[1] * w[2]
+    rho = 0.0
+    c = RHO_COEF0
+    for k_ in range(idx.shape[0]):
+        i = idx[k_]
+        s = (sensors[i, c] * q0 + sensors[i, c + 1] * q1 + sensors[i, c + 2] * q2
+             + sensors[i, c + 3] * q3 + sensors[i, c + 4] * q4 + sensors[i, c + 5] * q5)
+        if s > rho:
+            rho = s
+    return rho
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def health_checks(t, raw, r, valid, vr, sensors, fconst, iconst, sensor, counters) -> int:
+    """Health verdict per sensor of the set (``counters[HEALTH0 + i]``); returns how many
+    failed. Each sensor's check reads only its own history, so the order of isolation does
+    not change the verdicts."""
+    failed = 0
+    stuck = iconst[STUCK_COUNT]
+    for i in range(sensors.shape[0]):
+        counters[HEALTH0 + i] = HEALTH_OK
+        if sensors[i, IN_SET] == 0.0:
+            continue
+        if valid[vr, i]:
+            v = raw[r, i]
+            if not (sensors[i, LO] < v and v < sensors[i, HI]):
+                counters[HEALTH0 + i] = HEALTH_RANGE if math.isfinite(v) else HEALTH_NONFINITE
+                failed += 1
+                continue
+            if v == sensor[i, LAST_RAW]:
+                sensor[i, SAME_RUN] += 1.0
+                if sensor[i, SAME_RUN] >= stuck:
+                    counters[HEALTH0 + i] = HEALTH_STUCK
+                    failed += 1
+                    continue
+            else:
+                sensor[i, SAME_RUN] = 1.0
+                sensor[i, LAST_RAW] = v
+            # a timestamp that goes backwards (or is NaN) must not reset the stale clock
+            lvt = sensor[i, LAST_VALID_T]
+            if t > lvt or lvt != lvt:
+                sensor[i, LAST_VALID_T] = t
+        elif t - sensor[i, LAST_VALID_T] > fconst[STALE_TIMEOUT_S]:
+            counters[HEALTH0 + i] = HEALTH_STALE
+            failed += 1
+    return failed
+
+
+@njit(cache=True, error_model="numpy")
+def readmission_check(t, raw, r, valid, vr, idx, sensors, mats, iconst, sensor, counters, dwell_s,
+                      y, p, z, w) -> int:
+    """First isolated sensor that behaved for ``dwell_s`` (−1: none).
+
+    Good behaviour: valid, within the raw bounds, not repeating, and |y_i − h_iᵀω̂|² below
+    9·(Σ_ii + h_iᵀPh_i) with ω̂ from the healthy set.
+    """
+    if iconst[CAPABILITY] == _NONE or counters[DETECTED] != 0:
+        return -1
+    n = sensors.shape[0]
+    for i in range(n):
+        if sensors[i, IN_SET] != 0.0 and not valid[vr, i]:
+            return -1
+    compensate(raw, r, idx, sensors, mats, iconst[DF], True, y, p, z, w)
+    for i in range(n):
+        if sensors[i, IN_SET] != 0.0:
+            continue
+        v = raw[r, i]
+        good = (valid[vr, i] and sensors[i, LO] < v and v < sensors[i, HI]
+                and v != sensor[i, LAST_RAW])
+        if good:
+            yi = sensors[i, SF] * v - sensors[i, BIAS]
+            hw = (sensors[i, AXIS0] * w[0] + sensors[i, AXIS0 + 1] * w[1]
+                  + sensors[i, AXIS0 + 2] * w[2])
+            var = sensors[i, SIGMA_II] + sensors[i, H_P_H]
+            good = (yi - hw) ** 2 < 9.0 * var
+        sensor[i, LAST_RAW] = v
+        since = sensor[i, GOOD_SINCE_T]
+        if not good:
+            sensor[i, GOOD_SINCE_T] = np.nan
+        elif since != since:
+            sensor[i, GOOD_SINCE_T] = t
+        elif t - since >= dwell_s:
+            return i
+    return -1
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def detection_machine(alarm, clear, fired, iconst, counters) -> int:
+    """Detection state machine for one complete sample; returns the stop code.
+
+    The first alarm detects; ``persistence`` consecutive alarms isolate (when the set can
+    isolate); a detection clears after ``clear_samples`` samples below the clearing
+    thresholds (hysteresis: one event per onset).
+    """
+    code = STOP_NONE
+    if counters[DETECTED] == 0:
+        if not alarm:
+            return STOP_NONE
+        counters[DETECTED] = 1
+        counters[DETECTED_ROWS] = 1
+        counters[ALARM_RUN] = 1
+        counters[CLEAR_RUN] = 0
+        counters[FIRED] = fired
+        code = STOP_DETECTED
+    else:
+        counters[DETECTED_ROWS] += 1
+        counters[ALARM_RUN] = counters[ALARM_RUN] + 1 if alarm else 0
+        counters[CLEAR_RUN] = counters[CLEAR_RUN] + 1 if clear else 0
+    if iconst[CAPABILITY] == _ISOLATE and counters[ALARM_RUN] >= iconst[PERSISTENCE]:
+        counters[FIRED] = fired
+        code |= STOP_ISOLATE
+    elif counters[DETECTED] != 0 and counters[CLEAR_RUN] >= iconst[CLEAR_SAMPLES]:
+        counters[DETECTED] = 0
+    return code
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def protection_level(fconst, rho) -> float:
+    """PL(ρ) = a·sqrt(1 + bρ) + c·sqrt(d + eρ) (rad/s), :mod:`fdi.integrity`."""
+    return (fconst[PL_A] * math.sqrt(1.0 + fconst[PL_B] * rho)
+            + fconst[PL_C] * math.sqrt(fconst[PL_D] + fconst[PL_E] * rho))
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _untested_row(out, r, scales, fconst, iconst, K, parity0):
+    """Statistics NaN, base thresholds, parity NaN: a sample without a parity test."""
+    nw = iconst[N_WINDOWS]
+    for k in range(nw):
+        out[r, STATS0 + k] = np.nan
+        out[r, STATS0 + K + k] = scales[k, THRESHOLD]
+    if K > nw:
+        out[r, STATS0 + nw] = np.nan
+        out[r, STATS0 + K + nw] = fconst[CUSUM_H]
+    for j in range(parity0, out.shape[1]):
+        out[r, j] = np.nan
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def parity_tests(z, rho, p, df, sensors, scales, mats, fconst, iconst, windows, cusum,
+                 counters, K, parity0, out, r) -> int:
+    """Windows, CUSUM bank, parity output and state machine of one complete sample;
+    returns the stop code (a detection or an isolation)."""
+    nw = iconst[N_WINDOWS]
+    alarm, clear, fired, best = window_update(z, rho, df, windows, counters, scales, K, out, r)
+    if iconst[HAS_CUSUM] != 0:
+        g = cusum_update(z, rho, df, sensors, mats, fconst, cusum)
+        h = fconst[CUSUM_H]
+        out[r, STATS0 + nw] = g
+        out[r, STATS0 + K + nw] = h
+        if g > h:
+            alarm = True
+            if g / h > best:
+                fired = nw
+        if g >= fconst[CUSUM_CLEAR]:
+            clear = False
+    if counters[HAS_PARITY] != 0:
+        for j in range(df):
+            out[r, parity0 + j] = p[j]
+        for j in range(parity0 + df, out.shape[1]):
+            out[r, j] = np.nan
+    return detection_machine(alarm, clear, fired, iconst, counters)
+
+
+@njit(error_model="numpy")
+def _advance(t, raw, valid, r0, r1, sensors, scales, mats, fconst, iconst, windows, cusum,
+            sensor, counters, out, dwell_s) -> None:
+    """Run samples r0 … r1−1 until one needs the monitor; see the module docstring.
+
+    Parameters
+    ----------
+    t : ndarray, shape (N,)
+    raw : ndarray, shape (N, n)
+    valid : ndarray of bool, shape (N, n), or (1, n) when every sample is valid
+    r0, r1 : int
+    sensors, scales, mats, fconst, iconst : ndarray
+        Constants of the healthy set (:class:`fdi.state.KernelSet`).
+    windows, cusum, sensor, counters : ndarray
+        Detector state (:class:`fdi.state.DetectorState`), updated in place.
+    out : ndarray, shape (N, width)
+        Output rows (:class:`fdi.state.OutLayout`).
+    dwell_s : float
+        Re-admission dwell (s).
+
+    Notes
+    -----
+    On return ``counters[STOP_ROW]`` is the row the kernel stopped at (r1 when it ran
+    through) and ``counters[STOP_CODE]`` why. Detections and isolations stop *after* their
+    sample; health, re-admission and incomplete samples *during* it (``PHASE`` tells where
+    the next call resumes).
+    """
+    n = sensors.shape[0]
+    df = iconst[DF]
+    has_omega = iconst[HAS_OMEGA] != 0
+    K = iconst[N_WINDOWS] + (1 if iconst[HAS_CUSUM] != 0 else 0)
+    parity0 = STATS0 + 2 * K
+    has_valid = counters[HAS_VALID] != 0
+    y = np.zeros(n)
+    p = np.zeros(max(df, 1))
+    z = np.zeros(max(df, 1))
+    w = np.zeros(3)
+    idx = members(sensors)
+    phase = counters[PHASE]
+    counters[PHASE] = PHASE_HEALTH
+    for r in range(r0, r1):
+        tr = t[r]
+        vr = r if has_valid else 0
+        if phase == PHASE_HEALTH:
+            if counters[STARTED] == 0:
+                counters[STARTED] = 1
+                for i in range(n):
+                    sensor[i, LAST_VALID_T] = tr
+            if health_checks(tr, raw, r, valid, vr, sensors, fconst, iconst, sensor, counters) > 0:
+                counters[STOP_ROW] = r
+                counters[STOP_CODE] = STOP_HEALTH
+                return
+        if phase <= PHASE_READMIT and iconst[READMISSION] != 0:
+            k = readmission_check(tr, raw, r, valid, vr, idx, sensors, mats, iconst, sensor,
+                                  counters, dwell_s, y, p, z, w)
+            if k >= 0:
+                counters[READMIT_SENSOR] = k
+                counters[STOP_ROW] = r
+                counters[STOP_CODE] = STOP_READMIT
+                return
+        phase = PHASE_HEALTH
+        complete = True
+        for k_ in range(idx.shape[0]):
+            i = idx[k_]
+            if not valid[vr, i]:
+                complete = False
+        if not complete:
+            _untested_row(out, r, scales, fconst, iconst, K, parity0)
+            out[r, PROTECTION] = np.inf
+            counters[STOP_ROW] = r
+            counters[STOP_CODE] = STOP_INCOMPLETE
+            return
+        rho = compensate(raw, r, idx, sensors, mats, df, has_omega, y, p, z, w)
+        out[r, OMEGA0] = w[0]
+        out[r, OMEGA0 + 1] = w[1]
+        out[r, OMEGA0 + 2] = w[2]
+        if df > 0:
+            code = parity_tests(z, rho, p, df, sensors, scales, mats, fconst, iconst, windows,
+                                cusum, counters, K, parity0, out, r)
+        else:
+            code = STOP_NONE
+            _untested_row(out, r, scales, fconst, iconst, K, parity0)
+        out[r, PROTECTION] = protection_level(fconst, rho)
+        if code != STOP_NONE:
+            counters[STOP_ROW] = r
+            counters[STOP_CODE] = code
+            return
+    counters[STOP_ROW] = r1
+    counters[STOP_CODE] = STOP_NONE
+
+
+@njit(error_model="numpy")
+def _reconstruct_row(raw, r, sensors, mats, iconst, fconst, row) -> None:
+    """ω̂ of one sample from the sensors of a set (row[OMEGA0 …]) and its protection level
+    (row[PROTECTION]); used for incomplete samples and right after an isolation."""
+    n = sensors.shape[0]
+    df = iconst[DF]
+    y = np.zeros(n)
+    p = np.zeros(max(df, 1))
+    z = np.zeros(max(df, 1))
+    w = np.zeros(3)
+    rho = compensate(raw, r, members(sensors), sensors, mats, df, iconst[HAS_OMEGA] != 0,
+                     y, p, z, w)
+    row[OMEGA0] = w[0]
+    row[OMEGA0 + 1] = w[1]
+    row[OMEGA0 + 2] = w[2]
+    row[PROTECTION] = protection_level(fconst, rho)
+
+
+def _sources_digest() -> str:
+    """Digest of the sources compiled into the entry points (this module, the windows, the
+    CUSUM bank and the slot constants of :mod:`fdi.state`)."""
+    h = hashlib.sha256()
+    here = Path(__file__)
+    for name in ("kernel.py", "windows.py", "cusum.py", "state.py"):
+        h.update(here.with_name(name).read_bytes())
+    return h.hexdigest()
+
+
+def _entry_points(sources: str):
+    """The cached entry points. numba's cache checks the source of the file that holds a
+    cached function, not of what it calls; the digest of every source compiled in sits in
+    their closure, which numba's cache key includes, so an edit anywhere recompiles."""
+
+    @njit(cache=True, error_model="numpy")
+    def advance(t, raw, valid, r0, r1, sensors, scales, mats, fconst, iconst, windows, cusum,
+                sensor, counters, out, dwell_s):
+        sources  # noqa: B018
+        _advance(t, raw, valid, r0, r1, sensors, scales, mats, fconst, iconst, windows, cusum,
+                 sensor, counters, out, dwell_s)
+
+    @njit(cache=True, error_model="numpy")
+    def reconstruct_row(raw, r, sensors, mats, iconst, fconst, row):
+        sources  # noqa: B018
+        _reconstruct_row(raw, r, sensors, mats, iconst, fconst, row)
+
+    advance.__doc__ = _advance.__doc__
+    reconstruct_row.__doc__ = _reconstruct_row.__doc__
+    return advance, reconstruct_row
+
+
+advance, reconstruct_row = _entry_points(_sources_digest())

@@ -1,0 +1,245 @@
+"""A plain-numpy reference monitor: the detector's definitions, one sample at a time.
+
+Test oracle for the compiled kernel (:mod:`fdi.kernel`). It shares with the product only
+the per-set matrices (V, A, U, G, κ, β, the protection-level constants, built by
+:func:`fdi.reconstruction.build_set_model` and checked on their own in ``test_monitor``)
+and the threshold functions. Everything the kernel does differently is written here from
+the definitions instead:
+
+- windows as direct sums over the last w complete samples (the kernel: differences of
+  cumulative sums in a ring);
+- ρ as max_i ω̂ᵀC_iω̂/Σ_ii from the 3×3 input-error covariances (the kernel: six packed
+  coefficients);
+- the CUSUM as Page's recursion g = max(0, g + x) (the kernel: S − min S);
+- the health checks, the state machine and the attribution as numpy/Python.
+
+Re-admission (opt-in) is not modelled.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from fdi.detector import chi2_threshold, cusum_threshold
+from fdi.health import health_limits
+from fdi.reconstruction import SetCache
+
+
+@dataclass
+class OracleSample:
+    """The oracle's answer to one sample (the fields of :class:`fdi.answer.Answer`)."""
+
+    omega: np.ndarray
+    omega_sd: np.ndarray
+    healthy: np.ndarray
+    statistics: np.ndarray
+    thresholds: np.ndarray
+    parity: np.ndarray
+    protection_level: float
+    capability: str
+    events: list = field(default_factory=list)   # (type, sensor, reason, stat, thr, mag)
+
+
+class OracleMonitor:
+    """Reference of :class:`fdi.monitor.Monitor` (same constructor inputs)."""
+
+    def __init__(self, cal, thresholds, settings, kind: str = "gyro") -> None:
+        s = cal.kind(kind)
+        self.n = s.n
+        self.sf = np.asarray(s.scale_factors, float)
+        self.bias = np.asarray(s.biases, float)
+        self.sigma = np.asarray(s.noise_covariance, float)
+        self.cin = np.array([np.asarray(c.input_error_cov, float) for c in s.sensors])
+        self.th = thresholds
+        self.settings = settings
+        md = settings.missed_detection or thresholds.missed_detection
+        self.cache = SetCache(s.H, self.sf, self.bias, self.sigma, self.cin, thresholds, md,
+                              np.array([c.bias_sd for c in s.sensors], float))
+        self.lim = health_limits(settings, kind, self.sf, self.bias)
+        self.scales = [int(w) for w in thresholds.scales]
+        self.cusum = thresholds.detector != "windows"
+        self.K = len(self.scales) + int(self.cusum)
+        self.healthy = np.ones(self.n, bool)
+        self.last = np.full(self.n, np.nan)
+        self.run = np.zeros(self.n)
+        self.lvt = None
+        self._new_set()
+
+    # ------------------------------------------------------------ set and state
+    def _mask(self, healthy: np.ndarray) -> int:
+        return int(sum(1 << i for i in range(self.n) if healthy[i]))
+
+    def _new_set(self) -> None:
+        self.model = self.cache.get(self._mask(self.healthy))
+        self.hist_z: list[np.ndarray] = []
+        self.hist_rho: list[float] = []
+        m = self.model.m
+        self.g_up = np.zeros(m)
+        self.g_down = np.zeros(m)
+        self.detected = False
+        self.det_rows = self.alarm_run = self.clear_run = 0
+
+    def _base_thresholds(self) -> np.ndarray:
+        df = self.model.df
+        thr = [chi2_threshold(a, df) if df > 0 else np.inf for a in self.th.alpha]
+        return np.array(thr + ([self._h()] if self.cusum else []))
+
+    def _h(self) -> float:
+        if self.model.df < 1 or not self.cusum:
+            return np.nan
+        return cusum_threshold(self.th.alpha[0], self.th.cusum_drift, 2 * self.model.m)
+
+    def _reconstruct(self, model, u: np.ndarray) -> tuple[np.ndarray, float]:
+        """ω̂ = G·y over the set's sensors and ρ = max_i ω̂ᵀC_iω̂/Σ_ii (≥ 0)."""
+        if model.capability == "none":
+            return np.full(3, np.nan), 0.0
+        idx = list(model.idx)
+        y = self.sf[idx] * u[idx] - self.bias[idx]
+        w = model.G[:, idx] @ y
+        rho = max([0.0] + [float(w @ self.cin[i] @ w) / self.sigma[i, i] for i in idx])
+        return w, rho
+
+    # ------------------------------------------------------------ one sample
+    def step(self, t: float, u: np.ndarray, ok: np.ndarray) -> OracleSample:
+        u = np.asarray(u, float)
+        ok = np.asarray(ok, bool)
+        if self.lvt is None:
+            self.lvt = np.full(self.n, t)
+        events = self._health(t, u, ok)
+        mdl = self.model
+        idx = list(mdl.idx)
+        nan_par = np.full(max(self.n - 3, 0), np.nan)
+        if not ok[idx].all():                               # incomplete: no parity test
+            present = self.healthy & ok
+            sub = self.cache.get(self._mask(present))
+            w, _ = self._reconstruct(sub, u)
+            return OracleSample(w, sub.omega_sd, self.healthy.copy(),
+                                np.full(self.K, np.nan), self._base_thresholds(), nan_par,
+                                np.inf, mdl.capability, events)
+        y = self.sf[idx] * u[idx] - self.bias[idx]
+        p = mdl.V[:, idx] @ y
+        z = mdl.A @ p
+        w, rho = self._reconstruct(mdl, u)
+        if mdl.df == 0:
+            stats, thrs, par = np.full(self.K, np.nan), self._base_thresholds(), nan_par
+        else:
+            stats, thrs, alarm, clear, fired = self._tests(z, rho)
+            par = nan_par.copy()
+            par[:mdl.df] = p
+            events += self._machine(t, stats, thrs, alarm, clear, fired)
+            if self.model is not mdl:
+                w, rho = self._reconstruct(self.model, u)
+        pl = self.model.pl
+        level = pl.a * math.sqrt(1.0 + pl.b * rho) + pl.c * math.sqrt(pl.d + pl.e * rho)
+        return OracleSample(w, self.model.omega_sd, self.healthy.copy(), stats, thrs, par,
+                            level, self.model.capability, events)
+
+    def _health(self, t: float, u: np.ndarray, ok: np.ndarray) -> list:
+        events = []
+        for i in np.flatnonzero(self.healthy):
+            reason = None
+            if ok[i]:
+                v = u[i]
+                if not (self.lim.lo[i] < v < self.lim.hi[i]):
+                    reason = "range" if np.isfinite(v) else "nonfinite"
+                else:
+                    self.run[i] = self.run[i] + 1 if v == self.last[i] else 1
+                    self.last[i] = v
+                    if self.run[i] >= self.lim.stuck_count:
+                        reason = "stuck"
+                    elif t > self.lvt[i] or np.isnan(self.lvt[i]):
+                        self.lvt[i] = t
+            elif t - self.lvt[i] > self.lim.stale_timeout_s:
+                reason = "stale"
+            if reason is not None:
+                events.append(("health", int(i) + 1, reason, None, None, None))
+                self.healthy[i] = False
+        if events:
+            self._new_set()
+        return events
+
+    def _tests(self, z: np.ndarray, rho: float):
+        """Window statistics by direct sums, the CUSUM bank by Page's recursion."""
+        mdl = self.model
+        self.hist_z.append(z)
+        self.hist_rho.append(rho)
+        count = len(self.hist_z)
+        stats, thrs, ratios = [], [], []
+        clear = True
+        for w, a, f in zip(self.scales, self.th.alpha, self.th.variance_factor, strict=True):
+            thr = chi2_threshold(a, mdl.df)
+            if count < w:
+                stats.append(np.nan)
+                thrs.append(thr)
+                ratios.append(-np.inf)
+                continue
+            s = np.sum(self.hist_z[-w:], axis=0)
+            D = float(s @ s) / (w * f)
+            T = thr * (1.0 + w * mdl.beta / f + mdl.kappa / f * float(np.sum(self.hist_rho[-w:])))
+            stats.append(D)
+            thrs.append(T)
+            ratios.append(D / T if D > T else -np.inf)
+            clear &= D < self.settings.clear_ratio * thr
+        if self.cusum:
+            U = mdl.U / np.linalg.norm(mdl.U, axis=0)
+            r = U.T @ z
+            allowance = self.th.cusum_drift + 3.0 * math.sqrt(mdl.kappa * rho + mdl.beta)
+            self.g_up = np.maximum(0.0, self.g_up + r - allowance)
+            self.g_down = np.maximum(0.0, self.g_down - r - allowance)
+            g = float(max(self.g_up.max(), self.g_down.max(), 0.0))
+            h = self._h()
+            stats.append(g)
+            thrs.append(h)
+            ratios.append(g / h if g > h else -np.inf)
+            clear &= g < self.settings.clear_ratio * h
+        ratios = np.array(ratios)
+        alarm = bool(np.isfinite(ratios).any())
+        fired = int(np.argmax(ratios)) if alarm else -1
+        return np.array(stats), np.array(thrs), alarm, clear, fired
+
+    def _machine(self, t, stats, thrs, alarm, clear, fired) -> list:
+        mdl = self.model
+        events = []
+        if not self.detected:
+            if not alarm:
+                return events
+            self.detected, self.det_rows, self.alarm_run, self.clear_run = True, 1, 1, 0
+            sensor, mag, reason = self._attribute(fired)
+            iso = mdl.capability == "isolate"
+            events.append(("detected", sensor if iso else None, reason, stats[fired],
+                           thrs[fired], mag if iso else None))
+        else:
+            self.det_rows += 1
+            self.alarm_run = self.alarm_run + 1 if alarm else 0
+            self.clear_run = self.clear_run + 1 if clear else 0
+        if mdl.capability == "isolate" and self.alarm_run >= self.settings.persistence:
+            sensor, mag, reason = self._attribute(fired)
+            events.append(("isolated", sensor, reason, stats[fired], thrs[fired], mag))
+            self.healthy[sensor - 1] = False
+            self._new_set()
+        elif self.detected and self.clear_run >= self.settings.clear_samples:
+            self.detected = False
+        return events
+
+    def _attribute(self, fired: int) -> tuple[int, float | None, str]:
+        mdl = self.model
+        U = mdl.U
+        u2 = np.sum(U * U, axis=0)
+        if fired >= len(self.scales):
+            k = int(np.argmax(np.maximum(self.g_up, self.g_down)))
+            reason = "cusum"
+        else:
+            w = self.scales[fired]
+            s = np.sum(self.hist_z[-w:], axis=0)
+            k = int(np.argmax((U.T @ s) ** 2 / (w * u2)))
+            reason = f"parity scale {w}"
+        wm = max([w for w in self.scales if w <= max(self.det_rows, 1)
+                  and w <= len(self.hist_z)], default=0)
+        mag = None
+        if wm:
+            s = np.sum(self.hist_z[-wm:], axis=0)
+            mag = float(U[:, k] @ s) / (wm * u2[k])
+        return mdl.idx[k] + 1, mag, reason
