@@ -76,6 +76,8 @@ class Session:
         Local gravity (m/s²); normal gravity at the latitude when None.
     source : str
         Where the session came from (path or ``"<memory>"``), for error messages.
+    temperature_degC : ndarray, shape (N,) or (N, n_g), or None
+        Sensor temperature (°C): one column for the whole set, or one per gyro.
     """
 
     gyro_config: Configuration
@@ -96,6 +98,7 @@ class Session:
     gravity: float | None = None
     source: str = "<memory>"
     meta: dict = field(default_factory=dict)
+    temperature_degC: np.ndarray | None = None
 
     def step_slice(self, index: int) -> np.ndarray:
         """Boolean mask of the samples of step ``index`` (1-based)."""
