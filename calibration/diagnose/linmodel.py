@@ -39,8 +39,8 @@ class FTest:
         Upper tail of F(rank, dof) (1 when rank is 0).
     log_p : float
         Its natural logarithm (ranks tests whose p-value underflows).
-    basis : ndarray, shape (N, rank)
-        Orthonormal basis of the projected ``Z``.
+    Z : ndarray, shape (N, p)
+        The regressor tested (``LinModel.basis(Z)`` gives its projected basis).
     """
 
     rank: int
@@ -48,7 +48,7 @@ class FTest:
     F: float
     p_value: float
     log_p: float
-    basis: np.ndarray
+    Z: np.ndarray
 
 
 class LinModel:
@@ -93,19 +93,35 @@ class LinModel:
             U, _ = np.linalg.qr(U - self.Q @ (self.Q.T @ U))
         return U
 
-    def test(self, Z: np.ndarray) -> FTest:
-        """F-test of adding ``Z`` (N, p) to the model."""
-        U = self._basis(Z)
-        r = U.shape[1]
+    def basis(self, Z: np.ndarray) -> np.ndarray:
+        """Orthonormal basis (N, r) of ``Z`` projected off the model."""
+        return self._basis(Z)
+
+    def test(self, Z: np.ndarray, gram: np.ndarray | None = None) -> FTest:
+        """F-test of adding ``Z`` (N, p) to the model.
+
+        Only ``Qᵀ·Z``, ``Zᵀ·e`` and the Gram matrix ``Zᵀ·Z`` (pass it when several sensors
+        share ``Z``) are formed: the projected regressors never are.
+        """
+        Z = np.asarray(Z, float).reshape(self.y.size, -1)
+        G = Z.T @ Z if gram is None else gram
+        scale = np.sqrt(np.diag(G)).copy()
+        scale[scale == 0] = 1.0
+        A = (self.Q.T @ Z) / scale
+        Gp = G / np.outer(scale, scale) - A.T @ A
+        lam, V = np.linalg.eigh(Gp)
+        keep = lam > _RANK_TOL**2
+        r = int(keep.sum())
         if r == 0:
-            return FTest(0, 0.0, 0.0, 1.0, 0.0, U)
-        ss = float(np.sum((U.T @ self.e) ** 2))
+            return FTest(0, 0.0, 0.0, 1.0, 0.0, np.zeros((self.y.size, 0)))
+        c = V[:, keep].T @ ((Z.T @ self.e) / scale) / np.sqrt(lam[keep])
+        ss = float(c @ c)
         dof = self.y.size - self.k - r
         rss1 = max(self.rss - ss, 1e-300)
         F = (ss / r) / (rss1 / max(dof, 1))
         d2 = max(dof, 1)
         return FTest(r, ss, F, float(scipy.stats.f.sf(F, r, d2)),
-                     float(scipy.stats.f.logsf(F, r, d2)), U)
+                     float(scipy.stats.f.logsf(F, r, d2)), Z)
 
     def add(self, Z: np.ndarray) -> int:
         """Add the columns of ``Z`` to the model; returns the rank added."""

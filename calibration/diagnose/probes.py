@@ -24,7 +24,7 @@ from calibration.diagnose.context import KindData
 from calibration.diagnose.library import LINE_MIN_CYCLES, line_search, step_search
 from calibration.diagnose.linmodel import LinModel
 
-__all__ = ["PROBES", "run_probes"]
+__all__ = ["PROBES", "run_probes", "shared_regressors"]
 
 PROBES = ("step_means", "slow", "change_point", "line", "inputs")
 SLOW_DEGREE = 10
@@ -59,7 +59,18 @@ def _bad_steps(d: KindData, e: np.ndarray) -> list[int]:
     return [k for _, k in sorted(out, reverse=True)[:8]]
 
 
-def run_probes(d: KindData, i: int, model: LinModel, threshold: float) -> list[dict[str, Any]]:
+def shared_regressors(d: KindData) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """The sensor-independent probe regressors of a kind and their Gram matrices."""
+    out = {}
+    for name, Z in (("step_means", _step_dummies(d)), ("slow", _legendre(d)),
+                    ("inputs", _inputs(d))):
+        out[name] = (Z, Z.T @ Z)
+    return out
+
+
+def run_probes(d: KindData, i: int, model: LinModel, threshold: float,
+               shared: dict[str, tuple[np.ndarray, np.ndarray]] | None = None
+               ) -> list[dict[str, Any]]:
     """Failing probes of sensor ``i`` (0-based) at a per-probe p threshold.
 
     Returns
@@ -70,12 +81,12 @@ def run_probes(d: KindData, i: int, model: LinModel, threshold: float) -> list[d
     """
     out = []
     T = d.duration_s
+    shared = shared_regressors(d) if shared is None else shared
     for name in PROBES:
-        mult, extra = 1, {}
-        if name == "step_means":
-            Z = _step_dummies(d)
-        elif name == "slow":
-            Z = _legendre(d)
+        mult, extra, G = 1, {}, None
+        if name in shared:
+            Z, G = shared[name]
+        if name == "slow":
             extra["band_hz"] = [0.0, SLOW_DEGREE / (2 * T)]
         elif name == "change_point":
             par, mult = step_search(d, i, model.Q, model.e)
@@ -89,9 +100,7 @@ def run_probes(d: KindData, i: int, model: LinModel, threshold: float) -> list[d
             df = 1.0 / T
             extra["band_hz"] = [max(par["frequency_hz"] - df, LINE_MIN_CYCLES / T / 2),
                                 par["frequency_hz"] + df]
-        else:
-            Z = _inputs(d)
-        ft = model.test(Z)
+        ft = model.test(Z, G)
         p = min(1.0, ft.p_value * mult)
         if ft.rank and p < threshold:
             rec = {"test": name, "p_value": p, **extra}

@@ -26,7 +26,7 @@ import numpy as np
 from calibration.diagnose.context import KindData
 from calibration.diagnose.library import Candidate, testable
 from calibration.diagnose.linmodel import LinModel
-from calibration.diagnose.probes import PROBES, run_probes
+from calibration.diagnose.probes import PROBES, run_probes, shared_regressors
 
 __all__ = ["ALIAS_CORRELATION", "Selected", "Selection", "base_columns", "select"]
 
@@ -79,13 +79,9 @@ def base_columns(d: KindData, i: int) -> np.ndarray:
     return np.column_stack([np.ones(d.N), d.x])
 
 
-def _ss(model: LinModel, basis: np.ndarray) -> float:
-    return float(np.sum((basis.T @ model.e) ** 2))
-
-
 def _evaluate(d: KindData, i: int, c: Candidate, model: LinModel
-              ) -> tuple[float, float, dict[str, Any], np.ndarray, int]:
-    """(p, log p, params, basis, rank) of adding ``c`` to sensor ``i``'s model; the scan
+              ) -> tuple[float, float, dict[str, Any], np.ndarray, int, float]:
+    """(p, log p, params, Z, rank, sum of squares) of adding ``c`` to sensor ``i``'s model; the scan
     multiplicity (Bonferroni) is included in p."""
     if c.search is not None:
         params, mult = c.search(d, i, model.Q, model.e)
@@ -93,9 +89,9 @@ def _evaluate(d: KindData, i: int, c: Candidate, model: LinModel
         params, mult = (c.fixed_params(d, i) if c.fixed_params else {}), 1
     ft = model.test(c.columns(d, i, params))
     if not ft.rank:
-        return 1.0, 0.0, params, ft.basis, 0
+        return 1.0, 0.0, params, ft.Z, 0, 0.0
     logp = min(0.0, ft.log_p + float(np.log(mult)))
-    return float(np.exp(logp)), logp, params, ft.basis, ft.rank
+    return float(np.exp(logp)), logp, params, ft.Z, ft.rank, ft.ss
 
 
 def select(datas: Mapping[str, KindData], cands: Iterable[Candidate], alpha: float, *,
@@ -130,9 +126,9 @@ def select(datas: Mapping[str, KindData], cands: Iterable[Candidate], alpha: flo
         for kind, i, c in family:
             if c.name in forced:
                 d, model = datas[kind], out.models[(kind, i)]
-                p, _, params, basis, rank = _evaluate(d, i, c, model)
+                p, _, params, Z, rank, _ = _evaluate(d, i, c, model)
                 if rank:
-                    model.add(basis)
+                    model.add(Z)
                 out.claimed.append(Selected(c, kind, i, params, p, float("nan")))
         _probe(datas, out, alpha, demote=False)
         return out
@@ -145,11 +141,11 @@ def select(datas: Mapping[str, KindData], cands: Iterable[Candidate], alpha: flo
     collinear: dict[tuple[str, str], list[int]] = {}
     live = []
     for kind, i, c in family:
-        p, logp, params, basis, rank = _evaluate(datas[kind], i, c, out.models[(kind, i)])
+        p, logp, params, Z, rank, ss = _evaluate(datas[kind], i, c, out.models[(kind, i)])
         if rank == 0:
             collinear.setdefault((c.name, kind), []).append(i + 1)
             continue
-        cache[(kind, i, c.name)] = (p, logp, params, basis, _ss(out.models[(kind, i)], basis))
+        cache[(kind, i, c.name)] = (p, logp, params, Z, ss)
         live.append((kind, i, c))
     for (name, kind), sens in collinear.items():
         out.not_testable.append({"name": name, "kind": kind, "sensors": sens,
@@ -162,25 +158,27 @@ def select(datas: Mapping[str, KindData], cands: Iterable[Candidate], alpha: flo
     while len(accepted) < m_total:
         m = m_total - len(accepted)
         key = min((k for k in cache if k not in accepted), key=lambda k: (cache[k][1], -cache[k][4]))
-        p, logp, params, basis, _ = cache[key]
+        p, logp, params, Z, _ = cache[key]
         thr = (alpha / 2) / m
         if not logp < np.log(thr):
             break
         kind, i, name = key
+        model = out.models[(kind, i)]
         aliases = []
-        for k2, (_, lp2, _, b2, _) in cache.items():
+        basis = None
+        for k2, (_, lp2, _, Z2, _) in cache.items():
             if k2 in accepted or k2 == key or k2[:2] != key[:2] or not lp2 < np.log(thr):
                 continue
-            if np.linalg.norm(basis.T @ b2, 2) > ALIAS_CORRELATION:
+            basis = model.basis(Z) if basis is None else basis
+            if np.linalg.norm(basis.T @ model.basis(Z2), 2) > ALIAS_CORRELATION:
                 aliases.append(k2[2])
         accepted.add(key)
         out.claimed.append(Selected(by_name[name], kind, i, params, p, thr, tuple(aliases)))
-        model = out.models[(kind, i)]
-        model.add(basis)
+        model.add(Z)
         for k2 in list(cache):
             if k2[:2] == (kind, i) and k2 not in accepted:
-                p2, lp2, par2, b2, _ = _evaluate(datas[kind], i, by_name[k2[2]], model)
-                cache[k2] = (p2, lp2, par2, b2, _ss(model, b2))
+                p2, lp2, par2, Z2, _, ss2 = _evaluate(datas[kind], i, by_name[k2[2]], model)
+                cache[k2] = (p2, lp2, par2, Z2, ss2)
     _probe(datas, out, alpha)
     return out
 
@@ -192,8 +190,9 @@ def _probe(datas: Mapping[str, KindData], out: Selection, alpha: float, *,
     thr = (alpha / 2) / (len(PROBES) * max(n_sensors, 1))
     bad: set[tuple[str, int]] = set()
     for kind, d in datas.items():
+        shared = shared_regressors(d)
         for i in range(d.n):
-            for rec in run_probes(d, i, out.models[(kind, i)], thr):
+            for rec in run_probes(d, i, out.models[(kind, i)], thr, shared):
                 bad.add((kind, i))
                 out.unexplained.append({"kind": kind, "sensor": i + 1,
                                         "sensor_name": d.names[i], **rec})

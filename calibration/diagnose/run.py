@@ -1,0 +1,180 @@
+"""``diagnose(session, cal)``: find the effects the model lacks, refit, error before and after.
+
+Steps: check that the calibration belongs to the session (:func:`.context.check_match`);
+residuals per kind (:mod:`.context`); forward selection and adequacy probes
+(:mod:`.selection`); joint refit of the sensors with claimed effects (:mod:`.refit`);
+before / after figures (:mod:`.metrics`). The result serialises to the ``--json`` layout
+of ``rimu diagnose`` (:meth:`Diagnosis.to_json`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from calibration.diagnose.context import KindData, check_match, kind_data
+from calibration.diagnose.library import Candidate, candidates, get_candidate
+from calibration.diagnose.metrics import error_summary
+from calibration.diagnose.refit import refit
+from calibration.diagnose.selection import Selection, select
+from calibration.session import Session
+from fdi.calfile import Calibration
+from fdi.errors import ConfigError
+
+__all__ = ["DIAGNOSIS_SCHEMA", "MONITOR_NOTE", "Diagnosis", "adequacy_record", "assess",
+           "diagnose"]
+
+DIAGNOSIS_SCHEMA = "rimu.diagnosis/1"
+MONITOR_NOTE = ("the runtime monitor does not compensate effect terms yet: a calibration "
+                "with effects is used by the monitor without them")
+
+
+@dataclass(frozen=True)
+class Diagnosis:
+    """What :func:`diagnose` found.
+
+    Attributes
+    ----------
+    effects : list of dict
+        Claimed effects: ``{"name", "kind", "sensors" (1-based), "estimate",
+        "estimate_sd", "unit", "p_value", "threshold", "aliases", "params"}``.
+    unexplained : bool
+    unexplained_detail : list of dict
+        Per failing probe: ``{"kind", "sensor", "sensor_name", "test", "p_value", "steps",
+        "band_hz" / "time_s", "partial_fits"}``.
+    not_testable : list of dict
+        ``{"name", "kind", "reason"[, "sensors"]}``.
+    error_before, error_after : dict
+        :func:`calibration.diagnose.metrics.error_summary`.
+    alpha : float
+    calibration : Calibration
+        The refit calibration (effects and adequacy filled).
+    selection : Selection
+        Internals (models per sensor), for reports.
+    """
+
+    effects: list[dict[str, Any]]
+    unexplained: bool
+    unexplained_detail: list[dict[str, Any]]
+    not_testable: list[dict[str, Any]]
+    error_before: dict[str, Any]
+    error_after: dict[str, Any]
+    alpha: float
+    calibration: Calibration
+    selection: Selection = field(repr=False, compare=False, default_factory=Selection)
+
+    @property
+    def adequate(self) -> bool:
+        """True when nothing was claimed and nothing is unexplained."""
+        return not self.effects and not self.unexplained
+
+    def to_json(self) -> dict[str, Any]:
+        """The ``rimu diagnose --json`` document."""
+        return {"schema": DIAGNOSIS_SCHEMA, "alpha": self.alpha, "effects": self.effects,
+                "unexplained": self.unexplained,
+                "unexplained_detail": self.unexplained_detail,
+                "not_testable": self.not_testable, "error_before": self.error_before,
+                "error_after": self.error_after}
+
+
+def adequacy_record(sel: Selection, alpha: float) -> dict[str, Any]:
+    """The ``adequacy`` entry of a calibration file from a selection."""
+    where = [f"{s.kind} {s.sensor + 1}: {s.candidate.name}" for s in sel.claimed]
+    where += [f"{u['kind']} {u['sensor']}: unexplained ({u['test']}"
+              + (f", steps {', '.join(map(str, u['steps']))}" if u.get("steps") else "")
+              + (f", {u['band_hz'][0]:.3g}-{u['band_hz'][1]:.3g} Hz" if u.get("band_hz")
+                 else "") + ")" for u in sel.unexplained]
+    return {"verdict": "effects suspected" if where else "adequate", "alpha": alpha,
+            "where": where,
+            "method": "forward selection over the rimu.diagnose candidate library and "
+                      "adequacy probes (per-step means, slow trend, change point, spectral "
+                      "line, input correlation), nested-model F-tests, Holm/Bonferroni at "
+                      "alpha over candidates x sensors"}
+
+
+def _candidates(names: Iterable[str] | None) -> list[Candidate]:
+    if names is None:
+        return candidates()
+    return [get_candidate(n) for n in names]
+
+
+def assess(session: Session, cal: Calibration, *, alpha: float = 0.01,
+           effects: Iterable[str] | None = None,
+           datas: Mapping[str, KindData] | None = None) -> Selection:
+    """Selection and probes only (no refit): what :func:`diagnose` and the adequacy
+    check of ``rimu calibrate`` share. ``effects``: fit these without testing."""
+    datas = kind_data(session, cal) if datas is None else datas
+    forced = list(effects) if effects is not None else None
+    if forced:
+        for name in forced:
+            c = get_candidate(name)
+            for kind, d in datas.items():
+                why = c.needs(d) if kind in c.kinds else None
+                if why is not None:
+                    raise ConfigError(f"{session.source}: effect {name!r} cannot be fitted "
+                                      f"to the {kind}s: {why}")
+            if not any(k in c.kinds for k in datas):
+                raise ConfigError(f"{session.source}: effect {name!r} applies to "
+                                  f"{' and '.join(c.kinds)}; the session has none")
+    return select(datas, candidates() if not forced else [get_candidate(n) for n in forced],
+                  alpha, forced=forced)
+
+
+def _effects_json(sel: Selection, new: Calibration) -> list[dict[str, Any]]:
+    out = []
+    terms = {(t.kind, t.sensor, t.name): t for t in new.effects}
+    for s in sel.claimed:
+        t = terms[(s.kind, s.sensor, s.candidate.name)]
+        params = {k: v for k, v in t.params.items() if k != "p_value"}
+        out.append({"name": t.name, "kind": t.kind, "sensors": [t.sensor + 1],
+                    "estimate": t.estimate, "estimate_sd": t.estimate_sd, "unit": t.unit,
+                    "p_value": s.p_value,
+                    "threshold": None if not np.isfinite(s.threshold) else s.threshold,
+                    "aliases": list(s.aliases), "params": params})
+    return out
+
+
+def diagnose(session: Session, cal: Calibration, *, alpha: float = 0.01,
+             truth: tuple[Calibration, Mapping[str, float]] | None = None,
+             cal_path: str = "<calibration>",
+             effects: Iterable[str] | None = None) -> Diagnosis:
+    """Diagnose a session under a calibration (see the module docstring).
+
+    Parameters
+    ----------
+    session : Session
+    cal : Calibration
+        A calibration of this session (``rimu calibrate``).
+    alpha : float
+        Family-wise level of the tests (0 < α < 1).
+    truth : (Calibration, effects), optional
+        From :func:`calibration.truth.load_truth`: adds parameter errors in σ.
+    cal_path : str
+        For error messages.
+    effects : names, optional
+        Fit exactly these (no selection).
+
+    Raises
+    ------
+    ConfigError
+        Calibration of another configuration or session, bad α, an asked-for effect the
+        session lacks the inputs for.
+    """
+    if not 0 < alpha < 1:
+        raise ConfigError(f"alpha must be between 0 and 1, got {alpha!r}")
+    check_match(session, cal, cal_path)
+    datas = kind_data(session, cal)
+    sel = assess(session, cal, alpha=alpha, effects=effects, datas=datas)
+    rec = adequacy_record(sel, alpha)
+    fit = refit(datas, cal, sel.claimed, adequacy=rec)
+    before = error_summary(datas, {k: d.y for k, d in datas.items()},
+                           {k: np.full(d.n, 4) for k, d in datas.items()}, cal, truth)
+    after = error_summary(datas, fit.residual, fit.n_params, fit.calibration, truth)
+    return Diagnosis(effects=_effects_json(sel, fit.calibration),
+                     unexplained=bool(sel.unexplained),
+                     unexplained_detail=sel.unexplained, not_testable=sel.not_testable,
+                     error_before=before, error_after=after, alpha=alpha,
+                     calibration=fit.calibration, selection=sel)
