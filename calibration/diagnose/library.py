@@ -45,7 +45,7 @@ from fdi.units import DPH, G0, MG
 __all__ = ["BIAS_UNITS", "CHANGE_POINT_GRID", "ENTRY_POINT_GROUP", "LINE_MIN_CYCLES",
            "Candidate", "candidates", "change_point_scan", "get_candidate", "line_search", "mount_search",
            "register_effect", "step_search",
-           "temperature_reference", "testable"]
+           "model_effects", "temperature_reference", "testable"]
 
 ENTRY_POINT_GROUP = "rimu.effects"
 BIAS_UNITS = {"gyro": ("deg/h", DPH), "accel": ("mg", MG)}
@@ -336,3 +336,29 @@ def testable(c: Candidate, data: KindData) -> str | None:
         return f"applies to {' and '.join(c.kinds)} only"
     return c.needs(data)
 
+
+
+def model_effects(datas: Mapping[str, KindData], effects: Any) -> dict[str, KindData]:
+    """``datas`` with the residual of the extended model: every effect term of a
+    calibration (:class:`fdi.calfile.EffectTerm`) subtracted from ``y``.
+
+    Raises
+    ------
+    ConfigError
+        A term names an effect that is not registered (a user effect whose plug-in is not
+        installed).
+    """
+    import dataclasses
+
+    out = dict(datas)
+    for t in effects:
+        if t.kind not in out:
+            continue
+        d = out[t.kind]
+        c = get_candidate(t.name)
+        Z = c.columns(d, t.sensor, t.params)
+        beta = np.asarray(t.params.get("components", [t.estimate]), float)
+        y = d.y.copy()
+        y[:, t.sensor] -= Z @ beta[:Z.shape[1]]
+        out[t.kind] = dataclasses.replace(d, y=y)
+    return out

@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from calibration.diagnose.context import KindData, check_match, kind_data
-from calibration.diagnose.library import Candidate, candidates, get_candidate
+from calibration.diagnose.library import Candidate, candidates, get_candidate, model_effects
 from calibration.diagnose.metrics import error_summary
 from calibration.diagnose.refit import refit
 from calibration.diagnose.selection import Selection, select
@@ -106,7 +106,7 @@ def assess(session: Session, cal: Calibration, *, alpha: float = 0.01,
            datas: Mapping[str, KindData] | None = None) -> Selection:
     """Selection and probes only (no refit): what :func:`diagnose` and the adequacy
     check of ``rimu calibrate`` share. ``effects``: fit these without testing."""
-    datas = kind_data(session, cal) if datas is None else datas
+    datas = model_effects(kind_data(session, cal), cal.effects) if datas is None else datas
     forced = list(effects) if effects is not None else None
     if forced:
         for name in forced:
@@ -166,7 +166,7 @@ def diagnose(session: Session, cal: Calibration, *, alpha: float = 0.01,
     if not 0 < alpha < 1:
         raise ConfigError(f"alpha must be between 0 and 1, got {alpha!r}")
     check_match(session, cal, cal_path)
-    datas = kind_data(session, cal)
+    datas = model_effects(kind_data(session, cal), cal.effects)
     sel = assess(session, cal, alpha=alpha, effects=effects, datas=datas)
     rec = adequacy_record(sel, alpha)
     fit = refit(datas, cal, sel.claimed, adequacy=rec)

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from calibration.calibrate import BIAS_METHODS, NOISE_MODELS, calibrate
+from calibration.calibrate import BIAS_METHODS, NOISE_MODELS
 from calibration.residuals import GM_LR_THRESHOLD
 from fdi.calfile import Calibration, SensorSet
 from fdi.errors import ConfigError
@@ -39,6 +39,9 @@ def configure(p: argparse.ArgumentParser) -> None:
                    help="fit the Earth rate to the raw outputs, not the wavelet-denoised ones")
     p.add_argument("--plot", metavar="DIR",
                    help="write PNG plots (per-step residuals, Earth-rate fit) into DIR")
+    from calibration.diagnose.cli import add_calibrate_options
+
+    add_calibrate_options(p)
 
 
 def _set_summary(s: SensorSet, V_sd: object) -> list[str]:
@@ -132,15 +135,20 @@ def summary_text(cal: Calibration) -> str:
                         if cal.earth_rate_dph < 3 * (cal.earth_rate_dph_sd or 0.0) else ""))
     lines.extend(_noise_lines(ex.get("noise_model")))
     lines.extend(f"warning: {w}" for w in ex.get("warnings", []))
+    from calibration.diagnose.checked import format_adequacy
+
+    lines.extend(format_adequacy(cal))
     return "\n".join(lines)
 
 
 def run(args: argparse.Namespace) -> int:
     from calibration.session_io import load_session
 
+    from calibration.diagnose.cli import calibrate_with_check
+
     session = load_session(args.session)
-    cal = calibrate(session, bias_method=args.bias_method, denoise=not args.no_denoise,
-                    noise_model=args.noise_model)
+    cal = calibrate_with_check(session, args, bias_method=args.bias_method,
+                               denoise=not args.no_denoise, noise_model=args.noise_model)
     out = Path(args.out)
     if out.parent and not out.parent.exists():
         raise ConfigError(f"{args.out}: directory {out.parent} does not exist")
