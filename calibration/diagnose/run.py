@@ -169,6 +169,9 @@ def diagnose(session: Session, cal: Calibration, *, alpha: float = 0.01,
     datas = model_effects(kind_data(session, cal), cal.effects)
     sel = assess(session, cal, alpha=alpha, effects=effects, datas=datas)
     rec = adequacy_record(sel, alpha)
+    if sel.claimed and not sel.unexplained:      # the refit model holds the effects found
+        rec = {**rec, "verdict": "adequate", "effects_found": rec["where"], "where": [],
+               "monitor": MONITOR_NOTE}
     fit = refit(datas, cal, sel.claimed, adequacy=rec)
     before = error_summary(datas, {k: d.y for k, d in datas.items()},
                            {k: np.full(d.n, 4) for k, d in datas.items()}, cal, truth)
