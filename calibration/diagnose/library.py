@@ -35,6 +35,7 @@ from importlib import metadata
 from typing import Any
 
 import numpy as np
+import scipy.optimize
 
 from calibration.diagnose.context import KindData
 from calibration.effects import WARMUP_TAU_S
@@ -187,6 +188,7 @@ def change_point_scan(e: np.ndarray, Q: np.ndarray, idx: np.ndarray) -> np.ndarr
 
 def step_search(data: KindData, sensor: int, Q: np.ndarray,
                  e: np.ndarray) -> tuple[dict[str, Any], int]:
+    """The time of the best bias step for ``e``; multiplicity: the grid scanned."""
     N = data.N
     lo, hi = max(int(0.01 * N), 10), N - max(int(0.01 * N), 10)
     grid = np.unique(np.r_[np.linspace(lo, hi, CHANGE_POINT_GRID).astype(int),
@@ -202,25 +204,31 @@ def step_search(data: KindData, sensor: int, Q: np.ndarray,
 
 def line_search(data: KindData, sensor: int, Q: np.ndarray,
                  e: np.ndarray) -> tuple[dict[str, Any], int]:
+    """The frequency of the periodogram peak of ``e`` above :data:`LINE_MIN_CYCLES` per
+    session; multiplicity: the Fourier frequencies scanned."""
     N = data.N
     fs = data.sample_rate_hz
     spec = np.abs(np.fft.rfft(e)) ** 2
     k0 = int(math.ceil(LINE_MIN_CYCLES))
     kk = np.arange(k0, spec.size - 1)
     k = int(kk[int(np.argmax(spec[kk]))])
-    # refine between the neighbouring Fourier frequencies
-    best, fbest = -1.0, k * fs / N
-    for f in (k + np.linspace(-0.5, 0.5, 11)) * fs / N:
+    # refine: the frequency whose sinusoid (projected off the model) explains most of e,
+    # within one Fourier bin of the peak (estimation only; the test counts the Fourier grid)
+    def neg_ss(f: float) -> float:
         ph = 2 * np.pi * f * data.t
         z = np.column_stack([np.cos(ph), np.sin(ph)])
         z -= Q @ (Q.T @ z)
+        g = z.T @ z
+        ze = z.T @ e
         try:
-            b = np.linalg.lstsq(z, e, rcond=None)[0]
+            return -float(ze @ np.linalg.solve(g, ze))
         except np.linalg.LinAlgError:
-            continue
-        ss = float(np.sum((z @ b) ** 2))
-        if ss > best:
-            best, fbest = ss, float(f)
+            return 0.0
+
+    res = scipy.optimize.minimize_scalar(neg_ss, bounds=((k - 1) * fs / N, (k + 1) * fs / N),
+                                         method="bounded",
+                                         options={"xatol": 1e-4 * fs / N})
+    fbest = float(res.x) if res.fun <= neg_ss(k * fs / N) else k * fs / N
     return {"frequency_hz": fbest}, int(kk.size)
 
 
