@@ -325,7 +325,7 @@ class _SampleTable:
             sc = self.data[r, self.pos["step"]]
             st = int(sc) if np.isfinite(sc) and sc == round(sc) else None
             raise self.error(int(r), f"expected a finite number, got "
-                             f"{self.data[r, self.pos[need[jj]]]!r}", need[jj], st)
+                             f"{float(self.data[r, self.pos[need[jj]]])!r}", need[jj], st)
 
     def error(self, row: int, message: str, column: str, step: int | None = None
               ) -> FileFormatError:
