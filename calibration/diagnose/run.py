@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from calibration.diagnose.context import KindData, check_match, kind_data
 from calibration.diagnose.library import Candidate, candidates, get_candidate, model_effects
@@ -24,7 +25,7 @@ from calibration.session import Session
 from fdi.calfile import Calibration
 from fdi.errors import ConfigError
 
-__all__ = ["DIAGNOSIS_SCHEMA", "MONITOR_NOTE", "Diagnosis", "adequacy_record", "assess",
+__all__ = ["BLAS_THREADS", "DIAGNOSIS_SCHEMA", "MONITOR_NOTE", "Diagnosis", "adequacy_record", "assess",
            "diagnose"]
 
 DIAGNOSIS_SCHEMA = "rimu.diagnosis/1"
@@ -101,11 +102,23 @@ def _candidates(names: Iterable[str] | None) -> list[Candidate]:
     return [get_candidate(n) for n in names]
 
 
+BLAS_THREADS = 1
+"""BLAS threads inside the diagnosis: its products are tall and thin (N × few), which
+threads do not speed up and which a loaded machine slows down several-fold with them."""
+
+
 def assess(session: Session, cal: Calibration, *, alpha: float = 0.01,
            effects: Iterable[str] | None = None,
            datas: Mapping[str, KindData] | None = None) -> Selection:
     """Selection and probes only (no refit): what :func:`diagnose` and the adequacy
     check of ``rimu calibrate`` share. ``effects``: fit these without testing."""
+    with threadpool_limits(limits=BLAS_THREADS, user_api="blas"):
+        return _assess(session, cal, alpha=alpha, effects=effects, datas=datas)
+
+
+def _assess(session: Session, cal: Calibration, *, alpha: float,
+            effects: Iterable[str] | None,
+            datas: Mapping[str, KindData] | None) -> Selection:
     datas = model_effects(kind_data(session, cal), cal.effects) if datas is None else datas
     forced = list(effects) if effects is not None else None
     if forced:
@@ -166,8 +179,15 @@ def diagnose(session: Session, cal: Calibration, *, alpha: float = 0.01,
     if not 0 < alpha < 1:
         raise ConfigError(f"alpha must be between 0 and 1, got {alpha!r}")
     check_match(session, cal, cal_path)
+    with threadpool_limits(limits=BLAS_THREADS, user_api="blas"):
+        return _diagnose(session, cal, alpha, truth, effects)
+
+
+def _diagnose(session: Session, cal: Calibration, alpha: float,
+              truth: tuple[Calibration, Mapping[str, float]] | None,
+              effects: Iterable[str] | None) -> Diagnosis:
     datas = model_effects(kind_data(session, cal), cal.effects)
-    sel = assess(session, cal, alpha=alpha, effects=effects, datas=datas)
+    sel = _assess(session, cal, alpha=alpha, effects=effects, datas=datas)
     rec = adequacy_record(sel, alpha)
     if sel.claimed and not sel.unexplained:      # the refit model holds the effects found
         rec = {**rec, "verdict": "adequate", "effects_found": rec["where"], "where": [],
