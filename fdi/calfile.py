@@ -66,8 +66,8 @@ from fdi.units import (
 
 __all__ = [
     "CALIBRATION_SCHEMA",
-    "KINDS",
     "CALIBRATION_SCHEMAS",
+    "KINDS",
     "AllanTable",
     "Calibration",
     "EffectTerm",

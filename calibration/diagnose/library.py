@@ -43,10 +43,23 @@ from fdi.calfile import tangent_basis
 from fdi.errors import ConfigError
 from fdi.units import DPH, G0, MG
 
-__all__ = ["BIAS_UNITS", "CHANGE_POINT_GRID", "ENTRY_POINT_GROUP", "LINE_MIN_CYCLES",
-           "Candidate", "candidates", "change_point_scan", "get_candidate", "line_search", "mount_search",
-           "register_effect", "step_search",
-           "model_effects", "temperature_reference", "testable"]
+__all__ = [
+    "BIAS_UNITS",
+    "CHANGE_POINT_GRID",
+    "ENTRY_POINT_GROUP",
+    "LINE_MIN_CYCLES",
+    "Candidate",
+    "candidates",
+    "change_point_scan",
+    "get_candidate",
+    "line_search",
+    "model_effects",
+    "mount_search",
+    "register_effect",
+    "step_search",
+    "temperature_reference",
+    "testable",
+]
 
 ENTRY_POINT_GROUP = "rimu.effects"
 BIAS_UNITS = {"gyro": ("deg/h", DPH), "accel": ("mg", MG)}
@@ -136,7 +149,7 @@ def _load_entry_points() -> None:
     for ep in metadata.entry_points(group=ENTRY_POINT_GROUP):
         try:
             obj = ep.load()
-        except Exception as exc:  # noqa: BLE001 - a broken plug-in must name itself
+        except Exception as exc:  # a broken plug-in must name itself
             raise ConfigError(f"entry point {ep.name!r} of group {ENTRY_POINT_GROUP}: cannot "
                               f"load {ep.value} ({exc})") from None
         if callable(obj) and not isinstance(obj, Candidate):
@@ -209,7 +222,7 @@ def line_search(data: KindData, sensor: int, Q: np.ndarray,
     N = data.N
     fs = data.sample_rate_hz
     spec = np.abs(np.fft.rfft(e)) ** 2
-    k0 = int(math.ceil(LINE_MIN_CYCLES))
+    k0 = math.ceil(LINE_MIN_CYCLES)
     kk = np.arange(k0, spec.size - 1)
     k = int(kk[int(np.argmax(spec[kk]))])
     # refine: the frequency whose sinusoid (projected off the model) explains most of e,

@@ -25,7 +25,8 @@ from calibration.session import Session
 from fdi.calfile import Calibration
 from fdi.errors import ConfigError
 
-__all__ = ["BLAS_THREADS", "DIAGNOSIS_SCHEMA", "MONITOR_NOTE", "Diagnosis", "adequacy_record", "assess",
+__all__ = ["BLAS_THREADS", "DIAGNOSIS_SCHEMA", "MONITOR_NOTE", "Diagnosis", "adequacy_record",
+           "assess",
            "diagnose"]
 
 DIAGNOSIS_SCHEMA = "rimu.diagnosis/1"

@@ -157,7 +157,8 @@ def select(datas: Mapping[str, KindData], cands: Iterable[Candidate], alpha: flo
     accepted: set[tuple[str, int, str]] = set()
     while len(accepted) < m_total:
         m = m_total - len(accepted)
-        key = min((k for k in cache if k not in accepted), key=lambda k: (cache[k][1], -cache[k][4]))
+        key = min((k for k in cache if k not in accepted),
+                  key=lambda k: (cache[k][1], -cache[k][4]))
         p, logp, params, Z, _ = cache[key]
         thr = (alpha / 2) / m
         if not logp < np.log(thr):

@@ -142,9 +142,8 @@ def summary_text(cal: Calibration) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from calibration.session_io import load_session
-
     from calibration.diagnose.cli import calibrate_with_check
+    from calibration.session_io import load_session
 
     session = load_session(args.session)
     cal = calibrate_with_check(session, args, bias_method=args.bias_method,

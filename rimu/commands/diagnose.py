@@ -32,7 +32,7 @@ def _fmt_list(xs: list, f: str = "{:.3g}") -> str:
     return " ".join(f.format(x) for x in xs)
 
 
-def text(d) -> str:  # noqa: ANN001 - Diagnosis, imported lazily
+def text(d) -> str:
     """Readable summary of a :class:`calibration.diagnose.Diagnosis`."""
     lines = [f"diagnosis at alpha {d.alpha:g} (Holm/Bonferroni over candidates x sensors)"]
     if d.effects:

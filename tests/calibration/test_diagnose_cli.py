@@ -85,8 +85,8 @@ def test_temperature_columns_round_trip_and_effect(tmp_path):
     assert "temp_degC.g3" in header
     back = load_session(tmp_path / "t")
     np.testing.assert_array_equal(back.temperature_degC, s.temperature_degC)
-    from calibration.diagnose import diagnose
     from calibration.calibrate import calibrate
+    from calibration.diagnose import diagnose
 
     d = diagnose(back, calibrate(back, noise_model="white"))
     (e,) = d.effects

@@ -81,7 +81,7 @@ def test_knob_monte_carlo(case):
 
 
 def test_two_effects_at_once():
-    s, truth = session("tetrad-paper", 2, effects={"bias_drift": 10.0, "g_sensitivity": 100.0},
+    s, _truth = session("tetrad-paper", 2, effects={"bias_drift": 10.0, "g_sensitivity": 100.0},
                        effect_sensors={"bias_drift": [2], "g_sensitivity": [3]})
     d = diagnose(s, calibrate_fast(s))
     got = {(e["name"], e["sensors"][0]) for e in d.effects}
