@@ -9,6 +9,7 @@ import dataclasses
 
 import numpy as np
 from _sessions import session
+from threadpoolctl import threadpool_limits
 
 from calibration.calibrate import calibrate
 from fdi.units import DPH
@@ -21,7 +22,8 @@ _BASE: dict = {}
 def calibrate_fast(s, **kw):
     """The calibration's estimates without the Allan table and the Earth-rate fit."""
     kw.setdefault("noise_model", "white")
-    return calibrate(s, allan=False, earth_rate=False, **kw)
+    with threadpool_limits(limits=1, user_api="blas"):   # tall-thin products: 1 thread
+        return calibrate(s, allan=False, earth_rate=False, **kw)
 
 
 def clean_fast(name, seed):
