@@ -225,6 +225,11 @@ def line_search(data: KindData, sensor: int, Q: np.ndarray,
     k0 = math.ceil(LINE_MIN_CYCLES)
     kk = np.arange(k0, spec.size - 1)
     k = int(kk[int(np.argmax(spec[kk]))])
+    # a peak that could not pass any test (chi^2(2) tail of the periodogram ordinate,
+    # Bonferroni over the grid, above 1 %) is not worth refining
+    var = float(e @ e) / N
+    if var <= 0 or kk.size * np.exp(-spec[k] / (N * var)) > 0.01:
+        return {"frequency_hz": k * fs / N}, int(kk.size)
     # refine: the frequency whose sinusoid (projected off the model) explains most of e,
     # within one Fourier bin of the peak (estimation only; the test counts the Fourier grid)
     def neg_ss(f: float) -> float:
