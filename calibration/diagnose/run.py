@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from calibration.diagnose.context import KindData, check_match, kind_data
+from calibration.diagnose.context import KindData, check_match, check_same_session, kind_data
 from calibration.diagnose.library import Candidate, candidates, get_candidate, model_effects
 from calibration.diagnose.metrics import error_summary
 from calibration.diagnose.refit import refit
@@ -181,13 +181,14 @@ def diagnose(session: Session, cal: Calibration, *, alpha: float = 0.01,
         raise ConfigError(f"alpha must be between 0 and 1, got {alpha!r}")
     check_match(session, cal, cal_path)
     with threadpool_limits(limits=BLAS_THREADS, user_api="blas"):
-        return _diagnose(session, cal, alpha, truth, effects)
+        return _diagnose(session, cal, alpha, truth, effects, cal_path)
 
 
 def _diagnose(session: Session, cal: Calibration, alpha: float,
               truth: tuple[Calibration, Mapping[str, float]] | None,
-              effects: Iterable[str] | None) -> Diagnosis:
+              effects: Iterable[str] | None, cal_path: str) -> Diagnosis:
     datas = model_effects(kind_data(session, cal), cal.effects)
+    check_same_session(datas, cal, session.source, cal_path)
     sel = _assess(session, cal, alpha=alpha, effects=effects, datas=datas)
     rec = adequacy_record(sel, alpha)
     if sel.claimed and not sel.unexplained:      # the refit model holds the effects found

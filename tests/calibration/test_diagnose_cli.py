@@ -116,7 +116,7 @@ def test_bad_inputs_one_line(drift_dir, tmp_path, capsys):
     other, _ = session("tetrad-paper", 13)
     save_session(other, tmp_path / "other")
     _one_line_exit_2(capsys, "diagnose", tmp_path / "other", "--cal", drift_dir / "cal.json",
-                     must=("cal.json", "extra.source", "another session"))
+                     must=("cal.json", "residual_rms", "another session"))
     # an asked-for effect whose input the session lacks
     _one_line_exit_2(capsys, "calibrate", drift_dir / "s", "--out", tmp_path / "x.json",
                      "--effects", "temperature", must=("temperature", str(drift_dir / "s")))
