@@ -17,7 +17,7 @@ CASES = [
 ]
 
 
-@pytest.mark.parametrize("noise_model", ["auto", "white"])
+@pytest.mark.parametrize("noise_model", ["auto", pytest.param("white", marks=pytest.mark.slow)])
 @pytest.mark.parametrize("case", CASES, ids=lambda c: c[0])
 def test_effect_beyond_5_sigma_is_never_adequate(case, noise_model):
     name, value, sens = case

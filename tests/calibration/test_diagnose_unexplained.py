@@ -40,7 +40,9 @@ OUTSIDE = {"per_step": _per_step, "bump": _bump, "square_wave": _square,
            "outer_angle": _outer_angle}
 
 
-@pytest.mark.parametrize("kind", sorted(OUTSIDE))
+@pytest.mark.parametrize("kind", [k if k in ("per_step", "square_wave") else
+                                  pytest.param(k, marks=pytest.mark.slow)
+                                  for k in sorted(OUTSIDE)])
 def test_effect_outside_library_is_unexplained(kind):
     s, truth = session("tetrad-paper", 4)
     s = add_signal(s, truth, 1, OUTSIDE[kind](s) * DPH)
