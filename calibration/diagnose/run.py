@@ -125,14 +125,14 @@ def _assess(session: Session, cal: Calibration, *, alpha: float,
     if forced:
         for name in forced:
             c = get_candidate(name)
-            for kind, d in datas.items():
-                why = c.needs(d) if kind in c.kinds else None
-                if why is not None:
-                    raise ConfigError(f"{session.source}: effect {name!r} cannot be fitted "
-                                      f"to the {kind}s: {why}")
-            if not any(k in c.kinds for k in datas):
+            why = {k: c.needs(d) for k, d in datas.items() if k in c.kinds}
+            if not why:
                 raise ConfigError(f"{session.source}: effect {name!r} applies to "
                                   f"{' and '.join(c.kinds)}; the session has none")
+            if all(w is not None for w in why.values()):
+                kind, reason = next(iter(why.items()))
+                raise ConfigError(f"{session.source}: effect {name!r} cannot be fitted "
+                                  f"to the {kind}s: {reason}")
     return select(datas, candidates() if not forced else [get_candidate(n) for n in forced],
                   alpha, forced=forced)
 
