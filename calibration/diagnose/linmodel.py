@@ -17,6 +17,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.special
 import scipy.stats
 
 __all__ = ["FTest", "LinModel"]
@@ -49,6 +50,16 @@ class FTest:
     p_value: float
     log_p: float
     Z: np.ndarray
+
+
+def _log_sf(F: float, r: int, d2: int) -> float:
+    """log of the F(r, d2) upper tail; where it underflows, the χ²_r tail of ``r·F``
+    (d2 is the sample count, tens of thousands) by its leading asymptotic term."""
+    v = float(scipy.stats.f.logsf(F, r, d2))
+    if np.isfinite(v):
+        return v
+    x = r * F
+    return float(-x / 2 + (r / 2 - 1) * np.log(x / 2) - scipy.special.gammaln(r / 2))
 
 
 class LinModel:
@@ -121,7 +132,7 @@ class LinModel:
         F = (ss / r) / (rss1 / max(dof, 1))
         d2 = max(dof, 1)
         return FTest(r, ss, F, float(scipy.stats.f.sf(F, r, d2)),
-                     float(scipy.stats.f.logsf(F, r, d2)), Z)
+                     _log_sf(F, r, d2), Z)
 
     def add(self, Z: np.ndarray) -> int:
         """Add the columns of ``Z`` to the model; returns the rank added."""

@@ -42,7 +42,8 @@ class Diagnosis:
     ----------
     effects : list of dict
         Claimed effects: ``{"name", "kind", "sensors" (1-based), "estimate",
-        "estimate_sd", "unit", "p_value", "threshold", "aliases", "params"}``.
+        "estimate_sd", "unit", "p_value", "log10_p_value", "threshold", "aliases",
+        "params"}``.
     unexplained : bool
     unexplained_detail : list of dict
         Per failing probe: ``{"kind", "sensor", "sensor_name", "test", "p_value", "steps",
@@ -146,6 +147,8 @@ def _effects_json(sel: Selection, new: Calibration) -> list[dict[str, Any]]:
         out.append({"name": t.name, "kind": t.kind, "sensors": [t.sensor + 1],
                     "estimate": t.estimate, "estimate_sd": t.estimate_sd, "unit": t.unit,
                     "p_value": s.p_value,
+                    "log10_p_value": float(s.log_p / np.log(10)) if np.isfinite(s.log_p)
+                    else None,
                     "threshold": None if not np.isfinite(s.threshold) else s.threshold,
                     "aliases": list(s.aliases), "params": params})
     return out

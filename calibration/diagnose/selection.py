@@ -51,6 +51,8 @@ class Selected:
         The Holm threshold it passed.
     aliases : tuple of str
         Candidates this session cannot tell apart from it.
+    log_p : float
+        Natural log of ``p_value`` (finite where ``p_value`` underflows to 0).
     """
 
     candidate: Candidate
@@ -60,6 +62,7 @@ class Selected:
     p_value: float
     threshold: float
     aliases: tuple[str, ...] = ()
+    log_p: float = float("nan")
 
 
 @dataclass
@@ -174,7 +177,8 @@ def select(datas: Mapping[str, KindData], cands: Iterable[Candidate], alpha: flo
             if np.linalg.norm(basis.T @ model.basis(Z2), 2) > ALIAS_CORRELATION:
                 aliases.append(k2[2])
         accepted.add(key)
-        out.claimed.append(Selected(by_name[name], kind, i, params, p, thr, tuple(aliases)))
+        out.claimed.append(Selected(by_name[name], kind, i, params, p, thr, tuple(aliases),
+                                    logp))
         model.add(Z)
         for k2 in list(cache):
             if k2[:2] == (kind, i) and k2 not in accepted:

@@ -28,6 +28,12 @@ def configure(p: argparse.ArgumentParser) -> None:
                    help="write the refit calibration (rimu.calibration/2, with effects)")
 
 
+def _p(e: dict) -> str:
+    if e["p_value"] > 0 or e.get("log10_p_value") is None:
+        return f"{e['p_value']:.2g}"
+    return f"1e{e['log10_p_value']:.0f}"
+
+
 def _fmt_list(xs: list, f: str = "{:.3g}") -> str:
     return " ".join(f.format(x) for x in xs)
 
@@ -44,7 +50,7 @@ def text(d) -> str:
                             if isinstance(v, float))
             lines.append(f"  {e['name']:<18s} {e['kind']} {e['sensors'][0]}: "
                          f"{e['estimate']:+.4g} ± {e['estimate_sd']:.2g} {e['unit']}"
-                         f"   p {e['p_value']:.2g}" + (f"   [{par}]" if par else "") + alias)
+                         f"   p {_p(e)}" + (f"   [{par}]" if par else "") + alias)
     else:
         lines.append("effects found: none")
     if d.unexplained:
