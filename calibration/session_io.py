@@ -23,6 +23,13 @@ A session directory holds (a simulated one also ``truth.json``, see :mod:`calibr
     DIR/samples.csv   (comma-separated, one header line, one row per sample)
     t,step,inner_deg,outer_deg,inner_rate_dps,outer_rate_dps,gyro.g1,...,accel.x1,...
 
+Optional temperature columns (°C): ``temp_degC`` for the whole set, or ``temp_degC.<name>``
+for every gyro (one per gyro, all of them); the session then carries
+``Session.temperature_degC`` (shape (N,) or (N, n_g)) and the writer writes them back. A
+temperature column must hold finite numbers (NaN is refused naming the file, line and
+column); a column that starts with ``temp`` but is neither form is refused too (a typo would
+otherwise drop the temperature silently).
+
 ``t`` in s, ``step`` the 1-based step number of the sample (a number in the manifest's
 steps), table angles in ° and rates in °/s (right-handed, :mod:`calibration.turntable`),
 then the raw output of every gyro (``gyro.<name>``) and accelerometer (``accel.<name>``) in
@@ -52,8 +59,8 @@ from fdi.fileio import Fields, to_jsonable
 from fdi.geometry import Configuration
 from fdi.units import DEG, DPS, RAW_UNITS
 
-__all__ = ["MIN_STEP_SAMPLES", "SESSION_SCHEMA", "TABLE_COLUMNS", "load_session",
-           "save_session"]
+__all__ = ["MIN_STEP_SAMPLES", "SESSION_SCHEMA", "TABLE_COLUMNS", "TEMPERATURE_COLUMN",
+           "load_session", "save_session"]
 
 SESSION_SCHEMA = "rimu.session/1"
 MIN_STEP_SAMPLES = 10
@@ -61,6 +68,8 @@ MIN_STEP_SAMPLES = 10
 TABLE_COLUMNS = ("t", "step", "inner_deg", "outer_deg", "inner_rate_dps", "outer_rate_dps")
 """The fixed leading columns of ``samples.csv``."""
 _KINDS = ("gyro", "accel")
+TEMPERATURE_COLUMN = "temp_degC"
+"""Name of the set temperature column; per gyro ``temp_degC.<name>``."""
 
 
 def _mount_name(session: Session, st: Step) -> str:
@@ -76,6 +85,16 @@ def _mount_name(session: Session, st: Step) -> str:
 def _config_dict(c: Configuration) -> dict[str, Any]:
     return {"name": c.name, "sensor_names": list(c.sensor_names), "axes": c.H.tolist(),
             "groups": [[i + 1 for i in g] for g in c.groups]}
+
+
+def _temperature_columns(session: Session) -> tuple[list[str], np.ndarray | None]:
+    T = getattr(session, "temperature_degC", None)
+    if T is None:
+        return [], None
+    T = np.asarray(T, float)
+    if T.ndim == 1:
+        return [TEMPERATURE_COLUMN], T[:, None]
+    return [f"{TEMPERATURE_COLUMN}.{n}" for n in session.gyro_config.sensor_names], T
 
 
 def _columns(session: Session) -> tuple[list[str], list[str]]:
@@ -96,7 +115,8 @@ def save_session(session: Session, directory: str | Path) -> Path:
     d = Path(directory)
     d.mkdir(parents=True, exist_ok=True)
     gcols, acols = _columns(session)
-    columns = [*TABLE_COLUMNS, *gcols, *acols]
+    tcols, temp = _temperature_columns(session)
+    columns = [*TABLE_COLUMNS, *gcols, *acols, *tcols]
     manifest = {
         "schema": SESSION_SCHEMA,
         "sample_rate_hz": float(session.sample_rate_hz),
@@ -121,6 +141,8 @@ def save_session(session: Session, directory: str | Path) -> Path:
              session.raw_gyro]
     if acols:
         parts.append(session.raw_accel)
+    if temp is not None:
+        parts.append(temp)
     data = np.hstack(parts)
     fmt = ["%.17g", "%d"] + ["%.17g"] * (data.shape[1] - 2)
     np.savetxt(d / "samples.csv", data, fmt=fmt, delimiter=",", header=",".join(columns),
@@ -160,6 +182,7 @@ def load_session(directory: str | Path) -> Session:
     acols = [] if acfg is None else [f"accel.{n}" for n in acfg.sensor_names]
     table.require([*TABLE_COLUMNS, *gcols, *acols])
     step_no = table.check(steps)
+    temp = table.temperature(gcfg.sensor_names)
     meta["mounts"] = mounts
     return Session(
         gyro_config=gcfg, accel_config=acfg, sample_rate_hz=fs, latitude_deg=lat,
@@ -168,7 +191,8 @@ def load_session(directory: str | Path) -> Session:
         inner_rate=table.column("inner_rate_dps") * DPS,
         outer_rate=table.column("outer_rate_dps") * DPS, raw_gyro=table.columns(gcols),
         raw_accel=table.columns(acols) if acols else None, gyro_raw_unit=units["gyro"],
-        accel_raw_unit=units.get("accel", "raw"), gravity=grav, source=str(d), meta=meta)
+        accel_raw_unit=units.get("accel", "raw"), gravity=grav, source=str(d), meta=meta,
+        temperature_degC=temp)
 
 
 def _configurations(c: Fields) -> tuple[Configuration, Configuration | None]:
@@ -301,13 +325,40 @@ class _SampleTable:
             sc = self.data[r, self.pos["step"]]
             st = int(sc) if np.isfinite(sc) and sc == round(sc) else None
             raise self.error(int(r), f"expected a finite number, got "
-                             f"{self.data[r, self.pos[need[jj]]]!r}", need[jj], st)
+                             f"{float(self.data[r, self.pos[need[jj]]])!r}", need[jj], st)
 
     def error(self, row: int, message: str, column: str, step: int | None = None
               ) -> FileFormatError:
         """The error at data row ``row`` (0-based), naming its line in the file."""
         line, _, _ = _bad_cell(self.csv, len(self.cols), row)
         return FileFormatError(self.path, message, line=line, field=column, step=step)
+
+    def temperature(self, gyro_names: tuple[str, ...]) -> np.ndarray | None:
+        """The optional temperature column(s): (N,), (N, n_g) or None (module docstring)."""
+        per = [f"{TEMPERATURE_COLUMN}.{n}" for n in gyro_names]
+        found = [c for c in self.cols if c.lower().startswith("temp")]
+        for c in found:
+            if c != TEMPERATURE_COLUMN and c not in per:
+                raise FileFormatError(self.path, f"unknown temperature column; expected "
+                                      f"{TEMPERATURE_COLUMN} (whole set) or "
+                                      f"{TEMPERATURE_COLUMN}.<gyro name> (one per gyro: "
+                                      f"{', '.join(per)})", line=1, field=c)
+        if TEMPERATURE_COLUMN in self.pos:
+            if any(c in self.pos for c in per):
+                raise FileFormatError(self.path, "both a set temperature and per-gyro "
+                                      "temperatures; expected one or the other", line=1,
+                                      field=TEMPERATURE_COLUMN)
+            self.require([TEMPERATURE_COLUMN])
+            return self.column(TEMPERATURE_COLUMN).copy()
+        have = [c for c in per if c in self.pos]
+        if not have:
+            return None
+        if len(have) != len(per):
+            missing = [c for c in per if c not in self.pos]
+            raise FileFormatError(self.path, "per-gyro temperatures need one column per "
+                                  "gyro", line=1, field=missing[0])
+        self.require(per)
+        return self.columns(per).copy()
 
     def column(self, name: str) -> np.ndarray:
         return self.data[:, self.pos[name]]

@@ -1,4 +1,4 @@
-"""The calibration file ``rimu.calibration/1``: what the calibration produces and the runtime reads.
+"""The calibration file ``rimu.calibration/2``: what the calibration produces and the runtime reads.
 
 Model per sensor (seed 000 Eq. 13, seed 001 Eq. 1), internally in SI::
 
@@ -12,7 +12,7 @@ The compensated output the runtime uses is ``y_i = SF_i·u_i − b_i``.
 In the JSON file each value carries its unit (``scale_factor_unit``, ``bias_unit``); arrays
 are nested lists. Keys other tools read (keep them stable)::
 
-    {"schema": "rimu.calibration/1",
+    {"schema": "rimu.calibration/2",
      "sensors": {"gyro": [{"name", "axis", "axis_nominal", "misalignment_mrad",
                            "misalignment_mrad_sd", "scale_factor", "scale_factor_sd",
                            "scale_factor_unit", "bias", "bias_sd", "bias_unit",
@@ -24,6 +24,18 @@ are nested lists. Keys other tools read (keep them stable)::
      "misalignment_matrices": {"gyro": [{"sensors": [1, 2, 3], "M": [[...]]}], ...},
      "allan": {"gyro": {"tau_s": [...], "adev": [[...] per tau]}, ...},
      "earth_rate_dph": 15.04, "earth_rate_dph_sd": 0.3, ...}
+
+Version 2 adds two optional top-level keys (a ``/1`` file loads as a calibration with no
+effects and no adequacy record; it is migrated on the next save)::
+
+     "effects": [{"name": "bias_drift", "kind": "gyro", "sensor": 2,      # 1-based in files
+                  "estimate": 3.1, "estimate_sd": 0.4, "unit": "deg/h",
+                  "inputs": ["time"], "params": {...}}, ...],
+     "adequacy": {"verdict": "adequate" | "effects suspected", ...details}
+
+Each effect term adds ``estimate · g(inputs; params)`` to the sensor's output in the
+model (see :mod:`calibration.diagnose.library` for the regressors ``g``).
+The runtime monitor does not compensate effect terms yet: it reads them and ignores them.
 
 ``input_error_cov`` (3×3, dimensionless) is the covariance of the error of the estimated
 ``h̃_i/SF_i`` scaled to unit gain: the compensated output errs by ``e_iᵀ·x`` with
@@ -54,9 +66,11 @@ from fdi.units import (
 
 __all__ = [
     "CALIBRATION_SCHEMA",
+    "CALIBRATION_SCHEMAS",
     "KINDS",
     "AllanTable",
     "Calibration",
+    "EffectTerm",
     "SensorCal",
     "SensorSet",
     "calibration_from_dict",
@@ -65,7 +79,9 @@ __all__ = [
     "tangent_basis",
 ]
 
-CALIBRATION_SCHEMA = "rimu.calibration/1"
+CALIBRATION_SCHEMA = "rimu.calibration/2"
+CALIBRATION_SCHEMAS = ("rimu.calibration/1", CALIBRATION_SCHEMA)
+"""Versions the loader reads (``/1``: no effects, no adequacy record)."""
 KINDS = ("gyro", "accel")
 _INPUT_SI = {"gyro": "rad/s", "accel": "m/s^2"}
 
@@ -164,6 +180,45 @@ class AllanTable:
 
 
 @dataclass(frozen=True)
+class EffectTerm:
+    """One effect of the extended sensor model (``rimu.calibration/2``).
+
+    Attributes
+    ----------
+    name : str
+        Effect name (the simulator's knob name where one matches: ``bias_drift``).
+    kind : str
+        ``"gyro"`` or ``"accel"``.
+    sensor : int
+        0-based sensor index within its kind (1-based in files).
+    estimate, estimate_sd : float
+        Value and standard deviation, in ``unit``.
+    unit : str
+    inputs : tuple of str
+        Inputs the term needs (``"time"``, ``"temperature"``, ``"specific_force"``, ...).
+    params : dict
+        Fixed parameters of its regressor (a step time, a frequency, a reference
+        temperature), JSON-ready.
+    """
+
+    name: str
+    kind: str
+    sensor: int
+    estimate: float
+    estimate_sd: float
+    unit: str
+    inputs: tuple[str, ...] = ()
+    params: Mapping[str, Any] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready (sensor 1-based)."""
+        return {"name": self.name, "kind": self.kind, "sensor": self.sensor + 1,
+                "estimate": self.estimate, "estimate_sd": self.estimate_sd,
+                "unit": self.unit, "inputs": list(self.inputs),
+                "params": to_jsonable(dict(self.params))}
+
+
+@dataclass(frozen=True)
 class SensorSet:
     """All sensors of one kind (gyros or accelerometers) and their joint statistics.
 
@@ -237,6 +292,11 @@ class Calibration:
     extra : dict
         Anything else the calibration wants to keep (residual statistics per step,
         method, source session). Written as is under ``"extra"``.
+    effects : tuple of EffectTerm
+        Terms of the extended model (empty: the plain model).
+    adequacy : dict or None
+        The model-adequacy verdict (``{"verdict": "adequate" | "effects suspected", ...}``),
+        None when not assessed.
     """
 
     configuration: str
@@ -246,6 +306,8 @@ class Calibration:
     earth_rate_dph_sd: float | None = None
     latitude_deg: float | None = None
     extra: Mapping[str, Any] = field(default_factory=dict)
+    effects: tuple[EffectTerm, ...] = ()
+    adequacy: Mapping[str, Any] | None = None
 
     schema: str = CALIBRATION_SCHEMA
 
@@ -263,7 +325,7 @@ class Calibration:
 
     # -- writing -----------------------------------------------------------------------
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready dictionary in the ``rimu.calibration/1`` layout."""
+        """JSON-ready dictionary in the ``rimu.calibration/2`` layout."""
         from fdi.parity import parity_matrix
 
         doc: dict[str, Any] = {"schema": self.schema, "configuration": self.configuration,
@@ -290,6 +352,9 @@ class Calibration:
             doc["earth_rate_dph_sd"] = self.earth_rate_dph_sd
         if self.latitude_deg is not None:
             doc["latitude_deg"] = self.latitude_deg
+        doc["effects"] = [e.to_dict() for e in self.effects]
+        if self.adequacy is not None:
+            doc["adequacy"] = to_jsonable(dict(self.adequacy))
         doc["extra"] = to_jsonable(dict(self.extra))
         return doc
 
@@ -329,7 +394,7 @@ _WRITTEN_ONLY = ("parity", "parity_accel")
 
 
 def load_calibration(path: str | Path) -> Calibration:
-    """Read and validate a ``rimu.calibration/1`` file.
+    """Read and validate a ``rimu.calibration/2`` (or ``/1``) file.
 
     Raises
     ------
@@ -343,7 +408,7 @@ def load_calibration(path: str | Path) -> Calibration:
 def calibration_from_dict(doc: Mapping[str, Any], path: str = "<calibration>") -> Calibration:
     """Build a :class:`Calibration` from its JSON dictionary (see :func:`load_calibration`)."""
     r = Fields(doc, path)
-    r.schema(CALIBRATION_SCHEMA)
+    version = r.schema(CALIBRATION_SCHEMAS)
     rate = r.number("sample_rate_hz", positive=True)
     sensors = r.mapping("sensors")
     noise = r.mapping("noise_covariance")
@@ -361,9 +426,46 @@ def calibration_from_dict(doc: Mapping[str, Any], path: str = "<calibration>") -
         configuration=str(r.get("configuration", "")), sets=sets, sample_rate_hz=rate,
         earth_rate_dph=r.number("earth_rate_dph", None),
         earth_rate_dph_sd=r.number("earth_rate_dph_sd", None),
-        latitude_deg=r.number("latitude_deg", None), extra=r.free("extra", {}))
+        latitude_deg=r.number("latitude_deg", None), extra=r.free("extra", {}),
+        effects=_effects(r, sets) if version != CALIBRATION_SCHEMAS[0] else (),
+        adequacy=_adequacy(r) if version != CALIBRATION_SCHEMAS[0] else None)
     r.finish(accept=_WRITTEN_ONLY)
     return cal
+
+
+def _effects(r: Fields, sets: Mapping[str, SensorSet]) -> tuple[EffectTerm, ...]:
+    """``effects``: the extended model's terms (sensor numbers within their kind)."""
+    out = []
+    for e in r.tables("effects", [], nonempty=False):
+        kind = e.choice("kind", sorted(sets))
+        sensor = e.integer("sensor", lo=1)
+        if sensor > sets[kind].n:
+            raise e.error("sensor", f"expected 1..{sets[kind].n} ({kind} sensors), got "
+                          f"{sensor}")
+        inputs = e.get("inputs", [])
+        if not isinstance(inputs, list) or not all(isinstance(x, str) for x in inputs):
+            raise e.error("inputs", f"expected a list of input names, got {inputs!r}")
+        sd = e.number("estimate_sd")
+        if not sd >= 0:
+            raise e.error("estimate_sd", f"expected a standard deviation (>= 0), got {sd!r}")
+        out.append(EffectTerm(name=e.string("name"), kind=kind, sensor=sensor - 1,
+                              estimate=e.number("estimate"), estimate_sd=sd,
+                              unit=e.string("unit"), inputs=tuple(inputs),
+                              params=e.free("params", {})))
+        e.finish()
+    return tuple(out)
+
+
+def _adequacy(r: Fields) -> dict[str, Any] | None:
+    """``adequacy``: the verdict and its details (free-form beyond ``verdict``)."""
+    a = r.mapping("adequacy", None)
+    if a is None:
+        return None
+    a.choice("verdict", ("adequate", "effects suspected"))
+    doc = dict(a.doc)
+    a.accept(*doc)
+    a.finish()
+    return doc
 
 
 def _sensor_set(sensors: Fields, noise: Fields, mm: Fields, allan: Fields,

@@ -1,7 +1,7 @@
 """``rimu calibrate SESSION --out cal.json``: calibrate a turntable session.
 
 Reads a session directory (``calibration.session_io.load_session``), runs
-:func:`calibration.calibrate.calibrate`, writes the ``rimu.calibration/1`` file and prints a
+:func:`calibration.calibrate.calibrate`, writes the ``rimu.calibration/2`` file and prints a
 summary; ``--compare TRUTH`` adds estimate, truth, error and error/σ side by side.
 """
 
@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from calibration.calibrate import BIAS_METHODS, NOISE_MODELS, calibrate
+from calibration.calibrate import BIAS_METHODS, NOISE_MODELS
 from calibration.residuals import GM_LR_THRESHOLD
 from fdi.calfile import Calibration, SensorSet
 from fdi.errors import ConfigError
@@ -28,7 +28,7 @@ def configure(p: argparse.ArgumentParser) -> None:
     p.add_argument("session", nargs="?",
                    help="session directory (manifest.json + samples.csv)")
     p.add_argument("--out", required=True, metavar="FILE",
-                   help="calibration file to write (rimu.calibration/1 JSON)")
+                   help="calibration file to write (rimu.calibration/2 JSON)")
     p.add_argument("--compare", metavar="TRUTH",
                    help="truth sidecar (DIR/truth.json): print estimate, truth, error, error/sd")
     p.add_argument("--bias-method", choices=BIAS_METHODS, default="model",
@@ -43,6 +43,9 @@ def configure(p: argparse.ArgumentParser) -> None:
     p.add_argument("--plot", metavar="DIR",
                    help="write PNG plots (per-step residuals, Earth-rate fit) into DIR")
     add_ferraris_arguments(p)
+    from calibration.diagnose.cli import add_calibrate_options
+
+    add_calibrate_options(p)
 
 
 def _set_summary(s: SensorSet, V_sd: object) -> list[str]:
@@ -136,10 +139,14 @@ def summary_text(cal: Calibration) -> str:
                         if cal.earth_rate_dph < 3 * (cal.earth_rate_dph_sd or 0.0) else ""))
     lines.extend(_noise_lines(ex.get("noise_model")))
     lines.extend(f"warning: {w}" for w in ex.get("warnings", []))
+    from calibration.diagnose.checked import format_adequacy
+
+    lines.extend(format_adequacy(cal))
     return "\n".join(lines)
 
 
 def run(args: argparse.Namespace) -> int:
+    from calibration.diagnose.cli import calibrate_with_check
     from calibration.session_io import load_session
 
     if args.ferraris:
@@ -147,8 +154,8 @@ def run(args: argparse.Namespace) -> int:
     if args.session is None:
         raise ConfigError("rimu calibrate: give a session directory (or --ferraris CSV)")
     session = load_session(args.session)
-    cal = calibrate(session, bias_method=args.bias_method, denoise=not args.no_denoise,
-                    noise_model=args.noise_model)
+    cal = calibrate_with_check(session, args, bias_method=args.bias_method,
+                               denoise=not args.no_denoise, noise_model=args.noise_model)
     out = Path(args.out)
     if out.parent and not out.parent.exists():
         raise ConfigError(f"{args.out}: directory {out.parent} does not exist")

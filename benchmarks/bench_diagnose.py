@@ -1,0 +1,87 @@
+"""Benchmark: diagnose() on a tetrad-paper session (16 steps, 100 Hz, 57 600 × 4 samples).
+
+Two sessions: clean, and with an undeclared warm-up on one gyro (selection, refit and
+before/after figures all run). Baseline measured in the same run on the same session:
+``calibrate()`` (the call ``rimu diagnose`` follows), and the adequacy check alone
+(``assess``: selection and probes, what ``rimu calibrate`` adds). Issue 7 requires
+diagnose < 5 s on a 16-step 100 Hz session. Prints min / median / max and writes
+``benchmarks/results/diagnose.json``.
+
+Run: ``python benchmarks/bench_diagnose.py [--repeats 7]``
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import time
+from pathlib import Path
+
+import numpy as np
+
+from calibration.calibrate import calibrate
+from calibration.diagnose import assess, diagnose
+from calibration.presets import preset
+from calibration.simulate import simulate_session
+
+LIMIT_S = 5.0
+
+
+def _times(fn, repeats: int) -> list[float]:
+    fn()                                               # warm up
+    ts = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn()
+        ts.append(time.perf_counter() - t0)
+    return ts
+
+
+def _stats(ts: list[float]) -> dict[str, float]:
+    return {"min_s": float(np.min(ts)), "median_s": float(np.median(ts)),
+            "max_s": float(np.max(ts))}
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--repeats", type=int, default=7)
+    ap.add_argument("--out", default=str(Path(__file__).parent / "results" / "diagnose.json"))
+    args = ap.parse_args()
+    seq, truth, noise = preset("tetrad-paper")
+    r = args.repeats
+    res = {"schema": "rimu.benchmark/1", "name": "diagnose", "repeats": r, "limit_s": LIMIT_S,
+           "cases": {},
+           "machine": {"python": platform.python_version(), "numpy": np.__version__,
+                       "processor": platform.machine()}}
+    ok = True
+    for label, eff in (("clean", {}), ("warmup on gyro 3", {"warmup": 30.0})):
+        s = simulate_session(None, seq, truth, seed=0, noise=noise, effects=eff,
+                             effect_sensors=[3])
+        cal = calibrate(s)
+        t_cal = _stats(_times(lambda s=s: calibrate(s), r))
+        t_diag = _stats(_times(lambda s=s, cal=cal: diagnose(s, cal), r))
+        t_assess = _stats(_times(lambda s=s, cal=cal: assess(s, cal), r))
+        ratio = t_diag["median_s"] / t_cal["median_s"]
+        ok &= t_diag["max_s"] < LIMIT_S
+        res["cases"][label] = {"samples": int(s.t.size), "steps": len(s.steps),
+                               "sensors": int(s.raw_gyro.shape[1]),
+                               "sample_rate_hz": s.sample_rate_hz, "calibrate": t_cal,
+                               "diagnose": t_diag, "assess": t_assess,
+                               "ratio_diagnose_to_calibrate": ratio,
+                               "effects_found": [e["name"] for e in diagnose(s, cal).effects]}
+        print(f"{label}: {s.t.size} samples x {s.raw_gyro.shape[1]} gyros, {len(s.steps)} steps;"
+              f" min / median / max of {r}")
+        for name, t in (("calibrate", t_cal), ("diagnose", t_diag), ("assess", t_assess)):
+            print(f"  {name:<10s} {t['min_s']:7.3f} {t['median_s']:7.3f} {t['max_s']:7.3f} s")
+        print(f"  diagnose / calibrate = {ratio:.1f} x (median); limit {LIMIT_S:g} s: "
+              + ("met" if t_diag["max_s"] < LIMIT_S else "NOT met"))
+    res["limit_met"] = bool(ok)
+    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+    Path(args.out).write_text(json.dumps(res, indent=1) + "\n", encoding="utf-8")
+    print(f"wrote {args.out}")
+    return 0 if ok else 1
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,37 @@
+"""Close the loop on calibration sessions: residual → effect → refit → error before and after.
+
+``diagnose(session, cal)`` tests a library of candidate effects (the simulator's knobs,
+temperature, a bias step, a periodic line, a re-mounting tilt, and the user's own) as
+nested extensions of the calibration model, selects them forward at a stated α with a
+Holm/Bonferroni correction over candidates × sensors, says "unexplained" (and where) when
+structure remains that no candidate explains, refits and reports the error before and
+after. ``calibrate_checked`` is the calibration with this check in front of the
+coloured-noise model. See ``docs/diagnose.md``.
+"""
+
+from calibration.diagnose.checked import calibrate_checked, format_adequacy
+from calibration.diagnose.context import KindData, check_match, kind_data
+from calibration.diagnose.library import (
+    ENTRY_POINT_GROUP,
+    Candidate,
+    candidates,
+    get_candidate,
+    register_effect,
+)
+from calibration.diagnose.run import Diagnosis, assess, diagnose
+
+__all__ = [
+    "ENTRY_POINT_GROUP",
+    "Candidate",
+    "Diagnosis",
+    "KindData",
+    "assess",
+    "calibrate_checked",
+    "candidates",
+    "check_match",
+    "diagnose",
+    "format_adequacy",
+    "get_candidate",
+    "kind_data",
+    "register_effect",
+]

@@ -1,0 +1,108 @@
+"""``calibrate_checked``: calibrate, check the model's adequacy, only then model coloured noise.
+
+The coloured-noise model (``noise_model="auto"``, a Gauss-Markov bias fitted to the residual
+spectrum) widens the uncertainties for correlated *noise*. An unmodelled effect leaves
+structure in the residual that the same fit would read as noise and hide behind wider σ.
+So: calibrate with white noise, run the adequacy check of :mod:`calibration.diagnose`
+(candidate effects and generic probes, at level α) on the residual, and
+
+- adequate → calibrate with the requested noise model (the estimates do not depend on it);
+- effects suspected → keep the white-noise uncertainties, withhold the Gauss-Markov
+  widening, and say where the structure is (``adequacy`` in the calibration, a warning).
+
+With ``effects`` given (``rimu calibrate --effects``) those effects are fitted jointly with
+the calibration (:mod:`calibration.diagnose.refit`) and the adequacy is checked on the
+extended model.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Iterable
+from typing import Any
+
+from calibration.calibrate import calibrate
+from calibration.diagnose.context import kind_data
+from calibration.diagnose.library import model_effects
+from calibration.diagnose.refit import refit
+from calibration.diagnose.run import MONITOR_NOTE, adequacy_record, assess
+from calibration.session import Session
+from fdi.calfile import Calibration
+from fdi.errors import ConfigError
+
+__all__ = ["calibrate_checked", "format_adequacy"]
+
+
+def calibrate_checked(session: Session, *, alpha: float = 0.01, noise_model: str = "auto",
+                      effects: Iterable[str] | None = None, **kw: Any) -> Calibration:
+    """:func:`calibration.calibrate.calibrate` with the adequacy check (module docstring).
+
+    Parameters
+    ----------
+    session : Session
+    alpha : float
+        Family-wise level of the adequacy check.
+    noise_model : {"auto", "white"}
+        Wanted noise model; ``"auto"`` is applied only when the model is adequate.
+    effects : names, optional
+        Effects to fit jointly (no selection among them).
+    **kw
+        Passed to :func:`calibration.calibrate.calibrate` (``bias_method``, ``denoise``, ...).
+
+    Returns
+    -------
+    Calibration
+        ``adequacy`` filled; ``effects`` filled when asked for.
+    """
+    if not 0 < alpha < 1:
+        raise ConfigError(f"alpha must be between 0 and 1, got {alpha!r}")
+    effects = [e for e in (effects or []) if e]
+    white = calibrate(session, noise_model="white", **kw)
+    datas = kind_data(session, white)
+    if effects:
+        forced = assess(session, white, alpha=alpha, effects=effects, datas=datas)
+        fitted = refit(datas, white, forced.claimed).calibration
+        datas = model_effects(kind_data(session, fitted), fitted.effects)
+        sel = assess(session, fitted, alpha=alpha, datas=datas)
+        base = fitted
+    else:
+        sel = assess(session, white, alpha=alpha, datas=datas)
+        base = white
+    rec = adequacy_record(sel, alpha)
+    rec["noise_model_requested"] = noise_model
+    warnings = list(base.extra.get("warnings", []))
+    if effects:
+        rec["effects_fitted"] = effects
+        rec["monitor"] = MONITOR_NOTE
+    if rec["verdict"] == "adequate":
+        if noise_model != "white" and not effects:
+            base = calibrate(session, noise_model=noise_model, **kw)
+            warnings = list(base.extra.get("warnings", []))
+        rec["noise_model_applied"] = noise_model if not effects else "white"
+    else:
+        rec["noise_model_applied"] = "white"
+        warnings.append("model adequacy: effects suspected (" + "; ".join(rec["where"])
+                        + "); " + ("the Gauss-Markov noise widening is withheld (it would "
+                                   "hide them): run rimu diagnose"
+                                   if noise_model != "white" else "run rimu diagnose"))
+    extra = dict(base.extra)
+    extra["warnings"] = warnings
+    return dataclasses.replace(base, adequacy=rec, extra=extra)
+
+
+def format_adequacy(cal: Calibration) -> list[str]:
+    """Lines ``rimu calibrate`` prints about the adequacy and the effect terms."""
+    a = cal.adequacy
+    out = []
+    if a is not None:
+        out.append(f"model adequacy (alpha {a.get('alpha')}): {a['verdict']}"
+                   + (": " + "; ".join(a.get("where", [])) if a.get("where") else ""))
+        if a.get("noise_model_requested") != a.get("noise_model_applied"):
+            out.append(f"  noise model: {a.get('noise_model_applied')} (asked for "
+                       f"{a.get('noise_model_requested')})")
+    for t in cal.effects:
+        out.append(f"effect {t.name} on {t.kind} {t.sensor + 1}: {t.estimate:+.4g} ± "
+                   f"{t.estimate_sd:.2g} {t.unit}")
+    if cal.effects:
+        out.append(f"note: {MONITOR_NOTE}")
+    return out

@@ -1,0 +1,33 @@
+"""The adequacy and effect options of ``rimu calibrate`` (kept here so the command stays
+a thin shell): ``--effects NAME,...`` and ``--alpha A``."""
+
+from __future__ import annotations
+
+import argparse
+from typing import Any
+
+from calibration.diagnose.checked import calibrate_checked
+from calibration.diagnose.library import candidates
+from calibration.session import Session
+from fdi.calfile import Calibration
+
+__all__ = ["add_calibrate_options", "calibrate_with_check"]
+
+
+def add_calibrate_options(p: argparse.ArgumentParser) -> None:
+    """Add ``--effects`` and ``--alpha`` to the ``rimu calibrate`` parser."""
+    p.add_argument("--effects", metavar="NAME,...",
+                   help="fit these effects jointly with the calibration, on every sensor "
+                        "they apply to (rimu.calibration/2 'effects'): "
+                        + ", ".join(c.name for c in candidates()))
+    p.add_argument("--alpha", type=float, default=0.01, metavar="A",
+                   help="level of the model-adequacy check run before the noise model "
+                        "(default 0.01); a suspected effect withholds the Gauss-Markov "
+                        "widening")
+
+
+def calibrate_with_check(session: Session, args: argparse.Namespace,
+                         **kw: Any) -> Calibration:
+    """``calibrate_checked`` with the command's ``--effects`` and ``--alpha``."""
+    names = [x.strip() for x in (getattr(args, "effects", None) or "").split(",") if x.strip()]
+    return calibrate_checked(session, alpha=getattr(args, "alpha", 0.01), effects=names, **kw)

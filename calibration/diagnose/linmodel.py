@@ -1,0 +1,144 @@
+"""One sensor's residual under a growing linear model, and nested-model F-tests on it.
+
+The model starts from the calibration's own degrees of freedom that any effect test must
+keep free (a bias and a scale correction along the calibrated axis: columns ``1`` and
+``s = h̃·x``) and grows by the columns of the effects accepted so far. Testing a candidate
+``Z`` (N, p) is the classical nested-model F-test for white noise::
+
+    F = (ΔSS / r) / (RSS₁ / (N − k − r)),     r = rank of Z after projection on the model
+
+(ΔSS the sum of squares ``Z`` explains beyond the current model). Exact for Gaussian white
+noise; the diagnosis assumes the noise left after the deterministic model is white (it is
+what the adequacy probes check).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.special
+import scipy.stats
+
+__all__ = ["FTest", "LinModel"]
+
+_RANK_TOL = 1e-6
+
+
+@dataclass(frozen=True)
+class FTest:
+    """Result of one nested-model test.
+
+    Attributes
+    ----------
+    rank : int
+        Columns of ``Z`` left after projection (0: not identifiable beside the model).
+    ss : float
+        Sum of squares explained (SI²).
+    F : float
+    p_value : float
+        Upper tail of F(rank, dof) (1 when rank is 0).
+    log_p : float
+        Its natural logarithm (ranks tests whose p-value underflows).
+    Z : ndarray, shape (N, p)
+        The regressor tested (``LinModel.basis(Z)`` gives its projected basis).
+    """
+
+    rank: int
+    ss: float
+    F: float
+    p_value: float
+    log_p: float
+    Z: np.ndarray
+
+
+def _log_sf(F: float, r: int, d2: int) -> float:
+    """log of the F(r, d2) upper tail; where it underflows, the χ²_r tail of ``r·F``
+    (d2 is the sample count, tens of thousands) by its leading asymptotic term."""
+    v = float(scipy.stats.f.logsf(F, r, d2))
+    if np.isfinite(v):
+        return v
+    x = r * F
+    return float(-x / 2 + (r / 2 - 1) * np.log(x / 2) - scipy.special.gammaln(r / 2))
+
+
+class LinModel:
+    """Orthonormal basis ``Q`` of the current model and the residual ``e`` of ``y``."""
+
+    def __init__(self, y: np.ndarray, X: np.ndarray) -> None:
+        self.y = np.asarray(y, float)
+        self.Q = np.zeros((self.y.size, 0))
+        self.e = self.y.copy()
+        self._update()
+        self.add(X)
+
+    @property
+    def k(self) -> int:
+        """Number of independent model columns."""
+        return self.Q.shape[1]
+
+    @property
+    def rss(self) -> float:
+        """Residual sum of squares."""
+        return self._rss
+
+    def _update(self) -> None:
+        self._rss = float(self.e @ self.e)
+
+    def project_out(self, Z: np.ndarray) -> np.ndarray:
+        """``Z`` minus its projection on the model."""
+        Z = np.asarray(Z, float).reshape(self.y.size, -1)
+        return Z - self.Q @ (self.Q.T @ Z)
+
+    def _basis(self, Z: np.ndarray, *, exact: bool = False) -> np.ndarray:
+        Z = np.asarray(Z, float).reshape(self.y.size, -1)
+        scale = np.linalg.norm(Z, axis=0)
+        scale[scale == 0] = 1.0
+        Zp = self.project_out(Z / scale)
+        if Zp.shape[1] == 0:
+            return Zp
+        lam, V = np.linalg.eigh(Zp.T @ Zp)           # Gram: p×p, cheaper than an SVD
+        keep = lam > _RANK_TOL**2
+        U = (Zp @ V[:, keep]) / np.sqrt(lam[keep])
+        if exact and U.shape[1]:                       # re-orthogonalise what is kept
+            U, _ = np.linalg.qr(U - self.Q @ (self.Q.T @ U))
+        return U
+
+    def basis(self, Z: np.ndarray) -> np.ndarray:
+        """Orthonormal basis (N, r) of ``Z`` projected off the model."""
+        return self._basis(Z)
+
+    def test(self, Z: np.ndarray, gram: np.ndarray | None = None) -> FTest:
+        """F-test of adding ``Z`` (N, p) to the model.
+
+        Only ``Qᵀ·Z``, ``Zᵀ·e`` and the Gram matrix ``Zᵀ·Z`` (pass it when several sensors
+        share ``Z``) are formed: the projected regressors never are.
+        """
+        Z = np.asarray(Z, float).reshape(self.y.size, -1)
+        G = Z.T @ Z if gram is None else gram
+        scale = np.sqrt(np.diag(G)).copy()
+        scale[scale == 0] = 1.0
+        A = (self.Q.T @ Z) / scale
+        Gp = G / np.outer(scale, scale) - A.T @ A
+        lam, V = np.linalg.eigh(Gp)
+        keep = lam > _RANK_TOL**2
+        r = int(keep.sum())
+        if r == 0:
+            return FTest(0, 0.0, 0.0, 1.0, 0.0, np.zeros((self.y.size, 0)))
+        c = V[:, keep].T @ ((Z.T @ self.e) / scale) / np.sqrt(lam[keep])
+        ss = float(c @ c)
+        dof = self.y.size - self.k - r
+        rss1 = max(self.rss - ss, 1e-300)
+        F = (ss / r) / (rss1 / max(dof, 1))
+        d2 = max(dof, 1)
+        return FTest(r, ss, F, float(scipy.stats.f.sf(F, r, d2)),
+                     _log_sf(F, r, d2), Z)
+
+    def add(self, Z: np.ndarray) -> int:
+        """Add the columns of ``Z`` to the model; returns the rank added."""
+        U = self._basis(Z, exact=True)
+        if U.shape[1]:
+            self.Q = np.hstack([self.Q, U])
+            self.e = self.e - U @ (U.T @ self.e)
+            self._update()
+        return U.shape[1]

@@ -1,0 +1,119 @@
+"""``rimu diagnose SESSION --cal CAL``: find the effect the model lacks, refit, before/after.
+
+See :mod:`calibration.diagnose` and ``docs/diagnose.md``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+HELP = "find unmodelled effects in a calibration session, refit, report before and after"
+
+
+def configure(p: argparse.ArgumentParser) -> None:
+    p.add_argument("session", help="session directory (manifest.json + samples.csv)")
+    p.add_argument("--cal", required=True, metavar="FILE",
+                   help="calibration of this session (rimu calibrate --out FILE)")
+    p.add_argument("--alpha", type=float, default=0.01, metavar="A",
+                   help="family-wise false-claim level of the tests (default 0.01)")
+    p.add_argument("--json", action="store_true", help="print the result as JSON")
+    p.add_argument("--report", metavar="DIR",
+                   help="write a Markdown page with PNG plots into DIR")
+    p.add_argument("--truth", metavar="TRUTH",
+                   help="truth sidecar (DIR/truth.json): parameter errors in sigma before "
+                        "and after the refit")
+    p.add_argument("--out", metavar="FILE",
+                   help="write the refit calibration (rimu.calibration/2, with effects)")
+
+
+def _p(e: dict) -> str:
+    if e["p_value"] > 0 or e.get("log10_p_value") is None:
+        return f"{e['p_value']:.2g}"
+    return f"1e{e['log10_p_value']:.0f}"
+
+
+def _fmt_list(xs: list, f: str = "{:.3g}") -> str:
+    return " ".join(f.format(x) for x in xs)
+
+
+def text(d) -> str:
+    """Readable summary of a :class:`calibration.diagnose.Diagnosis`."""
+    lines = [f"diagnosis at alpha {d.alpha:g} (Holm/Bonferroni over candidates x sensors)"]
+    if d.effects:
+        lines.append("effects found:")
+        for e in d.effects:
+            alias = f"  (strongly correlated on this sequence with {', '.join(e['aliases'])})" \
+                if e["aliases"] else ""
+            par = ", ".join(f"{k} {v:.4g}" for k, v in e["params"].items()
+                            if isinstance(v, float))
+            lines.append(f"  {e['name']:<18s} {e['kind']} {e['sensors'][0]}: "
+                         f"{e['estimate']:+.4g} ± {e['estimate_sd']:.2g} {e['unit']}"
+                         f"   p {_p(e)}" + (f"   [{par}]" if par else "") + alias)
+    else:
+        lines.append("effects found: none")
+    if d.unexplained:
+        lines.append("unexplained structure (no candidate explains it):")
+        for u in d.unexplained_detail:
+            where = []
+            if u.get("steps"):
+                where.append("steps " + ", ".join(map(str, u["steps"])))
+            if u.get("band_hz"):
+                where.append(f"band {u['band_hz'][0]:.3g}-{u['band_hz'][1]:.3g} Hz")
+            if u.get("time_s") is not None:
+                where.append(f"near t = {u['time_s']:.1f} s")
+            part = f"; partial fits not claimed: {', '.join(u['partial_fits'])}" \
+                if u.get("partial_fits") else ""
+            lines.append(f"  {u['kind']} {u['sensor']} ({u['sensor_name']}): {u['test']} "
+                         f"p {u['p_value']:.2g}; " + ", ".join(where) + part)
+    else:
+        lines.append("unexplained structure: none")
+    nt = sorted({(n["name"], n["kind"], n["reason"]) for n in d.not_testable})
+    for name, kind, why in nt:
+        lines.append(f"not testable: {name} ({kind}): {why}")
+    for label, e in (("before", d.error_before), ("after ", d.error_after)):
+        for kind in e["residual_rms"]:
+            u = e["unit"][kind]
+            lines.append(f"{label} {kind}: residual rms [{u}] {_fmt_list(e['residual_rms'][kind])}"
+                         f"; step-mean chi2/dof {_fmt_list(e['step_chi2_dof'][kind], '{:.2f}')}"
+                         + (f"; parity rms [{u}] {_fmt_list(e['parity_rms'][kind])}"
+                            if kind in e["parity_rms"] else ""))
+        if "truth" in e:
+            t = e["truth"]
+            lines.append(f"{label} truth: max |error/sd| {t['max_abs_z']:.2f}, "
+                         f"{t['n_beyond_3']} beyond 3 sigma, rms error/sd {t['rms_z']:.2f}")
+    return "\n".join(lines)
+
+
+def run(args: argparse.Namespace) -> int:
+    from calibration.diagnose import diagnose
+    from calibration.session_io import load_session
+    from fdi.calfile import load_calibration
+
+    session = load_session(args.session)
+    cal = load_calibration(args.cal)
+    truth = None
+    if args.truth:
+        from calibration.truth import load_truth
+
+        t, effects, _ = load_truth(args.truth)
+        truth = (t, effects)
+    d = diagnose(session, cal, alpha=args.alpha, truth=truth, cal_path=str(args.cal))
+    if args.out:
+        d.calibration.save(Path(args.out))
+    if args.json:
+        from fdi.fileio import to_jsonable
+
+        print(json.dumps(to_jsonable(d.to_json()), indent=1))
+    else:
+        print(text(d))
+        if args.out:
+            print(f"wrote {args.out}")
+    if args.report:
+        from calibration.diagnose.report import write_report
+
+        page = write_report(session, cal, d, args.report)
+        if not args.json:
+            print(f"wrote {page}")
+    return 0
