@@ -8,14 +8,13 @@ summary; ``--compare TRUTH`` adds estimate, truth, error and error/σ side by si
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
+import logging
 
 import numpy as np
 
 from calibration.calibrate import BIAS_METHODS, NOISE_MODELS, calibrate
 from calibration.residuals import GM_LR_THRESHOLD
 from fdi.calfile import Calibration, SensorSet
-from fdi.errors import ConfigError
 from fdi.parity import parity_matrix
 from fdi.units import input_unit_factor, scale_factor_from_si, scale_factor_sd_from_si
 
@@ -131,29 +130,42 @@ def summary_text(cal: Calibration) -> str:
                      + (" - not resolved at this noise level (below 3 sd)"
                         if cal.earth_rate_dph < 3 * (cal.earth_rate_dph_sd or 0.0) else ""))
     lines.extend(_noise_lines(ex.get("noise_model")))
-    lines.extend(f"warning: {w}" for w in ex.get("warnings", []))
     return "\n".join(lines)
 
 
 def run(args: argparse.Namespace) -> int:
     from calibration.session_io import load_session
+    from fdi.calfile import check_plausible
+    from rimu.outputs import atomic_file, input_path, output_dir, output_file
 
-    session = load_session(args.session)
-    cal = calibrate(session, bias_method=args.bias_method, denoise=not args.no_denoise,
-                    noise_model=args.noise_model)
-    out = Path(args.out)
-    if out.parent and not out.parent.exists():
-        raise ConfigError(f"{args.out}: directory {out.parent} does not exist")
-    cal.save(out)
-    print(summary_text(cal))
-    print(f"wrote {out}")
+    out = output_file(args.out, "--out")
     if args.compare:
-        from calibration.compare import compare, format_comparison
+        input_path(args.compare, "--compare")
+    if args.plot:
+        output_dir(args.plot, "--plot")
+    session = load_session(args.session)
+    truth = None
+    if args.compare:
         from calibration.truth import load_truth
 
         truth, effects, _ = load_truth(args.compare)
+    cal = calibrate(session, bias_method=args.bias_method, denoise=not args.no_denoise,
+                    noise_model=args.noise_model)
+    check_plausible(cal, str(args.session))
+    compared = None
+    if truth is not None:
+        from calibration.compare import compare, format_comparison
+
+        compared = format_comparison(compare(cal, truth, effects))
+    with atomic_file(out) as tmp:
+        cal.save(tmp)
+    print(summary_text(cal))
+    for w in cal.extra.get("warnings", []):
+        logging.getLogger("rimu").warning(w)
+    print(f"wrote {out}")
+    if compared is not None:
         print(f"\ncompared with {args.compare}:")
-        print(format_comparison(compare(cal, truth, effects)))
+        print(compared)
     if args.plot:
         from calibration.plots import write_plots
 
