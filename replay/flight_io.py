@@ -149,9 +149,11 @@ def write_truth_sidecar(flight: Flight, path: str | Path) -> None:
     p.write_text(json.dumps(to_jsonable(doc), indent=1) + "\n", encoding="utf-8")
 
 
-def read_truth_sidecar(path: str | Path, *, samples: int | None = None
+def read_truth_sidecar(path: str | Path, *, samples: int | None = None, mmap: bool = False
                        ) -> tuple[tuple[Fault, ...], dict[str, Any], np.ndarray | None]:
     """Read a ``rimu.flight-truth/1`` file: (faults, truth record, true rates or None).
+
+    With ``mmap`` a float64 rates file is memory-mapped, not read (long logs).
 
     Raises
     ------
@@ -179,7 +181,7 @@ def read_truth_sidecar(path: str | Path, *, samples: int | None = None
                                   field="rates_file")
         rp = p.with_name(rf)
         try:
-            rates = np.load(rp, allow_pickle=False)
+            rates = np.load(rp, allow_pickle=False, mmap_mode="r" if mmap else None)
         except Exception as exc:        # a damaged .npy header fails in many ways (EOFError,
             # ValueError, SyntaxError, tokenize.TokenError from its literal header, ...)
             why = exc.strerror if isinstance(exc, OSError) else f"{type(exc).__name__}: {exc}"
@@ -193,7 +195,8 @@ def read_truth_sidecar(path: str | Path, *, samples: int | None = None
                                                        and rates.shape[0] != samples):
             want = f"({samples}, 3)" if samples is not None else "(N, 3)"
             raise FileFormatError(str(rp), f"expected shape {want}, got {rates.shape}")
-        rates = rates.astype(float)
+        if not (mmap and rates.dtype == np.float64):
+            rates = rates.astype(float)
     doc.pop("rates_file", None)
     return tuple(faults), doc, rates
 

@@ -49,6 +49,7 @@ from replay.assemble import (
     FRAME_DATA,
     FRAME_ERROR,
     FRAME_REMOTE,
+    BlockDecoder,
     RawFrames,
     Samples,
     decode_frames,
@@ -65,6 +66,7 @@ __all__ = [
     "CORRUPTION_REASONS",
     "DEFAULT_T0_EPOCH_S",
     "LOG_SUFFIXES",
+    "LogStream",
     "read_frames",
     "read_log",
     "resolve_map",
@@ -215,9 +217,19 @@ _ASC_NON_FRAME = re.compile(
 
 
 class _Gather:
-    """Collects frames from python-can messages (one pass, plain lists)."""
+    """Collects frames from python-can messages (one pass, plain lists).
 
-    def __init__(self) -> None:
+    With a ``sink``, every ``chunk`` frames are handed to it as :class:`RawFrames` and
+    forgotten (:meth:`spill`), so that memory stays bounded on long logs.
+    """
+
+    def __init__(self, sink: Any = None, chunk: int = 1 << 18) -> None:
+        self.sink = sink
+        self.chunk = int(chunk)
+        self.handed = 0
+        self._reset()
+
+    def _reset(self) -> None:
         self.t: list[float] = []
         self.arb: list[int] = []
         self.ext: list[bool] = []
@@ -225,6 +237,14 @@ class _Gather:
         self.data = bytearray()
         self.lengths: list[int] = []
         self.special: list[tuple[int, int]] = []
+
+    def spill(self, force: bool = False) -> None:
+        """Hand the frames gathered so far to the sink (when ``chunk`` are there)."""
+        if self.sink is not None and self.t and (force or len(self.t) >= self.chunk):
+            fr = self.frames()
+            self.handed += len(fr)
+            self._reset()
+            self.sink(fr)
 
     def frames(self) -> RawFrames:
         M = len(self.t)
@@ -283,6 +303,7 @@ def _consume(it: Iterator[can.Message], g: _Gather, lines: _Lines | None,
             got = len(g.t) - n0
             if bar is not None:
                 bar.update(got)
+            g.spill()
             if got < _CHUNK:
                 return
     for msg in it:
@@ -304,8 +325,11 @@ def _consume(it: Iterator[can.Message], g: _Gather, lines: _Lines | None,
         x = msg.data
         buf += x
         l_app(len(x))
-        if bar is not None and not len(g.t) & 0xFFFF:
-            bar.update(0x10000)
+        if not len(g.t) & 0xFFFF:
+            if bar is not None:
+                bar.update(0x10000)
+            if lines is None or not lines.pending:
+                g.spill()
 
 
 def _garbage(acct: FrameAccounting, lineno: int, line: str, why: str) -> None:
@@ -316,9 +340,13 @@ def _garbage(acct: FrameAccounting, lineno: int, line: str, why: str) -> None:
                             "text": line.strip()[:80], "kind": "garbage_line"})
 
 
-def read_frames(path: str | Path, *, strict: bool = False,
-                progress: bool = True) -> tuple[RawFrames, FrameAccounting]:
+def read_frames(path: str | Path, *, strict: bool = False, progress: bool = True,
+                sink: Any = None, chunk_frames: int = 1 << 18,
+                acct: FrameAccounting | None = None) -> tuple[RawFrames, FrameAccounting]:
     """Read every frame of a CAN log with python-can (see the module docstring).
+
+    With ``sink``, frames go to ``sink(RawFrames)`` in blocks of about ``chunk_frames`` as
+    they are read (the returned frames are then empty): memory stays bounded.
 
     Returns
     -------
@@ -339,8 +367,8 @@ def read_frames(path: str | Path, *, strict: bool = False,
     if not p.is_file():
         raise FileFormatError(str(p), "no such file")
     sfx = _suffix(p)
-    acct = FrameAccounting()
-    g = _Gather()
+    acct = acct if acct is not None else FrameAccounting()
+    g = _Gather(sink, chunk_frames)
     bar = None
     if progress and p.stat().st_size > 20_000_000:
         from tqdm import tqdm
@@ -367,9 +395,9 @@ def read_frames(path: str | Path, *, strict: bool = False,
                 try:
                     _consume(iter(reader), g, None, acct, bar)
                 except Exception as exc:
-                    _reader_error(acct, p, len(g.t), exc, strict)
+                    _reader_error(acct, p, g.handed + len(g.t), exc, strict)
                 else:
-                    _check_blf_complete(reader, p, len(g.t), acct, strict)
+                    _check_blf_complete(reader, p, g.handed + len(g.t), acct, strict)
                 finally:
                     try:
                         reader.stop()
@@ -378,6 +406,7 @@ def read_frames(path: str | Path, *, strict: bool = False,
     finally:
         if bar is not None:
             bar.close()
+    g.spill(force=True)
     return g.frames(), acct
 
 
@@ -546,3 +575,105 @@ def read_log(path: str | Path, cal: Calibration, *, dbc: str | Path | None = Non
     t_first = float(frames.t[finite].min()) if finite.any() else 0.0
     flight = samples_to_flight(samples, cal, cmap, t_first_frame=t_first, source=str(path))
     return flight, acct.to_dict()
+
+
+class LogStream:
+    """A CAN log read, decoded and handed over in pieces: bounded memory on long logs.
+
+    The log is read once; every ``chunk_frames`` frames are decoded
+    (:class:`~replay.assemble.BlockDecoder`, checks and sample numbering carried across
+    pieces) and the samples now complete are handed to ``on_samples`` as a
+    :class:`~replay.flight.Flight` piece (with the sidecar's true rates, memory-mapped).
+    The result equals :func:`read_log` except that a frame arriving after two later samples
+    have been seen is ``late`` rather than merged.
+
+    Parameters
+    ----------
+    path : str or Path
+    cal : Calibration
+    db, cmap
+        From :func:`resolve_map`.
+    strict, progress : bool
+        As :func:`read_log`.
+    chunk_frames : int
+        Frames per piece.
+
+    Attributes
+    ----------
+    header : Flight
+        The log's metadata (names, rate, source, faults and truth of the sidecar), no
+        samples; ``omega_true`` is an empty (0, 3) array when the sidecar has true rates.
+    """
+
+    def __init__(self, path: str | Path, cal: Calibration, db: Any, cmap: ChannelMap, *,
+                 strict: bool = False, progress: bool = True,
+                 chunk_frames: int = 1 << 16) -> None:
+        from replay.flight_data import Flight
+        from replay.flight_io import read_truth_sidecar
+
+        self.path = Path(path)
+        if not self.path.is_file():
+            raise FileFormatError(str(self.path), "no such file")
+        self.cal, self.db, self.cmap = cal, db, cmap
+        self.strict, self.progress = strict, progress
+        self.chunk_frames = int(chunk_frames)
+        s = cal.kind(cmap.kind)
+        self.fs = float(cal.sample_rate_hz)
+        self.t_start = 0.0
+        self._rates = None
+        faults: tuple = ()
+        truth: dict[str, Any] = {}
+        tp = truth_path(self.path)
+        if tp.is_file():
+            faults, truth, self._rates = read_truth_sidecar(tp, mmap=True)
+            self.t_start = float(truth.get("can_log", {}).get("t_start_s", 0.0))
+            self.fs = float(truth.get("sample_rate_hz", self.fs))
+        self.header = Flight(
+            t=np.zeros(0), raw=np.zeros((0, s.n)), valid=np.zeros((0, s.n), bool),
+            sample_rate_hz=self.fs, sensor_names=tuple(c.name for c in s.sensors),
+            raw_unit=s.sensors[0].raw_unit if s.n else "raw",
+            omega_true=None if self._rates is None else np.zeros((0, 3)),
+            faults=tuple(faults), truth=truth, source=str(self.path), kind=cmap.kind)
+        self.acct = FrameAccounting()
+        self.decoder = BlockDecoder(db, cmap, self.acct, sample_rate_hz=cal.sample_rate_hz)
+        self.samples = 0
+
+    def _piece(self, smp: Samples) -> Any:
+        t = smp.t - float(self.decoder.t_first or 0.0) + self.t_start
+        rates = None
+        if self._rates is not None:
+            k = np.clip(np.rint(t * self.fs).astype(np.int64), 0, self._rates.shape[0] - 1)
+            rates = np.asarray(self._rates[k], float)
+        return replace(self.header, t=t, raw=smp.raw, valid=smp.valid, omega_true=rates)
+
+    def run(self, on_samples: Any) -> dict[str, Any]:
+        """Read the whole log, calling ``on_samples(flight_piece)``; returns the accounting.
+
+        Raises
+        ------
+        FileFormatError, ReplayError
+            As :func:`read_log` (``strict``: after the first piece with corrupt frames).
+        """
+        def sink(frames: RawFrames) -> None:
+            smp = self.decoder.feed(frames)
+            self._check_strict()
+            if smp.t.size:
+                self.samples += smp.t.size
+                on_samples(self._piece(smp))
+
+        read_frames(self.path, strict=self.strict, progress=self.progress, sink=sink,
+                    chunk_frames=self.chunk_frames, acct=self.acct)
+        smp = self.decoder.flush()
+        self._check_strict()
+        if smp.t.size:
+            self.samples += smp.t.size
+            on_samples(self._piece(smp))
+        return self.acct.to_dict()
+
+    def _check_strict(self) -> None:
+        if not self.strict:
+            return
+        bad = {k: v for k, v in self.acct.rejected.items() if k in CORRUPTION_REASONS and v}
+        if bad:
+            raise ReplayError(f"{self.path}: corrupt frames: "
+                              + ", ".join(f"{v} {k}" for k, v in sorted(bad.items())))
