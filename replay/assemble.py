@@ -452,6 +452,22 @@ class _Rows:
                    np.concatenate([a.values, b.values]), np.concatenate([a.valid, b.valid]))
 
 
+def _sibling_keys(db: cantools.database.can.Database, slots: list[Slot],
+                  j1939: bool) -> dict[int, str]:
+    """Frame keys of the DBC messages named like a mapped one but for digits."""
+    import re
+
+    if j1939:
+        return {}
+    shape = {re.sub(r"\d+", "#", s.message.name) for s in slots}
+    used = {s.message.name for s in slots}
+    out = {}
+    for m in db.messages:
+        if m.name not in used and re.sub(r"\d+", "#", m.name) in shape:
+            out[_message_key(m, None, False)] = m.name
+    return out
+
+
 class BlockDecoder:
     """Vectorised decoding of a stream of frame blocks, with state carried between blocks.
 
@@ -490,6 +506,13 @@ class BlockDecoder:
         self.tol = (cmap.time_tolerance_s if cmap.time_tolerance_s is not None
                     else 0.4 / self.fs)
         self._known = np.array(sorted({s.key for s in self.slots}), np.int64)
+        self._siblings = _sibling_keys(db, self.slots, cmap.j1939)
+        self.siblings_seen: set[str] = set()
+        """DBC messages like the mapped ones (same name but for digits: ``RIMU_GYRO_05``
+        beside ``RIMU_GYRO_01``..``04``) that the log carries but the map does not use:
+        a sign that the log has more sensors than the calibration."""
+        self.delivered = np.zeros(len(self.slots), np.int64)
+        """Frames each slot delivered past the checks."""
         self._state = [_SlotState() for _ in self.slots]
         self._m = max((len(s.sensors) for s in self.slots), default=1)
         self._pending = _Rows.empty(self._m)
@@ -532,7 +555,12 @@ class BlockDecoder:
             self.t_first = float(frames.t[alive].min())
         keys = frame_keys(frames.arbitration_id, frames.extended, cmap.j1939)
         is_known = alive & np.isin(keys, self._known)
-        acct.reject("unknown_id", int(np.count_nonzero(alive & ~is_known)))
+        unknown = alive & ~is_known
+        acct.reject("unknown_id", int(np.count_nonzero(unknown)))
+        if self._siblings and unknown.any():
+            for k in np.unique(keys[unknown]).tolist():
+                if k in self._siblings:
+                    self.siblings_seen.add(self._siblings[k])
         claimed = np.zeros(M, bool)
         parts = []
         for k, slot in enumerate(self.slots):
@@ -545,6 +573,7 @@ class BlockDecoder:
             parts.append(_decode_slot(slot, frames, idx, cmap.j1939, cmap.max_counter_delta,
                                       acct, self._state[k], self.fs))
         acct.reject("other_channel", int(np.count_nonzero(is_known & ~claimed)))
+        self.delivered += np.array([p.idx.size for p in parts], np.int64)
         R = sum(p.idx.size for p in parts)
         if R == 0:
             return _Rows.empty(self._m)

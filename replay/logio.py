@@ -42,7 +42,7 @@ from typing import Any
 import can
 import numpy as np
 
-from fdi.calfile import Calibration
+from fdi.calfile import Calibration, check_compatible
 from fdi.errors import ConfigError, FileFormatError, ReplayError
 from replay.accounting import FrameAccounting
 from replay.assemble import (
@@ -496,6 +496,9 @@ def resolve_map(cal: Calibration, *, dbc: str | Path | None = None,
     else:
         cmap = load_channel_map(channel_map)
     check_against_calibration(cmap, cal)
+    check_compatible(cal, cmap.n, [sc.unit for sc in cmap.sensors],
+                     f"channel map {cmap.source}", kind=cmap.kind,
+                     names=[sc.name for sc in cmap.sensors])
     db = load_dbc(dbc if dbc is not None else cmap.dbc)
     return db, cmap
 
@@ -597,6 +600,10 @@ class LogStream:
         As :func:`read_log`.
     chunk_frames : int
         Frames per piece.
+    check_sensor_set : bool
+        Refuse a log that carries messages like the mapped ones for more sensors than the
+        calibration has (e.g. ``RIMU_GYRO_05`` and ``_06`` with a 4-sensor calibration);
+        for the default map, where the calibration chose the sensors.
 
     Attributes
     ----------
@@ -607,7 +614,7 @@ class LogStream:
 
     def __init__(self, path: str | Path, cal: Calibration, db: Any, cmap: ChannelMap, *,
                  strict: bool = False, progress: bool = True,
-                 chunk_frames: int = 1 << 16) -> None:
+                 chunk_frames: int = 1 << 16, check_sensor_set: bool = False) -> None:
         from replay.flight_data import Flight
         from replay.flight_io import read_truth_sidecar
 
@@ -617,6 +624,7 @@ class LogStream:
         self.cal, self.db, self.cmap = cal, db, cmap
         self.strict, self.progress = strict, progress
         self.chunk_frames = int(chunk_frames)
+        self.check_sensor_set = check_sensor_set
         s = cal.kind(cmap.kind)
         self.fs = float(cal.sample_rate_hz)
         self.t_start = 0.0
@@ -628,6 +636,10 @@ class LogStream:
             faults, truth, self._rates = read_truth_sidecar(tp, mmap=True)
             self.t_start = float(truth.get("can_log", {}).get("t_start_s", 0.0))
             self.fs = float(truth.get("sample_rate_hz", self.fs))
+            sig = truth.get("sigma")
+            if isinstance(sig, list) and truth.get("kind", cmap.kind) == cmap.kind:
+                check_compatible(cal, len(sig), None, f"{self.path} (truth sidecar {tp.name})",
+                                 kind=cmap.kind)
         self.header = Flight(
             t=np.zeros(0), raw=np.zeros((0, s.n)), valid=np.zeros((0, s.n), bool),
             sample_rate_hz=self.fs, sensor_names=tuple(c.name for c in s.sensors),
@@ -657,18 +669,39 @@ class LogStream:
         def sink(frames: RawFrames) -> None:
             smp = self.decoder.feed(frames)
             self._check_strict()
+            self._check_sensor_set()
             if smp.t.size:
                 self.samples += smp.t.size
                 on_samples(self._piece(smp))
 
         read_frames(self.path, strict=self.strict, progress=self.progress, sink=sink,
                     chunk_frames=self.chunk_frames, acct=self.acct)
+        self._check_sensor_set()
         smp = self.decoder.flush()
         self._check_strict()
         if smp.t.size:
             self.samples += smp.t.size
             on_samples(self._piece(smp))
         return self.acct.to_dict()
+
+    def _check_sensor_set(self) -> None:
+        seen = self.decoder.siblings_seen
+        if self.check_sensor_set and seen:
+            n = self.cmap.n
+            raise ConfigError(
+                f"{self.path}: the log also carries {', '.join(sorted(seen))}, which the "
+                f"{n}-sensor calibration of {self.cal.configuration} has no {self.cmap.kind} "
+                "sensor for: a calibration only applies to the sensor set it was made for "
+                "(give --map to replay a subset on purpose)")
+
+    def silent_sensors(self) -> list[str]:
+        """Names of the sensors that delivered no frame at all."""
+        names = self.header.sensor_names
+        out = []
+        for k, slot in enumerate(self.decoder.slots):
+            if self.decoder.delivered[k] == 0:
+                out.extend(names[i] for i in slot.sensors)
+        return out
 
     def _check_strict(self) -> None:
         if not self.strict:

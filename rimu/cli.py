@@ -46,6 +46,18 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
+class _StderrHandler(logging.StreamHandler):
+    """Writes to whatever ``sys.stderr`` is at the time (tests swap it)."""
+
+    @property  # type: ignore[override]
+    def stream(self):
+        return sys.stderr
+
+    @stream.setter
+    def stream(self, value) -> None:
+        pass
+
+
 class _Lower(logging.Formatter):
     def format(self, record: logging.LogRecord) -> str:
         return super().format(record).replace(record.levelname, record.levelname.lower(), 1)
@@ -55,7 +67,7 @@ def _log_to_stderr() -> None:
     """Warnings and diagnostics go to stderr through :mod:`logging` (stdout stays clean)."""
     root = logging.getLogger("rimu")
     if not any(getattr(h, "_rimu", False) for h in root.handlers):
-        h = logging.StreamHandler(sys.stderr)
+        h = _StderrHandler()
         h.setFormatter(_Lower("rimu: %(levelname)s: %(message)s"))
         h._rimu = True  # type: ignore[attr-defined]
         root.addHandler(h)
