@@ -23,8 +23,12 @@ over the file, gathering (timestamp, id, payload) for the vectorised decoder
 - ``.asc``: lines that do not look like frames are skipped silently; rimu tracks the lines
   between frames and counts those that are not header, comment or known event lines as
   ``garbage_line``; a frame line that raises is a ``garbage_line`` too and reading resumes.
-- binary formats (``.blf``) cannot resume: the error (where, why) is reported, the frames
-  read so far are kept.
+- ``.blf``: read by :class:`replay.blf.ResyncBLFReader`, which skips a damaged container or
+  object and resynchronises on the next valid one (each damage an error of kind ``resync``
+  with the bytes skipped; the frames lost show in the counter gaps); a file without the BLF
+  signature is "not a BLF file";
+- other binary formats cannot resume: the error (where, why) is reported, the frames read
+  so far are kept.
 
 Flight time of a decoded sample is its earliest frame's timestamp minus the log's first
 frame timestamp, plus the sidecar's ``t_start_s`` when there is one (0 otherwise).
@@ -32,6 +36,7 @@ frame timestamp, plus the sidecar's ``t_start_s`` when there is one (0 otherwise
 
 from __future__ import annotations
 
+import contextlib
 import re
 from collections.abc import Iterator
 from dataclasses import replace
@@ -377,6 +382,23 @@ def read_frames(path: str | Path, *, strict: bool = False, progress: bool = True
     try:
         if sfx in (".log", ".asc") and not str(p).lower().endswith(".gz"):
             _read_text(p, sfx, g, acct, strict, bar)
+        elif sfx == ".blf" and not str(p).lower().endswith(".gz"):
+            from replay.blf import ResyncBLFReader
+
+            reader = ResyncBLFReader(p)       # FileFormatError: not a BLF file
+            try:
+                _consume(iter(reader), g, None, acct, bar)
+            except Exception as exc:
+                _reader_error(acct, p, g.handed + len(g.t), exc, strict)
+            finally:
+                with contextlib.suppress(Exception):
+                    reader.stop()
+            for d in reader.damage:
+                if strict:
+                    raise ReplayError(f"{p}: {d['where']}: {d['why']}")
+                acct.errors.append(dict(d))
+            if not reader.damage:
+                _check_blf_complete(reader, p, g.handed + len(g.t), acct, strict)
         else:
             try:
                 reader = can.LogReader(str(p))
