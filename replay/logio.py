@@ -232,9 +232,6 @@ class _Gather:
         self.sink = sink
         self.chunk = int(chunk)
         self.handed = 0
-        self._reset()
-
-    def _reset(self) -> None:
         self.t: list[float] = []
         self.arb: list[int] = []
         self.ext: list[bool] = []
@@ -242,6 +239,12 @@ class _Gather:
         self.data = bytearray()
         self.lengths: list[int] = []
         self.special: list[tuple[int, int]] = []
+
+    def _reset(self) -> None:
+        # in place: the reading loop holds bound methods of these lists
+        for x in (self.t, self.arb, self.ext, self.ch, self.lengths, self.special):
+            x.clear()
+        del self.data[:]
 
     def spill(self, force: bool = False) -> None:
         """Hand the frames gathered so far to the sink (when ``chunk`` are there)."""
