@@ -293,12 +293,13 @@ def _consume(it: Iterator[can.Message], g: _Gather, lines: _Lines | None,
                                          g.ch.append, g.lengths.append)
     s_app = g.special.append
     buf = g.data
+    step = min(_CHUNK, g.chunk) if g.sink is not None else _CHUNK
     if lines is None:
         # the hot path: one pass over python-can's messages, plain appends, in chunks
         # (the progress bar moves between chunks)
         while True:
             n0 = len(g.t)
-            for msg in islice(it, _CHUNK):
+            for msg in islice(it, step):
                 if msg.is_error_frame or msg.is_remote_frame:
                     s_app((len(g.t), FRAME_ERROR if msg.is_error_frame else FRAME_REMOTE))
                 t_app(msg.timestamp)
@@ -312,7 +313,7 @@ def _consume(it: Iterator[can.Message], g: _Gather, lines: _Lines | None,
             if bar is not None:
                 bar.update(got)
             g.spill()
-            if got < _CHUNK:
+            if got < step:
                 return
     for msg in it:
         if lines is not None:
@@ -333,11 +334,10 @@ def _consume(it: Iterator[can.Message], g: _Gather, lines: _Lines | None,
         x = msg.data
         buf += x
         l_app(len(x))
-        if not len(g.t) & 0xFFFF:
-            if bar is not None:
-                bar.update(0x10000)
-            if lines is None or not lines.pending:
-                g.spill()
+        if bar is not None and not len(g.t) & 0xFFFF:
+            bar.update(0x10000)
+        if len(g.t) >= g.chunk and g.sink is not None:
+            g.spill()
 
 
 def _garbage(acct: FrameAccounting, lineno: int, line: str, why: str) -> None:

@@ -107,15 +107,16 @@ def _fault_outcome(f: Any, events: Sequence[Mapping[str, Any]], fs: float,
 class _Median:
     """Median of a stream of positive numbers in bounded memory.
 
-    Exact (all values kept) up to :data:`EXACT_MAX` values; beyond, a histogram of 200
-    log-spaced bins per decade over 1e-9 … 1e6 takes over (the median is then the centre
-    of its bin: within 0.6 % of the exact value).
+    Exact (all values kept) up to ``exact_max`` values (default :data:`EXACT_MAX`); beyond,
+    a histogram of 200 log-spaced bins per decade over 1e-9 … 1e6 takes over (the median is
+    then the centre of its bin: within 0.6 % of the exact value).
     """
 
     EXACT_MAX = 1 << 20
     EDGES = np.logspace(-9.0, 6.0, 15 * 200 + 1)
 
-    def __init__(self) -> None:
+    def __init__(self, exact_max: int = EXACT_MAX) -> None:
+        self.exact_max = int(exact_max)
         self._vals: list[np.ndarray] = []
         self._n = 0
         self._hist: np.ndarray | None = None
@@ -128,7 +129,7 @@ class _Median:
         self._n += x.size
         if self._hist is None:
             self._vals.append(x.copy())
-            if self._n > self.EXACT_MAX:
+            if self._n > self.exact_max:
                 self._hist = np.zeros(self.EDGES.size - 1, np.int64)
                 for v in self._vals:
                     self._bin(v)
@@ -157,15 +158,21 @@ class RunningReport:
     keeps the events, the last health and capability, counts and sums, never the answers.
     :meth:`build` makes the ``rimu.report/1`` dictionary (:func:`build_report` is one
     update and a build).
+
+    Parameters
+    ----------
+    median_exact_max : int
+        Protection levels kept for an exact median; beyond, a histogram (0.6 %). A live
+        monitor gives a small number so that its memory stops growing early.
     """
 
-    def __init__(self) -> None:
+    def __init__(self, median_exact_max: int = _Median.EXACT_MAX) -> None:
         self.events: list[Any] = []
         self.samples = 0
         self.healthy_end: list[bool] | None = None
         self.capability_end: str | None = None
         self.n_ok = 0
-        self._pl = _Median()
+        self._pl = _Median(median_exact_max)
         self._err_sq = np.zeros(3)
         self._n_err = 0
         self._breaches: int | None = None

@@ -62,7 +62,7 @@ def run(args: argparse.Namespace) -> int:
         raise ReplayError(f"cannot open {args.interface} bus {args.channel}: {exc}") from None
     dec = StreamDecoder(db, cmap, cal.sample_rate_hz)
     names = mon.sensor_names
-    acc = RunningReport()
+    acc = RunningReport(median_exact_max=10_000)
     print(f"monitoring {args.interface}:{args.channel}, {cmap.n} {cmap.kind} sensors "
           f"(Ctrl-C to stop)", flush=True)
     try:
