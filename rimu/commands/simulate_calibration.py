@@ -26,6 +26,9 @@ from rimu.argtypes import (
     positive_float,
 )
 
+MAX_SAMPLES = 20_000_000
+"""Most samples one simulated session may hold (about 55 h at 100 Hz)."""
+
 HELP = "simulate a turntable calibration session (manifest, samples, truth sidecar)"
 
 
@@ -99,6 +102,12 @@ def run(args: argparse.Namespace) -> int:
             or args.turns is not None):
         name = args.sequence or (seq.source if seq is not None else default_sequence_name(cfg))
         seq = load_sequence(name, table_rate_dps=args.table_rate_dps, turns=args.turns)
+    n_samples = seq.duration_s * float(truth.sample_rate_hz)
+    if not n_samples <= MAX_SAMPLES:
+        raise ConfigError(f"sequence {seq.name}: {seq.duration_s:.4g} s at "
+                          f"{float(truth.sample_rate_hz):g} Hz is {n_samples:.3g} samples; at "
+                          f"most {MAX_SAMPLES:.0e} are simulated (check --turns and "
+                          "--table-rate-dps)")
     if args.bias_instability_dph < 0 or args.rate_random_walk_dph_rth < 0 \
             or args.bias_correlation_s <= 0:
         raise ConfigError("--bias-instability-dph and --rate-random-walk-dph-rth must be >= 0, "
