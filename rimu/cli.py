@@ -43,7 +43,7 @@ class _Parser(argparse.ArgumentParser):
     """An argument parser whose usage errors are one line on stderr (exit 2)."""
 
     def error(self, message: str):  # type: ignore[override]
-        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+        self.exit(2, f"rimu: error: {message} (see {self.prog} --help)\n")
 
 
 class _StderrHandler(logging.StreamHandler):
@@ -113,7 +113,10 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the CLI; returns the exit code."""
     parser = build_parser()
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:       # --help, --version, or a usage error (one line, exit 2)
+        return int(exc.code or 0) if not isinstance(exc.code, str) else 2
     _log_to_stderr()
     run = getattr(args, "_run", None)
     if run is None:
