@@ -7,7 +7,7 @@
   virtual bus, simulate flight, simulate calibration) are run with one fuzzed option on
   top of valid ones: exit 0 or 2, one stderr line on 2, no traceback, no hang.
 
-The default run tries a few examples per option (about 20 s in all); ``--slow`` 80 per
+The default run tries a few examples per option (about 10 s in all); ``--slow`` 20 more per
 option. Valid values that only make the work long (a 2 h simulated flight, a session with
 a table rate of 1e-6 °/s) are not run: they are work, not faults (the limits that bound
 them are tested by the parse test and tests/test_cli_hardening.py).
@@ -35,7 +35,7 @@ SPECIAL = ["nan", "NaN", "inf", "-inf", "+inf", "-1", "0", "-0", "0.0", "-0.0", 
 VALUES = st.one_of(st.sampled_from(SPECIAL),
                    st.floats(allow_nan=True, allow_infinity=True).map(repr),
                    st.integers(min_value=-(2**70), max_value=2**70).map(str))
-SLOW = settings(max_examples=80, deadline=None,
+SLOW = settings(max_examples=20, deadline=None,
                 suppress_health_check=[HealthCheck.function_scoped_fixture,
                                        HealthCheck.too_slow])
 FAST = settings(max_examples=6, deadline=None,
