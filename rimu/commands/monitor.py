@@ -81,7 +81,8 @@ def run(args: argparse.Namespace) -> int:
     header = Flight(t=np.zeros(0), raw=np.zeros((0, s.n)), valid=np.zeros((0, s.n), bool),
                     sample_rate_hz=cal.sample_rate_hz, sensor_names=names,
                     source=f"{args.interface}:{args.channel}", kind=cmap.kind)
-    report = acc.build(header, cal, frames=frames, extra={"thresholds": how, "live": True})
+    report = acc.build(header, cal, frames=frames, extra={"thresholds": how, "live": True,
+                                                     "window": args.window})
     print(format_report(report, max_events=0))
     write_report(report, args.report)
     return 0
