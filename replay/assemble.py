@@ -541,6 +541,35 @@ class BlockDecoder:
 
     # -- decoding --------------------------------------------------------------------
     def _decode(self, frames: RawFrames) -> _Rows:
+        parts = self._match_and_check(frames)
+        R = sum(p.idx.size for p in parts)
+        if R == 0:
+            return _Rows.empty(self._m)
+        t = np.concatenate([p.t for p in parts])
+        slot_of = np.concatenate([np.full(p.idx.size, k, np.int64)
+                                  for k, p in enumerate(parts)])
+        vals = np.full((R, self._m), np.nan)
+        ok = np.zeros((R, self._m), bool)
+        r = 0
+        for p in parts:
+            m = p.values.shape[1]
+            vals[r:r + p.idx.size, :m] = p.values
+            ok[r:r + p.idx.size, :m] = p.valid
+            r += p.idx.size
+        order = np.argsort(t, kind="stable")
+        t, slot_of, vals, ok = t[order], slot_of[order], vals[order], ok[order]
+        sc = (np.concatenate([p.sample_counter for p in parts])[order].astype(np.int64)
+              if self.by_counter else None)
+        rows = _Rows(t, slot_of, self._number(t, sc), vals, ok)
+        if self._emitted is not None:
+            late = rows.cluster <= self._emitted
+            if late.any():
+                self.acct.reject("late", int(np.count_nonzero(late)))
+                rows = rows.take(~late)
+        return rows
+
+    def _match_and_check(self, frames: RawFrames) -> list[_SlotFrames]:
+        """Frame-level rejections, matching to slots and the per-slot checks."""
         acct, cmap = self.acct, self.cmap
         M = len(frames)
         acct.read += M
@@ -558,57 +587,35 @@ class BlockDecoder:
         unknown = alive & ~is_known
         acct.reject("unknown_id", int(np.count_nonzero(unknown)))
         if self._siblings and unknown.any():
-            for k in np.unique(keys[unknown]).tolist():
-                if k in self._siblings:
-                    self.siblings_seen.add(self._siblings[k])
+            self.siblings_seen.update(self._siblings[k] for k in np.unique(keys[unknown]).tolist()
+                                      if k in self._siblings)
         claimed = np.zeros(M, bool)
         parts = []
         for k, slot in enumerate(self.slots):
-            sel = is_known & (keys == slot.key)
+            sel = is_known & (keys == slot.key) & ~claimed
             if slot.channel is not None:
                 sel &= frames.channel == slot.channel
-            sel &= ~claimed
             claimed |= sel
-            idx = np.flatnonzero(sel)
-            parts.append(_decode_slot(slot, frames, idx, cmap.j1939, cmap.max_counter_delta,
-                                      acct, self._state[k], self.fs))
+            parts.append(_decode_slot(slot, frames, np.flatnonzero(sel), cmap.j1939,
+                                      cmap.max_counter_delta, acct, self._state[k], self.fs))
         acct.reject("other_channel", int(np.count_nonzero(is_known & ~claimed)))
         self.delivered += np.array([p.idx.size for p in parts], np.int64)
-        R = sum(p.idx.size for p in parts)
-        if R == 0:
-            return _Rows.empty(self._m)
-        t = np.concatenate([p.t for p in parts])
-        slot_of = np.concatenate([np.full(p.idx.size, k, np.int64)
-                                  for k, p in enumerate(parts)])
-        vals = np.full((R, self._m), np.nan)
-        ok = np.zeros((R, self._m), bool)
-        r = 0
-        for p in parts:
-            m = p.values.shape[1]
-            vals[r:r + p.idx.size, :m] = p.values
-            ok[r:r + p.idx.size, :m] = p.valid
-            r += p.idx.size
-        order = np.argsort(t, kind="stable")
-        t, slot_of, vals, ok = t[order], slot_of[order], vals[order], ok[order]
-        if self.by_counter:
-            c = np.concatenate([p.sample_counter for p in parts])[order].astype(np.int64)
-            prev = c[0] if self._last_c is None else self._last_c
-            d = np.diff(np.concatenate([[prev], c]))
+        return parts
+
+    def _number(self, t: np.ndarray, sc: np.ndarray | None) -> np.ndarray:
+        """Sample index of each decoded frame (time order), continuing the numbering."""
+        if sc is not None:
+            prev = sc[0] if self._last_c is None else self._last_c
+            d = np.diff(np.concatenate([[prev], sc]))
             d = (d + 32768) % 65536 - 32768
             cluster = self._last_u + np.cumsum(d)
-            self._last_c, self._last_u = int(c[-1]), int(cluster[-1])
+            self._last_c, self._last_u = int(sc[-1]), int(cluster[-1])
         else:
             prev_t = -np.inf if self._last_t is None else self._last_t
             new = np.diff(np.concatenate([[prev_t], t])) > self.tol
             cluster = self._cluster + np.cumsum(new)
             self._last_t, self._cluster = float(t[-1]), int(cluster[-1])
-        rows = _Rows(t, slot_of, cluster.astype(np.int64), vals, ok)
-        if self._emitted is not None:
-            late = rows.cluster <= self._emitted
-            if late.any():
-                acct.reject("late", int(np.count_nonzero(late)))
-                rows = rows.take(~late)
-        return rows
+        return cluster.astype(np.int64)
 
     # -- assembly --------------------------------------------------------------------
     def _assemble(self, rows: _Rows, *, final: bool) -> Samples:

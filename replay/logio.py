@@ -383,56 +383,68 @@ def read_frames(path: str | Path, *, strict: bool = False, progress: bool = True
 
         bar = tqdm(desc=f"reading {p.name}", unit=" frames", unit_scale=True, leave=False)
     try:
-        if sfx in (".log", ".asc") and not str(p).lower().endswith(".gz"):
+        gz = str(p).lower().endswith(".gz")
+        if sfx in (".log", ".asc") and not gz:
             _read_text(p, sfx, g, acct, strict, bar)
-        elif sfx == ".blf" and not str(p).lower().endswith(".gz"):
-            from replay.blf import ResyncBLFReader
-
-            reader = ResyncBLFReader(p)       # FileFormatError: not a BLF file
-            try:
-                _consume(iter(reader), g, None, acct, bar)
-            except Exception as exc:
-                _reader_error(acct, p, g.handed + len(g.t), exc, strict)
-            finally:
-                with contextlib.suppress(Exception):
-                    reader.stop()
-            for d in reader.damage:
-                if strict:
-                    raise ReplayError(f"{p}: {d['where']}: {d['why']}")
-                acct.errors.append(dict(d))
-            if not reader.damage:
-                _check_blf_complete(reader, p, g.handed + len(g.t), acct, strict)
+        elif sfx == ".blf" and not gz:
+            _read_blf(p, g, acct, strict, bar)
         else:
-            try:
-                reader = can.LogReader(str(p))
-            except (ValueError, NotImplementedError, ImportError) as exc:
-                if isinstance(exc, ValueError) and sfx in can.io.player.MESSAGE_READERS:
-                    # a known format whose header is damaged (e.g. a BLF header size)
-                    _reader_error(acct, p, 0, exc, strict)
-                    reader = None
-                else:
-                    raise FileFormatError(str(p), f"no CAN log reader for this file ({exc})") \
-                        from None
-            except Exception as exc:
-                _reader_error(acct, p, 0, exc, strict)
-                reader = None
-            if reader is not None:
-                try:
-                    _consume(iter(reader), g, None, acct, bar)
-                except Exception as exc:
-                    _reader_error(acct, p, g.handed + len(g.t), exc, strict)
-                else:
-                    _check_blf_complete(reader, p, g.handed + len(g.t), acct, strict)
-                finally:
-                    try:
-                        reader.stop()
-                    except Exception:  # closing a broken file must not hide the report
-                        pass
+            _read_binary(p, sfx, g, acct, strict, bar)
     finally:
         if bar is not None:
             bar.close()
     g.spill(force=True)
     return g.frames(), acct
+
+
+def _read_blf(p: Path, g: _Gather, acct: FrameAccounting, strict: bool, bar: Any) -> None:
+    """A BLF file through :class:`replay.blf.ResyncBLFReader` (damage reported, resumed)."""
+    from replay.blf import ResyncBLFReader
+
+    reader = ResyncBLFReader(p)       # FileFormatError: not a BLF file
+    try:
+        _consume(iter(reader), g, None, acct, bar)
+    except Exception as exc:
+        _reader_error(acct, p, g.handed + len(g.t), exc, strict)
+    finally:
+        with contextlib.suppress(Exception):
+            reader.stop()
+    for d in reader.damage:
+        if strict:
+            raise ReplayError(f"{p}: {d['where']}: {d['why']}")
+        acct.errors.append(dict(d))
+    if not reader.damage:
+        _check_blf_complete(reader, p, g.handed + len(g.t), acct, strict)
+
+
+def _read_binary(p: Path, sfx: str, g: _Gather, acct: FrameAccounting, strict: bool,
+                 bar: Any) -> None:
+    """Any other log through python-can's reader for its suffix (cannot resume)."""
+    try:
+        reader = can.LogReader(str(p))
+    except (ValueError, NotImplementedError, ImportError) as exc:
+        if isinstance(exc, ValueError) and sfx in can.io.player.MESSAGE_READERS:
+            # a known format whose header is damaged (e.g. a BLF header size)
+            _reader_error(acct, p, 0, exc, strict)
+            reader = None
+        else:
+            raise FileFormatError(str(p), f"no CAN log reader for this file ({exc})") \
+                from None
+    except Exception as exc:
+        _reader_error(acct, p, 0, exc, strict)
+        reader = None
+    if reader is not None:
+        try:
+            _consume(iter(reader), g, None, acct, bar)
+        except Exception as exc:
+            _reader_error(acct, p, g.handed + len(g.t), exc, strict)
+        else:
+            _check_blf_complete(reader, p, g.handed + len(g.t), acct, strict)
+        finally:
+            try:
+                reader.stop()
+            except Exception:  # closing a broken file must not hide the report
+                pass
 
 
 def _reader_error(acct: FrameAccounting, p: Path, nframes: int, exc: Exception,
