@@ -71,6 +71,15 @@ def configure(p: argparse.ArgumentParser) -> None:
                         "(default: all)")
 
 
+def _check_size(seq: object, fs: float) -> None:
+    """Refuse a session too long to simulate in memory (a tiny table rate, huge turns)."""
+    n_samples = seq.duration_s * fs
+    if not n_samples <= MAX_SAMPLES:
+        raise ConfigError(f"sequence {seq.name}: {seq.duration_s:.4g} s at {fs:g} Hz is "
+                          f"{n_samples:.3g} samples; at most {MAX_SAMPLES:.0e} are simulated "
+                          "(check --turns and --table-rate-dps)")
+
+
 def run(args: argparse.Namespace) -> int:
     from rimu.outputs import atomic_dir, output_dir
 
@@ -102,12 +111,7 @@ def run(args: argparse.Namespace) -> int:
             or args.turns is not None):
         name = args.sequence or (seq.source if seq is not None else default_sequence_name(cfg))
         seq = load_sequence(name, table_rate_dps=args.table_rate_dps, turns=args.turns)
-    n_samples = seq.duration_s * float(truth.sample_rate_hz)
-    if not n_samples <= MAX_SAMPLES:
-        raise ConfigError(f"sequence {seq.name}: {seq.duration_s:.4g} s at "
-                          f"{float(truth.sample_rate_hz):g} Hz is {n_samples:.3g} samples; at "
-                          f"most {MAX_SAMPLES:.0e} are simulated (check --turns and "
-                          "--table-rate-dps)")
+    _check_size(seq, float(truth.sample_rate_hz))
     if args.bias_instability_dph < 0 or args.rate_random_walk_dph_rth < 0 \
             or args.bias_correlation_s <= 0:
         raise ConfigError("--bias-instability-dph and --rate-random-walk-dph-rth must be >= 0, "
