@@ -23,6 +23,7 @@ laying out raw | compensated, ω̂ vs truth, detector statistics | parity, healt
 
 from __future__ import annotations
 
+import contextlib
 import time
 from pathlib import Path
 from typing import Any
@@ -114,6 +115,7 @@ class Recorder:
         self._events = 0
         self._t_first: float | None = None
         self._static_done = False
+        self._closed = False
         bp = blueprint(has_truth)
         t0 = time.perf_counter()
         self.rec = rr.RecordingStream(application_id)
@@ -178,8 +180,16 @@ class Recorder:
         self.rows += int(t.size)
         self.log_s += time.perf_counter() - t0
 
+    def abort(self) -> None:
+        """Stop recording without finishing (after an error); harmless after :meth:`close`."""
+        if not self._closed:
+            self._closed = True
+            with contextlib.suppress(Exception):
+                self.rec.disconnect()
+
     def close(self) -> dict[str, float]:
         """Flush and close; returns ``{"log_s", "flush_s", "rows"}``."""
+        self._closed = True
         if self._events == 0:
             tf = np.array([self._t_first if self._t_first is not None else 0.0])
             self.rec.send_columns("events", indexes=[rr.TimeColumn("time", duration=tf)],

@@ -130,6 +130,20 @@ def test_replay_writes_report_and_recording_atomically(files, tmp_path, capsys):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["r.json", "x.rrd"], "no temp file"
 
 
+def test_failure_mid_replay_leaves_no_recording_or_report(files, tmp_path, capsys):
+    """--strict on a log with a garbage line fails while reading, after the recording was
+    opened: neither the recording, nor the report, nor a temporary file stays."""
+    lines = files["f4"].read_text().splitlines()
+    lines.insert(40, "this is not a frame")
+    log = tmp_path / "bad.log"
+    log.write_text("\n".join(lines) + "\n")
+    out = tmp_path / "out"
+    out.mkdir()
+    refused(capsys, out, ["replay", log, "--cal", files["cal4"], "--strict", "--no-progress",
+                          "--rrd", out / "x.rrd", "--report", out / "r.json"], "bad.log:41")
+    assert list(out.iterdir()) == []
+
+
 def test_spawn_without_display(files, tmp_path, capsys, monkeypatch):
     monkeypatch.delenv("DISPLAY", raising=False)
     monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)

@@ -169,6 +169,7 @@ def run(args: argparse.Namespace) -> int:
             recorder = Recorder(cal, names, cmap.kind, path=rrd, spawn=spawn,
                                 has_truth=header.omega_true is not None,
                                 thresholds=mon.thresholds)
+            stack.callback(recorder.abort)      # on an error: stop writing the temp file
         clock = [time.perf_counter()]
 
         def on_samples(piece: Any) -> None:
