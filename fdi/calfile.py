@@ -562,3 +562,97 @@ def _sensor_from(e: Fields) -> SensorCal:
         residual_rms=e.number("residual_rms", float("nan")))
     e.finish()
     return c
+
+
+# -- compatibility of a calibration with the data it is applied to (issue 10) ---------------
+GENERIC_RAW_UNITS = frozenset({"", "raw"})
+"""Raw-unit names that say nothing (accepted against any calibration)."""
+IMPLAUSIBLE_ALPHA = 1e-9
+"""Tail probability beyond which a fit statistic is refused rather than warned about."""
+
+
+def check_compatible(cal: Calibration, n_sensors: int, raw_unit: Any, source: str, *,
+                     kind: str = "gyro", names: Any = None) -> None:
+    """Refuse data that the calibration cannot describe (sensor count, raw unit).
+
+    Parameters
+    ----------
+    cal : Calibration
+    n_sensors : int
+        Sensors of ``kind`` in the data (log, flight folder, channel map, truth sidecar).
+    raw_unit : str or sequence of str or None
+        The data's raw unit (one for all sensors, or one per sensor); ``"raw"``, ``""`` and
+        None say nothing and are accepted.
+    source : str
+        What the data is (file name), for the message.
+    kind : str
+        ``"gyro"`` or ``"accel"``.
+    names : sequence of str, optional
+        The data's sensor names (only used in the message).
+
+    Raises
+    ------
+    ConfigError
+        One line naming ``source``, the calibration and what disagrees.
+    """
+    s = cal.kind(kind)
+    where = f"calibration of {cal.configuration}"
+    if int(n_sensors) != s.n:
+        raise ConfigError(f"{source}: {int(n_sensors)} {kind} sensors, the {where} has {s.n}: "
+                          "a calibration only applies to the sensor set it was made for")
+    if raw_unit is None:
+        return
+    units = [raw_unit] * s.n if isinstance(raw_unit, str) else list(raw_unit)
+    for i, (u, c) in enumerate(zip(units, s.sensors, strict=False)):
+        got = "" if u is None else str(u).strip()
+        want = str(c.raw_unit).strip()
+        if got in GENERIC_RAW_UNITS or want in GENERIC_RAW_UNITS or got == want:
+            continue
+        who = names[i] if names is not None and i < len(names) else c.name
+        raise ConfigError(f"{source}: {kind} sensor {i + 1} ({who}) is in {got!r}, the {where} "
+                          f"expects raw outputs in {want!r}")
+
+
+def check_plausible(cal: Calibration, source: str) -> None:
+    """Refuse a calibration whose Earth-rate fit is beyond any plausible noise.
+
+    The horizontal Earth rate the rate test recovers from the outer-axis modulation must be
+    Ω·cos(latitude); a table-rate column in the wrong unit (rad/s read as °/s) scales every
+    input rate and the recovered Earth rate with it. With sd the larger of the fit's sd and
+    the per-step scatter, ``z² = ((h − Ω cos φ)/sd)²`` is refused above
+    ``chi2.isf(IMPLAUSIBLE_ALPHA, 1)`` (≈ 37, about 6 σ). A fit without an Earth-rate
+    record (no outer-axis steps, or accelerometers only) passes.
+
+    Raises
+    ------
+    CalibrationError
+        One line with the expected and recovered rates and z.
+    """
+    from scipy.stats import chi2
+
+    from fdi.errors import CalibrationError
+    from fdi.units import EARTH_RATE_DPH
+
+    er = cal.extra.get("earth_rate_fit") if isinstance(cal.extra, Mapping) else None
+    if not isinstance(er, Mapping) or cal.latitude_deg is None:
+        return
+    try:
+        h = float(er["horizontal_dph"])
+        sd = max(float(er.get("horizontal_dph_sd", 0.0)), float(er.get("scatter_sd_dph", 0.0)))
+    except (KeyError, TypeError, ValueError):
+        return
+    want = EARTH_RATE_DPH * math.cos(math.radians(float(cal.latitude_deg)))
+    if not (math.isfinite(h) and math.isfinite(sd) and sd > 0):
+        return
+    z = (h - want) / sd
+    limit = float(chi2.isf(IMPLAUSIBLE_ALPHA, 1))
+    if z * z > limit:
+        raise CalibrationError(
+            f"{source}: the rate test recovers a horizontal Earth rate of {h:.4g} ± {sd:.2g} "
+            f"deg/h, expected {want:.4g} at latitude {float(cal.latitude_deg):g} deg (z = "
+            f"{z:+.1f}, z^2 beyond chi2.isf(1e-9, 1) = {limit:.1f}): are the table-rate columns "
+            "in deg/s and the latitude right?")
+
+
+__all__ = sorted([*__all__, "GENERIC_RAW_UNITS", "IMPLAUSIBLE_ALPHA", "check_compatible",
+                  "check_plausible"])

@@ -60,6 +60,9 @@ class FrameAccounting:
     lost_frames : int
         Frames the rolling counters say were never received (counter steps > 1 that
         were accepted); informational, not part of the balance.
+    lost_samples : int
+        Samples missing from the sequence handed to the monitor (gaps in the sample
+        counter; without one, gaps of more than one sample period); not part of the balance.
     """
 
     read: int = 0
@@ -68,6 +71,7 @@ class FrameAccounting:
     values_not_available: int = 0
     errors: list[dict[str, Any]] = field(default_factory=list)
     lost_frames: int = 0
+    lost_samples: int = 0
 
     def reject(self, reason: str, count: int = 1) -> None:
         """Count ``count`` frames rejected for ``reason`` (one of :data:`REASONS`)."""
@@ -91,5 +95,6 @@ class FrameAccounting:
                 "rejected": {k: int(v) for k, v in sorted(self.rejected.items()) if v},
                 "values_not_available": int(self.values_not_available),
                 "lost_frames": int(self.lost_frames),
+                "lost_samples": int(self.lost_samples),
                 "errors": list(self.errors),
                 "balanced": self.balanced()}

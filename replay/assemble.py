@@ -34,6 +34,7 @@ __all__ = [
     "FRAME_DATA",
     "FRAME_ERROR",
     "FRAME_REMOTE",
+    "BlockDecoder",
     "RawFrames",
     "Samples",
     "Slot",
@@ -249,8 +250,87 @@ class _SlotFrames:
     valid: np.ndarray        # (K, m)
 
 
+@dataclass
+class _SlotState:
+    """What one slot's checks carry from one block of frames to the next."""
+
+    max_t: float = -np.inf           # latest time of a frame past the length/CRC checks
+    counter: int | None = None       # rolling counter of the last frame past the order check
+    sample: int | None = None        # its sample counter
+    t: float | None = None           # its time
+
+
+def _with_prev(prev: float | int | None, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``x`` shifted by one with ``prev`` in front, and where that predecessor exists."""
+    has = np.ones(x.size, bool)
+    out = np.empty(x.size, np.float64 if x.dtype.kind == "f" else np.int64)
+    if x.size:
+        out[1:] = x[:-1]
+        if prev is None:
+            has[0] = False
+            out[0] = x[0]
+        else:
+            out[0] = prev
+    return out, has
+
+
+def _counter_check(slot: Slot, st: _SlotState, t: np.ndarray, le: np.ndarray, be: np.ndarray,
+                   max_counter_delta: int, fs: float, acct: FrameAccounting) -> np.ndarray:
+    """Rolling-counter and sample-counter check of frames past the order check.
+
+    A frame whose rolling counter advanced by d is accepted when d ≤ ``max_counter_delta``
+    (d − 1 frames lost), or when a larger d agrees, modulo the rolling counter's range, with
+    how far the sample counter advanced (without one: with the time elapsed, in sample
+    periods) — a gap longer than the counter's range — and that advance minus one is lost
+    (``lost_frames``). The first frame after a gap is used,
+    not discarded. A counter that did not move is ``counter_repeat``; one that disagrees is
+    ``counter_jump`` (a corrupt or foreign frame). Returns the mask of accepted frames.
+    """
+    lay = slot.layout
+    sc = (lay.signals[slot.sample_counter].raw(le, be).astype(np.int64)
+          if slot.sample_counter is not None else None)
+    keep = np.ones(t.size, bool)
+    if t.size == 0:
+        return keep
+    if sc is not None:
+        s_prev, has_s = _with_prev(st.sample, sc)
+        ds = (sc - s_prev) % 65536
+    if slot.counter is not None:
+        cs = lay.signals[slot.counter]
+        mod = 1 << cs.length
+        c = cs.raw(le, be).astype(np.int64)
+        c_prev, has = _with_prev(st.counter, c)
+        d = (c - c_prev) % mod
+        small = (d >= 1) & (d <= max_counter_delta)
+        if sc is not None:
+            n_est = ds
+            agree = (ds >= 1) & (ds < 32768) & ((ds - d) % mod == 0)
+        else:
+            t_prev, _ = _with_prev(st.t, t)
+            n_est = np.rint((t - t_prev) * fs).astype(np.int64)
+            agree = (n_est >= 1) & ((n_est - d) % mod == 0)
+        ok = small | ((d >= 1) & agree)
+        gap = np.where(small, d, n_est) - 1
+        repeat = has & (d == 0)
+        jump = has & ~ok & ~repeat
+        acct.reject("counter_repeat", int(np.count_nonzero(repeat)))
+        acct.reject("counter_jump", int(np.count_nonzero(jump)))
+        acct.lost_frames += int(np.sum(gap[has & ok]))
+        keep = ~(repeat | jump)
+        st.counter = int(c[-1])
+    elif sc is not None:
+        fwd = has_s & (ds >= 1) & (ds < 32768)
+        acct.lost_frames += int(np.sum(ds[fwd] - 1))
+    if sc is not None:
+        st.sample = int(sc[-1])
+    st.t = float(t[-1])
+    return keep
+
+
 def _decode_slot(slot: Slot, frames: RawFrames, idx: np.ndarray, j1939: bool,
-                 max_counter_delta: int, acct: FrameAccounting) -> _SlotFrames:
+                 max_counter_delta: int, acct: FrameAccounting,
+                 st: _SlotState | None = None, fs: float = 100.0) -> _SlotFrames:
+    st = st if st is not None else _SlotState()
     lay = slot.layout
     ok = frames.lengths[idx] == lay.length
     acct.reject("wrong_length", int(np.count_nonzero(~ok)))
@@ -261,29 +341,21 @@ def _decode_slot(slot: Slot, frames: RawFrames, idx: np.ndarray, j1939: bool,
         acct.reject("crc", int(np.count_nonzero(~good)))
         idx, block = idx[good], block[good]
     t = frames.t[idx]
-    if idx.size > 1:
-        prev_max = np.maximum.accumulate(t)
-        ooo = np.zeros(idx.size, bool)
-        ooo[1:] = t[1:] < prev_max[:-1]
+    if idx.size:
+        prev_max = np.maximum.accumulate(np.concatenate([[st.max_t], t]))[:-1]
+        ooo = t < prev_max
+        st.max_t = float(max(st.max_t, t.max()))
         if ooo.any():
             acct.reject("out_of_order", int(np.count_nonzero(ooo)))
             keep = ~ooo
             idx, block, t = idx[keep], block[keep], t[keep]
     le, be = lay.words(block)
-    if slot.counter is not None and idx.size > 1:
-        cs = lay.signals[slot.counter]
-        c = cs.raw(le, be)
-        mod = 1 << cs.length
-        d = np.diff(c) % mod
-        keep = np.ones(idx.size, bool)
-        keep[1:] = (d >= 1) & (d <= max_counter_delta)
-        acct.reject("counter_repeat", int(np.count_nonzero(d == 0)))
-        acct.reject("counter_jump", int(np.count_nonzero(d > max_counter_delta)))
-        acct.lost_frames += int(np.sum(d[(d > 1) & (d <= max_counter_delta)] - 1))
+    keep = _counter_check(slot, st, t, le, be, max_counter_delta, fs, acct)
+    if not keep.all():
         idx, t, le, be = idx[keep], t[keep], le[keep], be[keep]
     if slot.status is not None and idx.size:
-        st = lay.signals[slot.status].raw(le, be)
-        good = st == 0
+        stt = lay.signals[slot.status].raw(le, be)
+        good = stt == 0
         acct.reject("status", int(np.count_nonzero(~good)))
         idx, t, le, be = idx[good], t[good], le[good], be[good]
     m = len(slot.sensors)
@@ -330,57 +402,316 @@ class Samples:
     valid: np.ndarray
     sample_index: np.ndarray
 
+    @classmethod
+    def empty(cls, n: int) -> Samples:
+        """No sample, ``n`` sensors."""
+        return cls(np.zeros(0), np.zeros((0, n)), np.zeros((0, n), bool),
+                   np.zeros(0, np.int64))
+
+    @classmethod
+    def concat(cls, parts: list[Samples], n: int) -> Samples:
+        """Samples of several blocks, in order."""
+        parts = [p for p in parts if p.t.size]
+        if not parts:
+            return cls.empty(n)
+        if len(parts) == 1:
+            return parts[0]
+        return cls(np.concatenate([p.t for p in parts]),
+                   np.concatenate([p.raw for p in parts]),
+                   np.concatenate([p.valid for p in parts]),
+                   np.concatenate([p.sample_index for p in parts]))
+
+
+@dataclass
+class _Rows:
+    """Decoded frames waiting for their sample to be complete (time order)."""
+
+    t: np.ndarray
+    slot: np.ndarray         # slot number
+    cluster: np.ndarray      # sample index
+    values: np.ndarray       # (R, m_max)
+    valid: np.ndarray        # (R, m_max)
+
+    @classmethod
+    def empty(cls, m: int) -> _Rows:
+        return cls(np.zeros(0), np.zeros(0, np.int64), np.zeros(0, np.int64),
+                   np.zeros((0, m)), np.zeros((0, m), bool))
+
+    def take(self, sel: np.ndarray) -> _Rows:
+        return _Rows(self.t[sel], self.slot[sel], self.cluster[sel], self.values[sel],
+                     self.valid[sel])
+
+    @classmethod
+    def cat(cls, a: _Rows, b: _Rows) -> _Rows:
+        if a.t.size == 0:
+            return b
+        if b.t.size == 0:
+            return a
+        return cls(np.concatenate([a.t, b.t]), np.concatenate([a.slot, b.slot]),
+                   np.concatenate([a.cluster, b.cluster]),
+                   np.concatenate([a.values, b.values]), np.concatenate([a.valid, b.valid]))
+
+
+def _sibling_keys(db: cantools.database.can.Database, slots: list[Slot],
+                  j1939: bool) -> dict[int, str]:
+    """Frame keys of the DBC messages named like a mapped one but for digits."""
+    import re
+
+    if j1939:
+        return {}
+    shape = {re.sub(r"\d+", "#", s.message.name) for s in slots}
+    used = {s.message.name for s in slots}
+    out = {}
+    for m in db.messages:
+        if m.name not in used and re.sub(r"\d+", "#", m.name) in shape:
+            out[_message_key(m, None, False)] = m.name
+    return out
+
+
+class BlockDecoder:
+    """Vectorised decoding of a stream of frame blocks, with state carried between blocks.
+
+    Each :meth:`feed` takes the next block of frames (in file order) and returns the samples
+    that are complete; :meth:`flush` returns the rest at the end. The per-slot checks
+    (order, counters) compare each block's first frame with the previous block's last, and
+    the assembly continues the sample numbering, so that any split of a log into blocks
+    gives the samples and the accounting of one block holding the whole log, as long as
+    no frame arrives after two later samples have been seen (such a frame is ``late``).
+
+    A sample is handed over when every slot has delivered, or when a frame of a sample two
+    indices on (time assembly: any later sample) shows it cannot grow any more.
+
+    Lost samples (``FrameAccounting.lost_samples``): gaps in the sample-counter sequence of
+    the samples handed over (time assembly: gaps of more than one sample period).
+
+    Parameters
+    ----------
+    db : cantools Database
+    cmap : ChannelMap
+    acct : FrameAccounting, optional
+        Updated in place (``read`` grows with every frame fed; ``used`` as samples are
+        handed over, so that ``balanced()`` holds after :meth:`flush`).
+    sample_rate_hz : float
+        Nominal sample rate (default assembly tolerance 0.4 periods; gap counting).
+    """
+
+    def __init__(self, db: cantools.database.can.Database, cmap: ChannelMap,
+                 acct: FrameAccounting | None = None, *, sample_rate_hz: float) -> None:
+        self.cmap = cmap
+        self.n = cmap.n
+        self.acct = acct if acct is not None else FrameAccounting()
+        self.fs = float(sample_rate_hz)
+        self.slots = build_slots(db, cmap)
+        self.by_counter = cmap.uses_sample_counter
+        self.tol = (cmap.time_tolerance_s if cmap.time_tolerance_s is not None
+                    else 0.4 / self.fs)
+        self._known = np.array(sorted({s.key for s in self.slots}), np.int64)
+        self._siblings = _sibling_keys(db, self.slots, cmap.j1939)
+        self.siblings_seen: set[str] = set()
+        """DBC messages like the mapped ones (same name but for digits: ``RIMU_GYRO_05``
+        beside ``RIMU_GYRO_01``..``04``) that the log carries but the map does not use:
+        a sign that the log has more sensors than the calibration."""
+        self.delivered = np.zeros(len(self.slots), np.int64)
+        """Frames each slot delivered past the checks."""
+        self._state = [_SlotState() for _ in self.slots]
+        self._m = max((len(s.sensors) for s in self.slots), default=1)
+        self._pending = _Rows.empty(self._m)
+        self._last_c: int | None = None
+        self._last_u = 0
+        self._last_t: float | None = None
+        self._cluster = -1
+        self._emitted: int | None = None
+        self._emitted_t: float | None = None
+        self.t_first: float | None = None
+        """Earliest finite data-frame time of the first block with one (log clock)."""
+
+    @property
+    def pending_frames(self) -> int:
+        """Frames decoded but not yet handed over in a sample."""
+        return int(self._pending.t.size)
+
+    def feed(self, frames: RawFrames) -> Samples:
+        """Decode the next block of frames; returns the samples now complete."""
+        rows = self._decode(frames)
+        return self._assemble(rows, final=False)
+
+    def flush(self) -> Samples:
+        """Hand over every pending sample (end of the stream)."""
+        return self._assemble(_Rows.empty(self._m), final=True)
+
+    # -- decoding --------------------------------------------------------------------
+    def _decode(self, frames: RawFrames) -> _Rows:
+        parts = self._match_and_check(frames)
+        R = sum(p.idx.size for p in parts)
+        if R == 0:
+            return _Rows.empty(self._m)
+        t = np.concatenate([p.t for p in parts])
+        slot_of = np.concatenate([np.full(p.idx.size, k, np.int64)
+                                  for k, p in enumerate(parts)])
+        vals = np.full((R, self._m), np.nan)
+        ok = np.zeros((R, self._m), bool)
+        r = 0
+        for p in parts:
+            m = p.values.shape[1]
+            vals[r:r + p.idx.size, :m] = p.values
+            ok[r:r + p.idx.size, :m] = p.valid
+            r += p.idx.size
+        order = np.argsort(t, kind="stable")
+        t, slot_of, vals, ok = t[order], slot_of[order], vals[order], ok[order]
+        sc = (np.concatenate([p.sample_counter for p in parts])[order].astype(np.int64)
+              if self.by_counter else None)
+        rows = _Rows(t, slot_of, self._number(t, sc), vals, ok)
+        if self._emitted is not None:
+            late = rows.cluster <= self._emitted
+            if late.any():
+                self.acct.reject("late", int(np.count_nonzero(late)))
+                rows = rows.take(~late)
+        return rows
+
+    def _match_and_check(self, frames: RawFrames) -> list[_SlotFrames]:
+        """Frame-level rejections, matching to slots and the per-slot checks."""
+        acct, cmap = self.acct, self.cmap
+        M = len(frames)
+        acct.read += M
+        ft = frames.frame_type
+        alive = ft == FRAME_DATA
+        acct.reject("error_frame", int(np.count_nonzero(ft == FRAME_ERROR)))
+        acct.reject("remote_frame", int(np.count_nonzero(ft == FRAME_REMOTE)))
+        bad_t = alive & ~np.isfinite(frames.t)
+        acct.reject("nonfinite_time", int(np.count_nonzero(bad_t)))
+        alive &= ~bad_t
+        if self.t_first is None and alive.any():
+            self.t_first = float(frames.t[alive].min())
+        keys = frame_keys(frames.arbitration_id, frames.extended, cmap.j1939)
+        is_known = alive & np.isin(keys, self._known)
+        unknown = alive & ~is_known
+        acct.reject("unknown_id", int(np.count_nonzero(unknown)))
+        if self._siblings and unknown.any():
+            self.siblings_seen.update(self._siblings[k] for k in np.unique(keys[unknown]).tolist()
+                                      if k in self._siblings)
+        claimed = np.zeros(M, bool)
+        parts = []
+        for k, slot in enumerate(self.slots):
+            sel = is_known & (keys == slot.key) & ~claimed
+            if slot.channel is not None:
+                sel &= frames.channel == slot.channel
+            claimed |= sel
+            parts.append(_decode_slot(slot, frames, np.flatnonzero(sel), cmap.j1939,
+                                      cmap.max_counter_delta, acct, self._state[k], self.fs))
+        acct.reject("other_channel", int(np.count_nonzero(is_known & ~claimed)))
+        self.delivered += np.array([p.idx.size for p in parts], np.int64)
+        return parts
+
+    def _number(self, t: np.ndarray, sc: np.ndarray | None) -> np.ndarray:
+        """Sample index of each decoded frame (time order), continuing the numbering."""
+        if sc is not None:
+            prev = sc[0] if self._last_c is None else self._last_c
+            d = np.diff(np.concatenate([[prev], sc]))
+            d = (d + 32768) % 65536 - 32768
+            cluster = self._last_u + np.cumsum(d)
+            self._last_c, self._last_u = int(sc[-1]), int(cluster[-1])
+        else:
+            prev_t = -np.inf if self._last_t is None else self._last_t
+            new = np.diff(np.concatenate([[prev_t], t])) > self.tol
+            cluster = self._cluster + np.cumsum(new)
+            self._last_t, self._cluster = float(t[-1]), int(cluster[-1])
+        return cluster.astype(np.int64)
+
+    # -- assembly --------------------------------------------------------------------
+    def _assemble(self, rows: _Rows, *, final: bool) -> Samples:
+        allr = _Rows.cat(self._pending, rows)
+        if allr.t.size == 0:
+            self._pending = allr
+            return Samples.empty(self.n)
+        ns = len(self.slots)
+        # a slot twice in one sample: keep the earliest (pending rows come first)
+        key = allr.cluster * ns + allr.slot
+        o2 = np.argsort(key, kind="stable")
+        ks = key[o2]
+        dup = np.zeros(allr.t.size, bool)
+        dup[o2[1:]] = ks[1:] == ks[:-1]
+        if dup.any():
+            self.acct.reject("duplicate", int(np.count_nonzero(dup)))
+            allr = allr.take(~dup)
+        ids, inv, counts = np.unique(allr.cluster, return_inverse=True, return_counts=True)
+        if final:
+            n_out = ids.size
+        else:
+            top = ids[-1]
+            ready = (counts == ns) | (ids < (top - 1 if self.by_counter else top))
+            n_out = int(np.argmin(ready)) if not ready.all() else ids.size
+        out_sel = inv < n_out
+        out = allr.take(out_sel)
+        self._pending = allr.take(~out_sel)
+        if n_out == 0:
+            return Samples.empty(self.n)
+        inv_o = inv[out_sel]
+        ids_o = ids[:n_out]
+        ts = np.full(n_out, np.inf)
+        np.minimum.at(ts, inv_o, out.t)
+        raw = np.full((n_out, self.n), np.nan)
+        valid = np.zeros((n_out, self.n), bool)
+        for k, slot in enumerate(self.slots):
+            sel = out.slot == k
+            if not sel.any():
+                continue
+            rr = inv_o[sel]
+            for j, sensor in enumerate(slot.sensors):
+                raw[rr, sensor] = out.values[sel, j]
+                valid[rr, sensor] = out.valid[sel, j]
+        self.acct.used += int(out.t.size)
+        self._count_lost(ids_o, ts)
+        self._emitted, self._emitted_t = int(ids_o[-1]), float(ts[-1])
+        return Samples(t=ts, raw=raw, valid=valid, sample_index=ids_o)
+
+    def _count_lost(self, ids: np.ndarray, ts: np.ndarray) -> None:
+        if self.by_counter:
+            prev = ids[0] - 1 if self._emitted is None else self._emitted
+            gaps = np.diff(np.concatenate([[prev], ids])) - 1
+        else:
+            prev = ts[0] if self._emitted_t is None else self._emitted_t
+            gaps = np.rint(np.diff(np.concatenate([[prev], ts])) * self.fs) - 1
+        self.acct.lost_samples += int(np.sum(np.clip(gaps, 0, None)))
+
 
 def assemble_samples(parts: list[tuple[Slot, _SlotFrames]], n: int, *, by_counter: bool,
                      tolerance_s: float, acct: FrameAccounting) -> Samples:
-    """Assemble decoded slot frames into samples (see the module docstring)."""
-    ns = len(parts)
-    if ns == 0 or sum(p.idx.size for _, p in parts) == 0:
-        return Samples(np.zeros(0), np.zeros((0, n)), np.zeros((0, n), bool),
-                       np.zeros(0, np.int64))
+    """Assemble decoded slot frames of a whole log into samples (one block, then flushed).
+
+    Kept for callers of the one-block API; :class:`BlockDecoder` does the work.
+    """
+    if not parts or sum(p.idx.size for _, p in parts) == 0:
+        return Samples.empty(n)
     t = np.concatenate([p.t for _, p in parts])
     slot_of = np.concatenate([np.full(p.idx.size, k, np.int64) for k, (_, p) in enumerate(parts)])
-    row_in = np.concatenate([np.arange(p.idx.size) for _, p in parts])
+    m = max(p.values.shape[1] for _, p in parts)
+    vals = np.full((t.size, m), np.nan)
+    ok = np.zeros((t.size, m), bool)
+    r = 0
+    for _, p in parts:
+        vals[r:r + p.idx.size, :p.values.shape[1]] = p.values
+        ok[r:r + p.idx.size, :p.values.shape[1]] = p.valid
+        r += p.idx.size
     order = np.argsort(t, kind="stable")
-    t, slot_of, row_in = t[order], slot_of[order], row_in[order]
+    t, slot_of, vals, ok = t[order], slot_of[order], vals[order], ok[order]
     if by_counter:
         c = np.concatenate([p.sample_counter for _, p in parts])[order].astype(np.int64)
-        d = np.diff(c)
-        d = (d + 32768) % 65536 - 32768
-        u = np.concatenate([[0], np.cumsum(d)])
-        cluster = u - u.min()
+        d = (np.diff(c) + 32768) % 65536 - 32768
+        cluster = np.concatenate([[0], np.cumsum(d)])
     else:
         cluster = np.concatenate([[0], np.cumsum(np.diff(t) > tolerance_s)]).astype(np.int64)
-    # duplicates: a slot twice in one sample -> keep the earliest (a stable sort of the
-    # combined key keeps time order within equal keys; the data are nearly sorted already)
-    key = cluster * ns + slot_of
-    o2 = np.argsort(key, kind="stable")
-    ks = key[o2]
-    dup = np.zeros(t.size, bool)
-    dup[o2[1:]] = ks[1:] == ks[:-1]
-    acct.reject("duplicate", int(np.count_nonzero(dup)))
-    keep = ~dup
-    t, slot_of, row_in, cluster = t[keep], slot_of[keep], row_in[keep], cluster[keep]
-    acct.used += int(t.size)
-    ids, inv = np.unique(cluster, return_inverse=True)
-    S = ids.size
-    ts = np.full(S, np.inf)
-    np.minimum.at(ts, inv, t)
-    raw = np.full((S, n), np.nan)
-    valid = np.zeros((S, n), bool)
-    for k, (slot, p) in enumerate(parts):
-        sel = slot_of == k
-        rows = inv[sel]
-        src = row_in[sel]
-        for j, sensor in enumerate(slot.sensors):
-            raw[rows, sensor] = p.values[src, j]
-            valid[rows, sensor] = p.valid[src, j]
-    return Samples(t=ts, raw=raw, valid=valid, sample_index=ids)
+    dec = BlockDecoder.__new__(BlockDecoder)
+    dec.n, dec.acct, dec.by_counter, dec.fs = n, acct, by_counter, 1.0 / max(tolerance_s, 1e-12)
+    dec.slots = [s for s, _ in parts]
+    dec._m = m
+    dec._pending = _Rows(t, slot_of, cluster - cluster.min(), vals, ok)
+    dec._emitted = dec._emitted_t = None
+    return dec._assemble(_Rows.empty(m), final=True)
 
 
 def decode_frames(frames: RawFrames, db: cantools.database.can.Database, cmap: ChannelMap,
                   acct: FrameAccounting, *, sample_rate_hz: float) -> Samples:
-    """Match, check, decode and assemble every frame (see the module docstring).
+    """Match, check, decode and assemble every frame of a whole log (one block).
 
     Parameters
     ----------
@@ -395,33 +726,10 @@ def decode_frames(frames: RawFrames, db: cantools.database.can.Database, cmap: C
     Returns
     -------
     Samples
+        ``sample_index`` counted from 0.
     """
-    M = len(frames)
-    acct.read += M
-    slots = build_slots(db, cmap)
-    ft = frames.frame_type
-    alive = ft == FRAME_DATA
-    acct.reject("error_frame", int(np.count_nonzero(ft == FRAME_ERROR)))
-    acct.reject("remote_frame", int(np.count_nonzero(ft == FRAME_REMOTE)))
-    bad_t = alive & ~np.isfinite(frames.t)
-    acct.reject("nonfinite_time", int(np.count_nonzero(bad_t)))
-    alive &= ~bad_t
-    keys = frame_keys(frames.arbitration_id, frames.extended, cmap.j1939)
-    known_keys = np.array(sorted({s.key for s in slots}), np.int64)
-    is_known = alive & np.isin(keys, known_keys)
-    acct.reject("unknown_id", int(np.count_nonzero(alive & ~is_known)))
-    claimed = np.zeros(M, bool)
-    parts = []
-    for slot in slots:
-        sel = is_known & (keys == slot.key)
-        if slot.channel is not None:
-            sel &= frames.channel == slot.channel
-        sel &= ~claimed
-        claimed |= sel
-        idx = np.flatnonzero(sel)
-        parts.append((slot, _decode_slot(slot, frames, idx, cmap.j1939,
-                                         cmap.max_counter_delta, acct)))
-    acct.reject("other_channel", int(np.count_nonzero(is_known & ~claimed)))
-    tol = cmap.time_tolerance_s if cmap.time_tolerance_s is not None else 0.4 / sample_rate_hz
-    return assemble_samples(parts, cmap.n, by_counter=cmap.uses_sample_counter,
-                            tolerance_s=tol, acct=acct)
+    dec = BlockDecoder(db, cmap, acct, sample_rate_hz=sample_rate_hz)
+    s = Samples.concat([dec.feed(frames), dec.flush()], cmap.n)
+    if s.sample_index.size:
+        s = Samples(s.t, s.raw, s.valid, s.sample_index - s.sample_index.min())
+    return s

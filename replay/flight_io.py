@@ -8,6 +8,9 @@ Flight directory ``rimu.flight/1``
      "sensor_names": ["g1", ...], "raw_unit": "mV", "columns": ["t", "g1", ...],
      "samples": N, "samples_file": "samples.csv", "source": "..."}
 
+Unknown keys are refused (a typo must not switch a field off silently); a writer's own
+information goes under ``"meta"`` (a free-form object).
+
 ``DIR/samples.csv``: one header line (the columns), then one line per sample: ``t`` (s) and
 the raw output of each sensor in its raw unit; an **empty cell means no sample** from that
 sensor (``valid = False``), while ``nan``/``inf`` are values the sensor sent.
@@ -54,7 +57,7 @@ from typing import Any
 import numpy as np
 
 from fdi.errors import ConfigError, FileFormatError
-from fdi.fileio import read_json_object, to_jsonable
+from fdi.fileio import Fields, read_json_object, to_jsonable
 from replay.faults import Fault, fault_from_dict
 from replay.flight_data import AUX_KINDS, AUX_UNITS, FLIGHT_TRUTH_SCHEMA, AuxChannels, Flight
 
@@ -149,9 +152,11 @@ def write_truth_sidecar(flight: Flight, path: str | Path) -> None:
     p.write_text(json.dumps(to_jsonable(doc), indent=1) + "\n", encoding="utf-8")
 
 
-def read_truth_sidecar(path: str | Path, *, samples: int | None = None
+def read_truth_sidecar(path: str | Path, *, samples: int | None = None, mmap: bool = False
                        ) -> tuple[tuple[Fault, ...], dict[str, Any], np.ndarray | None]:
     """Read a ``rimu.flight-truth/1`` file: (faults, truth record, true rates or None).
+
+    With ``mmap`` a float64 rates file is memory-mapped, not read (long logs).
 
     Raises
     ------
@@ -179,7 +184,7 @@ def read_truth_sidecar(path: str | Path, *, samples: int | None = None
                                   field="rates_file")
         rp = p.with_name(rf)
         try:
-            rates = np.load(rp, allow_pickle=False)
+            rates = np.load(rp, allow_pickle=False, mmap_mode="r" if mmap else None)
         except Exception as exc:        # a damaged .npy header fails in many ways (EOFError,
             # ValueError, SyntaxError, tokenize.TokenError from its literal header, ...)
             why = exc.strerror if isinstance(exc, OSError) else f"{type(exc).__name__}: {exc}"
@@ -193,7 +198,8 @@ def read_truth_sidecar(path: str | Path, *, samples: int | None = None
                                                        and rates.shape[0] != samples):
             want = f"({samples}, 3)" if samples is not None else "(N, 3)"
             raise FileFormatError(str(rp), f"expected shape {want}, got {rates.shape}")
-        rates = rates.astype(float)
+        if not (mmap and rates.dtype == np.float64):
+            rates = rates.astype(float)
     doc.pop("rates_file", None)
     return tuple(faults), doc, rates
 
@@ -312,6 +318,7 @@ def _aux_channel(ch: Any, mp: str, where: str) -> tuple[str, str, str]:
                                               for k in ("kind", "name")):
         raise FileFormatError(mp, "expected an object with string 'kind' and 'name'",
                               field=where)
+    Fields(ch, mp, where).finish(accept=("kind", "name", "unit", "imu"))
     if ch["kind"] not in AUX_KINDS:
         raise FileFormatError(mp, f"kind {ch['kind']!r} is not one of {AUX_KINDS}",
                               field=where)
@@ -366,15 +373,25 @@ def load_flight_dir(directory: str | Path) -> Flight:
     mpath = d / "manifest.json"
     man = read_json_object(mpath, FLIGHT_SCHEMA)
     mp = str(mpath)
+    f = Fields(man, mp)
+    f.accept("schema")
     fs = _positive_rate(man, mp)
     names = _sensor_names(man, mp)
     columns = ["t", *names]
     imu = _imu_groups(man, mp, len(names))
-    kind = str(man.get("kind", "gyro"))
+    kind = f.choice("kind", ("gyro", "accel"), "gyro")
+    raw_unit = f.string("raw_unit", "raw")
+    n_samples = f.integer("samples", None, lo=0)
+    f.string("source", None, nonempty=False)
+    f.free("meta", None)
+    if isinstance(man.get("aux"), Mapping):
+        Fields(man["aux"], mp, "aux").finish(accept=("file", "channels"))
+    f.finish(accept=("sample_rate_hz", "sensor_names", "columns", "imu", "samples_file",
+                     "aux"))
     spath = _file_beside(d, mp, man.get("samples_file", "samples.csv"), "samples_file")
     vals, missing = _load_samples(spath, len(columns), columns)
-    if "samples" in man and man["samples"] != vals.shape[0]:
-        raise FileFormatError(mp, f"says {man['samples']!r} samples, {spath.name} has "
+    if n_samples is not None and n_samples != vals.shape[0]:
+        raise FileFormatError(mp, f"says {n_samples!r} samples, {spath.name} has "
                                   f"{vals.shape[0]} (truncated or edited?)", field="samples")
     t = vals[:, 0].copy()
     raw = vals[:, 1:].copy()
@@ -388,6 +405,6 @@ def load_flight_dir(directory: str | Path) -> Flight:
     if (d / "truth.json").exists():
         faults, truth, rates = read_truth_sidecar(d / "truth.json", samples=t.shape[0])
     return Flight(t=t, raw=raw, valid=valid, sample_rate_hz=fs,
-                  sensor_names=tuple(names), raw_unit=str(man.get("raw_unit", "raw")),
+                  sensor_names=tuple(names), raw_unit=raw_unit,
                   omega_true=rates, faults=faults, truth=truth, source=str(d), kind=kind,
                   imu=imu, aux=aux)

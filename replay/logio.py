@@ -23,8 +23,12 @@ over the file, gathering (timestamp, id, payload) for the vectorised decoder
 - ``.asc``: lines that do not look like frames are skipped silently; rimu tracks the lines
   between frames and counts those that are not header, comment or known event lines as
   ``garbage_line``; a frame line that raises is a ``garbage_line`` too and reading resumes.
-- binary formats (``.blf``) cannot resume: the error (where, why) is reported, the frames
-  read so far are kept.
+- ``.blf``: read by :class:`replay.blf.ResyncBLFReader`, which skips a damaged container or
+  object and resynchronises on the next valid one (each damage an error of kind ``resync``
+  with the bytes skipped; the frames lost show in the counter gaps); a file without the BLF
+  signature is "not a BLF file";
+- other binary formats cannot resume: the error (where, why) is reported, the frames read
+  so far are kept.
 
 Flight time of a decoded sample is its earliest frame's timestamp minus the log's first
 frame timestamp, plus the sidecar's ``t_start_s`` when there is one (0 otherwise).
@@ -32,6 +36,7 @@ frame timestamp, plus the sidecar's ``t_start_s`` when there is one (0 otherwise
 
 from __future__ import annotations
 
+import contextlib
 import re
 from collections.abc import Iterator
 from dataclasses import replace
@@ -42,13 +47,14 @@ from typing import Any
 import can
 import numpy as np
 
-from fdi.calfile import Calibration
+from fdi.calfile import Calibration, check_compatible
 from fdi.errors import ConfigError, FileFormatError, ReplayError
 from replay.accounting import FrameAccounting
 from replay.assemble import (
     FRAME_DATA,
     FRAME_ERROR,
     FRAME_REMOTE,
+    BlockDecoder,
     RawFrames,
     Samples,
     decode_frames,
@@ -65,6 +71,7 @@ __all__ = [
     "CORRUPTION_REASONS",
     "DEFAULT_T0_EPOCH_S",
     "LOG_SUFFIXES",
+    "LogStream",
     "read_frames",
     "read_log",
     "resolve_map",
@@ -215,9 +222,16 @@ _ASC_NON_FRAME = re.compile(
 
 
 class _Gather:
-    """Collects frames from python-can messages (one pass, plain lists)."""
+    """Collects frames from python-can messages (one pass, plain lists).
 
-    def __init__(self) -> None:
+    With a ``sink``, every ``chunk`` frames are handed to it as :class:`RawFrames` and
+    forgotten (:meth:`spill`), so that memory stays bounded on long logs.
+    """
+
+    def __init__(self, sink: Any = None, chunk: int = 1 << 18) -> None:
+        self.sink = sink
+        self.chunk = int(chunk)
+        self.handed = 0
         self.t: list[float] = []
         self.arb: list[int] = []
         self.ext: list[bool] = []
@@ -225,6 +239,20 @@ class _Gather:
         self.data = bytearray()
         self.lengths: list[int] = []
         self.special: list[tuple[int, int]] = []
+
+    def _reset(self) -> None:
+        # in place: the reading loop holds bound methods of these lists
+        for x in (self.t, self.arb, self.ext, self.ch, self.lengths, self.special):
+            x.clear()
+        del self.data[:]
+
+    def spill(self, force: bool = False) -> None:
+        """Hand the frames gathered so far to the sink (when ``chunk`` are there)."""
+        if self.sink is not None and self.t and (force or len(self.t) >= self.chunk):
+            fr = self.frames()
+            self.handed += len(fr)
+            self._reset()
+            self.sink(fr)
 
     def frames(self) -> RawFrames:
         M = len(self.t)
@@ -265,12 +293,13 @@ def _consume(it: Iterator[can.Message], g: _Gather, lines: _Lines | None,
                                          g.ch.append, g.lengths.append)
     s_app = g.special.append
     buf = g.data
+    step = min(_CHUNK, g.chunk) if g.sink is not None else _CHUNK
     if lines is None:
         # the hot path: one pass over python-can's messages, plain appends, in chunks
         # (the progress bar moves between chunks)
         while True:
             n0 = len(g.t)
-            for msg in islice(it, _CHUNK):
+            for msg in islice(it, step):
                 if msg.is_error_frame or msg.is_remote_frame:
                     s_app((len(g.t), FRAME_ERROR if msg.is_error_frame else FRAME_REMOTE))
                 t_app(msg.timestamp)
@@ -283,7 +312,8 @@ def _consume(it: Iterator[can.Message], g: _Gather, lines: _Lines | None,
             got = len(g.t) - n0
             if bar is not None:
                 bar.update(got)
-            if got < _CHUNK:
+            g.spill()
+            if got < step:
                 return
     for msg in it:
         if lines is not None:
@@ -306,6 +336,8 @@ def _consume(it: Iterator[can.Message], g: _Gather, lines: _Lines | None,
         l_app(len(x))
         if bar is not None and not len(g.t) & 0xFFFF:
             bar.update(0x10000)
+        if len(g.t) >= g.chunk and g.sink is not None:
+            g.spill()
 
 
 def _garbage(acct: FrameAccounting, lineno: int, line: str, why: str) -> None:
@@ -316,9 +348,13 @@ def _garbage(acct: FrameAccounting, lineno: int, line: str, why: str) -> None:
                             "text": line.strip()[:80], "kind": "garbage_line"})
 
 
-def read_frames(path: str | Path, *, strict: bool = False,
-                progress: bool = True) -> tuple[RawFrames, FrameAccounting]:
+def read_frames(path: str | Path, *, strict: bool = False, progress: bool = True,
+                sink: Any = None, chunk_frames: int = 1 << 18,
+                acct: FrameAccounting | None = None) -> tuple[RawFrames, FrameAccounting]:
     """Read every frame of a CAN log with python-can (see the module docstring).
+
+    With ``sink``, frames go to ``sink(RawFrames)`` in blocks of about ``chunk_frames`` as
+    they are read (the returned frames are then empty): memory stays bounded.
 
     Returns
     -------
@@ -339,46 +375,76 @@ def read_frames(path: str | Path, *, strict: bool = False,
     if not p.is_file():
         raise FileFormatError(str(p), "no such file")
     sfx = _suffix(p)
-    acct = FrameAccounting()
-    g = _Gather()
+    acct = acct if acct is not None else FrameAccounting()
+    g = _Gather(sink, chunk_frames)
     bar = None
     if progress and p.stat().st_size > 20_000_000:
         from tqdm import tqdm
 
         bar = tqdm(desc=f"reading {p.name}", unit=" frames", unit_scale=True, leave=False)
     try:
-        if sfx in (".log", ".asc") and not str(p).lower().endswith(".gz"):
+        gz = str(p).lower().endswith(".gz")
+        if sfx in (".log", ".asc") and not gz:
             _read_text(p, sfx, g, acct, strict, bar)
+        elif sfx == ".blf" and not gz:
+            _read_blf(p, g, acct, strict, bar)
         else:
-            try:
-                reader = can.LogReader(str(p))
-            except (ValueError, NotImplementedError, ImportError) as exc:
-                if isinstance(exc, ValueError) and sfx in can.io.player.MESSAGE_READERS:
-                    # a known format whose header is damaged (e.g. a BLF header size)
-                    _reader_error(acct, p, 0, exc, strict)
-                    reader = None
-                else:
-                    raise FileFormatError(str(p), f"no CAN log reader for this file ({exc})") \
-                        from None
-            except Exception as exc:
-                _reader_error(acct, p, 0, exc, strict)
-                reader = None
-            if reader is not None:
-                try:
-                    _consume(iter(reader), g, None, acct, bar)
-                except Exception as exc:
-                    _reader_error(acct, p, len(g.t), exc, strict)
-                else:
-                    _check_blf_complete(reader, p, len(g.t), acct, strict)
-                finally:
-                    try:
-                        reader.stop()
-                    except Exception:  # closing a broken file must not hide the report
-                        pass
+            _read_binary(p, sfx, g, acct, strict, bar)
     finally:
         if bar is not None:
             bar.close()
+    g.spill(force=True)
     return g.frames(), acct
+
+
+def _read_blf(p: Path, g: _Gather, acct: FrameAccounting, strict: bool, bar: Any) -> None:
+    """A BLF file through :class:`replay.blf.ResyncBLFReader` (damage reported, resumed)."""
+    from replay.blf import ResyncBLFReader
+
+    reader = ResyncBLFReader(p)       # FileFormatError: not a BLF file
+    try:
+        _consume(iter(reader), g, None, acct, bar)
+    except Exception as exc:
+        _reader_error(acct, p, g.handed + len(g.t), exc, strict)
+    finally:
+        with contextlib.suppress(Exception):
+            reader.stop()
+    for d in reader.damage:
+        if strict:
+            raise ReplayError(f"{p}: {d['where']}: {d['why']}")
+        acct.errors.append(dict(d))
+    if not reader.damage:
+        _check_blf_complete(reader, p, g.handed + len(g.t), acct, strict)
+
+
+def _read_binary(p: Path, sfx: str, g: _Gather, acct: FrameAccounting, strict: bool,
+                 bar: Any) -> None:
+    """Any other log through python-can's reader for its suffix (cannot resume)."""
+    try:
+        reader = can.LogReader(str(p))
+    except (ValueError, NotImplementedError, ImportError) as exc:
+        if isinstance(exc, ValueError) and sfx in can.io.player.MESSAGE_READERS:
+            # a known format whose header is damaged (e.g. a BLF header size)
+            _reader_error(acct, p, 0, exc, strict)
+            reader = None
+        else:
+            raise FileFormatError(str(p), f"no CAN log reader for this file ({exc})") \
+                from None
+    except Exception as exc:
+        _reader_error(acct, p, 0, exc, strict)
+        reader = None
+    if reader is not None:
+        try:
+            _consume(iter(reader), g, None, acct, bar)
+        except Exception as exc:
+            _reader_error(acct, p, g.handed + len(g.t), exc, strict)
+        else:
+            _check_blf_complete(reader, p, g.handed + len(g.t), acct, strict)
+        finally:
+            try:
+                reader.stop()
+            except Exception:  # closing a broken file must not hide the report
+                pass
 
 
 def _reader_error(acct: FrameAccounting, p: Path, nframes: int, exc: Exception,
@@ -467,6 +533,9 @@ def resolve_map(cal: Calibration, *, dbc: str | Path | None = None,
     else:
         cmap = load_channel_map(channel_map)
     check_against_calibration(cmap, cal)
+    check_compatible(cal, cmap.n, [sc.unit for sc in cmap.sensors],
+                     f"channel map {cmap.source}", kind=cmap.kind,
+                     names=[sc.name for sc in cmap.sensors])
     db = load_dbc(dbc if dbc is not None else cmap.dbc)
     return db, cmap
 
@@ -546,3 +615,135 @@ def read_log(path: str | Path, cal: Calibration, *, dbc: str | Path | None = Non
     t_first = float(frames.t[finite].min()) if finite.any() else 0.0
     flight = samples_to_flight(samples, cal, cmap, t_first_frame=t_first, source=str(path))
     return flight, acct.to_dict()
+
+
+class LogStream:
+    """A CAN log read, decoded and handed over in pieces: bounded memory on long logs.
+
+    The log is read once; every ``chunk_frames`` frames are decoded
+    (:class:`~replay.assemble.BlockDecoder`, checks and sample numbering carried across
+    pieces) and the samples now complete are handed to ``on_samples`` as a
+    :class:`~replay.flight.Flight` piece (with the sidecar's true rates, memory-mapped).
+    The result equals :func:`read_log` except that a frame arriving after two later samples
+    have been seen is ``late`` rather than merged.
+
+    Parameters
+    ----------
+    path : str or Path
+    cal : Calibration
+    db, cmap
+        From :func:`resolve_map`.
+    strict, progress : bool
+        As :func:`read_log`.
+    chunk_frames : int
+        Frames per piece.
+    check_sensor_set : bool
+        Refuse a log that carries messages like the mapped ones for more sensors than the
+        calibration has (e.g. ``RIMU_GYRO_05`` and ``_06`` with a 4-sensor calibration);
+        for the default map, where the calibration chose the sensors.
+
+    Attributes
+    ----------
+    header : Flight
+        The log's metadata (names, rate, source, faults and truth of the sidecar), no
+        samples; ``omega_true`` is an empty (0, 3) array when the sidecar has true rates.
+    """
+
+    def __init__(self, path: str | Path, cal: Calibration, db: Any, cmap: ChannelMap, *,
+                 strict: bool = False, progress: bool = True,
+                 chunk_frames: int = 1 << 16, check_sensor_set: bool = False) -> None:
+        from replay.flight_data import Flight
+        from replay.flight_io import read_truth_sidecar
+
+        self.path = Path(path)
+        if not self.path.is_file():
+            raise FileFormatError(str(self.path), "no such file")
+        self.cal, self.db, self.cmap = cal, db, cmap
+        self.strict, self.progress = strict, progress
+        self.chunk_frames = int(chunk_frames)
+        self.check_sensor_set = check_sensor_set
+        s = cal.kind(cmap.kind)
+        self.fs = float(cal.sample_rate_hz)
+        self.t_start = 0.0
+        self._rates = None
+        faults: tuple = ()
+        truth: dict[str, Any] = {}
+        tp = truth_path(self.path)
+        if tp.is_file():
+            faults, truth, self._rates = read_truth_sidecar(tp, mmap=True)
+            self.t_start = float(truth.get("can_log", {}).get("t_start_s", 0.0))
+            self.fs = float(truth.get("sample_rate_hz", self.fs))
+            sig = truth.get("sigma")
+            if isinstance(sig, list) and truth.get("kind", cmap.kind) == cmap.kind:
+                check_compatible(cal, len(sig), None, f"{self.path} (truth sidecar {tp.name})",
+                                 kind=cmap.kind)
+        self.header = Flight(
+            t=np.zeros(0), raw=np.zeros((0, s.n)), valid=np.zeros((0, s.n), bool),
+            sample_rate_hz=self.fs, sensor_names=tuple(c.name for c in s.sensors),
+            raw_unit=s.sensors[0].raw_unit if s.n else "raw",
+            omega_true=None if self._rates is None else np.zeros((0, 3)),
+            faults=tuple(faults), truth=truth, source=str(self.path), kind=cmap.kind)
+        self.acct = FrameAccounting()
+        self.decoder = BlockDecoder(db, cmap, self.acct, sample_rate_hz=cal.sample_rate_hz)
+        self.samples = 0
+
+    def _piece(self, smp: Samples) -> Any:
+        t = smp.t - float(self.decoder.t_first or 0.0) + self.t_start
+        rates = None
+        if self._rates is not None:
+            k = np.clip(np.rint(t * self.fs).astype(np.int64), 0, self._rates.shape[0] - 1)
+            rates = np.asarray(self._rates[k], float)
+        return replace(self.header, t=t, raw=smp.raw, valid=smp.valid, omega_true=rates)
+
+    def run(self, on_samples: Any) -> dict[str, Any]:
+        """Read the whole log, calling ``on_samples(flight_piece)``; returns the accounting.
+
+        Raises
+        ------
+        FileFormatError, ReplayError
+            As :func:`read_log` (``strict``: after the first piece with corrupt frames).
+        """
+        def sink(frames: RawFrames) -> None:
+            smp = self.decoder.feed(frames)
+            self._check_strict()
+            self._check_sensor_set()
+            if smp.t.size:
+                self.samples += smp.t.size
+                on_samples(self._piece(smp))
+
+        read_frames(self.path, strict=self.strict, progress=self.progress, sink=sink,
+                    chunk_frames=self.chunk_frames, acct=self.acct)
+        self._check_sensor_set()
+        smp = self.decoder.flush()
+        self._check_strict()
+        if smp.t.size:
+            self.samples += smp.t.size
+            on_samples(self._piece(smp))
+        return self.acct.to_dict()
+
+    def _check_sensor_set(self) -> None:
+        seen = self.decoder.siblings_seen
+        if self.check_sensor_set and seen:
+            n = self.cmap.n
+            raise ConfigError(
+                f"{self.path}: the log also carries {', '.join(sorted(seen))}, which the "
+                f"{n}-sensor calibration of {self.cal.configuration} has no {self.cmap.kind} "
+                "sensor for: a calibration only applies to the sensor set it was made for "
+                "(give --map to replay a subset on purpose)")
+
+    def silent_sensors(self) -> list[str]:
+        """Names of the sensors that delivered no frame at all."""
+        names = self.header.sensor_names
+        out = []
+        for k, slot in enumerate(self.decoder.slots):
+            if self.decoder.delivered[k] == 0:
+                out.extend(names[i] for i in slot.sensors)
+        return out
+
+    def _check_strict(self) -> None:
+        if not self.strict:
+            return
+        bad = {k: v for k, v in self.acct.rejected.items() if k in CORRUPTION_REASONS and v}
+        if bad:
+            raise ReplayError(f"{self.path}: corrupt frames: "
+                              + ", ".join(f"{v} {k}" for k, v in sorted(bad.items())))

@@ -47,7 +47,8 @@ from fdi.calfile import Calibration
 from fdi.units import DPS
 from replay.flight_data import Flight
 
-__all__ = ["ALARM_TYPES", "REPORT_SCHEMA", "build_report", "format_report", "format_summary"]
+__all__ = ["ALARM_TYPES", "REPORT_SCHEMA", "RunningReport", "build_report", "format_report",
+           "format_summary"]
 
 REPORT_SCHEMA = "rimu.report/1"
 ALARM_TYPES = ("detected", "isolated", "health")
@@ -103,6 +104,156 @@ def _fault_outcome(f: Any, events: Sequence[Mapping[str, Any]], fs: float,
             "isolation_correct": None if iso is None else iso.get("sensor") == f.sensor}
 
 
+class _Median:
+    """Median of a stream of positive numbers in bounded memory.
+
+    Exact (all values kept) up to ``exact_max`` values (default :data:`EXACT_MAX`); beyond,
+    a histogram of 200 log-spaced bins per decade over 1e-9 … 1e6 takes over (the median is
+    then the centre of its bin: within 0.6 % of the exact value).
+    """
+
+    EXACT_MAX = 1 << 20
+    EDGES = np.logspace(-9.0, 6.0, 15 * 200 + 1)
+
+    def __init__(self, exact_max: int = EXACT_MAX) -> None:
+        self.exact_max = int(exact_max)
+        self._vals: list[np.ndarray] = []
+        self._n = 0
+        self._hist: np.ndarray | None = None
+
+    def add(self, x: np.ndarray) -> None:
+        x = np.asarray(x, float)
+        x = x[np.isfinite(x)]
+        if x.size == 0:
+            return
+        self._n += x.size
+        if self._hist is None:
+            self._vals.append(x.copy())
+            if self._n > self.exact_max:
+                self._hist = np.zeros(self.EDGES.size - 1, np.int64)
+                for v in self._vals:
+                    self._bin(v)
+                self._vals = []
+        else:
+            self._bin(x)
+
+    def _bin(self, x: np.ndarray) -> None:
+        k = np.clip(np.searchsorted(self.EDGES, x, side="right") - 1, 0, self.EDGES.size - 2)
+        self._hist += np.bincount(k, minlength=self.EDGES.size - 1)
+
+    def median(self) -> float | None:
+        if self._n == 0:
+            return None
+        if self._hist is None:
+            return float(np.median(np.concatenate(self._vals)))
+        k = int(np.searchsorted(np.cumsum(self._hist), (self._n + 1) / 2.0))
+        return float(np.sqrt(self.EDGES[k] * self.EDGES[k + 1]))
+
+
+class RunningReport:
+    """The report's running summaries over a monitoring run fed in pieces (bounded memory).
+
+    :meth:`update` takes each piece of the monitor's answers (``Monitor.run`` over a block
+    of samples, or a few live answers) with the true rates of those samples when known; it
+    keeps the events, the last health and capability, counts and sums, never the answers.
+    :meth:`build` makes the ``rimu.report/1`` dictionary (:func:`build_report` is one
+    update and a build).
+
+    Parameters
+    ----------
+    median_exact_max : int
+        Protection levels kept for an exact median; beyond, a histogram (0.6 %). A live
+        monitor gives a small number so that its memory stops growing early.
+    """
+
+    def __init__(self, median_exact_max: int = _Median.EXACT_MAX) -> None:
+        self.events: list[Any] = []
+        self.samples = 0
+        self.healthy_end: list[bool] | None = None
+        self.capability_end: str | None = None
+        self.n_ok = 0
+        self._pl = _Median(median_exact_max)
+        self._err_sq = np.zeros(3)
+        self._n_err = 0
+        self._breaches: int | None = None
+
+    def update(self, result: Any, omega_true: np.ndarray | None = None) -> None:
+        """Add one piece of answers (``BlockResult``) and the true rates of its samples."""
+        N = int(np.asarray(result.t).shape[0])
+        self.events.extend(result.events)
+        if N == 0:
+            return
+        self.samples += N
+        healthy = np.asarray(result.healthy, bool)
+        self.healthy_end = healthy[-1].tolist()
+        self.capability_end = str(np.asarray(result.capability)[-1])
+        omega = np.asarray(result.omega, float)
+        ok = np.all(np.isfinite(omega), axis=1)
+        self.n_ok += int(np.count_nonzero(ok))
+        pl = np.asarray(getattr(result, "protection_level", np.zeros(0)), float)
+        pl_ok = pl.shape == ok.shape
+        if pl_ok:
+            self._pl.add(pl[ok] / DPS)
+        if omega_true is not None and ok.any():
+            tru = np.asarray(omega_true, float)
+            err = (omega[ok] - tru[ok]) / DPS
+            self._err_sq += np.sum(err ** 2, axis=0)
+            self._n_err += int(np.count_nonzero(ok))
+            if pl_ok:
+                norm = np.linalg.norm(omega - tru, axis=1)
+                self._breaches = (self._breaches or 0) + int(np.sum(ok & (norm > pl)))
+
+    def build(self, flight: Flight, cal: Calibration, *,
+              frames: Mapping[str, Any] | None = None, kind: str | None = None,
+              extra: Mapping[str, Any] | None = None) -> dict[str, Any]:
+        """The ``rimu.report/1`` dictionary (see :func:`build_report`); ``flight`` gives
+        the source, names, rate, faults and truth (its arrays are not read)."""
+        kind = kind or flight.kind
+        fs = float(flight.sample_rate_hz)
+        truth = _has_truth(flight)
+        events = sorted((_event_dict(e) for e in self.events),
+                        key=lambda e: float(e["t"]))      # stable: keeps in-sample order
+        faults = list(flight.faults)
+        for e in events:
+            e["false_alarm"] = _is_false_alarm(e, faults) if truth else None
+        outcomes = [_fault_outcome(f, events, fs, faults) for f in faults] if truth else []
+        isolated = sorted({int(e["sensor"]) for e in events
+                           if e["type"] in _ISOLATING and e.get("sensor") is not None})
+        summary: dict[str, Any] = {
+            "events": len(events),
+            "isolated_sensors": isolated,
+            "healthy_at_end": (self.healthy_end if self.healthy_end is not None
+                               else [True] * flight.n),
+            "capability_at_end": self.capability_end,
+            "false_alarms": (sum(bool(e["false_alarm"]) for e in events) if truth else None),
+            "detection_delay_s": [o["detection_delay_s"] for o in outcomes],
+            "isolation_delay_s": [o["isolation_delay_s"] for o in outcomes],
+            "isolation_correct": [o["isolation_correct"] for o in outcomes],
+            "rate_error_rms_dps": None,
+            "rate_error_rms_axis_dps": None,
+            "rate_available_fraction": self.n_ok / self.samples if self.samples else 0.0,
+            "protection_level_median_dps": self._pl.median(),
+            "integrity_breaches": None,
+        }
+        if self._n_err:
+            summary["rate_error_rms_dps"] = float(np.sqrt(self._err_sq.sum()
+                                                          / (3 * self._n_err)))
+            summary["rate_error_rms_axis_dps"] = np.sqrt(self._err_sq / self._n_err).tolist()
+            summary["integrity_breaches"] = self._breaches
+        report: dict[str, Any] = {
+            "schema": REPORT_SCHEMA, "source": flight.source,
+            "configuration": cal.configuration, "kind": kind, "samples": self.samples,
+            "duration_s": self.samples / fs if fs > 0 else 0.0,
+            "sample_rate_hz": fs, "sensor_names": list(flight.sensor_names), "truth": truth,
+            "events": events, "faults": outcomes, "summary": summary,
+        }
+        if frames is not None:
+            report["frames"] = dict(frames)
+        if extra:
+            report.update(dict(extra))
+        return report
+
+
 def build_report(result: Any, flight: Flight, cal: Calibration, *,
                  frames: Mapping[str, Any] | None = None, kind: str | None = None,
                  extra: Mapping[str, Any] | None = None) -> dict[str, Any]:
@@ -127,61 +278,10 @@ def build_report(result: Any, flight: Flight, cal: Calibration, *,
     dict
         JSON-ready (see the module docstring).
     """
-    kind = kind or flight.kind
-    fs = float(flight.sample_rate_hz)
-    truth = _has_truth(flight)
-    events = sorted((_event_dict(e) for e in result.events),
-                    key=lambda e: float(e["t"]))          # stable: keeps in-sample order
-    faults = list(flight.faults)
-    for e in events:
-        e["false_alarm"] = _is_false_alarm(e, faults) if truth else None
-    outcomes = [_fault_outcome(f, events, fs, faults) for f in faults] if truth else []
-
-    healthy = np.asarray(result.healthy, bool)
-    isolated = sorted({int(e["sensor"]) for e in events
-                       if e["type"] in _ISOLATING and e.get("sensor") is not None})
-    healthy_end = healthy[-1].tolist() if healthy.shape[0] else [True] * flight.n
-    cap = np.asarray(result.capability)
-    summary: dict[str, Any] = {
-        "events": len(events),
-        "isolated_sensors": isolated,
-        "healthy_at_end": healthy_end,
-        "capability_at_end": str(cap[-1]) if cap.shape[0] else None,
-        "false_alarms": (sum(bool(e["false_alarm"]) for e in events) if truth else None),
-        "detection_delay_s": [o["detection_delay_s"] for o in outcomes],
-        "isolation_delay_s": [o["isolation_delay_s"] for o in outcomes],
-        "isolation_correct": [o["isolation_correct"] for o in outcomes],
-        "rate_error_rms_dps": None,
-        "rate_error_rms_axis_dps": None,
-    }
-    omega = np.asarray(result.omega, float)
-    ok = np.all(np.isfinite(omega), axis=1) if omega.size else np.zeros(0, bool)
-    summary["rate_available_fraction"] = float(ok.mean()) if ok.size else 0.0
-    pl = np.asarray(getattr(result, "protection_level", np.zeros(0)), float)
-    summary["protection_level_median_dps"] = None
-    summary["integrity_breaches"] = None
-    if pl.shape == ok.shape and ok.any():
-        fin = ok & np.isfinite(pl)
-        if fin.any():
-            summary["protection_level_median_dps"] = float(np.median(pl[fin]) / DPS)
-    if flight.omega_true is not None and ok.any():
-        err = (omega[ok] - flight.omega_true[ok]) / DPS
-        summary["rate_error_rms_dps"] = float(np.sqrt(np.mean(err ** 2)))
-        summary["rate_error_rms_axis_dps"] = np.sqrt(np.mean(err ** 2, axis=0)).tolist()
-        if pl.shape == ok.shape:
-            norm = np.linalg.norm(omega - flight.omega_true, axis=1)
-            summary["integrity_breaches"] = int(np.sum(ok & (norm > pl)))
-    report: dict[str, Any] = {
-        "schema": REPORT_SCHEMA, "source": flight.source, "configuration": cal.configuration,
-        "kind": kind, "samples": int(flight.t.shape[0]), "duration_s": flight.duration_s,
-        "sample_rate_hz": fs, "sensor_names": list(flight.sensor_names), "truth": truth,
-        "events": events, "faults": outcomes, "summary": summary,
-    }
-    if frames is not None:
-        report["frames"] = dict(frames)
-    if extra:
-        report.update(dict(extra))
-    return report
+    acc = RunningReport()
+    om = flight.omega_true
+    acc.update(result, om if om is not None and len(om) == len(result.t) else None)
+    return acc.build(flight, cal, frames=frames, kind=kind, extra=extra)
 
 
 def _fmt(x: Any, unit: str = "", prec: str = ".4g") -> str:

@@ -15,13 +15,15 @@ Entities, all on one timeline ``"time"`` (duration, seconds of flight time)::
     events                   one TextLog per monitor event (WARN detected, ERROR isolated,
                              WARN health, INFO readmitted)
 
-:func:`record` logs all of it with one ``send_columns`` per entity (never ``rr.log`` per
-sample) and writes it with ``save`` (headless) and/or ``spawn`` (viewer), with a blueprint
+:class:`Recorder` logs it piece by piece (one ``send_columns`` per entity and piece, never
+``rr.log`` per sample; a long replay streams its pieces to the file) and :func:`record` in one
+piece, and writes it with ``save`` (headless) and/or ``spawn`` (viewer), with a blueprint
 laying out raw | compensated, ω̂ vs truth, detector statistics | parity, health | events.
 """
 
 from __future__ import annotations
 
+import contextlib
 import time
 from pathlib import Path
 from typing import Any
@@ -33,7 +35,7 @@ import rerun.blueprint as rrb
 from fdi.calfile import Calibration
 from fdi.units import DPS
 
-__all__ = ["ENTITIES", "blueprint", "record"]
+__all__ = ["ENTITIES", "Recorder", "blueprint", "record"]
 
 ENTITIES = ("sensors/raw", "sensors/compensated", "sensors/health", "parity", "omega/estimate",
             "integrity/protection_level_dps", "events")
@@ -80,10 +82,130 @@ def _series(rec: rr.RecordingStream, path: str, t: np.ndarray, values: np.ndarra
                      columns=rr.Scalars.columns(scalars=v))
 
 
+class Recorder:
+    """A rerun recording written piece by piece (bounded memory on long runs).
+
+    Parameters
+    ----------
+    cal : Calibration
+    sensor_names : sequence of str
+    kind : str
+    has_truth : bool
+        Whether pieces come with true rates (adds ``omega/truth`` and ``omega/error``).
+    path : path, optional
+        ``.rrd`` file to write (headless).
+    spawn : bool
+        Also open the rerun viewer.
+    thresholds : fdi.settings.Thresholds, optional
+        Names the statistic columns.
+    application_id : str
+    """
+
+    def __init__(self, cal: Calibration, sensor_names: Any, kind: str = "gyro", *,
+                 has_truth: bool = False, path: str | Path | None = None, spawn: bool = False,
+                 thresholds: Any = None, application_id: str = "rimu") -> None:
+        self.s = cal.kind(kind)
+        self.kind = kind
+        self.names = list(sensor_names)
+        self.has_truth = has_truth
+        self.thresholds = thresholds
+        self.path = path
+        self.rows = 0
+        self.log_s = 0.0
+        self._events = 0
+        self._t_first: float | None = None
+        self._static_done = False
+        self._closed = False
+        bp = blueprint(has_truth)
+        t0 = time.perf_counter()
+        self.rec = rr.RecordingStream(application_id)
+        if path is not None:
+            self.rec.save(str(path), default_blueprint=bp)
+        if spawn:
+            self.rec.spawn(default_blueprint=bp)
+        self.log_s += time.perf_counter() - t0
+
+    def _series(self, path: str, t: np.ndarray, values: np.ndarray, names: list[str]) -> None:
+        v = np.asarray(values, dtype=np.float64)
+        if v.ndim == 1:
+            v = v[:, None]
+        if not self._static_done:
+            self.rec.log(path, rr.SeriesLines(names=names), static=True)
+        self.rec.send_columns(path, indexes=[rr.TimeColumn("time", duration=t)],
+                              columns=rr.Scalars.columns(scalars=v))
+
+    def log(self, result: Any, flight: Any) -> None:
+        """Log one piece: the answers ``result`` for the samples of ``flight``."""
+        t = np.asarray(result.t, dtype=np.float64)
+        if t.size == 0:
+            return
+        t0 = time.perf_counter()
+        if self._t_first is None:
+            self._t_first = float(t[0])
+        s, names = self.s, self.names
+        unit = DPS if self.kind == "gyro" else 1.0
+        raw = np.asarray(flight.raw, float)
+        self._series("sensors/raw", t, raw, names)
+        self._series("sensors/compensated", t, (raw * s.scale_factors - s.biases) / unit, names)
+        self._series("sensors/health", t, np.asarray(result.healthy, float), names)
+        par = getattr(result, "parity", None)
+        if par is None or np.asarray(par).shape[0] != t.size:
+            par = np.full((t.size, max(s.n - 3, 1)), np.nan)
+        par = np.asarray(par, float)
+        self._series("parity", t, par, [f"p{j + 1}" for j in range(par.shape[1])])
+        stats = np.asarray(result.statistics, float)
+        thr = np.asarray(result.thresholds, float)
+        for j, name in enumerate(_scale_names(self.thresholds, stats.shape[1])):
+            self._series(f"detector/{name}", t, np.column_stack([stats[:, j], thr[:, j]]),
+                         ["statistic", "threshold"])
+        axes = ["x", "y", "z"]
+        omega = np.asarray(result.omega, float) / unit
+        self._series("omega/estimate", t, omega, [f"ω̂{a}" for a in axes])
+        tru = getattr(flight, "omega_true", None)
+        if self.has_truth and tru is not None and len(tru) == t.size:
+            tru = np.asarray(tru, float) / unit
+            self._series("omega/truth", t, tru, [f"ω{a}" for a in axes])
+            self._series("omega/error", t, omega - tru, [f"δω{a}" for a in axes])
+        self._series("integrity/protection_level_dps", t,
+                     np.asarray(result.protection_level, float) / unit, ["protection level"])
+        self._static_done = True
+        ev = list(result.events)
+        if ev:
+            et = np.array([float(e.t) for e in ev])
+            self.rec.send_columns(
+                "events", indexes=[rr.TimeColumn("time", duration=et)],
+                columns=rr.TextLog.columns(text=[_event_text(e, names) for e in ev],
+                                           level=[_LEVEL.get(e.type, "INFO") for e in ev]))
+            self._events += len(ev)
+        self.rows += int(t.size)
+        self.log_s += time.perf_counter() - t0
+
+    def abort(self) -> None:
+        """Stop recording without finishing (after an error); harmless after :meth:`close`."""
+        if not self._closed:
+            self._closed = True
+            with contextlib.suppress(Exception):
+                self.rec.disconnect()
+
+    def close(self) -> dict[str, float]:
+        """Flush and close; returns ``{"log_s", "flush_s", "rows"}``."""
+        self._closed = True
+        if self._events == 0:
+            tf = np.array([self._t_first if self._t_first is not None else 0.0])
+            self.rec.send_columns("events", indexes=[rr.TimeColumn("time", duration=tf)],
+                                  columns=rr.TextLog.columns(text=["no events"],
+                                                             level=["INFO"]))
+        t1 = time.perf_counter()
+        self.rec.flush()
+        if self.path is not None:
+            self.rec.disconnect()
+        return {"log_s": self.log_s, "flush_s": time.perf_counter() - t1, "rows": self.rows}
+
+
 def record(result: Any, flight: Any, cal: Calibration, *, path: str | Path | None = None,
            spawn: bool = False, kind: str | None = None, thresholds: Any = None,
            application_id: str = "rimu") -> dict[str, float]:
-    """Write a monitoring run as a rerun recording.
+    """Write a monitoring run as a rerun recording (one :class:`Recorder` piece).
 
     Parameters
     ----------
@@ -107,58 +229,11 @@ def record(result: Any, flight: Any, cal: Calibration, *, path: str | Path | Non
         ``{"log_s": ..., "flush_s": ..., "rows": N}`` timings.
     """
     kind = kind or flight.kind
-    s = cal.kind(kind)
-    t = np.asarray(result.t, dtype=np.float64)
-    has_truth = flight.omega_true is not None and len(flight.omega_true) == len(t)
-    bp = blueprint(has_truth)
-    rec = rr.RecordingStream(application_id)
-    t0 = time.perf_counter()
-    if path is not None:
-        rec.save(str(path), default_blueprint=bp)
-    if spawn:
-        rec.spawn(default_blueprint=bp)
-    names = list(flight.sensor_names)
-    unit = DPS if kind == "gyro" else 1.0
-    _series(rec, "sensors/raw", t, flight.raw, names)
-    y = (flight.raw * s.scale_factors - s.biases) / unit
-    _series(rec, "sensors/compensated", t, y, names)
-    _series(rec, "sensors/health", t, np.asarray(result.healthy, float), names)
-    par = getattr(result, "parity", None)
-    if par is None:
-        par = np.full((len(t), max(s.n - 3, 1)), np.nan)
-    par = np.asarray(par, float)
-    _series(rec, "parity", t, par, [f"p{j + 1}" for j in range(par.shape[1])])
-    stats = np.asarray(result.statistics, float)
-    thr = np.asarray(result.thresholds, float)
-    scales = _scale_names(thresholds, stats.shape[1])
-    for j, name in enumerate(scales):
-        _series(rec, f"detector/{name}", t, np.column_stack([stats[:, j], thr[:, j]]),
-                ["statistic", "threshold"])
-    axes = ["x", "y", "z"]
-    omega = np.asarray(result.omega, float) / unit
-    _series(rec, "omega/estimate", t, omega, [f"ω̂{a}" for a in axes])
-    if has_truth:
-        tru = np.asarray(flight.omega_true, float) / unit
-        _series(rec, "omega/truth", t, tru, [f"ω{a}" for a in axes])
-        _series(rec, "omega/error", t, omega - tru, [f"δω{a}" for a in axes])
-    _series(rec, "integrity/protection_level_dps", t,
-            np.asarray(result.protection_level, float) / unit, ["protection level"])
-    ev = list(result.events)
-    if ev:
-        et = np.array([float(e.t) for e in ev])
-        text = [_event_text(e, names) for e in ev]
-        lvl = [_LEVEL.get(e.type, "INFO") for e in ev]
-        rec.send_columns("events", indexes=[rr.TimeColumn("time", duration=et)],
-                         columns=rr.TextLog.columns(text=text, level=lvl))
-    else:
-        rec.send_columns("events", indexes=[rr.TimeColumn("time", duration=t[:1])],
-                         columns=rr.TextLog.columns(text=["no events"], level=["INFO"]))
-    t1 = time.perf_counter()
-    rec.flush()
-    if path is not None:
-        rec.disconnect()
-    t2 = time.perf_counter()
-    return {"log_s": t1 - t0, "flush_s": t2 - t1, "rows": len(t)}
+    has_truth = flight.omega_true is not None and len(flight.omega_true) == len(result.t)
+    rec = Recorder(cal, flight.sensor_names, kind, has_truth=has_truth, path=path,
+                   spawn=spawn, thresholds=thresholds, application_id=application_id)
+    rec.log(result, flight)
+    return rec.close()
 
 
 def _scale_names(thresholds: Any, K: int) -> list[str]:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import logging
 import sys
 from collections.abc import Sequence
 
@@ -38,6 +39,46 @@ SIMULATE: dict[str, str] = {
 """``rimu simulate KIND`` sub-commands."""
 
 
+class _Parser(argparse.ArgumentParser):
+    """An argument parser whose usage errors are one line on stderr (exit 2)."""
+
+    def error(self, message: str):  # type: ignore[override]
+        self.exit(2, f"rimu: error: {message} (see {self.prog} --help)\n")
+
+
+class _StderrHandler(logging.StreamHandler):
+    """Writes to whatever ``sys.stderr`` is at the time (tests swap it)."""
+
+    @property  # type: ignore[override]
+    def stream(self):
+        return sys.stderr
+
+    @stream.setter
+    def stream(self, value) -> None:
+        pass
+
+
+class _Lower(logging.Formatter):
+    def format(self, record: logging.LogRecord) -> str:
+        return super().format(record).replace(record.levelname, record.levelname.lower(), 1)
+
+
+def _log_to_stderr() -> None:
+    """Warnings and diagnostics go to stderr through :mod:`logging` (stdout stays clean)."""
+    root = logging.getLogger("rimu")
+    if not any(getattr(h, "_rimu", False) for h in root.handlers):
+        h = _StderrHandler()
+        h.setFormatter(_Lower("rimu: %(levelname)s: %(message)s"))
+        h._rimu = True  # type: ignore[attr-defined]
+        root.addHandler(h)
+    root.setLevel(logging.INFO)
+    root.propagate = False
+    logging.captureWarnings(True)
+    pw = logging.getLogger("py.warnings")
+    if not pw.handlers:
+        pw.addHandler(root.handlers[0])
+
+
 def _add(sub: argparse._SubParsersAction, name: str, module: str) -> None:
     try:
         mod = importlib.import_module(module)
@@ -52,7 +93,7 @@ def _add(sub: argparse._SubParsersAction, name: str, module: str) -> None:
 
 def build_parser() -> argparse.ArgumentParser:
     """The full argument parser."""
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="rimu", description="Fault detection and isolation for redundant IMUs.")
     parser.add_argument("--version", action="version", version=f"rimu {__version__}")
     parser.add_argument("--debug", action="store_true",
@@ -72,7 +113,11 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the CLI; returns the exit code."""
     parser = build_parser()
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:       # --help, --version, or a usage error (one line, exit 2)
+        return int(exc.code or 0) if not isinstance(exc.code, str) else 2
+    _log_to_stderr()
     run = getattr(args, "_run", None)
     if run is None:
         parser.print_help()
@@ -89,3 +134,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 130
     except BrokenPipeError:
         return 1
+    except OSError as exc:          # disk full, permission lost mid-run: one line too
+        if args.debug:
+            raise
+        print(f"rimu: error: {exc}", file=sys.stderr)
+        return 2

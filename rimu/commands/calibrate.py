@@ -8,7 +8,7 @@ summary; ``--compare TRUTH`` adds estimate, truth, error and error/σ side by si
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
+import logging
 
 import numpy as np
 
@@ -138,7 +138,6 @@ def summary_text(cal: Calibration) -> str:
                      + (" - not resolved at this noise level (below 3 sd)"
                         if cal.earth_rate_dph < 3 * (cal.earth_rate_dph_sd or 0.0) else ""))
     lines.extend(_noise_lines(ex.get("noise_model")))
-    lines.extend(f"warning: {w}" for w in ex.get("warnings", []))
     from calibration.diagnose.checked import format_adequacy
 
     lines.extend(format_adequacy(cal))
@@ -148,27 +147,41 @@ def summary_text(cal: Calibration) -> str:
 def run(args: argparse.Namespace) -> int:
     from calibration.diagnose.cli import calibrate_with_check
     from calibration.session_io import load_session
+    from fdi.calfile import check_plausible
+    from rimu.outputs import atomic_file, input_path, output_dir, output_file
 
     if args.ferraris:
         return ferraris_command(args)
     if args.session is None:
         raise ConfigError("rimu calibrate: give a session directory (or --ferraris CSV)")
-    session = load_session(args.session)
-    cal = calibrate_with_check(session, args, bias_method=args.bias_method,
-                               denoise=not args.no_denoise, noise_model=args.noise_model)
-    out = Path(args.out)
-    if out.parent and not out.parent.exists():
-        raise ConfigError(f"{args.out}: directory {out.parent} does not exist")
-    cal.save(out)
-    print(summary_text(cal))
-    print(f"wrote {out}")
+    out = output_file(args.out, "--out")
     if args.compare:
-        from calibration.compare import compare, format_comparison
+        input_path(args.compare, "--compare")
+    if args.plot:
+        output_dir(args.plot, "--plot")
+    session = load_session(args.session)
+    truth = None
+    if args.compare:
         from calibration.truth import load_truth
 
         truth, effects, _ = load_truth(args.compare)
+    cal = calibrate_with_check(session, args, bias_method=args.bias_method,
+                               denoise=not args.no_denoise, noise_model=args.noise_model)
+    check_plausible(cal, str(args.session))
+    compared = None
+    if truth is not None:
+        from calibration.compare import compare, format_comparison
+
+        compared = format_comparison(compare(cal, truth, effects))
+    with atomic_file(out) as tmp:
+        cal.save(tmp)
+    print(summary_text(cal))
+    for w in cal.extra.get("warnings", []):
+        logging.getLogger("rimu").warning(w)
+    print(f"wrote {out}")
+    if compared is not None:
         print(f"\ncompared with {args.compare}:")
-        print(format_comparison(compare(cal, truth, effects)))
+        print(compared)
     if args.plot:
         from calibration.plots import write_plots
 

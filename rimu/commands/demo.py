@@ -15,14 +15,20 @@ import json
 import time
 from pathlib import Path
 
+from rimu.argtypes import SEED_MAX, nonnegative_int, positive_float
+
+MAX_DURATION_S = 3600.0
+"""Longest demo flight (s): one hour is already a 130 MB BLF log."""
+
 HELP = "run the whole chain on a simulated cone of six MEMS sensors (no downloads)"
 
 
 def configure(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", default="rimu-demo", help="output directory (default: rimu-demo)")
-    p.add_argument("--seed", type=int, default=7, help="random seed (default 7)")
-    p.add_argument("--duration", type=float, default=60.0,
-                   help="flight duration in seconds (default 60)")
+    p.add_argument("--seed", type=nonnegative_int(SEED_MAX), default=7,
+                   help="random seed (default 7)")
+    p.add_argument("--duration", type=positive_float(MAX_DURATION_S), default=60.0,
+                   help=f"flight duration in seconds (default 60, at most {MAX_DURATION_S:g})")
     p.add_argument("--no-rrd", action="store_true", help="skip the rerun recording")
 
 
@@ -31,6 +37,18 @@ def _say(step: int, text: str) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from rimu.outputs import atomic_dir, output_dir
+
+    final = output_dir(args.out, "--out")
+    t0 = time.perf_counter()
+    with atomic_dir(final) as out:
+        _demo(args, out, final)
+    print(f"\ndone in {time.perf_counter() - t0:.1f} s; outputs in {final}/")
+    return 0
+
+
+def _demo(args: argparse.Namespace, out: Path, final: Path) -> None:
+    """The six steps, writing into ``out`` (a temporary folder renamed to ``final``)."""
     from calibration.calibrate import calibrate
     from calibration.compare import compare, format_comparison
     from calibration.presets import preset
@@ -43,31 +61,29 @@ def run(args: argparse.Namespace) -> int:
     from replay.report import build_report, format_summary
     from thresholds import compute_thresholds
 
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    t0 = time.perf_counter()
-
     _say(1, "simulating a cone6 turntable session (seed 001 Tables 1-2, preset cone-paper)")
     p = preset("cone-paper")
     session = simulate_session(p.config, p.sequence, p.truth, seed=args.seed,
                                accel_config=p.accel_config, noise=p.noise)
     sess_dir = out / "session"
     save_simulation(session, p.truth, sess_dir)
-    print(f"  {session.t.size} samples, {len(session.steps)} steps -> {sess_dir}")
+    print(f"  {session.t.size} samples, {len(session.steps)} steps -> {final / 'session'}")
 
     _say(2, "calibrating (rate test, multi-position test, Earth rate removed)")
     cal = calibrate(session)
+    if isinstance(cal.extra, dict):
+        cal.extra["source"] = str(final / "session")
     cal_path = out / "cal.json"
     cal.save(cal_path)
     cal = load_calibration(cal_path)
     print(format_comparison(compare(cal, p.truth)))
-    print(f"  -> {cal_path}")
+    print(f"  -> {final / 'cal.json'}")
 
     _say(3, "thresholds for 1e-3 false alarms per hour")
     thr = compute_thresholds(cal, false_alarms_per_hour=1e-3)
     thr_path = out / "thresholds.json"
     thr.save(thr_path)
-    print(f"  {len(thr.scales)} dyadic scales -> {thr_path}")
+    print(f"  {len(thr.scales)} dyadic scales -> {final / 'thresholds.json'}")
 
     _say(4, "simulating a flight with two successive faults, written as a CAN log")
     specs = ["step:3:8sigma:20", "ramp:5:0.5sigma/s:35"]
@@ -75,19 +91,20 @@ def run(args: argparse.Namespace) -> int:
     flight = simulate_flight(cal, args.duration, seed=args.seed, faults=faults)
     log_path = out / "flight.blf"
     write_flight_log(flight, log_path)
-    print(f"  {flight.t.size} samples, faults {', '.join(specs)} -> {log_path}")
+    print(f"  {flight.t.size} samples, faults {', '.join(specs)} -> {final / 'flight.blf'}")
 
     _say(5, "replaying the log through the monitor")
     replayed, frames = read_log(log_path, cal, progress=False)
     mon = Monitor(cal, thr)
     result = mon.run(replayed.t, replayed.raw, replayed.valid)
     report = build_report(result, replayed, cal, frames=frames)
+    report["source"] = str(final / "flight.blf")
     for e in report["events"]:
         print(f"  t={e['t']:8.2f} s  sensor {e['sensor']}  {e['type']:9s} {e['reason']}")
     print(format_summary(report))
     rep_path = out / "report.json"
-    rep_path.write_text(json.dumps(report, indent=1) + "\n", encoding="utf-8")
-    print(f"  -> {rep_path}")
+    rep_path.write_text(json.dumps(report, indent=1, allow_nan=False) + "\n", encoding="utf-8")
+    print(f"  -> {final / 'report.json'}")
 
     _say(6, "rerun recording")
     if args.no_rrd:
@@ -97,6 +114,4 @@ def run(args: argparse.Namespace) -> int:
 
         rrd = out / "replay.rrd"
         record(result, replayed, cal, path=rrd, thresholds=thr)
-        print(f"  -> {rrd}  (open with: rerun {rrd})")
-    print(f"\ndone in {time.perf_counter() - t0:.1f} s; outputs in {out}/")
-    return 0
+        print(f"  -> {final / 'replay.rrd'}  (open with: rerun {final / 'replay.rrd'})")

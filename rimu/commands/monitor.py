@@ -3,10 +3,20 @@
 from __future__ import annotations
 
 import argparse
+import logging
 
 from fdi.calfile import load_calibration
 from fdi.errors import ConfigError, ReplayError
-from rimu.commands.replay import add_monitor_options, make_monitor, write_report
+from rimu.argtypes import positive_float, positive_int
+from rimu.commands.replay import (
+    add_monitor_options,
+    check_monitor_paths,
+    make_monitor,
+    write_report,
+)
+
+DEFAULT_WINDOW = 6000
+"""Answers the live monitor keeps (one minute at 100 Hz); memory stays constant."""
 
 HELP = "monitor a live CAN bus (socketcan, virtual, ...); print events as they happen"
 
@@ -15,22 +25,29 @@ def configure(p: argparse.ArgumentParser) -> None:
     p.add_argument("--interface", required=True,
                    help="python-can interface: socketcan, virtual, pcan, kvaser, ...")
     p.add_argument("--channel", required=True, help="bus channel: can0, vcan0, a name, ...")
-    p.add_argument("--bitrate", type=int, help="bit rate, where the interface sets it")
+    p.add_argument("--bitrate", type=positive_int(20_000_000),
+                   help="bit rate, where the interface sets it")
     add_monitor_options(p)
-    p.add_argument("--duration", type=float, metavar="S", help="stop after S seconds")
-    p.add_argument("--max-frames", type=int, metavar="N", help="stop after N frames")
-    p.add_argument("--idle-timeout", type=float, metavar="S",
+    p.add_argument("--duration", type=positive_float(1e9), metavar="S",
+                   help="stop after S seconds")
+    p.add_argument("--max-frames", type=positive_int(), metavar="N", help="stop after N frames")
+    p.add_argument("--idle-timeout", type=positive_float(1e9), metavar="S",
                    help="stop after S seconds without a frame")
+    p.add_argument("--window", type=positive_int(10_000_000), default=DEFAULT_WINDOW,
+                   metavar="N", help=f"answers kept in memory (default {DEFAULT_WINDOW}); "
+                   "events and the report's summaries cover the whole run")
 
 
 def run(args: argparse.Namespace) -> int:
     import can
+    import numpy as np
 
     from replay.flight import Flight
     from replay.live import StreamDecoder, format_event, run_live
     from replay.logio import resolve_map
-    from replay.report import build_report, format_report
+    from replay.report import RunningReport, format_report
 
+    check_monitor_paths(args)
     cal = load_calibration(args.cal)
     db, cmap = resolve_map(cal, dbc=args.dbc, channel_map=args.channel_map)
     mon, how = make_monitor(cal, args, cmap.kind)
@@ -45,29 +62,27 @@ def run(args: argparse.Namespace) -> int:
         raise ReplayError(f"cannot open {args.interface} bus {args.channel}: {exc}") from None
     dec = StreamDecoder(db, cmap, cal.sample_rate_hz)
     names = mon.sensor_names
+    acc = RunningReport(median_exact_max=10_000)
     print(f"monitoring {args.interface}:{args.channel}, {cmap.n} {cmap.kind} sensors "
           f"(Ctrl-C to stop)", flush=True)
     try:
-        result, frames = run_live(bus, dec, mon, duration_s=args.duration,
-                                  max_frames=args.max_frames,
-                                  idle_timeout_s=args.idle_timeout,
-                                  on_event=lambda e: print(format_event(e, names), flush=True))
+        _, frames = run_live(bus, dec, mon, duration_s=args.duration,
+                             max_frames=args.max_frames, idle_timeout_s=args.idle_timeout,
+                             on_event=lambda e: print(format_event(e, names), flush=True),
+                             window=args.window, summary=acc)
     finally:
         bus.shutdown()
-    if len(result) == 0:
-        print(f"no sample decoded: frames {frames}")
+    if acc.samples == 0:
+        logging.getLogger("rimu").warning(f"no sample decoded: frames {frames}")
         if args.report:
             raise ConfigError("no sample decoded; no report written")
         return 0
     s = cal.kind(cmap.kind)
-    import numpy as np
-
-    flight = Flight(t=result.t, raw=np.full((len(result), s.n), np.nan),
-                    valid=np.ones((len(result), s.n), bool),
+    header = Flight(t=np.zeros(0), raw=np.zeros((0, s.n)), valid=np.zeros((0, s.n), bool),
                     sample_rate_hz=cal.sample_rate_hz, sensor_names=names,
                     source=f"{args.interface}:{args.channel}", kind=cmap.kind)
-    report = build_report(result, flight, cal, frames=frames,
-                          extra={"thresholds": how, "live": True})
+    report = acc.build(header, cal, frames=frames, extra={"thresholds": how, "live": True,
+                                                     "window": args.window})
     print(format_report(report, max_events=0))
     write_report(report, args.report)
     return 0

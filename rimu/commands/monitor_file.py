@@ -4,12 +4,12 @@ from __future__ import annotations
 
 import argparse
 import json
-from pathlib import Path
 
 from fdi.calfile import load_calibration
 from fdi.errors import ConfigError
 from replay.flight import load_flight_dir
 from replay.report import build_report, format_report
+from rimu.argtypes import nonnegative_int, positive_float
 
 HELP = "run the monitor over a flight sample directory; print events and a summary"
 
@@ -17,23 +17,33 @@ HELP = "run the monitor over a flight sample directory; print events and a summa
 def configure(p: argparse.ArgumentParser) -> None:
     p.add_argument("flight", metavar="DIR", help="flight directory (rimu.flight/1)")
     p.add_argument("--cal", required=True, metavar="FILE", help="calibration file")
-    p.add_argument("--false-alarms-per-hour", type=float, default=1e-3, metavar="X",
+    p.add_argument("--false-alarms-per-hour", type=positive_float(1e9), default=1e-3,
+                   metavar="X",
                    help="false-alarm budget for computed thresholds (default 1e-3)")
     p.add_argument("--thresholds", metavar="FILE",
                    help="a rimu.thresholds/1 file (default: computed from the calibration)")
     p.add_argument("--report", metavar="FILE", help="write the rimu.report/1 JSON here")
-    p.add_argument("--max-events", type=int, default=50, help="events to print (default 50)")
+    p.add_argument("--max-events", type=nonnegative_int(), default=50,
+                   help="events to print (default 50)")
 
 
 def run(args: argparse.Namespace) -> int:
+    from fdi.calfile import check_compatible
+    from rimu.outputs import atomic_write_text, input_path, output_file
+
+    input_path(args.flight, "DIR", kind="dir")
+    input_path(args.cal, "--cal")
+    if args.thresholds:
+        input_path(args.thresholds, "--thresholds")
+    if args.report:
+        output_file(args.report, "--report")
     cal = load_calibration(args.cal)
     flight = load_flight_dir(args.flight)
+    check_compatible(cal, flight.n, flight.raw_unit, str(args.flight), kind=flight.kind,
+                     names=flight.sensor_names)
     from fdi.monitor import Monitor
     from fdi.settings import load_thresholds
 
-    if cal.kind(flight.kind).n != flight.n:
-        raise ConfigError(f"{args.flight}: {flight.n} sensors, calibration {args.cal} has "
-                          f"{cal.kind(flight.kind).n} {flight.kind} sensors")
     if args.thresholds:
         thr = load_thresholds(args.thresholds)
         how = {"thresholds_file": str(args.thresholds)}
@@ -50,7 +60,6 @@ def run(args: argparse.Namespace) -> int:
     report = build_report(result, flight, cal, extra={"thresholds": how})
     print(format_report(report, max_events=args.max_events))
     if args.report:
-        Path(args.report).write_text(json.dumps(report, indent=1, allow_nan=False) + "\n",
-                                     encoding="utf-8")
+        atomic_write_text(args.report, json.dumps(report, indent=1, allow_nan=False) + "\n")
         print(f"wrote {args.report}")
     return 0

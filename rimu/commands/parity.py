@@ -21,14 +21,23 @@ def configure(p: argparse.ArgumentParser) -> None:
     p.add_argument("--json", action="store_true", help="print JSON instead of text")
 
 
+def _clean(a: np.ndarray, decimals: int = 12) -> np.ndarray:
+    """``a`` rounded, with negative zeros made positive (no ``-0.`` in the output)."""
+    return np.round(np.asarray(a, float), decimals) + 0.0
+
+
 def run(args: argparse.Namespace) -> int:
+    from rimu.outputs import input_path
+
+    if args.misalignment:
+        input_path(args.misalignment, "--misalignment")
     cfg = load_configuration(args.config)
-    V = parity_matrix(cfg.H)
+    V = _clean(parity_matrix(cfg.H))
     iso = isolability(V)
     out: dict[str, object] = {
         "configuration": cfg.name,
         "sensors": list(cfg.sensor_names),
-        "H": cfg.H.tolist(),
+        "H": _clean(cfg.H).tolist(),
         "V": V.tolist(),
         "detectable": iso["detectable"],
         "isolable_pairs": [
@@ -45,16 +54,16 @@ def run(args: argparse.Namespace) -> int:
             raise ConfigError(f"{args.misalignment}: {Ht.shape[0]} gyros, configuration "
                               f"{cfg.name} has {cfg.n}")
         out["H_calibrated"] = Ht.tolist()
-        out["V_calibrated"] = parity_matrix(Ht).tolist()
+        out["V_calibrated"] = _clean(parity_matrix(Ht)).tolist()
     if args.json:
         print(json.dumps(out, indent=1))
         return 0
     np.set_printoptions(precision=5, suppress=True, linewidth=100)
     print(f"configuration {cfg.name}: {cfg.n} sensors, {V.shape[0]} parity equation(s)")
-    print("H =\n" + str(cfg.H))
-    print("V =\n" + str(V))
+    print("H =\n" + str(_clean(cfg.H, 5)))
+    print("V =\n" + str(_clean(V, 5)))
     if "V_calibrated" in out:
-        print("V_c =\n" + str(np.array(out["V_calibrated"])))
+        print("V_c =\n" + str(_clean(np.array(out["V_calibrated"]), 5)))
     bad = [p["pair"] for p in out["isolable_pairs"] if not p["isolable"]]
     print("isolation: " + ("every pair isolable" if not bad else
                            f"{len(bad)} pair(s) cannot be told apart: {bad}"))

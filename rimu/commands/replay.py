@@ -3,13 +3,15 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
+import logging
 import time
-from pathlib import Path
 from typing import Any
 
 from fdi.calfile import Calibration, load_calibration
 from fdi.errors import ConfigError
+from rimu.argtypes import nonnegative_int, positive_float
 
 HELP = "replay a CAN log through the monitor; print events, a summary and frame accounting"
 
@@ -23,11 +25,12 @@ def add_monitor_options(p: argparse.ArgumentParser) -> None:
                    help="channel map TOML (rimu.channel_map/1): which message/signal is "
                         "sensor i (default: the shipped DBC's RIMU_GYRO_ii messages)")
     p.add_argument("--thresholds", metavar="FILE", help="a rimu.thresholds/1 file")
-    p.add_argument("--false-alarms-per-hour", type=float, metavar="X",
+    p.add_argument("--false-alarms-per-hour", type=positive_float(1e9), metavar="X",
                    help="compute thresholds for this false-alarm budget (default: the "
                         "monitor's default, 1e-3 per hour)")
     p.add_argument("--report", metavar="FILE", help="write the rimu.report/1 JSON here")
-    p.add_argument("--max-events", type=int, default=50, help="events to print (default 50)")
+    p.add_argument("--max-events", type=nonnegative_int(), default=50,
+                   help="events to print (default 50)")
 
 
 def configure(p: argparse.ArgumentParser) -> None:
@@ -72,65 +75,138 @@ def make_monitor(cal: Calibration, args: argparse.Namespace, kind: str) -> tuple
 
 
 def write_report(report: dict, path: str | None) -> None:
-    """Write a report as JSON (no NaN)."""
+    """Write a report as JSON (no NaN), atomically."""
     if path:
-        Path(path).write_text(json.dumps(report, indent=1, allow_nan=False) + "\n",
-                              encoding="utf-8")
+        from rimu.outputs import atomic_write_text
+
+        atomic_write_text(path, json.dumps(report, indent=1, allow_nan=False) + "\n")
         print(f"wrote {path}")
 
 
-def run(args: argparse.Namespace) -> int:
-    from replay.live import block_from_answers, format_event
-    from replay.logio import read_log, resolve_map
-    from replay.report import build_report, format_report
+def check_monitor_paths(args: argparse.Namespace) -> None:
+    """Inputs and outputs of ``replay``/``monitor`` checked before any work."""
+    from rimu.outputs import input_path, output_file
 
-    cal = load_calibration(args.cal)
-    _, cmap = resolve_map(cal, dbc=args.dbc, channel_map=args.channel_map)
-    t0 = time.perf_counter()
-    flight, frames = read_log(args.log, cal, dbc=args.dbc, channel_map=cmap,
-                              strict=args.strict, progress=not args.no_progress,
-                              kind=cmap.kind)
-    t_read = time.perf_counter() - t0
+    input_path(args.cal, "--cal")
+    for opt, val in (("--dbc", args.dbc), ("--map", args.channel_map),
+                     ("--thresholds", args.thresholds)):
+        if val:
+            input_path(val, opt)
+    if args.report:
+        output_file(args.report, "--report")
+
+
+def has_display() -> bool:
+    """Whether a viewer window can open here (a desktop session, or not Linux)."""
+    import os
+    import sys
+
+    if not sys.platform.startswith("linux"):
+        return True
+    return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
+
+
+def warn_reader_errors(frames: dict, source: str) -> None:
+    """Reader errors of a log as warnings on stderr (garbage lines are in the counts)."""
+    log = logging.getLogger("rimu")
     for e in frames["errors"]:
         if e.get("kind") != "garbage_line":
-            print(f"rimu: warning: {args.log}: {e['where']}: {e['why']}")
+            log.warning(f"{source}: {e['where']}: {e['why']}")
+
+
+def run(args: argparse.Namespace) -> int:
+    from replay.live import Pacer, format_event
+    from replay.logio import LogStream, resolve_map
+    from replay.report import RunningReport, format_report
+    from rimu.outputs import atomic_file, input_path, output_file
+
+    input_path(args.log, "LOG")
+    check_monitor_paths(args)
     if args.inject:
-        from replay.scenario import inject, load_scenario
+        input_path(args.inject, "--inject")
+    if args.rrd:
+        output_file(args.rrd, "--rrd")
+    spawn = args.spawn
+    if spawn and not has_display():
+        if not args.rrd:
+            raise ConfigError("--spawn: no display to open the rerun viewer on (DISPLAY is "
+                              "not set); write the recording with --rrd FILE and open it with "
+                              "'rerun FILE' where there is one")
+        logging.getLogger("rimu").warning("--spawn: no display; writing the recording to "
+                                          f"{args.rrd} only")
+        spawn = False
+    cal = load_calibration(args.cal)
+    db, cmap = resolve_map(cal, dbc=args.dbc, channel_map=args.channel_map)
+    stream = LogStream(args.log, cal, db, cmap, strict=args.strict,
+                       progress=not args.no_progress,
+                       check_sensor_set=args.channel_map is None)
+    header = stream.header
+    injector = None
+    if args.inject:
+        from dataclasses import replace
+
+        from replay.scenario import load_scenario
+        from replay.stream import ChunkInjector
 
         faults, seed = load_scenario(args.inject, cal, kind=cmap.kind)
-        flight = inject(flight, faults, cal, seed=seed, source=str(args.inject))
-    if flight.t.size == 0:
-        raise ConfigError(f"{args.log}: no sample could be decoded ({frames['read']} frames "
-                          f"read, rejected {frames['rejected']})")
+        injector = ChunkInjector(faults, cal, kind=cmap.kind, seed=seed, n=cmap.n)
+        truth = dict(header.truth)
+        truth["injected"] = {"faults": [f.to_dict() for f in faults], "seed": int(seed),
+                             "source": str(args.inject)}
+        header = replace(header, faults=tuple(header.faults) + tuple(faults), truth=truth)
     mon, how = make_monitor(cal, args, cmap.kind)
-    t1 = time.perf_counter()
-    if args.realtime:
-        answers = []
-        start = time.monotonic()
-        for k in range(flight.t.size):
-            delay = (flight.t[k] - flight.t[0]) - (time.monotonic() - start)
-            if delay > 0:
-                time.sleep(delay)
-            ans = mon.step(float(flight.t[k]), flight.raw[k], flight.valid[k])
-            for e in ans.events:
-                print(format_event(e, flight.sensor_names), flush=True)
-            answers.append(ans)
-        result = block_from_answers(answers, flight.n, len(answers[0].statistics))
-    else:
-        result = mon.run(flight.t, flight.raw, flight.valid)
-    t_mon = time.perf_counter() - t1
-    extra = {"thresholds": how, "timing_s": {"read_decode": t_read, "monitor": t_mon}}
-    if args.inject:
-        extra["injected"] = str(args.inject)
-    report = build_report(result, flight, cal, frames=frames, extra=extra)
-    print(format_report(report, max_events=args.max_events))
-    if args.rrd or args.spawn:
-        from replay.rerun_log import record
+    acc = RunningReport()
+    names = header.sensor_names
+    pacer = Pacer(lambda e: print(format_event(e, names), flush=True)) if args.realtime \
+        else None
+    timing = {"read_decode": 0.0, "monitor": 0.0}
+    with contextlib.ExitStack() as stack:
+        recorder = None
+        if args.rrd or spawn:
+            from replay.rerun_log import Recorder
 
-        tim = record(result, flight, cal, path=args.rrd, spawn=args.spawn,
-                     thresholds=mon.thresholds)
-        report["timing_s"]["rerun"] = tim["log_s"] + tim["flush_s"]
-        if args.rrd:
-            print(f"wrote {args.rrd} ({tim['log_s'] + tim['flush_s']:.2f} s)")
+            rrd = stack.enter_context(atomic_file(args.rrd)) if args.rrd else None
+            recorder = Recorder(cal, names, cmap.kind, path=rrd, spawn=spawn,
+                                has_truth=header.omega_true is not None,
+                                thresholds=mon.thresholds)
+            stack.callback(recorder.abort)      # on an error: stop writing the temp file
+        clock = [time.perf_counter()]
+
+        def on_samples(piece: Any) -> None:
+            t1 = time.perf_counter()
+            timing["read_decode"] += t1 - clock[0]
+            if injector is not None:
+                piece = injector.apply(piece)
+            if pacer is not None:
+                result = pacer.run(mon, piece.t, piece.raw, piece.valid)
+            else:
+                result = mon.run(piece.t, piece.raw, piece.valid)
+            acc.update(result, piece.omega_true)
+            if recorder is not None:
+                recorder.log(result, piece)
+            clock[0] = time.perf_counter()
+            timing["monitor"] += clock[0] - t1
+
+        frames = stream.run(on_samples)
+        timing["read_decode"] += time.perf_counter() - clock[0]
+        warn_reader_errors(frames, str(args.log))
+        silent = stream.silent_sensors()
+        if silent and acc.samples:
+            logging.getLogger("rimu").warning(
+                f"{args.log}: no frame at all from sensor(s) {', '.join(silent)}: is the "
+                "calibration for this log's sensor set?")
+        if acc.samples == 0:
+            raise ConfigError(f"{args.log}: no sample could be decoded ({frames['read']} "
+                              f"frames read, rejected {frames['rejected']})")
+        extra: dict[str, Any] = {"thresholds": how, "timing_s": timing}
+        if args.inject:
+            extra["injected"] = str(args.inject)
+        report = acc.build(header, cal, frames=frames, extra=extra)
+        print(format_report(report, max_events=args.max_events))
+        if recorder is not None:
+            tim = recorder.close()
+            timing["rerun"] = tim["log_s"] + tim["flush_s"]
+    if args.rrd:
+        print(f"wrote {args.rrd} ({timing['rerun']:.2f} s)")
     write_report(report, args.report)
     return 0

@@ -18,6 +18,16 @@ from calibration.simulate import NoiseModel, save_simulation, simulate_session
 from fdi.errors import ConfigError
 from fdi.geometry import load_configuration
 from fdi.units import DPH
+from rimu.argtypes import (
+    SEED_MAX,
+    bounded_float,
+    nonnegative_float,
+    nonnegative_int,
+    positive_float,
+)
+
+MAX_SAMPLES = 20_000_000
+"""Most samples one simulated session may hold (about 55 h at 100 Hz)."""
 
 HELP = "simulate a turntable calibration session (manifest, samples, truth sidecar)"
 
@@ -26,7 +36,8 @@ def configure(p: argparse.ArgumentParser) -> None:
     p.add_argument("--config", metavar="CONFIG",
                    help="tetrad, cone6 or a TOML configuration file (default: the preset's)")
     p.add_argument("--out", metavar="DIR", required=True, help="session directory to write")
-    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--seed", type=nonnegative_int(SEED_MAX), default=0,
+                   help="random seed (default 0)")
     p.add_argument("--preset", choices=sorted(PRESETS),
                    help="true parameters of a seed paper: "
                         + "; ".join(f"{k}: {v}" for k, v in sorted(PRESETS.items())))
@@ -34,21 +45,25 @@ def configure(p: argparse.ArgumentParser) -> None:
                    help="test sequence: tetrad-paper, cone-paper or a TOML sequence file "
                         "(default: the preset's, else tetrad-paper for the tetrad and "
                         "cone-paper otherwise)")
-    p.add_argument("--table-rate-dps", type=float, metavar="W",
+    p.add_argument("--table-rate-dps", type=positive_float(1e4), metavar="W",
                    help="replace the sequence's table rate w (deg/s)")
-    p.add_argument("--turns", type=float, metavar="K",
+    p.add_argument("--turns", type=positive_float(1e4), metavar="K",
                    help="length of the rate steps in whole turns (default: the sequence's)")
-    p.add_argument("--latitude-deg", type=float, metavar="X",
+    p.add_argument("--latitude-deg", type=bounded_float(-90.0, 90.0, name="latitude"),
+                   metavar="X",
                    help="site latitude (default: the preset's; -23.2 tetrad, 37.5 others)")
     p.add_argument("--effect", action="append", metavar="NAME=VALUE[,NAME=VALUE]",
                    help="switch on an effect the calibration model lacks (repeatable): "
                         + effects_help())
-    p.add_argument("--bias-instability-dph", type=float, default=0.0, metavar="S",
+    p.add_argument("--bias-instability-dph", type=nonnegative_float(1e6), default=0.0,
+                   metavar="S",
                    help="add a first-order Gauss-Markov gyro bias of this standard deviation "
                         "(deg/h; default 0: white noise only)")
-    p.add_argument("--bias-correlation-s", type=float, default=100.0, metavar="TAU",
+    p.add_argument("--bias-correlation-s", type=positive_float(1e9), default=100.0,
+                   metavar="TAU",
                    help="its correlation time (s, default 100)")
-    p.add_argument("--rate-random-walk-dph-rth", type=float, default=0.0, metavar="Q",
+    p.add_argument("--rate-random-walk-dph-rth", type=nonnegative_float(1e6), default=0.0,
+                   metavar="Q",
                    help="add a gyro bias random walk of this density (deg/h/sqrt(h), "
                         "default 0)")
     p.add_argument("--effect-sensors", metavar="1,3",
@@ -56,7 +71,19 @@ def configure(p: argparse.ArgumentParser) -> None:
                         "(default: all)")
 
 
+def _check_size(seq: object, fs: float) -> None:
+    """Refuse a session too long to simulate in memory (a tiny table rate, huge turns)."""
+    n_samples = seq.duration_s * fs
+    if not n_samples <= MAX_SAMPLES:
+        raise ConfigError(f"sequence {seq.name}: {seq.duration_s:.4g} s at {fs:g} Hz is "
+                          f"{n_samples:.3g} samples; at most {MAX_SAMPLES:.0e} are simulated "
+                          "(check --turns and --table-rate-dps)")
+
+
 def run(args: argparse.Namespace) -> int:
+    from rimu.outputs import atomic_dir, output_dir
+
+    final = output_dir(args.out, "--out")
     effects = parse_effects(args.effect)
     sensors = parse_effect_sensors(args.effect_sensors)
     if args.preset:
@@ -80,9 +107,11 @@ def run(args: argparse.Namespace) -> int:
         if not -90.0 <= args.latitude_deg <= 90.0:
             raise ConfigError(f"--latitude-deg must be in [-90, 90], got {args.latitude_deg}")
         truth = dataclasses.replace(truth, latitude_deg=args.latitude_deg)
-    if args.sequence or seq is None or args.table_rate_dps or args.turns:
+    if (args.sequence or seq is None or args.table_rate_dps is not None
+            or args.turns is not None):
         name = args.sequence or (seq.source if seq is not None else default_sequence_name(cfg))
         seq = load_sequence(name, table_rate_dps=args.table_rate_dps, turns=args.turns)
+    _check_size(seq, float(truth.sample_rate_hz))
     if args.bias_instability_dph < 0 or args.rate_random_walk_dph_rth < 0 \
             or args.bias_correlation_s <= 0:
         raise ConfigError("--bias-instability-dph and --rate-random-walk-dph-rth must be >= 0, "
@@ -97,7 +126,9 @@ def run(args: argparse.Namespace) -> int:
                          "gyro": args.rate_random_walk_dph_rth * DPH / 60.0})
     session = simulate_session(cfg, seq, truth, seed=args.seed, effects=effects,
                                effect_sensors=sensors, noise=noise)
-    out = save_simulation(session, truth, args.out)
+    with atomic_dir(final) as tmp:
+        save_simulation(session, truth, tmp)
+    out = final
     n_rate = len(seq.rate_steps())
     n_pos = len(seq.position_steps())
     kinds = f"{cfg.n} gyros" + ("" if session.raw_accel is None

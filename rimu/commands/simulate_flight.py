@@ -10,9 +10,12 @@ from fdi.errors import ConfigError
 from fdi.units import DPH, MG
 from replay.faults import parse_fault
 from replay.flight import save_flight_dir, simulate_flight
+from rimu.argtypes import DAY_S, SEED_MAX, nonnegative_float, nonnegative_int, positive_float
 
 HELP = "simulate a flight (manoeuvres, true sensor model, faults) with a truth sidecar"
 
+MAX_SAMPLES = 10_000_000
+"""Most samples one simulated flight may hold (about 28 h at 100 Hz)."""
 CAN_SUFFIXES = (".asc", ".blf", ".log")
 """``--out`` suffixes written as CAN logs (through ``replay.logio.write_flight_log``)."""
 
@@ -20,8 +23,10 @@ CAN_SUFFIXES = (".asc", ".blf", ".log")
 def configure(p: argparse.ArgumentParser) -> None:
     p.add_argument("--cal", required=True, metavar="FILE",
                    help="calibration file (rimu.calibration/1)")
-    p.add_argument("--duration", required=True, type=float, metavar="S", help="flight length (s)")
-    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--duration", required=True, type=positive_float(DAY_S), metavar="S",
+                   help="flight length (s, at most one day)")
+    p.add_argument("--seed", type=nonnegative_int(SEED_MAX), default=0,
+                   help="random seed (default 0)")
     p.add_argument("--fault", action="append", default=[], metavar="SPEC",
                    help="KIND:SENSOR:SIZE:ONSET[:DURATION], repeatable; e.g. step:3:15sigma:20, "
                         "ramp:2:0.05sigma/s:10, stuck:1::30, noise:4:3x:12, scale:5:1%%:40, "
@@ -29,15 +34,15 @@ def configure(p: argparse.ArgumentParser) -> None:
     p.add_argument("--truth", metavar="FILE",
                    help="true sensor parameters: a calibration session's truth sidecar "
                         "(default: drawn from the calibration's covariance)")
-    p.add_argument("--rate", type=float, metavar="HZ",
+    p.add_argument("--rate", type=positive_float(1e5), metavar="HZ",
                    help="sample rate (default: the calibration's)")
-    p.add_argument("--max-rate", type=float, default=300.0, metavar="DPS",
+    p.add_argument("--max-rate", type=positive_float(1e5), default=300.0, metavar="DPS",
                    help="largest body rate per axis in deg/s (default 300)")
     p.add_argument("--kind", default="gyro", choices=("gyro", "accel"))
-    p.add_argument("--bias-instability", type=float, default=0.0, metavar="X",
+    p.add_argument("--bias-instability", type=nonnegative_float(1e6), default=0.0, metavar="X",
                    help="in-run bias drift: stationary sd of a Gauss-Markov bias per sensor, "
                         "deg/h for gyros, mg for accelerometers (default 0: none)")
-    p.add_argument("--bias-corr", type=float, default=100.0, metavar="S",
+    p.add_argument("--bias-corr", type=positive_float(1e9), default=100.0, metavar="S",
                    help="correlation time of that bias (s, default 100)")
     p.add_argument("--out", required=True, metavar="DIR|FILE",
                    help="a flight directory, or a CAN log (.asc, .blf, .log)")
@@ -52,24 +57,46 @@ def _load_truth(path: str):
 
 
 def run(args: argparse.Namespace) -> int:
+    from rimu.outputs import atomic_dir, input_path, output_dir, output_file
+
+    out = Path(args.out)
+    is_log = out.suffix.lower() in CAN_SUFFIXES
+    if is_log:
+        output_file(out, "--out")
+    else:
+        output_dir(out, "--out")
+    input_path(args.cal, "--cal")
+    if args.truth:
+        input_path(args.truth, "--truth")
     cal = load_calibration(args.cal)
     faults = [parse_fault(s, cal, kind=args.kind) for s in args.fault]
+    for f in faults:
+        if not f.onset < args.duration:
+            raise ConfigError(f"--fault {f.spec}: onset {f.onset:g} s is not within the "
+                              f"flight (0 to {args.duration:g} s)")
+    fs = args.rate if args.rate is not None else cal.sample_rate_hz
+    if args.duration * fs > MAX_SAMPLES:
+        raise ConfigError(f"--duration {args.duration:g} s at {fs:g} Hz is "
+                          f"{args.duration * fs:.3g} samples; at most {MAX_SAMPLES:.0e} are "
+                          "simulated in memory at once")
     truth = _load_truth(args.truth) if args.truth else None
     unit = DPH if args.kind == "gyro" else MG
     flight = simulate_flight(cal, args.duration, seed=args.seed, faults=faults, truth=truth,
                              sample_rate_hz=args.rate, max_rate_dps=args.max_rate, kind=args.kind,
                              bias_instability=args.bias_instability * unit,
                              bias_correlation_s=args.bias_corr)
-    out = Path(args.out)
-    if out.suffix.lower() in CAN_SUFFIXES:
+    if is_log:
         try:
             from replay.logio import write_flight_log
         except ImportError:
             raise ConfigError(f"{out}: writing CAN logs needs replay.logio (not available in "
                               f"this build); give a directory instead") from None
-        write_flight_log(flight, out)
+        # the log and its truth sidecar, written together and renamed when all are done
+        with atomic_dir(out.parent if str(out.parent) else Path("."), inside=True) as tmp:
+            write_flight_log(flight, tmp / out.name)
     else:
-        save_flight_dir(flight, out)
+        with atomic_dir(out) as tmp:
+            save_flight_dir(flight, tmp)
     print(f"wrote {out}: {flight.t.shape[0]} samples of {flight.n} {args.kind} sensors at "
           f"{flight.sample_rate_hz:g} Hz, {len(faults)} fault(s)")
     return 0

@@ -25,7 +25,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from fdi.errors import ReplayError
+from fdi.errors import FileFormatError, ReplayError
 from replay.assemble import decode_frames
 from replay.channel_map import load_channel_map
 from replay.frames import load_dbc
@@ -157,13 +157,19 @@ def test_damaged_log_never_raises_and_accounts_every_frame(logs, work, sfx, data
     bad, kind, k = data.draw(damage(pristine, sfx != ".blf"), label="damage")
     p = work / f"damaged{sfx}"
     p.write_bytes(bad)
+    if sfx == ".blf" and not bad.startswith(b"LOGG") and b"LOBJ" not in bad:
+        # nothing of a BLF file is left: said so, not read as an empty log
+        with pytest.raises(FileFormatError, match="not a BLF file"):
+            read_log(p, CAL, progress=False)
+        return
     fr = _check(p)
     if kind == "truncate" and sfx != ".blf":
         # everything before the cut is kept (the pristine log has no corrupt frame)
         assert fr["used"] >= _complete_frames_before(pristine, k, sfx), (k, fr)
     if kind == "truncate" and sfx == ".blf" and 0 < k < len(pristine):
         # a BLF cut short says so (python-can alone stops silently)
-        assert any(e["kind"] in ("truncated", "reader_error") for e in fr["errors"]), fr
+        assert any(e["kind"] in ("truncated", "reader_error", "resync")
+                   for e in fr["errors"]), fr
 
 
 def test_pristine_logs_are_clean(logs, work):
@@ -248,7 +254,8 @@ def test_blf_with_damaged_header_is_reported_not_refused(logs, work):
     p = work / "header.blf"
     p.write_bytes(bytes(raw))
     frames, acct = read_frames(p, progress=False)
-    assert len(frames.t) == 0 and acct.errors and acct.errors[0]["kind"] == "reader_error"
+    # since the resynchronising reader (issue 10): the frames are read, the damage reported
+    assert len(frames.t) == 600 and acct.errors and acct.errors[0]["kind"] == "resync"
     with pytest.raises(ReplayError, match=r"header\.blf"):
         read_frames(p, strict=True, progress=False)
     _check(p)

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from fdi.calfile import Calibration, SensorCal, SensorSet
-from fdi.errors import ReplayError
+from fdi.errors import FileFormatError, ReplayError
 from fdi.geometry import load_configuration
 from fdi.units import DPH, DPS
 from replay.crc import crc8_j1850
@@ -207,7 +207,10 @@ def test_truncated_blf_reported_and_kept(tmp_path):
         read_log(q, CAL, strict=True, progress=False)
 
 
-def test_corrupt_blf_container_reported_and_frames_before_kept(tmp_path):
+def test_corrupt_blf_container_skipped_and_reading_resumes(tmp_path):
+    """Issue 10: a damaged container used to end the read (half the flight lost, exit 0).
+    Now it is skipped, reading resumes at the next container, the skipped bytes are
+    reported, and every frame and sample missing is counted as lost."""
     f = simulate_flight(CAL, 12.0, seed=7)  # several BLF containers
     p = tmp_path / "a.blf"
     write_flight_log(f, p)
@@ -215,13 +218,26 @@ def test_corrupt_blf_container_reported_and_frames_before_kept(tmp_path):
     b[len(b) // 2: len(b) // 2 + 64] = b"\xff" * 64
     p.write_bytes(bytes(b))
     f2, fr = read_log(p, CAL, progress=False)
-    assert fr["errors"] and fr["errors"][0]["kind"] == "reader_error" and fr["balanced"]
-    assert 0 < fr["read"] < f.valid.sum(), fr["read"]
-    assert fr["errors"][0]["where"] == f"after frame {fr['read']}"
-    k = f2.t.size
-    np.testing.assert_allclose(f2.raw[f2.valid], f.raw[:k][f2.valid], rtol=6e-8)
-    with pytest.raises(ReplayError, match="reader failed"):
+    n = int(f.valid.sum())
+    assert fr["balanced"] and fr["rejected"] == {}
+    err = fr["errors"][0]
+    assert err["kind"] == "resync" and err["skipped_bytes"] > 0, fr["errors"]
+    assert 0 < n - fr["read"] < n / 2                  # one container of three
+    assert fr["read"] + fr["lost_frames"] == n         # every frame read or counted lost
+    assert f2.t.size + fr["lost_samples"] == f.t.size  # every sample delivered or lost
+    assert f2.t[-1] == pytest.approx(f.t[-1], abs=1e-3), "the read went on to the end"
+    k = np.rint(f2.t * CAL.sample_rate_hz).astype(int)
+    np.testing.assert_allclose(f2.raw[f2.valid], f.raw[k][f2.valid], rtol=6e-8)
+    with pytest.raises(ReplayError, match="damaged container"):
         read_log(p, CAL, strict=True, progress=False)
+
+
+def test_random_bytes_are_not_a_blf_file(tmp_path):
+    """Issue 10: random bytes with a .blf suffix said "0 frames read"."""
+    p = tmp_path / "noise.blf"
+    p.write_bytes(np.random.default_rng(3).integers(0, 256, 5000, dtype=np.uint8).tobytes())
+    with pytest.raises(FileFormatError, match="not a BLF file"):
+        read_log(p, CAL, progress=False)
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2, 3])

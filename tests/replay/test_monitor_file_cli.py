@@ -63,7 +63,7 @@ def test_cli_errors_are_one_line(tmp_path, cal_file, capsys):
     assert rc == 2 and "SENSOR 9 out of range 1..6" in err and "Traceback" not in err
     rc = main(["monitor-file", str(tmp_path / "nowhere"), "--cal", str(cal_file)])
     err = capsys.readouterr().err
-    assert rc == 2 and "manifest.json: cannot read" in err
+    assert rc == 2 and "nowhere: no such directory" in err
     rc = main(["simulate", "flight", "--cal", str(cal_file), "--duration", "1",
                "--out", str(tmp_path / "f.asc")])
     err = capsys.readouterr().err

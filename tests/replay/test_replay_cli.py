@@ -95,8 +95,8 @@ def test_truncated_blf_warns_keeps_and_strict_fails(tmp_path, cal_path, capsys):
     rep = tmp_path / "r.json"
     assert main(["replay", str(log), "--cal", str(cal_path), "--report", str(rep),
                  "--no-progress"]) == 0
-    out = capsys.readouterr().out
-    assert "warning" in out and "truncated" in out
+    err = capsys.readouterr().err
+    assert "warning" in err and "truncated" in err
     d = _report(rep)
     assert 0 < d["samples"] < f.t.size and d["frames"]["errors"][0]["kind"] == "truncated"
     assert main(["replay", str(log), "--cal", str(cal_path), "--strict",

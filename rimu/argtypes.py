@@ -1,0 +1,116 @@
+"""argparse types for numeric options: finite, signed as asked, within stated limits.
+
+A bad value is refused while the arguments are parsed, before any work or any file is
+written: ``--duration nan``, ``--max-rate -300``, ``--turns 0`` fail with one line naming
+the option, what it accepts and what it got (exit 2). Each factory returns a callable that
+argparse uses as ``type=``; its ``__name__`` is what argparse would print as the type.
+
+Examples
+--------
+>>> p.add_argument("--duration", type=positive_float(max_value=DAY_S))
+>>> p.add_argument("--max-frames", type=positive_int())
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+from collections.abc import Callable
+
+__all__ = [
+    "DAY_S",
+    "MAX_COUNT",
+    "SEED_MAX",
+    "bounded_float",
+    "nonnegative_float",
+    "nonnegative_int",
+    "positive_float",
+    "positive_int",
+]
+
+DAY_S = 86_400.0
+"""One day in seconds: the default upper limit of durations."""
+MAX_COUNT = 1 << 40
+"""Default upper limit of counts (frames, events)."""
+SEED_MAX = 2**63 - 1
+"""Largest random seed (numpy takes any non-negative integer; this keeps it one int64)."""
+
+
+def _show(v: float) -> str:
+    return repr(float(v)) if isinstance(v, float) else str(v)
+
+
+def _parse_float(text: str) -> float:
+    try:
+        x = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not math.isfinite(x):
+        raise argparse.ArgumentTypeError(f"expected a finite number, got {text!r}")
+    return x
+
+
+def bounded_float(min_value: float | None = None, max_value: float | None = None, *,
+                  min_open: bool = False, max_open: bool = False,
+                  name: str = "number") -> Callable[[str], float]:
+    """A finite float in ``[min_value, max_value]`` (open ends with ``min_open``/``max_open``).
+
+    Parameters
+    ----------
+    min_value, max_value : float, optional
+        Limits (None: unbounded on that side, but always finite).
+    min_open, max_open : bool
+        Exclude the limit itself.
+    name : str
+        How the error message calls the value.
+    """
+    lo = "(" if min_open else "["
+    hi = ")" if max_open else "]"
+    rng = (f"{lo}{'-inf' if min_value is None else _show(min_value)}, "
+           f"{'inf' if max_value is None else _show(max_value)}{hi}")
+
+    def parse(text: str) -> float:
+        x = _parse_float(text)
+        bad = ((min_value is not None and (x < min_value or (min_open and x == min_value)))
+               or (max_value is not None and (x > max_value or (max_open and x == max_value))))
+        if bad:
+            raise argparse.ArgumentTypeError(f"expected a {name} in {rng}, got {text}")
+        return x
+
+    parse.__name__ = name
+    return parse
+
+
+def positive_float(max_value: float | None = None) -> Callable[[str], float]:
+    """A finite float > 0 (and ≤ ``max_value``)."""
+    return bounded_float(0.0, max_value, min_open=True, name="positive number")
+
+
+def nonnegative_float(max_value: float | None = None) -> Callable[[str], float]:
+    """A finite float ≥ 0 (and ≤ ``max_value``)."""
+    return bounded_float(0.0, max_value, name="non-negative number")
+
+
+def _int(min_value: int, max_value: int, name: str) -> Callable[[str], int]:
+    def parse(text: str) -> int:
+        try:
+            x = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
+        if not min_value <= x <= max_value:
+            raise argparse.ArgumentTypeError(f"expected a {name} in [{min_value}, "
+                                             f"{max_value}], got {text}")
+        return x
+
+    parse.__name__ = name
+    return parse
+
+
+def positive_int(max_value: int = MAX_COUNT) -> Callable[[str], int]:
+    """A whole number ≥ 1 (and ≤ ``max_value``)."""
+    return _int(1, max_value, "positive whole number")
+
+
+def nonnegative_int(max_value: int = MAX_COUNT) -> Callable[[str], int]:
+    """A whole number ≥ 0 (and ≤ ``max_value``)."""
+    return _int(0, max_value, "non-negative whole number")
