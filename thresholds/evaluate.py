@@ -13,7 +13,7 @@ Statistics: detection and isolation probabilities with Wilson 95 % intervals
 (``statsmodels.stats.proportion.proportion_confint``); false alarms per hour with the exact
 Poisson (Garwood) 95 % interval (``scipy.stats.chi2``) on the full-set exposure; the
 detectable size of each scale from a probit fit of the sweep's window detections against
-log size (maximum likelihood), with a bootstrap-free delta-method interval.
+size (maximum likelihood), with a delta-method interval.
 """
 
 from __future__ import annotations
@@ -165,15 +165,15 @@ def execute(task: Callable[[Any], RunResult], items: Sequence[Any], *,
     if not (scheduler in ("serial", "local") or "://" in scheduler):
         raise ConfigError(f"unknown scheduler {scheduler!r}; expected serial, local or "
                           f"tcp://HOST:PORT")
+    if scheduler != "serial":
+        return _execute_dask(task, items, scheduler, batch, workers, progress)
     bar = _bar(len(items), progress)
     try:
-        if scheduler == "serial":
-            out = []
-            for x in items:
-                out.append(task(x))
-                bar.update(1)
-            return out
-        return _execute_dask(task, items, scheduler, batch, workers, bar)
+        out = []
+        for x in items:
+            out.append(task(x))
+            bar.update(1)
+        return out
     finally:
         bar.close()
 
@@ -185,7 +185,7 @@ def _bar(total: int, progress: bool) -> Any:
 
 
 def _execute_dask(task: Callable[[Any], RunResult], items: list[Any], scheduler: str,
-                  batch: int, workers: int, bar: Any) -> list[RunResult]:
+                  batch: int, workers: int, progress: bool) -> list[RunResult]:
     from dask.distributed import Client, LocalCluster
 
     cluster = None
@@ -199,9 +199,11 @@ def _execute_dask(task: Callable[[Any], RunResult], items: list[Any], scheduler:
         except (OSError, TimeoutError, ValueError) as exc:
             raise ConfigError(f"cannot reach the Dask scheduler {scheduler}: "
                               f"{type(exc).__name__}: {exc}") from None
+    bar = _bar(len(items), progress)
     try:
         return map_on_client(client, task, items, batch=batch, bar=bar)
     finally:
+        bar.close()
         client.close()
         if cluster is not None:
             cluster.close()
@@ -247,38 +249,44 @@ def poisson_interval(k: int, exposure: float, level: float = 0.95) -> tuple[floa
 
 def _probit_b99(sizes: np.ndarray, hits: np.ndarray, p: float = 0.99
                 ) -> tuple[float, float, float]:
-    """Size detected with probability p from a probit fit in log size; (b, lo, hi)."""
+    """Size detected with probability p, and a 95 % interval, from a probit fit.
+
+    ``P(hit) = Φ((b − μ)/s)``: for a non-central χ² well above its threshold
+    ``sqrt(D) ≈ N(sqrt(λ), 1)`` with ``sqrt(λ) ∝ b``, so the probit is linear in b.
+    Maximum likelihood; the interval by the delta method on the numerical Hessian.
+    """
     ok = np.isfinite(hits)
-    x, y = np.log(sizes[ok]), hits[ok]
+    x, y = sizes[ok], hits[ok]
     if y.size < 4 or y.all() or not y.any():
         return (math.nan, math.nan, math.nan)
 
     def nll(th: np.ndarray) -> float:
         q = stats.norm.cdf((x - th[0]) / math.exp(th[1]))
-        q = np.clip(q, 1e-12, 1 - 1e-12)
-        return -float(np.sum(y * np.log(q) + (1 - y) * np.log1p(-q)))
+        q = np.clip(q, 1e-300, 1.0)
+        r = np.clip(stats.norm.sf((x - th[0]) / math.exp(th[1])), 1e-300, 1.0)
+        return -float(np.sum(y * np.log(q) + (1 - y) * np.log(r)))
 
-    x50 = float(np.median(x[y > 0])) if y.any() else float(x.mean())
-    r = optimize.minimize(nll, [x50, math.log(0.3)], method="Nelder-Mead",
-                          options={"xatol": 1e-7, "fatol": 1e-9, "maxiter": 4000})
+    x50 = float(np.median(x[y > 0]))
+    r = optimize.minimize(nll, [x50, math.log(0.3 * x50)], method="Nelder-Mead",
+                          options={"xatol": 1e-8, "fatol": 1e-10, "maxiter": 4000})
     mu, ls = r.x
     z = stats.norm.ppf(p)
-    b = math.exp(mu + z * math.exp(ls))
-    # delta-method interval from the numerical Hessian of the log-likelihood
-    h = 1e-4
+    b = mu + z * math.exp(ls)
+    h = 1e-4 * max(abs(mu), 1e-3)
+    steps = np.array([h, 1e-4])
     H = np.zeros((2, 2))
     for i in range(2):
         for k in range(2):
-            e_i, e_k = np.eye(2)[i] * h, np.eye(2)[k] * h
+            e_i, e_k = np.eye(2)[i] * steps[i], np.eye(2)[k] * steps[k]
             H[i, k] = (nll(r.x + e_i + e_k) - nll(r.x + e_i - e_k) - nll(r.x - e_i + e_k)
-                       + nll(r.x - e_i - e_k)) / (4 * h * h)
+                       + nll(r.x - e_i - e_k)) / (4 * steps[i] * steps[k])
     try:
         cov = np.linalg.inv(H)
         g = np.array([1.0, z * math.exp(ls)])
         sd = math.sqrt(max(float(g @ cov @ g), 0.0))
     except np.linalg.LinAlgError:
         sd = math.nan
-    return b, b * math.exp(-1.96 * sd), b * math.exp(1.96 * sd)
+    return float(b), float(b - 1.96 * sd), float(b + 1.96 * sd)
 
 
 def summarise(results: Iterable[RunResult], thresholds: Thresholds, *, n_sensors: int,

@@ -142,16 +142,23 @@ def check_scales(cal: Calibration, scales: int | tuple[int, ...], *, kind: str =
     return sc
 
 
-def _parity_geometry(cal: Calibration, kind: str) -> tuple[int, np.ndarray, float]:
-    """df, |u_i|² (whitened parity column norms per unit bias) and β of the full set."""
+def _parity_geometry(cal: Calibration, kind: str
+                     ) -> tuple[int, np.ndarray, float, np.ndarray, np.ndarray]:
+    """Full set: df, |u_i|², β, whitened columns U (df, n) and bias-error covariance G.
+
+    z = L⁻¹·p with L·Lᵀ = VΣVᵀ; ``U = L⁻¹V``; a bias error e ~ N(0, diag(bias_sd²)) moves z
+    by ``L⁻¹V·e`` with covariance ``G``; β is the largest eigenvalue of G (the monitor's
+    bias-uncertainty constant).
+    """
     s = cal.kind(kind)
     V = parity_matrix(s.H)
     S = np.asarray(s.noise_covariance, float)
-    P = V @ S @ V.T
-    u2 = np.einsum("ji,jk,ki->i", V, np.linalg.inv(P), V)
+    L = np.linalg.cholesky(V @ S @ V.T)
+    U = linalg.solve_triangular(L, V, lower=True)
     D = np.diag([c.bias_sd**2 for c in s.sensors])
-    beta = float(linalg.eigh(V @ D @ V.T, P, eigvals_only=True).max())
-    return V.shape[0], u2, max(beta, 0.0)
+    G = U @ D @ U.T
+    beta = float(np.linalg.eigvalsh(G).max()) if G.size else 0.0
+    return V.shape[0], np.sum(U * U, axis=0), max(beta, 0.0), U, G
 
 
 @dataclass(frozen=True)
@@ -185,19 +192,38 @@ class DetectableSize:
 
 
 def detectable_sizes(cal: Calibration, thresholds: Thresholds, *, kind: str = "gyro",
-                     probability: float = DETECTION_PROBABILITY) -> tuple[DetectableSize, ...]:
-    """Per scale, the smallest step one full window detects with ``probability`` (at rest)."""
+                     probability: float = DETECTION_PROBABILITY, draws: int = 4000
+                     ) -> tuple[DetectableSize, ...]:
+    """Per scale, the smallest step one full window detects with ``probability`` (at rest).
+
+    The window sum of z is ``N(w(b·u_i + g), w·f_w·I)`` with g the parity offset of the
+    bias error (``g ~ N(0, G)`` over flights, see :func:`_parity_geometry`), so
+    ``P(detect) = E_g[ncx2.sf(T_w(1 + w·β/f_w), df, w·|b·u_i + g|²/f_w)]``, averaged over
+    ``draws`` fixed draws of g; b solves P = ``probability`` for the worst sensor.
+    """
     s = cal.kind(kind)
-    df, u2, beta = _parity_geometry(cal, kind)
+    df, u2, beta, U, G = _parity_geometry(cal, kind)
     i = int(np.argmin(u2))
     sd = float(s.noise_sd[i])
     unit, conv = ("deg/s", DPS) if kind == "gyro" else ("m/s^2", 1.0)
+    g = np.random.default_rng(12345).multivariate_normal(np.zeros(df), G, size=draws,
+                                                         method="eigh")
+    ui = U[:, i]
     out = []
     for w, a, f in zip(thresholds.scales, thresholds.alpha, thresholds.variance_factor,
                        strict=True):
         T = chi2_threshold(a, df) * (1.0 + w * beta / f)
-        lam = minimum_detectable_noncentrality(T, df, 1.0 - probability)
-        b = math.sqrt(lam * f / (w * u2[i]))
+
+        def miss(b: float, T: float = T, w: int = int(w), f: float = f) -> float:
+            lam = w * np.sum((b * ui + g) ** 2, axis=1) / f
+            return float(np.mean(stats.ncx2.sf(T, df, lam))) - probability
+
+        b0 = math.sqrt(minimum_detectable_noncentrality(T, df, 1.0 - probability) * f
+                       / (w * u2[i]))
+        hi = 2.0 * b0
+        while miss(hi) < 0:
+            hi *= 2.0
+        b = optimize.brentq(miss, 0.0, hi, xtol=1e-9 * b0)
         out.append(DetectableSize(int(w), w / thresholds.sample_rate_hz, b, b / conv, unit,
                                   b / sd, i + 1))
     return tuple(out)
@@ -342,7 +368,7 @@ def tune(cal: Calibration, *, false_alarms_per_hour: float, kind: str = "gyro",
                           f"Allan table on, or give thresholds by hand")
     fs = float(sample_rate_hz or cal.sample_rate_hz)
     sc = check_scales(cal, scales, kind=kind, sample_rate_hz=fs)
-    df, _, beta = _parity_geometry(cal, kind)
+    df, _, beta, _, _ = _parity_geometry(cal, kind)
     if df < 1:
         raise ConfigError(f"{s.n} {kind} sensors: no parity space, nothing to tune")
     vf = variance_factors(s.allan, s.noise_covariance, fs, sc)
