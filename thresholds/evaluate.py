@@ -195,7 +195,7 @@ def _execute_dask(task: Callable[[Any], RunResult], items: list[Any], scheduler:
         client = Client(cluster)
     else:
         try:
-            client = Client(scheduler, timeout="5s")
+            client = Client(scheduler, timeout="3s")
         except (OSError, TimeoutError, ValueError) as exc:
             raise ConfigError(f"cannot reach the Dask scheduler {scheduler}: "
                               f"{type(exc).__name__}: {exc}") from None

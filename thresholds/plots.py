@@ -52,8 +52,10 @@ def _delay(ev: dict[str, Any], path: Path) -> None:
         p = [np.nan if f["delay_s_p90"] is None else f["delay_s_p90"] for f in rows]
         ax.plot(s, d, "o-", label="median")
         ax.plot(s, p, "s--", label="90 %")
-        ax.set_xscale("log")
-        ax.set_yscale("log")
+        if all(v > 0 for v in s):
+            ax.set_xscale("log")
+        if np.any(np.asarray(d, float) > 0):
+            ax.set_yscale("log")
         ax.set_title(k)
         ax.set_xlabel(f"size ({rows[0]['unit']})")
         ax.grid(True, which="both", alpha=0.3)
