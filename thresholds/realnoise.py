@@ -1,0 +1,194 @@
+"""Thresholds against real static noise: tune on the first part, count false alarms on the rest.
+
+Two public static recordings (read in place, never copied; a small reader here until the
+general log readers land):
+
+- four MPU9250 IMUs on one body, 16 min at ≈43 Hz (``multi_imu_4x_mpu9250``, MATLAB .mat):
+  12 gyro channels, a redundant set;
+- one ADIS16405, 2.8 h at 100 Hz (``smac_adis16405``, R .rda): 3 gyro channels, no
+  redundancy, used for the shape of the noise only.
+
+The vehicle is at rest, so the true rate is zero up to Earth rate (0.004 °/s, below the
+noise): the parity residual of *any* geometry of the channels sees only their noise and
+bias. The four MPU triads are taken as aligned (H = four stacked identities).
+
+:func:`static_holdout` builds a calibration from the first part (bias = mean, full noise
+covariance, Allan table of the residuals), tunes thresholds for the target rate, runs the
+monitor over the rest with isolation off (one false alarm = one detection episode), and
+does the same with the white-noise assumption (no Allan table) for comparison.
+:func:`noise_shape` measures how far the noise departs from the Gaussian white model:
+excess kurtosis, tail exceedances beyond 4σ against the Gaussian expectation, lag-1
+autocorrelation, the largest correlation between channels, the bias shift between the two
+parts in units of its white-noise standard error, and the Allan deviation at long τ
+against the white-noise prediction.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from scipy import stats
+
+from fdi.calfile import Calibration, SensorCal, SensorSet
+from fdi.errors import FileFormatError
+from fdi.units import DPS
+from thresholds.compute import allan_from_residuals
+
+__all__ = ["load_adis16405", "load_mpu9250_static", "noise_shape", "static_calibration",
+           "static_holdout"]
+
+
+def load_mpu9250_static(folder: str | Path) -> tuple[np.ndarray, np.ndarray, tuple[str, ...]]:
+    """Times (N,) s and gyro rates (N, 12) rad/s of ``imu1..4_raw.mat`` (``wb`` fields)."""
+    import scipy.io
+
+    d = Path(folder)
+    cols, names, t = [], [], None
+    for k in range(1, 5):
+        p = d / f"imu{k}_raw.mat"
+        try:
+            m = scipy.io.loadmat(p)[f"imu{k}_raw"][0, 0]
+            tk = np.asarray(m["t"], float).ravel()
+            wk = np.asarray(m["wb"], float)
+        except (OSError, KeyError, ValueError, IndexError) as exc:
+            raise FileFormatError(str(p), f"expected struct imu{k}_raw with t and wb "
+                                  f"({type(exc).__name__}: {exc})") from None
+        if wk.shape != (tk.size, 3):
+            raise FileFormatError(str(p), f"wb has shape {wk.shape}, expected ({tk.size}, 3)",
+                                  field="wb")
+        t = tk if t is None else t
+        if tk.size != t.size:
+            raise FileFormatError(str(p), f"{tk.size} samples, imu1 has {t.size}", field="t")
+        cols.append(wk)
+        names += [f"imu{k}_{a}" for a in "xyz"]
+    return t, np.hstack(cols), tuple(names)
+
+
+def load_adis16405(folder: str | Path) -> tuple[float, np.ndarray]:
+    """Sample rate (Hz) and gyro rates (N, 3) rad/s of ``adis_16405_imu1.rda`` (deg/s in file)."""
+    import warnings
+
+    import rdata
+
+    p = Path(folder) / "adis_16405_imu1.rda"
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            obj = rdata.conversion.convert(rdata.parser.parse_file(p))["adis_16405_imu1"]
+        a = np.asarray(obj, float)
+    except (OSError, KeyError, ValueError) as exc:
+        raise FileFormatError(str(p), f"expected the R matrix adis_16405_imu1 "
+                              f"({type(exc).__name__}: {exc})") from None
+    if a.ndim != 2 or a.shape[1] != 6:
+        raise FileFormatError(str(p), f"shape {a.shape}, expected (N, 6)")
+    return 100.0, a[:, :3] * DPS
+
+
+def static_calibration(y: np.ndarray, fs: float, names: tuple[str, ...],
+                       *, allan: bool = True) -> Calibration:
+    """A calibration of static channels (N, n) rad/s: aligned triads, SF 1, bias = mean."""
+    y = np.asarray(y, float)
+    n = y.shape[1]
+    if n % 3:
+        raise ValueError("channels must come in triads")
+    mean = y.mean(axis=0)
+    cov = np.cov(y, rowvar=False)
+    sd = np.sqrt(np.diag(cov))
+    sensors = []
+    for i in range(n):
+        ax = np.eye(3)[i % 3]
+        sensors.append(SensorCal(name=names[i], axis=ax, axis_nominal=ax.copy(),
+                                 scale_factor=1.0, scale_factor_sd=1e-6, bias=float(mean[i]),
+                                 bias_sd=float(sd[i] / math.sqrt(y.shape[0])),
+                                 input_error_cov=1e-12 * np.eye(3), raw_unit="rad/s",
+                                 scale_factor_unit="(rad/s)/(rad/s)", bias_unit="rad/s",
+                                 residual_rms=float(sd[i])))
+    groups = tuple(tuple(range(k, k + 3)) for k in range(0, n, 3))
+    table = allan_from_residuals(y - mean, fs) if allan else None
+    gs = SensorSet("gyro", tuple(sensors), cov, groups, tuple(np.eye(3) for _ in groups),
+                   table)
+    return Calibration("static", {"gyro": gs}, fs, extra={"source": "static recording"})
+
+
+def noise_shape(y: np.ndarray, fs: float, *, split: float = 0.5) -> dict[str, Any]:
+    """How far static noise (N, n) departs from zero-mean white Gaussian noise."""
+    y = np.asarray(y, float)
+    N, n = y.shape
+    k = int(N * split)
+    r = y - y.mean(axis=0)
+    sd = r.std(axis=0, ddof=1)
+    zs = r / sd
+    kurt = stats.kurtosis(r, axis=0, fisher=True)
+    over4 = np.mean(np.abs(zs) > 4.0, axis=0)
+    gauss4 = 2 * stats.norm.sf(4.0)
+    rho1 = np.array([np.corrcoef(r[1:, i], r[:-1, i])[0, 1] for i in range(n)])
+    C = np.corrcoef(r, rowvar=False)
+    off = np.abs(C - np.eye(n))
+    shift = (y[k:].mean(axis=0) - y[:k].mean(axis=0)) / (sd * math.sqrt(1 / k + 1 / (N - k)))
+    tab = allan_from_residuals(r, fs)
+    white = sd[None, :] / np.sqrt(tab.tau_s[:, None] * fs)
+    ratio = tab.adev / white
+    return {"samples": N, "channels": n, "sample_rate_hz": fs,
+            "sd": sd.tolist(), "excess_kurtosis": kurt.tolist(),
+            "beyond_4sigma": over4.tolist(), "beyond_4sigma_gaussian": gauss4,
+            "lag1_autocorrelation": rho1.tolist(),
+            "max_cross_correlation": float(off.max()) if n > 1 else 0.0,
+            "bias_shift_in_standard_errors": shift.tolist(),
+            "allan_ratio_to_white": {"tau_s": tab.tau_s.tolist(),
+                                     "median_over_channels": np.median(ratio, axis=1).tolist()}}
+
+
+def _holdout_rate(cal: Calibration, thr: Any, t: np.ndarray, y: np.ndarray
+                  ) -> tuple[int, float]:
+    from fdi.monitor import Monitor
+    from fdi.settings import MonitorSettings
+
+    mon = Monitor(cal, thr, settings=MonitorSettings(persistence=1 << 30))
+    res = mon.run(t - t[0], y)
+    n = sum(e.type == "detected" for e in res.events)
+    return n, float(t[-1] - t[0]) / 3600.0
+
+
+def static_holdout(t: np.ndarray, y: np.ndarray, names: tuple[str, ...], *,
+                   false_alarms_per_hour: float = 60.0, fraction: float = 0.5,
+                   simulate_hours: float = 1.0) -> dict[str, Any]:
+    """Tune on the first ``fraction`` of a static recording, count false alarms on the rest.
+
+    Returns the held-out rate of the tuned thresholds (Allan variance factors, full noise
+    covariance) and of white-noise thresholds (no Allan table), with Poisson intervals, and
+    :func:`noise_shape` of both parts.
+    """
+    from thresholds.evaluate import poisson_interval
+    from thresholds.tune import tune
+
+    t = np.asarray(t, float)
+    y = np.asarray(y, float)
+    fs = (t.size - 1) / float(t[-1] - t[0])
+    k = int(t.size * fraction)
+    out: dict[str, Any] = {"target_per_hour": false_alarms_per_hour, "fraction": fraction,
+                           "sample_rate_hz": fs, "tuning_s": float(t[k - 1] - t[0]),
+                           "held_out_s": float(t[-1] - t[k])}
+    for label, allan in (("tuned_allan", True), ("white", False)):
+        cal = static_calibration(y[:k], fs, names, allan=allan)
+        if allan:
+            thr = tune(cal, false_alarms_per_hour=false_alarms_per_hour,
+                       simulate_hours=simulate_hours).thresholds
+        else:
+            cal_a = static_calibration(y[:k], fs, names, allan=True)
+            thr = tune(cal_a, false_alarms_per_hour=false_alarms_per_hour,
+                       simulate_hours=simulate_hours).thresholds
+            thr = replace(thr, variance_factor=tuple(1.0 for _ in thr.scales))
+        n, h = _holdout_rate(cal, thr, t[k:], y[k:])
+        lo, hi = poisson_interval(n, h)
+        out[label] = {"false_alarms": n, "hours": h, "per_hour": n / h,
+                      "ci95_per_hour": [lo, hi], "ratio_to_target": n / h / false_alarms_per_hour,
+                      "variance_factor": list(thr.variance_factor)}
+    out["noise_tuning_part"] = noise_shape(y[:k], fs)
+    out["noise_held_out_part"] = noise_shape(y[k:], fs)
+    out["bias_shift_between_parts"] = noise_shape(y, fs, split=fraction)[
+        "bias_shift_in_standard_errors"]
+    return out
