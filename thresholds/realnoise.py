@@ -15,7 +15,8 @@ bias. The four MPU triads are taken as aligned (H = four stacked identities).
 :func:`static_holdout` builds a calibration from the first part (bias = mean, full noise
 covariance, Allan table of the residuals), tunes thresholds for the target rate, runs the
 monitor over the rest with isolation off (one false alarm = one detection episode), and
-does the same with the white-noise assumption (no Allan table) for comparison.
+does the same with the white-noise assumption (variance factors 1) and with a drift-aware
+bias uncertainty (``bias_sd`` = the Allan deviation at the longest τ) for comparison.
 :func:`noise_shape` measures how far the noise departs from the Gaussian white model:
 excess kurtosis, tail exceedances beyond 4σ against the Gaussian expectation, lag-1
 autocorrelation, the largest correlation between channels, the bias shift between the two
@@ -89,8 +90,13 @@ def load_adis16405(folder: str | Path) -> tuple[float, np.ndarray]:
 
 
 def static_calibration(y: np.ndarray, fs: float, names: tuple[str, ...],
-                       *, allan: bool = True) -> Calibration:
-    """A calibration of static channels (N, n) rad/s: aligned triads, SF 1, bias = mean."""
+                       *, allan: bool = True, drift_bias_sd: bool = False) -> Calibration:
+    """A calibration of static channels (N, n) rad/s: aligned triads, SF 1, bias = mean.
+
+    ``bias_sd`` is the standard error of the mean, or with ``drift_bias_sd`` the Allan
+    deviation at the longest τ of the part (the in-run bias wander the mean cannot
+    follow), which the monitor's bias-uncertainty inflation (1 + w·β/f_w) then carries.
+    """
     y = np.asarray(y, float)
     n = y.shape[1]
     if n % 3:
@@ -98,17 +104,21 @@ def static_calibration(y: np.ndarray, fs: float, names: tuple[str, ...],
     mean = y.mean(axis=0)
     cov = np.cov(y, rowvar=False)
     sd = np.sqrt(np.diag(cov))
+    table = allan_from_residuals(y - mean, fs) if (allan or drift_bias_sd) else None
+    bsd = sd / math.sqrt(y.shape[0])
+    if drift_bias_sd and table is not None:
+        bsd = np.maximum(bsd, table.adev[-1])
     sensors = []
     for i in range(n):
         ax = np.eye(3)[i % 3]
         sensors.append(SensorCal(name=names[i], axis=ax, axis_nominal=ax.copy(),
                                  scale_factor=1.0, scale_factor_sd=1e-6, bias=float(mean[i]),
-                                 bias_sd=float(sd[i] / math.sqrt(y.shape[0])),
+                                 bias_sd=float(bsd[i]),
                                  input_error_cov=1e-12 * np.eye(3), raw_unit="rad/s",
                                  scale_factor_unit="(rad/s)/(rad/s)", bias_unit="rad/s",
                                  residual_rms=float(sd[i])))
+    table = table if allan else None
     groups = tuple(tuple(range(k, k + 3)) for k in range(0, n, 3))
-    table = allan_from_residuals(y - mean, fs) if allan else None
     gs = SensorSet("gyro", tuple(sensors), cov, groups, tuple(np.eye(3) for _ in groups),
                    table)
     return Calibration("static", {"gyro": gs}, fs, extra={"source": "static recording"})
@@ -143,14 +153,22 @@ def noise_shape(y: np.ndarray, fs: float, *, split: float = 0.5) -> dict[str, An
 
 
 def _holdout_rate(cal: Calibration, thr: Any, t: np.ndarray, y: np.ndarray
-                  ) -> tuple[int, float]:
+                  ) -> tuple[int, float, list[float], float, float]:
+    """Detection episodes, hours, per scale the exceedance fraction over its alpha, the
+    fraction of samples with any statistic over its threshold, the first alarm (s)."""
     from fdi.monitor import Monitor
     from fdi.settings import MonitorSettings
 
     mon = Monitor(cal, thr, settings=MonitorSettings(persistence=1 << 30))
     res = mon.run(t - t[0], y)
     n = sum(e.type == "detected" for e in res.events)
-    return n, float(t[-1] - t[0]) / 3600.0
+    with np.errstate(invalid="ignore"):
+        exc = np.nanmean(np.where(np.isfinite(res.statistics),
+                                  res.statistics > res.thresholds, np.nan), axis=0)
+    ratio = [float(e / a) for e, a in zip(exc, thr.alpha, strict=False)]
+    anyx = np.any(res.statistics > res.thresholds, axis=1)
+    first = float(res.t[np.argmax(anyx)]) if anyx.any() else math.inf
+    return n, float(t[-1] - t[0]) / 3600.0, ratio, float(anyx.mean()), first
 
 
 def static_holdout(t: np.ndarray, y: np.ndarray, names: tuple[str, ...], *,
@@ -172,21 +190,20 @@ def static_holdout(t: np.ndarray, y: np.ndarray, names: tuple[str, ...], *,
     out: dict[str, Any] = {"target_per_hour": false_alarms_per_hour, "fraction": fraction,
                            "sample_rate_hz": fs, "tuning_s": float(t[k - 1] - t[0]),
                            "held_out_s": float(t[-1] - t[k])}
-    for label, allan in (("tuned_allan", True), ("white", False)):
-        cal = static_calibration(y[:k], fs, names, allan=allan)
-        if allan:
-            thr = tune(cal, false_alarms_per_hour=false_alarms_per_hour,
-                       simulate_hours=simulate_hours).thresholds
-        else:
-            cal_a = static_calibration(y[:k], fs, names, allan=True)
-            thr = tune(cal_a, false_alarms_per_hour=false_alarms_per_hour,
-                       simulate_hours=simulate_hours).thresholds
+    for label, allan, drift in (("tuned_allan", True, False), ("white", False, False),
+                                ("drift_aware", True, True)):
+        cal = static_calibration(y[:k], fs, names, allan=True, drift_bias_sd=drift)
+        thr = tune(cal, false_alarms_per_hour=false_alarms_per_hour,
+                   simulate_hours=simulate_hours).thresholds
+        if not allan:
             thr = replace(thr, variance_factor=tuple(1.0 for _ in thr.scales))
-        n, h = _holdout_rate(cal, thr, t[k:], y[k:])
+        n, h, exceed, busy, first = _holdout_rate(cal, thr, t[k:], y[k:])
         lo, hi = poisson_interval(n, h)
         out[label] = {"false_alarms": n, "hours": h, "per_hour": n / h,
                       "ci95_per_hour": [lo, hi], "ratio_to_target": n / h / false_alarms_per_hour,
-                      "variance_factor": list(thr.variance_factor)}
+                      "time_in_alarm_fraction": busy, "first_alarm_s": first,
+                      "variance_factor": list(thr.variance_factor),
+                      "exceedance_over_alpha_per_scale": exceed}
     out["noise_tuning_part"] = noise_shape(y[:k], fs)
     out["noise_held_out_part"] = noise_shape(y[k:], fs)
     out["bias_shift_between_parts"] = noise_shape(y, fs, split=fraction)[
