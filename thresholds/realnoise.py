@@ -15,8 +15,9 @@ bias. The four MPU triads are taken as aligned (H = four stacked identities).
 :func:`static_holdout` builds a calibration from the first part (bias = mean, full noise
 covariance, Allan table of the residuals), tunes thresholds for the target rate, runs the
 monitor over the rest with isolation off (one false alarm = one detection episode), and
-does the same with the white-noise assumption (variance factors 1) and with a drift-aware
-bias uncertainty (``bias_sd`` = the Allan deviation at the longest τ) for comparison.
+does the same with the white-noise assumption (variance factors 1), with a drift-aware
+bias uncertainty (``bias_sd`` = the Allan deviation at the longest τ), and with that plus
+threshold levels from the empirical tail of the first part (:func:`tail_thresholds`).
 :func:`noise_shape` measures how far the noise departs from the Gaussian white model:
 excess kurtosis, tail exceedances beyond 4σ against the Gaussian expectation, lag-1
 autocorrelation, the largest correlation between channels, the bias shift between the two
@@ -40,7 +41,7 @@ from fdi.units import DPS
 from thresholds.compute import allan_from_residuals
 
 __all__ = ["load_adis16405", "load_mpu9250_static", "noise_shape", "static_calibration",
-           "static_holdout"]
+           "static_holdout", "tail_thresholds"]
 
 
 def load_mpu9250_static(folder: str | Path) -> tuple[np.ndarray, np.ndarray, tuple[str, ...]]:
@@ -152,10 +153,11 @@ def noise_shape(y: np.ndarray, fs: float, *, split: float = 0.5) -> dict[str, An
                                      "median_over_channels": np.median(ratio, axis=1).tolist()}}
 
 
-def _holdout_rate(cal: Calibration, thr: Any, t: np.ndarray, y: np.ndarray
-                  ) -> tuple[int, float, list[float], float, float]:
-    """Detection episodes, hours, per scale the exceedance fraction over its alpha, the
-    fraction of samples with any statistic over its threshold, the first alarm (s)."""
+def _holdout_rate(cal: Calibration, thr: Any, t: np.ndarray, y: np.ndarray,
+                  alpha_ref: tuple[float, ...]) -> tuple[int, float, list[float], float, float]:
+    """Detection episodes, hours, per scale the exceedance fraction over ``alpha_ref``
+    (the Gaussian design), the fraction of samples with any statistic over its threshold,
+    and the time of the first alarm (s)."""
     from fdi.monitor import Monitor
     from fdi.settings import MonitorSettings
 
@@ -165,10 +167,47 @@ def _holdout_rate(cal: Calibration, thr: Any, t: np.ndarray, y: np.ndarray
     with np.errstate(invalid="ignore"):
         exc = np.nanmean(np.where(np.isfinite(res.statistics),
                                   res.statistics > res.thresholds, np.nan), axis=0)
-    ratio = [float(e / a) for e, a in zip(exc, thr.alpha, strict=False)]
+    ratio = [float(e / a) for e, a in zip(exc, alpha_ref, strict=False)]
     anyx = np.any(res.statistics > res.thresholds, axis=1)
     first = float(res.t[np.argmax(anyx)]) if anyx.any() else math.inf
     return n, float(t[-1] - t[0]) / 3600.0, ratio, float(anyx.mean()), first
+
+
+def tail_thresholds(cal: Calibration, thr: Any, t: np.ndarray, y: np.ndarray, *,
+                    tail_fraction: float = 0.02) -> Any:
+    """Thresholds whose levels come from the empirical tail of healthy data (peaks over
+    threshold), never below the Gaussian ones.
+
+    The monitor runs over the healthy samples ``y`` (isolation off); for each scale the
+    largest ``tail_fraction`` of its statistic D_w are fitted with a generalised Pareto
+    distribution (``scipy.stats.genpareto``, location at the empirical quantile), whose
+    level exceeded with probability ``alpha_w`` becomes the threshold; it is written back
+    as the χ² tail probability the monitor turns into that threshold. Running means are
+    correlated, so the long windows' fits rest on fewer independent values than samples.
+    """
+    from fdi.detector import chi2_threshold
+    from fdi.monitor import Monitor
+    from fdi.settings import MonitorSettings
+    from thresholds.tune import _parity_geometry
+
+    mon = Monitor(cal, thr, settings=MonitorSettings(persistence=1 << 30))
+    res = mon.run(t - t[0], y)
+    df, _, beta, _, _ = _parity_geometry(cal, thr.kind)
+    alphas = []
+    for k, (w, a, f) in enumerate(zip(thr.scales, thr.alpha, thr.variance_factor,
+                                      strict=True)):
+        d = res.statistics[:, k]
+        d = d[np.isfinite(d)]
+        u = float(np.quantile(d, 1.0 - tail_fraction))
+        exc = d[d > u] - u
+        c, _, scale = stats.genpareto.fit(exc, floc=0.0)
+        level = u + float(stats.genpareto.isf(min(a / tail_fraction, 0.5), c, 0.0, scale))
+        gauss = chi2_threshold(a, df)
+        emp = level / (1.0 + w * beta / f)
+        alphas.append(float(stats.chi2.sf(emp, df)) if emp > gauss else a)
+    return replace(thr, alpha=tuple(alphas),
+                   threshold=tuple(chi2_threshold(x, df) for x in alphas),
+                   notes=thr.notes + "; levels from the empirical tail (generalised Pareto)")
 
 
 def static_holdout(t: np.ndarray, y: np.ndarray, names: tuple[str, ...], *,
@@ -190,14 +229,19 @@ def static_holdout(t: np.ndarray, y: np.ndarray, names: tuple[str, ...], *,
     out: dict[str, Any] = {"target_per_hour": false_alarms_per_hour, "fraction": fraction,
                            "sample_rate_hz": fs, "tuning_s": float(t[k - 1] - t[0]),
                            "held_out_s": float(t[-1] - t[k])}
-    for label, allan, drift in (("tuned_allan", True, False), ("white", False, False),
-                                ("drift_aware", True, True)):
+    for label, allan, drift, tail in (("tuned_allan", True, False, False),
+                                      ("white", False, False, False),
+                                      ("drift_aware", True, True, False),
+                                      ("drift_and_tail_aware", True, True, True)):
         cal = static_calibration(y[:k], fs, names, allan=True, drift_bias_sd=drift)
         thr = tune(cal, false_alarms_per_hour=false_alarms_per_hour,
                    simulate_hours=simulate_hours).thresholds
         if not allan:
             thr = replace(thr, variance_factor=tuple(1.0 for _ in thr.scales))
-        n, h, exceed, busy, first = _holdout_rate(cal, thr, t[k:], y[k:])
+        design = thr.alpha
+        if tail:
+            thr = tail_thresholds(cal, thr, t[:k], y[:k])
+        n, h, exceed, busy, first = _holdout_rate(cal, thr, t[k:], y[k:], design)
         lo, hi = poisson_interval(n, h)
         out[label] = {"false_alarms": n, "hours": h, "per_hour": n / h,
                       "ci95_per_hour": [lo, hi], "ratio_to_target": n / h / false_alarms_per_hour,
