@@ -367,6 +367,10 @@ def tune(cal: Calibration, *, false_alarms_per_hour: float, kind: str = "gyro",
                           f"sensors (no Allan table of the residuals): recalibrate with the "
                           f"Allan table on, or give thresholds by hand")
     fs = float(sample_rate_hz or cal.sample_rate_hz)
+    if R > 36.0 * fs:
+        raise ConfigError(f"--false-alarms-per-hour {R:g} is more than one alarm per 100 "
+                          f"samples at {fs:g} Hz (at most {36.0 * fs:g}); that is not a "
+                          f"false-alarm budget")
     sc = check_scales(cal, scales, kind=kind, sample_rate_hz=fs)
     df, _, beta, _, _ = _parity_geometry(cal, kind)
     if df < 1:

@@ -57,6 +57,8 @@ def test_bad_input_is_a_config_error():
         tune(CAL, false_alarms_per_hour=0.0, simulate_hours=0)
     with pytest.raises(ConfigError, match="positive"):
         tune(CAL, false_alarms_per_hour=-3.0, simulate_hours=0)
+    with pytest.raises(ConfigError, match="not a false-alarm budget"):
+        tune(CAL, false_alarms_per_hour=1e6, simulate_hours=0)
     bare = synthetic_calibration("cone6", allan=False)
     with pytest.raises(ConfigError, match="residual statistics"):
         tune(bare, false_alarms_per_hour=1.0, simulate_hours=0)
