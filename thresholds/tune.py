@@ -202,6 +202,8 @@ def detectable_sizes(cal: Calibration, thresholds: Thresholds, *, kind: str = "g
     ``draws`` fixed draws of g; b solves P = ``probability`` for the worst sensor.
     """
     s = cal.kind(kind)
+    if s.n < 4:
+        raise ConfigError(f"{s.n} {kind} sensors: no parity space, no detectable size")
     df, u2, beta, U, G = _parity_geometry(cal, kind)
     i = int(np.argmin(u2))
     sd = float(s.noise_sd[i])
@@ -372,9 +374,9 @@ def tune(cal: Calibration, *, false_alarms_per_hour: float, kind: str = "gyro",
                           f"samples at {fs:g} Hz (at most {36.0 * fs:g}); that is not a "
                           f"false-alarm budget")
     sc = check_scales(cal, scales, kind=kind, sample_rate_hz=fs)
-    df, _, beta, _, _ = _parity_geometry(cal, kind)
-    if df < 1:
+    if s.n < 4:
         raise ConfigError(f"{s.n} {kind} sensors: no parity space, nothing to tune")
+    df, _, beta, _, _ = _parity_geometry(cal, kind)
     vf = variance_factors(s.allan, s.noise_covariance, fs, sc)
     base = {"kind": kind, "n": s.n, "sample_rate_hz": fs, "false_alarms_per_hour": R,
             "scales": sc, "variance_factor": vf, "detector": "windows"}
