@@ -334,8 +334,8 @@ def _assumptions(cal: Calibration, thr: Thresholds, kind: str, df: int, beta: fl
 
 
 def tune(cal: Calibration, *, false_alarms_per_hour: float, kind: str = "gyro",
-         scales: int | tuple[int, ...] = 7, simulate_hours: float = 4.0, seed: int = 0,
-         sample_rate_hz: float | None = None) -> Tuning:
+         scales: int | tuple[int, ...] = 7, simulate_hours: float = 4.0,
+         seed: int = 0) -> Tuning:
     """Thresholds whose full-set false-alarm rate is ``false_alarms_per_hour``.
 
     Parameters
@@ -352,7 +352,6 @@ def tune(cal: Calibration, *, false_alarms_per_hour: float, kind: str = "gyro",
         about 150 false alarms are expected (0: analytic shares only).
     seed : int
         Seed of the correction flights.
-    sample_rate_hz : float, optional
 
     Raises
     ------
@@ -368,7 +367,7 @@ def tune(cal: Calibration, *, false_alarms_per_hour: float, kind: str = "gyro",
         raise ConfigError(f"the calibration has no residual statistics for its {kind} "
                           f"sensors (no Allan table of the residuals): recalibrate with the "
                           f"Allan table on, or give thresholds by hand")
-    fs = float(sample_rate_hz or cal.sample_rate_hz)
+    fs = float(cal.sample_rate_hz)
     if R > 36.0 * fs:
         raise ConfigError(f"--false-alarms-per-hour {R:g} is more than one alarm per 100 "
                           f"samples at {fs:g} Hz (at most {36.0 * fs:g}); that is not a "
@@ -405,8 +404,9 @@ def tune(cal: Calibration, *, false_alarms_per_hour: float, kind: str = "gyro",
         "factor": gamma, "passes": passes,
         "flights": "replay.flight_sim healthy, errors drawn from the calibration covariance, "
                    "manoeuvres up to 300 deg/s, 60-600 s",
-        "extrapolated": R < MIN_SIMULATED_RATE and simulate_hours > 0,
-        "note": (f"measured at {Rc:g}/h and carried over to {R:g}/h" if R < Rc
+        "extrapolated": R < MIN_SIMULATED_RATE and bool(passes),
+        "note": ("not simulated: analytic shares only (conservative)" if not passes
+                 else f"measured at {Rc:g}/h and carried over to {R:g}/h" if R < Rc
                  else "measured at the target")}
     ass["created"] = datetime.now(UTC).isoformat(timespec="seconds")
     return Tuning(thr, detectable_sizes(cal, thr, kind=kind), ass)
