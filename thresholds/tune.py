@@ -314,7 +314,9 @@ def _assumptions(cal: Calibration, thr: Thresholds, kind: str, df: int, beta: fl
             "white": white,
             "calibration_noise_model": noise_rec.get("method") if isinstance(noise_rec, dict)
             else None},
-        "allan_deviation": {"scale": list(thr.scales), "tau_s": tau.tolist(),
+        "allan_deviation": {"source": "the calibration's Allan table (allantools.oadev of "
+                                      "its residuals), log-log interpolated at tau = w/fs",
+                            "scale": list(thr.scales), "tau_s": tau.tolist(),
                             "unit": "SI input (rad/s or m/s^2)",
                             "adev": None if adev is None else adev.tolist(),
                             "variance_factor": list(thr.variance_factor)},

@@ -23,8 +23,9 @@ def configure(p: argparse.ArgumentParser) -> None:
                    help="budget for computed thresholds (default 1e-3)")
     p.add_argument("--runs", type=int, default=200, metavar="N",
                    help="simulated flights (default 200)")
-    p.add_argument("--sweep-runs", type=int, default=0, metavar="N",
-                   help="extra runs measuring the detectable step per scale (default 0)")
+    p.add_argument("--sweep-runs", type=int, default=220, metavar="N",
+                   help="extra short runs measuring the detectable step per scale, compared "
+                        "with rimu tune's prediction (default 220; 0: none)")
     p.add_argument("--seed", type=int, default=0, help="campaign seed (default 0)")
     p.add_argument("--faults", metavar="KINDS",
                    help="comma-separated fault kinds (default: all of step, ramp, stuck, "
@@ -127,8 +128,9 @@ def run(args: argparse.Namespace) -> int:
         items = _corpus_items(args.corpus)
         task = corpus_task(cal, thr, args.kind)
     else:
+        n_sweep = args.sweep_runs if cal.kind(args.kind).n >= 4 else 0   # no parity: no sweep
         items = design(cal, thr, runs=args.runs, seed=args.seed, faults=kinds,
-                       sweep_runs=args.sweep_runs, kind=args.kind, duration_s=args.duration,
+                       sweep_runs=n_sweep, kind=args.kind, duration_s=args.duration,
                        onset_s=args.duration / 2, max_rate_dps=args.max_rate)
         task = simulation_task(cal, thr, args.kind)
     out = Path(args.out)
@@ -137,7 +139,8 @@ def run(args: argparse.Namespace) -> int:
     results = execute(task, items, scheduler=args.scheduler, progress=not args.no_progress,
                       workers=args.workers)
     wall = time.perf_counter() - t0
-    pred = detectable_sizes(cal, thr, kind=args.kind) if args.sweep_runs else ()
+    sweep = any(getattr(x, "fault", "") == "sweep" for x in items)
+    pred = detectable_sizes(cal, thr, kind=args.kind) if sweep else ()
     ev = summarise(results, thr, n_sensors=cal.kind(args.kind).n, predicted=pred)
     ev["source"] = "corpus" if args.corpus else "simulation"
     ev["threshold_choice"] = choice.to_dict()
