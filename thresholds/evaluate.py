@@ -301,6 +301,7 @@ def summarise(results: Iterable[RunResult], thresholds: Thresholds, *, n_sensors
     out: dict[str, Any] = {
         "schema": EVALUATION_SCHEMA, "runs": len(res),
         "thresholds": {"false_alarms_per_hour": thresholds.false_alarms_per_hour,
+                       "sample_rate_hz": thresholds.sample_rate_hz,
                        "scales": list(thresholds.scales), "notes": thresholds.notes},
         "false_alarms": {"count": nfa, "exposure_h": expo_h,
                          "per_hour": nfa / expo_h if expo_h > 0 else math.nan,

@@ -42,24 +42,30 @@ def _roc(ev: dict[str, Any], path: Path) -> None:
 
 def _delay(ev: dict[str, Any], path: Path) -> None:
     plt = _plt()
+    from matplotlib.ticker import NullFormatter
+
+    floor = 1.0 / float(ev["thresholds"].get("sample_rate_hz") or 100.0)
     kinds = sorted({f["fault"] for f in ev["faults"] if f["unit"] not in ("-",)})
     fig, axes = plt.subplots(1, max(1, len(kinds)), figsize=(3.2 * max(1, len(kinds)), 3.4),
                              squeeze=False)
     for ax, k in zip(axes[0], kinds, strict=False):
         rows = [f for f in ev["faults"] if f["fault"] == k]
         s = [f["size"] for f in rows]
-        d = [np.nan if f["delay_s_median"] is None else f["delay_s_median"] for f in rows]
-        p = [np.nan if f["delay_s_p90"] is None else f["delay_s_p90"] for f in rows]
+        d = [np.nan if f["delay_s_median"] is None else max(f["delay_s_median"], floor)
+             for f in rows]
+        p = [np.nan if f["delay_s_p90"] is None else max(f["delay_s_p90"], floor)
+             for f in rows]
         ax.plot(s, d, "o-", label="median")
         ax.plot(s, p, "s--", label="90 %")
         if all(v > 0 for v in s):
             ax.set_xscale("log")
         if np.any(np.asarray(d, float) > 0):
             ax.set_yscale("log")
+        ax.xaxis.set_minor_formatter(NullFormatter())
         ax.set_title(k)
         ax.set_xlabel(f"size ({rows[0]['unit']})")
         ax.grid(True, which="both", alpha=0.3)
-    axes[0][0].set_ylabel("detection delay (s)")
+    axes[0][0].set_ylabel("detection delay (s; 0 drawn at one sample)")
     axes[0][0].legend(fontsize=7)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
