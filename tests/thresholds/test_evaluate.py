@@ -136,3 +136,23 @@ def test_tune_detectable_sizes_agree_with_the_evaluate_sweep_within_20_percent()
                    predicted=detectable_sizes(CAL, THR))
     for r in ev["detectable_sizes"]["per_scale"]:
         assert abs(r["ratio"] - 1.0) < 0.2, r
+
+
+@pytest.mark.slow
+def test_cli_serial_and_local_cluster_processes_write_the_same_evaluation(tmp_path):
+    """End to end through worker processes (pickling the calibration and the task): the
+    two evaluation.json files differ only in their timing entry."""
+    from rimu.cli import main
+
+    cal = tmp_path / "cal.json"
+    CAL.save(cal)
+    docs = []
+    for sched in ("serial", "local"):
+        out = tmp_path / sched
+        assert main(["evaluate", "--cal", str(cal), "--false-alarms-per-hour", "10",
+                     "--runs", "24", "--sweep-runs", "22", "--duration", "6", "--seed", "9",
+                     "--scheduler", sched, "--no-progress", "--out", str(out)]) == 0
+        doc = json.loads((out / "evaluation.json").read_text())
+        assert doc.pop("timing")["scheduler"] == sched
+        docs.append(doc)
+    assert docs[0] == docs[1]
