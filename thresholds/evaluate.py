@@ -289,81 +289,109 @@ def _probit_b99(sizes: np.ndarray, hits: np.ndarray, p: float = 0.99
     return float(b), float(b - 1.96 * sd), float(b + 1.96 * sd)
 
 
-def summarise(results: Iterable[RunResult], thresholds: Thresholds, *, n_sensors: int,
-              predicted: Sequence[Any] = ()) -> dict[str, Any]:
-    """The numbers of ``evaluation.json`` (no timing; deterministic in the results)."""
-    res = list(results)
-    errors = [r.spec.fault for r in res if r.spec.fault.startswith("error")]
-    main = [r for r in res if r.spec.fault != "sweep" and not r.spec.fault.startswith("error")]
+def _false_alarms(main: list[RunResult]) -> dict[str, Any]:
+    """Full-set false alarms per hour of exposure, exact Poisson interval."""
     nfa = sum(r.false_alarm for r in main)
     expo_h = sum(r.exposure_s for r in main) / 3600.0
     lo, hi = poisson_interval(nfa, expo_h)
-    out: dict[str, Any] = {
-        "schema": EVALUATION_SCHEMA, "runs": len(res),
-        "thresholds": {"false_alarms_per_hour": thresholds.false_alarms_per_hour,
-                       "sample_rate_hz": thresholds.sample_rate_hz,
-                       "scales": list(thresholds.scales), "notes": thresholds.notes},
-        "false_alarms": {"count": nfa, "exposure_h": expo_h,
-                         "per_hour": nfa / expo_h if expo_h > 0 else math.nan,
-                         "ci95_per_hour": [lo, hi],
-                         "definition": "first alarm of the full healthy set before the fault "
-                                       "onset, per hour of exposure until it"}}
+    return {"count": nfa, "exposure_h": expo_h,
+            "per_hour": nfa / expo_h if expo_h > 0 else math.nan, "ci95_per_hour": [lo, hi],
+            "definition": "first alarm of the full healthy set before the fault onset, per "
+                          "hour of exposure until it"}
+
+
+def _fault_cells(main: list[RunResult]) -> list[dict[str, Any]]:
+    """Per fault kind and size: detection, correct isolation (Wilson intervals), delay."""
     cells: dict[tuple[str, float], list[RunResult]] = {}
     for r in main:
         if r.spec.fault != "healthy":
             cells.setdefault((r.spec.fault, r.spec.size_label), []).append(r)
-    faults = []
+    out = []
     for (f, lab), rs in sorted(cells.items()):
         n = len(rs)
         kd = sum(r.detected for r in rs)
         ki = sum(r.isolated == r.spec.sensor for r in rs)
         d = np.array([r.delay_s for r in rs if r.detected])
-        faults.append({"fault": f, "size": lab, "unit": SIZE_UNITS.get(f, "SI"), "runs": n,
-                       "detected": kd, "pd": kd / n, "pd_ci95": list(wilson_interval(kd, n)),
-                       "isolated_correctly": ki, "p_isolation": ki / n,
-                       "p_isolation_ci95": list(wilson_interval(ki, n)),
-                       "delay_s_median": float(np.median(d)) if d.size else None,
-                       "delay_s_p90": float(np.quantile(d, 0.9)) if d.size else None})
-    out["faults"] = faults
-    if errors:
-        out["errors"] = errors
+        out.append({"fault": f, "size": lab, "unit": SIZE_UNITS.get(f, "SI"), "runs": n,
+                    "detected": kd, "pd": kd / n, "pd_ci95": list(wilson_interval(kd, n)),
+                    "isolated_correctly": ki, "p_isolation": ki / n,
+                    "p_isolation_ci95": list(wilson_interval(ki, n)),
+                    "delay_s_median": float(np.median(d)) if d.size else None,
+                    "delay_s_p90": float(np.quantile(d, 0.9)) if d.size else None})
+    return out
+
+
+def _confusion(main: list[RunResult], n_sensors: int) -> dict[str, Any]:
+    """Faulty sensor (rows) against the first sensor isolated after the onset (columns)."""
     conf = np.zeros((n_sensors, n_sensors + 1), int)
     for r in main:
-        if r.spec.fault not in ("healthy",) and r.detected:
+        if r.spec.fault != "healthy" and r.detected:
             conf[r.spec.sensor - 1, r.isolated] += 1
-    out["isolation_confusion"] = {"rows": "true sensor 1..n",
-                                  "columns": "isolated: none, 1..n", "counts": conf.tolist()}
-    roc = []
-    for k, c in enumerate(ROC_MULTIPLIERS):
-        fa, ex = 0, 0.0
-        for r in main:
-            first = r.roc_first[k]
-            on = r.spec.onset_s if r.spec.fault != "healthy" else math.inf
-            end = min(on, r.spec.duration_s)
-            fa += first < end
-            ex += min(first, end)
-        det = [r for r in main if r.spec.fault in ("step", "ramp")]
-        kd = sum(r.roc_first[k] >= r.spec.onset_s and math.isfinite(r.roc_first[k])
-                 for r in det)
-        roc.append({"multiplier": c, "false_alarms_per_hour": fa / (ex / 3600.0) if ex else
-                    math.nan, "false_alarms": fa, "pd_step_ramp": kd / len(det) if det else
-                    math.nan})
-    out["roc"] = roc
+    return {"rows": "true sensor 1..n", "columns": "isolated: none, 1..n",
+            "counts": conf.tolist()}
+
+
+def _roc_point(main: list[RunResult], k: int) -> dict[str, Any]:
+    """False alarms per hour and detection of step/ramp faults at ROC multiplier k."""
+    fa, ex = 0, 0.0
+    for r in main:
+        first = r.roc_first[k]
+        end = min(r.spec.onset_s if r.spec.fault != "healthy" else math.inf,
+                  r.spec.duration_s)
+        fa += first < end
+        ex += min(first, end)
+    det = [r for r in main if r.spec.fault in ("step", "ramp")]
+    kd = sum(r.spec.onset_s <= r.roc_first[k] < math.inf for r in det)
+    return {"multiplier": ROC_MULTIPLIERS[k],
+            "false_alarms_per_hour": fa / (ex / 3600.0) if ex else math.nan,
+            "false_alarms": fa, "pd_step_ramp": kd / len(det) if det else math.nan}
+
+
+def _detectable(sweep: list[RunResult], thresholds: Thresholds, predicted: Sequence[Any]
+                ) -> dict[str, Any]:
+    """Measured 99 % detectable size per scale (probit fit) beside the prediction."""
+    sizes = np.array([r.spec.size_label for r in sweep])
+    hits = np.array([r.window_hit for r in sweep], float)
+    rows = []
+    for k, w in enumerate(thresholds.scales):
+        b, blo, bhi = _probit_b99(sizes, hits[:, k])
+        row = {"scale": int(w), "measured_sigma": b, "ci95_sigma": [blo, bhi]}
+        if k < len(predicted):
+            pr = predicted[k].size_sigma
+            row["predicted_sigma"] = pr
+            row["ratio"] = b / pr if math.isfinite(b) else None
+        rows.append(row)
+    return {"probability": 0.99, "runs": len(sweep), "sensor": sweep[0].spec.sensor,
+            "conditions": "step at rest, one full window, isolation off", "per_scale": rows}
+
+
+def summarise(results: Iterable[RunResult], thresholds: Thresholds, *, n_sensors: int,
+              predicted: Sequence[Any] = ()) -> dict[str, Any]:
+    """The numbers of ``evaluation.json`` (no timing; deterministic in the results).
+
+    Parameters
+    ----------
+    results : iterable of RunResult
+        In run order.
+    thresholds : Thresholds
+    n_sensors : int
+    predicted : sequence of DetectableSize
+        ``rimu tune``'s detectable sizes, shown beside the measured ones.
+    """
+    res = list(results)
+    errors = [r.spec.fault for r in res if r.spec.fault.startswith("error")]
+    main = [r for r in res if r.spec.fault != "sweep" and not r.spec.fault.startswith("error")]
     sweep = [r for r in res if r.spec.fault == "sweep"]
+    out: dict[str, Any] = {
+        "schema": EVALUATION_SCHEMA, "runs": len(res),
+        "thresholds": {"false_alarms_per_hour": thresholds.false_alarms_per_hour,
+                       "sample_rate_hz": thresholds.sample_rate_hz,
+                       "scales": list(thresholds.scales), "notes": thresholds.notes},
+        "false_alarms": _false_alarms(main), "faults": _fault_cells(main)}
+    if errors:
+        out["errors"] = errors
+    out["isolation_confusion"] = _confusion(main, n_sensors)
+    out["roc"] = [_roc_point(main, k) for k in range(len(ROC_MULTIPLIERS))]
     if sweep:
-        sizes = np.array([r.spec.size_label for r in sweep])
-        hits = np.array([r.window_hit for r in sweep], float)
-        rows = []
-        for k, w in enumerate(thresholds.scales):
-            b, blo, bhi = _probit_b99(sizes, hits[:, k])
-            row = {"scale": int(w), "measured_sigma": b, "ci95_sigma": [blo, bhi]}
-            if k < len(predicted):
-                pr = predicted[k].size_sigma
-                row["predicted_sigma"] = pr
-                row["ratio"] = b / pr if math.isfinite(b) else None
-            rows.append(row)
-        out["detectable_sizes"] = {"probability": 0.99, "runs": len(sweep),
-                                   "sensor": sweep[0].spec.sensor,
-                                   "conditions": "step at rest, one full window, isolation off",
-                                   "per_scale": rows}
+        out["detectable_sizes"] = _detectable(sweep, thresholds, predicted)
     return out
