@@ -6,7 +6,6 @@ import argparse
 import json
 
 from fdi.calfile import load_calibration
-from fdi.errors import ConfigError
 from replay.flight import load_flight_dir
 from replay.report import build_report, format_report
 from rimu.argtypes import nonnegative_int, positive_float
@@ -17,11 +16,11 @@ HELP = "run the monitor over a flight sample directory; print events and a summa
 def configure(p: argparse.ArgumentParser) -> None:
     p.add_argument("flight", metavar="DIR", help="flight directory (rimu.flight/1)")
     p.add_argument("--cal", required=True, metavar="FILE", help="calibration file")
-    p.add_argument("--false-alarms-per-hour", type=positive_float(1e9), default=1e-3,
-                   metavar="X",
+    p.add_argument("--false-alarms-per-hour", type=positive_float(1e9), metavar="X",
                    help="false-alarm budget for computed thresholds (default 1e-3)")
     p.add_argument("--thresholds", metavar="FILE",
-                   help="a rimu.thresholds/1 file (default: computed from the calibration)")
+                   help="a rimu.thresholds/1 or rimu.tuning/1 (rimu tune) file (default: "
+                        "computed from the calibration)")
     p.add_argument("--report", metavar="FILE", help="write the rimu.report/1 JSON here")
     p.add_argument("--max-events", type=nonnegative_int(), default=50,
                    help="events to print (default 50)")
@@ -42,19 +41,11 @@ def run(args: argparse.Namespace) -> int:
     check_compatible(cal, flight.n, flight.raw_unit, str(args.flight), kind=flight.kind,
                      names=flight.sensor_names)
     from fdi.monitor import Monitor
-    from fdi.settings import load_thresholds
+    from thresholds.select import select
 
-    if args.thresholds:
-        thr = load_thresholds(args.thresholds)
-        how = {"thresholds_file": str(args.thresholds)}
-    else:
-        if not args.false_alarms_per_hour > 0:
-            raise ConfigError(f"--false-alarms-per-hour must be positive, "
-                              f"got {args.false_alarms_per_hour}")
-        from thresholds.compute import compute_thresholds
-        thr = compute_thresholds(cal, false_alarms_per_hour=args.false_alarms_per_hour,
-                                 kind=flight.kind)
-        how = {"false_alarms_per_hour": args.false_alarms_per_hour}
+    choice = select(cal, kind=flight.kind, thresholds_file=args.thresholds,
+                    false_alarms_per_hour=args.false_alarms_per_hour)
+    thr, how = choice.thresholds, choice.to_dict()
     mon = Monitor(cal, thr, kind=flight.kind)
     result = mon.run(flight.t, flight.raw, flight.valid)
     report = build_report(result, flight, cal, extra={"thresholds": how})

@@ -24,10 +24,11 @@ def add_monitor_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--map", metavar="FILE", dest="channel_map",
                    help="channel map TOML (rimu.channel_map/1): which message/signal is "
                         "sensor i (default: the shipped DBC's RIMU_GYRO_ii messages)")
-    p.add_argument("--thresholds", metavar="FILE", help="a rimu.thresholds/1 file")
+    p.add_argument("--thresholds", metavar="FILE",
+                   help="a rimu.thresholds/1 or rimu.tuning/1 (rimu tune) file")
     p.add_argument("--false-alarms-per-hour", type=positive_float(1e9), metavar="X",
-                   help="compute thresholds for this false-alarm budget (default: the "
-                        "monitor's default, 1e-3 per hour)")
+                   help="compute thresholds for this false-alarm budget (default 1e-3 "
+                        "per hour)")
     p.add_argument("--report", metavar="FILE", help="write the rimu.report/1 JSON here")
     p.add_argument("--max-events", type=nonnegative_int(), default=50,
                    help="events to print (default 50)")
@@ -53,24 +54,11 @@ def configure(p: argparse.ArgumentParser) -> None:
 def make_monitor(cal: Calibration, args: argparse.Namespace, kind: str) -> tuple[Any, dict]:
     """The monitor the options ask for, and how its thresholds were chosen."""
     from fdi.monitor import Monitor
+    from thresholds.select import select
 
-    if args.thresholds:
-        from fdi.settings import load_thresholds
-
-        thr = load_thresholds(args.thresholds)
-        how: dict[str, Any] = {"thresholds_file": str(args.thresholds)}
-    elif args.false_alarms_per_hour is not None:
-        if not args.false_alarms_per_hour > 0:
-            raise ConfigError(f"--false-alarms-per-hour must be positive, "
-                              f"got {args.false_alarms_per_hour}")
-        from thresholds import compute_thresholds
-
-        thr = compute_thresholds(cal, false_alarms_per_hour=args.false_alarms_per_hour,
-                                 kind=kind)
-        how = {"false_alarms_per_hour": args.false_alarms_per_hour}
-    else:
-        thr = None
-        how = {"thresholds": "monitor default"}
+    choice = select(cal, kind=kind, thresholds_file=args.thresholds,
+                    false_alarms_per_hour=args.false_alarms_per_hour)
+    thr, how = choice.thresholds, choice.to_dict()
     return Monitor(cal, thr, kind=kind), how
 
 

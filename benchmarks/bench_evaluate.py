@@ -1,0 +1,79 @@
+"""Throughput of an evaluation campaign: serial, and Dask LocalClusters of 1 and 2 workers.
+
+A campaign of N runs (default 1000) of 60-s simulated cone6 flights at 100 Hz, every fault
+kind (``rimu evaluate``'s design). The same campaign runs serially in this process and on
+LocalClusters of 1 and 2 single-threaded worker processes; each configuration is repeated
+and reported as min / median / max wall time, as runs per second, and as a ratio to the
+serial run of the same benchmark. Checks that every configuration gives the same
+``evaluation.json`` numbers. Writes ``benchmarks/results/evaluate.json``.
+
+Run: ``python benchmarks/bench_evaluate.py [--runs 1000] [--repeats 1]``
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import time
+from pathlib import Path
+
+from thresholds import synthetic_calibration
+from thresholds.evaluate import design, execute, simulation_task, summarise
+from thresholds.select import select
+
+
+def _timed(fn, repeats: int) -> tuple[list[float], object]:
+    times, out = [], None
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        out = fn()
+        times.append(time.perf_counter() - t0)
+    return times, out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--runs", type=int, default=1000)
+    ap.add_argument("--repeats", type=int, default=1)
+    ap.add_argument("--duration", type=float, default=60.0)
+    ap.add_argument("--out", default=str(Path(__file__).parent / "results" / "evaluate.json"))
+    a = ap.parse_args()
+    cal = synthetic_calibration("cone6")
+    thr = select(cal, false_alarms_per_hour=10.0).thresholds
+    specs = design(cal, thr, runs=a.runs, seed=0, duration_s=a.duration,
+                   onset_s=a.duration / 2)
+    task = simulation_task(cal, thr)
+    configs = {"serial": dict(scheduler="serial"),
+               "dask_local_1_worker": dict(scheduler="local", workers=1),
+               "dask_local_2_workers": dict(scheduler="local", workers=2)}
+    res: dict[str, dict] = {}
+    ref = None
+    for name, kw in configs.items():
+        times, results = _timed(lambda kw=kw: execute(task, specs, batch=10, **kw), a.repeats)
+        ev = json.dumps(summarise(results, thr, n_sensors=6), sort_keys=True)
+        ref = ref or ev
+        s = sorted(times)
+        res[name] = {"wall_s": {"min": s[0], "median": s[len(s) // 2], "max": s[-1]},
+                     "runs_per_s_median": a.runs / s[len(s) // 2],
+                     "identical_to_serial": ev == ref}
+        print(f"{name:22s} {s[0]:7.1f} / {s[len(s) // 2]:7.1f} / {s[-1]:7.1f} s "
+              f"(min/median/max)  {a.runs / s[len(s) // 2]:6.1f} runs/s  "
+              f"same numbers: {ev == ref}", flush=True)
+    base = res["serial"]["wall_s"]["median"]
+    for v in res.values():
+        v["ratio_to_serial"] = v["wall_s"]["median"] / base
+    doc = {"benchmark": "evaluate", "runs": a.runs, "flight_s": a.duration,
+           "repeats": a.repeats, "configuration": "cone6, 100 Hz, every fault kind",
+           "machine": {"platform": platform.platform(), "cpus": os.cpu_count(),
+                       "load_avg_1m": os.getloadavg()[0]},
+           "date_utc": time.strftime("%Y-%m-%d %H:%M", time.gmtime()), "results": res}
+    Path(a.out).parent.mkdir(parents=True, exist_ok=True)
+    Path(a.out).write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
+    print(f"under 10 minutes: {max(v['wall_s']['max'] for v in res.values()) < 600}; "
+          f"wrote {a.out}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,414 @@
+"""Threshold tuning for a false-alarm rate that holds (``rimu tune``).
+
+Why the per-sample budget of :func:`thresholds.compute_thresholds` is conservative
+-------------------------------------------------------------------------------------
+It charges every window scale ``alpha = rate/(3600·fs·K)`` *per sample*. A false alarm,
+though, is an *episode*: the monitor emits one event when a statistic first crosses its
+threshold and stays in the detection state until every statistic has been below half its
+threshold for 100 samples (or isolates). Three things make episodes rarer than
+exceedance samples:
+
+1. a w-sample running mean that exceeds its threshold tends to stay above it for many
+   samples: the share of exceedance samples that start an upcrossing is 0.26 at w = 128
+   (df = 3), 0.83 at w = 8, 1 at w = 1 (computed exactly below);
+2. the dyadic scales share samples (means over w and 2w are correlated 0.71), so one
+   excursion of the noise crosses several scales at once;
+3. the hysteresis merges upcrossings that come within one detection episode.
+
+On healthy simulated cone6 flights the per-sample budget gave 25 false alarms per hour for
+a target of 60 (factor 2.4 low) and 84 for a target of 3600.
+
+The tuning here
+---------------
+- per scale, the probability of an *upcrossing* is computed exactly for white noise: the
+  windows at t−1 and t share a sum A of w−1 samples, and given A the two statistics are
+  independent non-central χ² (df = m − 3, λ = |A|²), so
+  ``P(D_{t−1} ≤ T < D_t) = E_A[p(|A|)(1 − p(|A|))]`` with ``p = ncx2.sf(w·T, df, |A|²)``,
+  a one-dimensional integral over ``|A|²/(w−1) ~ χ²(df)``; each scale gets an equal share
+  of the episode rate (items 1);
+- the remaining effects (2, 3, and the calibration-uncertainty inflation of the thresholds
+  during manoeuvres) are measured: healthy flights of this calibration are simulated
+  (:mod:`replay.flight_sim`, errors drawn from the calibration covariance, manoeuvres up to
+  300 °/s), the full-set false-alarm rate is counted, and the per-scale shares are scaled by
+  target/measured (``correction``); twice, the second time at the corrected level. Below
+  :data:`MIN_SIMULATED_RATE` per hour the correction is measured at that rate and carried
+  over (stated in the assumptions).
+
+Detectable size (at rest)
+-------------------------
+A step b on sensor i moves the whitened parity by ``b·u_i``; over a full window of w
+samples ``D_w ~ ncx2(df, λ = w·b²·|u_i|²/f_w)``. The smallest step detected with 99 %
+probability by one window of scale w solves ``ncx2.sf(T_w(1 + w·β/f_w), df, λ) = 0.99``
+(:func:`fdi.detector.minimum_detectable_noncentrality`), with the bias-uncertainty
+inflation β of the monitor and the worst sensor (smallest |u_i|).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from datetime import UTC, datetime
+from functools import lru_cache
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from scipy import integrate, linalg, optimize, stats
+
+from fdi.calfile import Calibration
+from fdi.detector import chi2_threshold, minimum_detectable_noncentrality, variance_factors
+from fdi.errors import ConfigError
+from fdi.fileio import to_jsonable
+from fdi.parity import parity_matrix
+from fdi.settings import MAX_SCALE, Thresholds
+from fdi.units import DPS
+from thresholds.select import TUNING_SCHEMA
+
+__all__ = ["MIN_SIMULATED_RATE", "DetectableSize", "Tuning", "check_scales",
+           "detectable_sizes", "tune", "upcrossing_probability"]
+
+MIN_SIMULATED_RATE = 20.0
+"""False alarms per hour below which the simulation correction is measured at this rate."""
+DETECTION_PROBABILITY = 0.99
+"""Detection probability of the detectable sizes."""
+
+
+@lru_cache(maxsize=4096)
+def upcrossing_probability(alpha: float, df: int, w: int) -> float:
+    """``P(D_{t−1} ≤ T < D_t)`` for the w-sample window of white noise, T = χ²_df isf(alpha).
+
+    Parameters
+    ----------
+    alpha : float
+        Per-sample exceedance probability of the scale.
+    df : int
+        Parity dimension.
+    w : int
+        Window length (samples).
+    """
+    if w <= 1:
+        return alpha * (1.0 - alpha)
+    T = chi2_threshold(alpha, df)
+
+    def f(s: float) -> float:
+        p = stats.ncx2.sf(w * T, df, s * (w - 1))
+        return p * (1.0 - p) * stats.chi2.pdf(s, df)
+
+    mid = T * w / (w - 1)
+    hi = max(4.0 * mid, mid + 60.0)
+    v, _ = integrate.quad(f, 0.0, hi, points=[mid], limit=400, epsabs=0.0, epsrel=1e-8)
+    return float(v)
+
+
+def _alpha_for_upcrossings(rate: float, df: int, w: int) -> float:
+    """Per-sample alpha whose upcrossing probability is ``rate`` (per sample)."""
+    rate = min(rate, 0.2)
+    g = lambda la: math.log(upcrossing_probability(math.exp(la), df, w)) - math.log(rate)  # noqa: E731
+    lo = math.log(rate) - 1e-12
+    return math.exp(optimize.brentq(g, lo, math.log(0.45), xtol=1e-10))
+
+
+def check_scales(cal: Calibration, scales: int | tuple[int, ...], *, kind: str = "gyro",
+                 sample_rate_hz: float | None = None) -> tuple[int, ...]:
+    """Window lengths to tune (K: 1 ... 2^K), checked against the Allan table.
+
+    Raises
+    ------
+    ConfigError
+        A scale that is not a positive integer up to 2^20, or longer than the longest τ of
+        the calibration's Allan table (its noise is unknown there).
+    """
+    if isinstance(scales, int):
+        if not 0 <= scales <= 20:
+            raise ConfigError(f"scales: K must be in 0..20, got {scales}")
+        sc = tuple(2**k for k in range(scales + 1))
+    else:
+        sc = []
+        for w in scales:
+            if not (float(w) == int(w) and 1 <= int(w) <= MAX_SCALE):
+                raise ConfigError(f"unknown scale {w!r}: expected a window length in samples, "
+                                  f"an integer in 1..{MAX_SCALE}")
+            sc.append(int(w))
+        sc = tuple(sorted(set(sc)))
+        if not sc:
+            raise ConfigError("scales: give at least one window length")
+    s = cal.kind(kind)
+    fs = float(sample_rate_hz or cal.sample_rate_hz)
+    tmax = float(np.max(s.allan.tau_s)) if s.allan is not None else math.inf
+    for w in sc:
+        if w / fs > tmax * (1 + 1e-9):
+            raise ConfigError(f"unknown scale {w}: {w / fs:g} s is beyond the calibration's "
+                              f"Allan table (longest tau {tmax:g} s); its noise is unknown there")
+    return sc
+
+
+def _parity_geometry(cal: Calibration, kind: str
+                     ) -> tuple[int, np.ndarray, float, np.ndarray, np.ndarray]:
+    """Full set: df, |u_i|², β, whitened columns U (df, n) and bias-error covariance G.
+
+    z = L⁻¹·p with L·Lᵀ = VΣVᵀ; ``U = L⁻¹V``; a bias error e ~ N(0, diag(bias_sd²)) moves z
+    by ``L⁻¹V·e`` with covariance ``G``; β is the largest eigenvalue of G (the monitor's
+    bias-uncertainty constant).
+    """
+    s = cal.kind(kind)
+    V = parity_matrix(s.H)
+    S = np.asarray(s.noise_covariance, float)
+    L = np.linalg.cholesky(V @ S @ V.T)
+    U = linalg.solve_triangular(L, V, lower=True)
+    D = np.diag([c.bias_sd**2 for c in s.sensors])
+    G = U @ D @ U.T
+    beta = float(np.linalg.eigvalsh(G).max()) if G.size else 0.0
+    return V.shape[0], np.sum(U * U, axis=0), max(beta, 0.0), U, G
+
+
+@dataclass(frozen=True)
+class DetectableSize:
+    """Smallest step detected with :data:`DETECTION_PROBABILITY` by one window, at rest.
+
+    Attributes
+    ----------
+    scale : int
+        Window length (samples).
+    window_s : float
+    size : float
+        SI (rad/s for gyros, m/s² for accelerometers), worst sensor.
+    size_unit_value : float
+        The same in ``unit``.
+    unit : str
+        ``"deg/s"`` for gyros, ``"m/s^2"`` for accelerometers.
+    size_sigma : float
+        In units of that sensor's white-noise sd per sample.
+    sensor : int
+        1-based worst sensor.
+    """
+
+    scale: int
+    window_s: float
+    size: float
+    size_unit_value: float
+    unit: str
+    size_sigma: float
+    sensor: int
+
+
+def detectable_sizes(cal: Calibration, thresholds: Thresholds, *, kind: str = "gyro",
+                     probability: float = DETECTION_PROBABILITY, draws: int = 4000
+                     ) -> tuple[DetectableSize, ...]:
+    """Per scale, the smallest step one full window detects with ``probability`` (at rest).
+
+    The window sum of z is ``N(w(b·u_i + g), w·f_w·I)`` with g the parity offset of the
+    bias error (``g ~ N(0, G)`` over flights, see :func:`_parity_geometry`), so
+    ``P(detect) = E_g[ncx2.sf(T_w(1 + w·β/f_w), df, w·|b·u_i + g|²/f_w)]``, averaged over
+    ``draws`` fixed draws of g; b solves P = ``probability`` for the worst sensor.
+    """
+    s = cal.kind(kind)
+    if s.n < 4:
+        raise ConfigError(f"{s.n} {kind} sensors: no parity space, no detectable size")
+    df, u2, beta, U, G = _parity_geometry(cal, kind)
+    i = int(np.argmin(u2))
+    sd = float(s.noise_sd[i])
+    unit, conv = ("deg/s", DPS) if kind == "gyro" else ("m/s^2", 1.0)
+    g = np.random.default_rng(12345).multivariate_normal(np.zeros(df), G, size=draws,
+                                                         method="eigh")
+    ui = U[:, i]
+    out = []
+    for w, a, f in zip(thresholds.scales, thresholds.alpha, thresholds.variance_factor,
+                       strict=True):
+        T = chi2_threshold(a, df) * (1.0 + w * beta / f)
+
+        def miss(b: float, T: float = T, w: int = int(w), f: float = f) -> float:
+            lam = w * np.sum((b * ui + g) ** 2, axis=1) / f
+            return float(np.mean(stats.ncx2.sf(T, df, lam))) - probability
+
+        b0 = math.sqrt(minimum_detectable_noncentrality(T, df, 1.0 - probability) * f
+                       / (w * u2[i]))
+        hi = 2.0 * b0
+        while miss(hi) < 0:
+            hi *= 2.0
+        b = optimize.brentq(miss, 0.0, hi, xtol=1e-9 * b0)
+        out.append(DetectableSize(int(w), w / thresholds.sample_rate_hz, b, b / conv, unit,
+                                  b / sd, i + 1))
+    return tuple(out)
+
+
+@dataclass(frozen=True)
+class Tuning:
+    """Thresholds tuned for a false-alarm rate, with what they assume.
+
+    Attributes
+    ----------
+    thresholds : Thresholds
+    detectable : tuple of DetectableSize
+    assumptions : dict
+        Noise model, Allan deviation per scale, calibration covariance, residual tails, the
+        simulated correction.
+    schema : str
+    """
+
+    thresholds: Thresholds
+    detectable: tuple[DetectableSize, ...]
+    assumptions: dict[str, Any] = field(default_factory=dict)
+    schema: str = TUNING_SCHEMA
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready ``rimu.tuning/1`` document."""
+        return to_jsonable({"schema": self.schema, "thresholds": self.thresholds.to_dict(),
+                            "detectable": [d.__dict__ for d in self.detectable],
+                            "assumptions": self.assumptions})
+
+    def save(self, path: str | Path) -> None:
+        """Write as JSON (NaN as null)."""
+        import json
+
+        Path(path).write_text(json.dumps(self.to_dict(), indent=1, allow_nan=False) + "\n",
+                              encoding="utf-8")
+
+
+def _share_thresholds(base: dict[str, Any], per_scale_rate: float, df: int) -> Thresholds:
+    al = tuple(_alpha_for_upcrossings(per_scale_rate, df, w) for w in base["scales"])
+    return Thresholds(**{**base, "alpha": al,
+                         "threshold": tuple(chi2_threshold(a, df) for a in al)})
+
+
+def simulated_rate(cal: Calibration, thr: Thresholds, *, hours: float, seed: int,
+                   kind: str = "gyro", flight_s: float | None = None) -> tuple[int, float]:
+    """False alarms and exposure (h) of the full set over simulated healthy flights.
+
+    Flights last ``flight_s`` (default: about one expected false alarm each at the
+    thresholds' budget, between 60 and 600 s): the rate varies from flight to flight with
+    the drawn calibration error, so many flights are needed.
+    """
+    from thresholds.campaign import RunSpec, run_one
+
+    if flight_s is None:
+        flight_s = float(np.clip(3600.0 / thr.false_alarms_per_hour, 60.0, 600.0))
+
+    nf = max(1, math.ceil(hours * 3600.0 / flight_s))
+    count, expo = 0, 0.0
+    for j in range(nf):
+        r = run_one(cal, thr, RunSpec(j, int(np.random.SeedSequence([seed, 77, j])
+                                               .generate_state(1)[0]), "healthy", 0.0, 0.0,
+                                      0, math.inf, flight_s), kind=kind)
+        count += int(r.false_alarm)
+        expo += r.exposure_s
+    return count, expo / 3600.0
+
+
+def _assumptions(cal: Calibration, thr: Thresholds, kind: str, df: int, beta: float
+                 ) -> dict[str, Any]:
+    s = cal.kind(kind)
+    fs = thr.sample_rate_hz
+    tau = np.array(thr.scales, float) / fs
+    adev = None
+    if s.allan is not None:
+        lt = np.log(np.asarray(s.allan.tau_s, float))
+        la = np.log(np.asarray(s.allan.adev, float))
+        adev = np.exp([np.interp(np.log(tau), lt, la[:, i]) for i in range(s.n)]).T
+    noise_rec = cal.extra.get("noise_model") if isinstance(cal.extra, dict) else None
+    white = all(abs(f - 1.0) < 1e-9 for f in thr.variance_factor)
+    steps = cal.extra.get("residual_steps") if isinstance(cal.extra, dict) else None
+    return {
+        "noise_model": {
+            "detector_assumes": "zero-mean Gaussian parity noise, white within each window "
+                                "up to the Allan variance factors f_w",
+            "white": white,
+            "calibration_noise_model": noise_rec.get("method") if isinstance(noise_rec, dict)
+            else None},
+        "allan_deviation": {"source": "the calibration's Allan table (allantools.oadev of "
+                                      "its residuals), log-log interpolated at tau = w/fs",
+                            "scale": list(thr.scales), "tau_s": tau.tolist(),
+                            "unit": "SI input (rad/s or m/s^2)",
+                            "adev": None if adev is None else adev.tolist(),
+                            "variance_factor": list(thr.variance_factor)},
+        "calibration_covariance": {
+            "noise_covariance": np.asarray(s.noise_covariance, float).tolist(),
+            "noise_sd": s.noise_sd.tolist(),
+            "bias_sd": [c.bias_sd for c in s.sensors],
+            "input_error_cov_trace": [float(np.trace(c.input_error_cov)) for c in s.sensors],
+            "parity_dof": df, "bias_inflation_beta": beta},
+        "residual_tails": {
+            "assumed": "Gaussian (chi-square detection statistics)",
+            "residual_rms": [c.residual_rms for c in s.sensors],
+            "calibration_step_residuals": "recorded in the calibration file" if steps
+            else "not recorded",
+            "check": "thresholds.realnoise measures the tails of a real static recording"},
+    }
+
+
+def tune(cal: Calibration, *, false_alarms_per_hour: float, kind: str = "gyro",
+         scales: int | tuple[int, ...] = 7, simulate_hours: float = 4.0,
+         seed: int = 0) -> Tuning:
+    """Thresholds whose full-set false-alarm rate is ``false_alarms_per_hour``.
+
+    Parameters
+    ----------
+    cal : Calibration
+        Must carry residual statistics (an Allan table) for ``kind``.
+    false_alarms_per_hour : float
+        Target rate of false alarms (episodes) per hour of healthy operation (> 0).
+    kind : str
+    scales : int or tuple of int
+        K (windows 1 ... 2^K) or window lengths (samples).
+    simulate_hours : float
+        Hours of healthy flight simulated per correction pass, at most the time in which
+        about 150 false alarms are expected (0: analytic shares only).
+    seed : int
+        Seed of the correction flights.
+
+    Raises
+    ------
+    ConfigError
+        No residual statistics, a target that is not positive and finite, an unknown scale,
+        a set without redundancy.
+    """
+    R = float(false_alarms_per_hour)
+    if not (math.isfinite(R) and R > 0):
+        raise ConfigError(f"--false-alarms-per-hour must be positive and finite, got {R:g}")
+    s = cal.kind(kind)
+    if s.allan is None:
+        raise ConfigError(f"the calibration has no residual statistics for its {kind} "
+                          f"sensors (no Allan table of the residuals): recalibrate with the "
+                          f"Allan table on, or give thresholds by hand")
+    fs = float(cal.sample_rate_hz)
+    if R > 36.0 * fs:
+        raise ConfigError(f"--false-alarms-per-hour {R:g} is more than one alarm per 100 "
+                          f"samples at {fs:g} Hz (at most {36.0 * fs:g}); that is not a "
+                          f"false-alarm budget")
+    sc = check_scales(cal, scales, kind=kind, sample_rate_hz=fs)
+    if s.n < 4:
+        raise ConfigError(f"{s.n} {kind} sensors: no parity space, nothing to tune")
+    df, _, beta, _, _ = _parity_geometry(cal, kind)
+    vf = variance_factors(s.allan, s.noise_covariance, fs, sc)
+    base = {"kind": kind, "n": s.n, "sample_rate_hz": fs, "false_alarms_per_hour": R,
+            "scales": sc, "variance_factor": vf, "detector": "windows"}
+    per_sample = R / (3600.0 * fs)
+    gamma = 1.0
+    passes = []
+    Rc = max(R, MIN_SIMULATED_RATE)
+    for p in range(2 if simulate_hours > 0 else 0):
+        thr_c = _share_thresholds({**base, "false_alarms_per_hour": Rc},
+                                  Rc / (3600.0 * fs) / len(sc) / gamma, df)
+        cnt, hrs = simulated_rate(cal, thr_c, hours=min(simulate_hours, 150.0 / Rc),
+                                  seed=seed + 1000 * p, kind=kind)
+        meas = max(cnt, 0.5) / hrs
+        passes.append({"target_per_hour": Rc, "false_alarms": cnt, "exposure_h": hrs,
+                       "rate_per_hour": cnt / hrs, "correction_before": gamma})
+        gamma = gamma * meas / Rc
+    thr = _share_thresholds(base, per_sample / len(sc) / gamma, df)
+    notes = (f"tuned for {R:g} false alarms/h: exact white-noise upcrossing rate per scale, "
+             f"equal shares, simulated correction {gamma:.3f} (rimu tune)")
+    thr = Thresholds(kind=kind, n=s.n, sample_rate_hz=fs, false_alarms_per_hour=R,
+                     scales=sc, alpha=thr.alpha, variance_factor=vf, threshold=thr.threshold,
+                     detector="windows", notes=notes)
+    ass = _assumptions(cal, thr, kind, df, beta)
+    ass["method"] = "rimu tune: upcrossing shares + simulated correction"
+    ass["simulation_correction"] = {
+        "factor": gamma, "passes": passes,
+        "flights": "replay.flight_sim healthy, errors drawn from the calibration covariance, "
+                   "manoeuvres up to 300 deg/s, 60-600 s",
+        "extrapolated": R < MIN_SIMULATED_RATE and bool(passes),
+        "note": ("not simulated: analytic shares only (conservative)" if not passes
+                 else f"measured at {Rc:g}/h and carried over to {R:g}/h" if R < Rc
+                 else "measured at the target")}
+    ass["created"] = datetime.now(UTC).isoformat(timespec="seconds")
+    return Tuning(thr, detectable_sizes(cal, thr, kind=kind), ass)
