@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import functools
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.interpolate import CubicSpline
@@ -328,7 +328,6 @@ def fit_pair(t: np.ndarray, y_ref: np.ndarray, y: np.ndarray, used: np.ndarray, 
             tau += step
             if abs(step) < 1e-3 * max(fit.sd[-1], 1e-9):
                 break
-    assert fit is not None
     res_sd = np.std(fit.residual, axis=0)
     noise = float(np.sqrt(np.mean(res_sd**2) / 2))
     zn = np.full(X.shape[2], noise)
@@ -450,9 +449,9 @@ def fit_inflight(flight: Flight, *, reference: str | None = None, model: str = "
                 if "time offset" in str(exc) or "bias" in str(exc):
                     raise
                 a = fit_pair(flight.t, rates[ref], y, used, model="rotation", **kw)
-                out[g] = ImuAlignment(**{**a.__dict__, "notes": a.notes + (
+                out[g] = replace(a, notes=(*a.notes, (
                     f"scale factors and non-orthogonality not fitted ({exc}); taken equal "
-                    f"to the reference's",)})
+                    f"to the reference's")))
         else:
             out[g] = fit_pair(flight.t, rates[ref], y, used, model=model, **kw)
     return InflightFit(reference=ref, imus=tuple(rates), alignments=out, used=used,

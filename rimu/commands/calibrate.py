@@ -23,7 +23,8 @@ HELP = "calibrate redundant gyros/accelerometers from a turntable session"
 
 
 def configure(p: argparse.ArgumentParser) -> None:
-    p.add_argument("session", help="session directory (manifest.json + samples.csv)")
+    p.add_argument("session", nargs="?",
+                   help="session directory (manifest.json + samples.csv)")
     p.add_argument("--out", required=True, metavar="FILE",
                    help="calibration file to write (rimu.calibration/1 JSON)")
     p.add_argument("--compare", metavar="TRUTH",
@@ -39,6 +40,9 @@ def configure(p: argparse.ArgumentParser) -> None:
                    help="fit the Earth rate to the raw outputs, not the wavelet-denoised ones")
     p.add_argument("--plot", metavar="DIR",
                    help="write PNG plots (per-step residuals, Earth-rate fit) into DIR")
+    from rimu.commands.calibrate_inflight import configure_options
+
+    configure_options(p)
 
 
 def _set_summary(s: SensorSet, V_sd: object) -> list[str]:
@@ -136,6 +140,12 @@ def summary_text(cal: Calibration) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
+    if getattr(args, "in_flight", None):
+        from rimu.commands import calibrate_inflight
+
+        return calibrate_inflight.run(args)
+    if not args.session:
+        raise ConfigError("rimu calibrate: give a session directory or --in-flight DIR")
     from calibration.session_io import load_session
 
     session = load_session(args.session)

@@ -18,8 +18,8 @@ CAN_SUFFIXES = (".asc", ".blf", ".log")
 
 
 def configure(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--cal", required=True, metavar="FILE",
-                   help="calibration file (rimu.calibration/1)")
+    p.add_argument("--cal", metavar="FILE",
+                   help="calibration file (rimu.calibration/1); required unless --imus")
     p.add_argument("--duration", required=True, type=float, metavar="S", help="flight length (s)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument("--fault", action="append", default=[], metavar="SPEC",
@@ -41,6 +41,9 @@ def configure(p: argparse.ArgumentParser) -> None:
                    help="correlation time of that bias (s, default 100)")
     p.add_argument("--out", required=True, metavar="DIR|FILE",
                    help="a flight directory, or a CAN log (.asc, .blf, .log)")
+    from rimu.commands.simulate_imu_set import configure_options
+
+    configure_options(p)
 
 
 def _load_truth(path: str):
@@ -52,6 +55,12 @@ def _load_truth(path: str):
 
 
 def run(args: argparse.Namespace) -> int:
+    if getattr(args, "imus", None):
+        from rimu.commands import simulate_imu_set
+
+        return simulate_imu_set.run(args)
+    if not args.cal:
+        raise ConfigError("rimu simulate flight: --cal is required (or --imus K)")
     cal = load_calibration(args.cal)
     faults = [parse_fault(s, cal, kind=args.kind) for s in args.fault]
     truth = _load_truth(args.truth) if args.truth else None
