@@ -242,7 +242,7 @@ def _select(r: np.ndarray, cands: list[_Cand], keep: np.ndarray, alpha_each: flo
 def _structure(e: np.ndarray, fs: float, alpha_each: float, names: list[str]) -> list[str]:
     """Channels whose 1-s block means vary more than AR(1) noise allows."""
     out = []
-    q = max(2, int(round(fs)))
+    q = max(2, round(fs))
     nb = e.shape[0] // q
     if nb < 10:
         return out
