@@ -20,9 +20,13 @@ Candidate effects, per IMU j (regressors on its three channels):
 A constant per channel is always in the model. Selection is forward: at each step the
 candidate with the smallest p-value (HAC Wald test of its parameters in the model with
 those already chosen, :mod:`.regression`) enters if p < α/M (Bonferroni over all M
-candidates of all IMUs); the reported p-values are those of the final model (each effect
-removed from it). Spectral lines: bins of the Welch spectrum of a channel more than
-:data:`LINE_FACTOR` times the median spectrum, local maxima, up to :data:`MAX_LINES`.
+candidates of all IMUs); effects that are functions of time only (warm-up, drift) enter
+only when no candidate built from a measured signal (angular acceleration, specific force,
+temperature, a spectral line) passes, since a slow temperature change and a warm-up curve
+explain the same residual and the measured one is the physical explanation. The reported
+p-values are those of the final model (each effect removed from it). Spectral lines: bins
+of the Welch spectrum of a channel more than :data:`LINE_FACTOR` times its running median
+(41 bins), local maxima, up to :data:`MAX_LINES`.
 
 Unexplained: after the final model, a channel whose 1-s block means vary more than its
 short-lag (AR(1)) correlation explains (χ² test at α/M), or that still shows a line.
@@ -35,7 +39,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy import signal, stats
+from scipy import ndimage, signal, stats
 from scipy.interpolate import CubicSpline
 from scipy.special import eval_legendre
 
@@ -46,13 +50,17 @@ from fdi.errors import ConfigError
 from fdi.units import DPS, G0
 from replay.flight_data import Flight
 
-__all__ = ["DIAGNOSE_SCHEMA", "LINE_FACTOR", "MAX_LINES", "WARM_UP_S", "diagnose_flight",
+__all__ = ["DIAGNOSE_SCHEMA", "GENERIC", "LINE_FACTOR", "MAX_LINES", "WARM_UP_S", "diagnose_flight",
            "flight_residual"]
 
 DIAGNOSE_SCHEMA = "rimu.diagnose-flight/1"
-LINE_FACTOR = 20.0
-"""A spectral bin this many times the median spectrum is a line."""
+LINE_FACTOR = 10.0
+"""A spectral bin this many times the local median spectrum is a line."""
+_LOCAL_BINS = 41
+"""Width (bins) of the running median a line is compared with."""
 MAX_LINES = 3
+GENERIC = ("warm_up", "bias_drift")
+"""Effects that are functions of time only; they enter after the measured regressors."""
 WARM_UP_S = 60.0
 """Time constant of the warm-up regressor (s)."""
 
@@ -115,12 +123,12 @@ def _aux(flight: Flight, kind: str, imu: str) -> np.ndarray | None:
 
 def _lines(r: np.ndarray, fs: float) -> list[float]:
     """Frequencies (Hz) of the strongest spectral lines of the residual channels."""
-    nper = int(min(r.shape[0], max(256, 2 ** int(math.log2(max(fs * 20, 256))))))
+    nper = int(min(r.shape[0], 8192, max(256, 2 ** int(math.log2(max(r.shape[0] / 4, 2))))))
     found: dict[float, float] = {}
     for k in range(r.shape[1]):
         f, p = signal.welch(r[:, k] - r[:, k].mean(), fs=fs, nperseg=nper)
-        med = np.median(p[1:])
-        if not med > 0:
+        med = ndimage.median_filter(p, size=_LOCAL_BINS, mode="nearest")
+        if not np.all(med > 0):
             continue
         ratio = p / med
         pk, _ = signal.find_peaks(ratio, height=LINE_FACTOR)
@@ -224,17 +232,16 @@ def _select(r: np.ndarray, cands: list[_Cand], keep: np.ndarray, alpha_each: flo
     chosen: list[_Cand] = []
     left = list(cands)
     while left:
-        best, best_p = None, 1.0
+        ps = []
         for c in left:
             X, sl = _design(base, [*chosen, c])
             fit = stacked_lstsq(X[keep], Y)
-            p = wald_test(fit, np.arange(sl[-1].start, sl[-1].stop))[2]
-            if p < best_p:
-                best, best_p = c, p
-        if best is None or not best_p < alpha_each:
+            ps.append(wald_test(fit, np.arange(sl[-1].start, sl[-1].stop))[2])
+        ok = [(c.name in GENERIC, p, i) for i, (c, p) in enumerate(zip(left, ps, strict=True))
+              if p < alpha_each]
+        if not ok:
             break
-        chosen.append(best)
-        left.remove(best)
+        chosen.append(left.pop(min(ok)[2]))       # measured regressors before generic ones
     X, sl = _design(base, chosen)
     return chosen, stacked_lstsq(X[keep], Y), sl
 
