@@ -35,6 +35,7 @@ import math
 from dataclasses import dataclass, field, replace
 
 import numpy as np
+from scipy import ndimage
 from scipy.interpolate import CubicSpline
 
 from calibration.inflight.regression import StackedFit, stacked_lstsq
@@ -51,6 +52,8 @@ EXCITATION_MIN = 10.0
 """Smallest ratio of a regressor's RMS variation to the noise it carries."""
 MODELS = ("auto", "full", "rotation")
 _GN_ITER = 6
+_EDGE = 3
+"""Samples left out on each side of a dropped block (the spline bridges it)."""
 _AXES = "xyz"
 
 
@@ -306,6 +309,9 @@ def fit_pair(t: np.ndarray, y_ref: np.ndarray, y: np.ndarray, used: np.ndarray, 
     ok = used & np.all(np.isfinite(y_ref), axis=1) & np.all(np.isfinite(y), axis=1)
     if ok.sum() < 50:
         raise CalibrationError(f"{label}: only {int(ok.sum())} usable samples (need 50)")
+    # rows next to a dropped block read a spline that bridges it: leave them out too
+    core = ok & ndimage.binary_erosion(ok, structure=np.ones(2 * _EDGE + 1, bool),
+                                       border_value=True)
     tau = 0.0
     A = np.eye(3)
     noise = float(np.std(y[ok] - y_ref[ok] - np.median(y[ok] - y_ref[ok], axis=0)))
@@ -314,7 +320,7 @@ def fit_pair(t: np.ndarray, y_ref: np.ndarray, y: np.ndarray, used: np.ndarray, 
     spline = CubicSpline(tt, y_ref[ok], axis=0)
     Sr = np.zeros((3, 3))
     for _ in range(_GN_ITER if time_offset else 2):
-        inside = (tt + tau >= tt[0]) & (tt + tau <= tt[-1])
+        inside = (tt + tau >= tt[0]) & (tt + tau <= tt[-1]) & core[ok]
         z = spline(tt + tau)
         dz = spline(tt + tau, 1)
         X, names, const = _design(model, z, dz, A, time_offset)
