@@ -17,7 +17,10 @@ model; its gyro output (rad/s, already in engineering units as a flight log stor
   coefficient ``k_j`` (rad/s per °C) on a logged temperature ``T_j(t)`` that rises by
   ``ΔT`` with time constant ``t_T``; a vibration line of frequency ``f_v`` (aliased when
   above Nyquist, as a sampled sensor does) and amplitude ``a_j`` per axis; a bias random
-  walk ``d_j``;
+  walk ``d_j``; broadband vibration in bursts: an envelope ``v(t)`` in [0, 1] (smoothed
+  random, :data:`VIBRATION_CORR_S`) scales white noise of sd ``vibration_accel`` on every
+  accelerometer and of sd ``vibration_noise`` on the gyros of the IMUs with effects (the
+  gyro residual power then follows the accelerometers' vibration level);
 - ``η_j`` white noise, sd ``noise_sd`` per sample.
 
 Specific force: ``f = Rᵀ·(0, 0, g) + a_lin``, ``R`` the attitude integrated from the true
@@ -55,6 +58,8 @@ IMU_SET_MODEL = "replay.imu_set/1"
 """Name of the sensor model in the truth record."""
 
 _AXES = ("x", "y", "z")
+VIBRATION_CORR_S = 5.0
+"""Correlation time (s) of the vibration envelope."""
 
 
 @dataclass(frozen=True)
@@ -79,6 +84,10 @@ class ImuEffects:
         Sd of its per-axis amplitude (rad/s).
     random_walk : float
         Bias random walk density (rad/s per √s).
+    vibration_noise : float
+        Gyro noise sd (rad/s) added at full vibration (envelope 1).
+    vibration_accel : float
+        Accelerometer noise sd (m/s²) at full vibration.
     imus : tuple of int
         1-based IMUs that carry the effects (empty: all).
     """
@@ -92,6 +101,8 @@ class ImuEffects:
     vibration_hz: float = 0.0
     vibration: float = 0.0
     random_walk: float = 0.0
+    vibration_noise: float = 0.0
+    vibration_accel: float = 5.0
     imus: tuple[int, ...] = ()
 
     def on(self, j: int) -> bool:
@@ -279,6 +290,12 @@ def simulate_imu_set(spec: ImuSetSpec) -> Flight:
         return np.column_stack([np.interp(tt, tf, ff[:, a]) for a in range(3)])
 
     e = spec.effects
+    env = np.zeros(N)
+    if e.vibration_noise > 0:
+        env = np.abs(_smooth_noise(np.random.default_rng([int(spec.seed), 15]), N, fs, 1.0,
+                                   VIBRATION_CORR_S)[:, 0])
+        env = np.clip(env - 0.5, 0.0, None)
+        env /= max(float(env.max()), 1e-12)
     raw_cols, acc_cols, temp_cols = [], [], []
     T0 = 25.0
     for j, m in enumerate(imus, start=1):
@@ -297,8 +314,12 @@ def simulate_imu_set(spec: ImuSetSpec) -> Flight:
         if e.random_walk > 0 and e.on(j):
             u += np.cumsum(nr.standard_normal((N, 3)), axis=0) * (e.random_walk /
                                                                   math.sqrt(fs))
+        vr = np.random.default_rng([int(spec.seed), 16, j])
+        if e.vibration_noise > 0 and e.on(j):
+            u += env[:, None] * e.vibration_noise * vr.standard_normal((N, 3))
         raw_cols.append(u)
-        acc_cols.append(f + spec.accel_noise_sd * nr.standard_normal((N, 3)))
+        acc_cols.append(f + spec.accel_noise_sd * nr.standard_normal((N, 3))
+                        + env[:, None] * e.vibration_accel * vr.standard_normal((N, 3)))
         temp_cols.append(temp + 0.05 * nr.standard_normal(N))
     raw = np.hstack(raw_cols)
     names = tuple(f"imu{j}.{a}" for j in range(1, K + 1) for a in _AXES)
@@ -340,7 +361,8 @@ def _truth(spec: ImuSetSpec, imus: Sequence[_Imu], N: int) -> dict[str, Any]:
                         "temperature_rise_c": e.temperature_rise_c,
                         "temperature_tau_s": e.temperature_tau_s,
                         "vibration_hz": e.vibration_hz, "vibration": e.vibration,
-                        "random_walk": e.random_walk, "imus": list(e.imus)},
+                        "random_walk": e.random_walk, "vibration_noise": e.vibration_noise,
+                        "vibration_accel": e.vibration_accel, "imus": list(e.imus)},
             "imus": {f"imu{j}": m.to_dict() for j, m in enumerate(imus, start=1)},
             "relative_to_reference": {"reference": "imu1", **rel},
             "units": {"gyro": "rad/s", "g_sensitivity": "rad/s per m/s^2",

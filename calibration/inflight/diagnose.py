@@ -28,6 +28,10 @@ p-values are those of the final model (each effect removed from it). Spectral li
 of the Welch spectrum of a channel more than :data:`LINE_FACTOR` times its running median
 (41 bins), local maxima, up to :data:`MAX_LINES`.
 
+Vibration noise (a variance effect, tested after the mean model): the squared residual of
+each channel regressed on the IMU's accelerometer vibration power (1-s mean of the squared
+deviation from the 1-s mean acceleration); one candidate per IMU with accelerometers.
+
 Unexplained: after the final model, a channel whose 1-s block means vary more than its
 short-lag (AR(1)) correlation explains (χ² test at α/M), or that still shows a line.
 """
@@ -213,6 +217,37 @@ def _candidates(flight: Flight, imu: str, idx: list[int], H: np.ndarray, omega_d
     return cands, untestable
 
 
+def _vibration_level(flight: Flight, imu: str) -> np.ndarray | None:
+    """Accelerometer vibration power of an IMU: 1-s mean of |a − 1-s mean of a|², (m/s²)²."""
+    a = _aux(flight, "accel", imu)
+    if a is None or a.shape[1] != 3 or not np.isfinite(a).all():
+        return None
+    q = max(3, round(flight.sample_rate_hz))
+    hp = np.sum((a - ndimage.uniform_filter1d(a, q, axis=0, mode="nearest")) ** 2, axis=1)
+    return ndimage.uniform_filter1d(hp, q, mode="nearest")
+
+
+def _vibration_noise(e: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray, float,
+                                                             list[float]]:
+    """Does the residual power follow the vibration level?  ``e_k² = c_k + s_k·(v − v̄)``.
+
+    Returns the slopes (rad²/s² per (m/s²)²), their HAC sds, the Wald p-value and the
+    residual RMS per axis in the calmest and the roughest quarter of the samples (rad/s).
+    """
+    N = e.shape[0]
+    X = np.zeros((N, 3, 6))
+    vc = v - v.mean()
+    for k in range(3):
+        X[:, k, k] = 1.0
+        X[:, k, 3 + k] = vc
+    fit = stacked_lstsq(X, e**2)
+    p = wald_test(fit, [3, 4, 5])[2]
+    lo, hi = np.quantile(v, [0.25, 0.75])
+    calm = float(np.sqrt(np.mean(e[v <= lo] ** 2)))
+    rough = float(np.sqrt(np.mean(e[v >= hi] ** 2)))
+    return fit.beta[3:], fit.sd[3:], p, [calm, rough]
+
+
 def _design(base: np.ndarray, chosen: list[_Cand]) -> tuple[np.ndarray, list[slice]]:
     blocks = [base] + [c.X for c in chosen]
     sl, a = [], base.shape[2]
@@ -304,7 +339,8 @@ def diagnose_flight(flight: Flight, cal: Calibration, *, alpha: float = 0.01,
         c, u = _candidates(flight, g, groups[g], H, omega_dot, np.nan_to_num(r), t, keep)
         per_imu[g] = c
         not_testable += u
-    M = sum(len(c) for c in per_imu.values())
+    vib = {g: _vibration_level(flight, g) for g in res}
+    M = sum(len(c) for c in per_imu.values()) + sum(v is not None for v in vib.values())
     alpha_each = alpha / max(M, 1)
     effects, detail = [], []
     chans, before, after = [], [], []
@@ -324,6 +360,21 @@ def diagnose_flight(flight: Flight, cal: Calibration, *, alpha: float = 0.01,
                             "estimate": float(est[0]) if est.size == 1 else est.tolist(),
                             "estimate_sd": float(sd[0]) if sd.size == 1 else sd.tolist(),
                             "unit": c.unit, "p_value": p})
+        if vib[g] is not None:
+            sl_, sd_, p, (calm, rough) = _vibration_noise(fit.residual, vib[g][keep])
+            if p < alpha_each:
+                f2 = (G0 / DPS) ** 2                  # rad²/s² per (m/s²)² → (deg/s)² per g²
+                effects.append({
+                    "name": "vibration_noise", "imu": g, "sensors": [i + 1 for i in groups[g]],
+                    "estimate": (sl_ * f2).tolist(), "estimate_sd": (sd_ * f2).tolist(),
+                    "unit": "(deg/s)^2 of residual variance per g^2 of accelerometer "
+                            "vibration power", "p_value": p,
+                    "detail": f"residual rms {calm / DPS:.3g} deg/s in the calmest quarter, "
+                              f"{rough / DPS:.3g} deg/s in the roughest (a variance effect: "
+                              f"not removed from the residual)"})
+        else:
+            not_testable.append({"name": "vibration_noise", "imu": g,
+                                 "reason": "no accelerometer logged beside the gyros"})
         detail += _structure(fit.residual, flight.sample_rate_hz, alpha_each, names)
         for f0 in _lines(fit.residual, flight.sample_rate_hz):
             detail.append(f"{g}: a spectral line at {f0:.2f} Hz remains")
