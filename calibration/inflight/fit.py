@@ -443,6 +443,17 @@ def fit_inflight(flight: Flight, *, reference: str | None = None, model: str = "
                           f"(IMUs: {', '.join(rates)})")
     segs = find_segments(flight)
     used = keep_mask(flight.t, segs)
+    try:
+        out = _fit_all(flight, rates, ref, used, model, time_offset)
+    except CalibrationError as exc:
+        raise CalibrationError(f"{flight.source}: {exc}") from None
+    return InflightFit(reference=ref, imus=tuple(rates), alignments=out, used=used,
+                       left_out=tuple(segs), sample_rate_hz=flight.sample_rate_hz,
+                       source=flight.source)
+
+
+def _fit_all(flight: Flight, rates: dict[str, np.ndarray], ref: str, used: np.ndarray,
+             model: str, time_offset: bool) -> dict[str, ImuAlignment]:
     out = {}
     for g, y in rates.items():
         if g == ref:
@@ -460,6 +471,4 @@ def fit_inflight(flight: Flight, *, reference: str | None = None, model: str = "
                     f"to the reference's")))
         else:
             out[g] = fit_pair(flight.t, rates[ref], y, used, model=model, **kw)
-    return InflightFit(reference=ref, imus=tuple(rates), alignments=out, used=used,
-                       left_out=tuple(segs), sample_rate_hz=flight.sample_rate_hz,
-                       source=flight.source)
+    return out
