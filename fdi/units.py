@@ -26,6 +26,7 @@ __all__ = [
     "INPUT_UNITS",
     "MG",
     "RAW_UNITS",
+    "TIME_UNITS",
     "input_unit_factor",
     "scale_factor_from_si",
     "scale_factor_sd_from_si",
@@ -57,6 +58,9 @@ INPUT_UNITS: dict[str, float] = {
     "mg": MG,
 }
 """Physical input units: value in SI = value in unit × factor."""
+
+TIME_UNITS: dict[str, float] = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
+"""Time units of logged time stamps: value in s = value in unit × factor."""
 
 RAW_UNITS: frozenset[str] = frozenset({"mV", "V", "LSB", "count", "raw", "uA"})
 """Names accepted for a sensor's raw output unit (the value is not converted)."""

@@ -1,0 +1,237 @@
+"""Put the IMU streams of one log on one time base and account for every sample.
+
+The base is the time stamps of a reference IMU (the one with most samples, or the one
+named). Every other IMU is placed on it sample by sample:
+
+- a sample stamped within ``tol`` of a base time is **kept** as it is;
+- a base time between two samples of the IMU (closer together than ``gap_factor`` times
+  the IMU's median interval) gets the linear interpolation of the two: **resampled**; the
+  two samples count as ``used_for_resampling``;
+- a base time with no such pair stays empty (``missing_on_base``: no sample, the monitor
+  sees the sensor as silent);
+- a sample of the IMU that serves no base time is **dropped**, with the reason.
+
+Before that, each stream loses the samples whose time is not finite or does not increase
+(duplicate or backwards stamps): dropped, with the reason. Per IMU,
+``samples_in = kept + used_for_resampling + sum(dropped)``.
+
+No time offset is applied: the IMUs are taken at their stamps (finding a lag between
+them is the job of the in-flight calibration).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from fdi.errors import ConfigError
+from replay.flight_data import AuxChannels, Flight
+from replay.ingest.stream import ImuStream, LogRead
+
+__all__ = ["INGEST_REPORT_SCHEMA", "align_streams"]
+
+INGEST_REPORT_SCHEMA = "rimu.ingest-report/1"
+_AXES = ("x", "y", "z")
+
+
+def _clean(s: ImuStream) -> tuple[ImuStream, dict[str, int]]:
+    """Drop samples with non-finite or non-increasing time; count them by reason."""
+    dropped: dict[str, int] = {}
+    fin = np.isfinite(s.t)
+    if not fin.all():
+        dropped["non-finite time stamp"] = int((~fin).sum())
+        s = s.take(fin)
+    if s.size > 1:
+        run_max = np.maximum.accumulate(s.t)
+        keep = np.ones(s.size, bool)
+        keep[1:] = s.t[1:] > run_max[:-1]
+        if not keep.all():
+            dropped["time stamp not increasing (duplicate or backwards)"] = \
+                int((~keep).sum())
+            s = s.take(keep)
+    return s, dropped
+
+
+def _median_dt(t: np.ndarray) -> float:
+    d = np.diff(t)
+    return float(np.median(d)) if d.size else float("nan")
+
+
+def _placement(ts: np.ndarray, tb: np.ndarray, tol: float, max_gap: float
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """How each base time ``tb`` is filled from samples at ``ts``.
+
+    Returns (i0, i1, w, how): values are ``(1-w)·x[i0] + w·x[i1]``; ``how`` is 0 for
+    missing, 1 for an exact (kept) sample, 2 for an interpolated one.
+    """
+    n, m = ts.shape[0], tb.shape[0]
+    i0 = np.zeros(m, int)
+    i1 = np.zeros(m, int)
+    w = np.zeros(m)
+    how = np.zeros(m, np.int8)
+    if n == 0:
+        return i0, i1, w, how
+    j = np.clip(np.searchsorted(ts, tb), 0, n - 1)
+    jl = np.clip(j - 1, 0, n - 1)
+    near_j = np.abs(ts[j] - tb) <= tol
+    near_l = np.abs(ts[jl] - tb) <= tol
+    exact_idx = np.where(near_j, j, jl)
+    exact = near_j | near_l
+    i0[exact] = i1[exact] = exact_idx[exact]
+    how[exact] = 1
+    if n > 1:
+        a = np.clip(j - 1, 0, n - 2)
+        b = a + 1
+        span = ts[b] - ts[a]
+        inside = (~exact) & (ts[a] < tb) & (tb < ts[b]) & (span <= max_gap)
+        i0[inside], i1[inside] = a[inside], b[inside]
+        w[inside] = (tb[inside] - ts[a[inside]]) / span[inside]
+        how[inside] = 2
+    return i0, i1, w, how
+
+
+def _place(x: np.ndarray, i0: np.ndarray, i1: np.ndarray, w: np.ndarray,
+           ok: np.ndarray) -> np.ndarray:
+    """Interpolated values on the base (NaN where ``ok`` is False); x is (n,) or (n, k)."""
+    ww = w if x.ndim == 1 else w[:, None]
+    out = (1.0 - ww) * x[i0] + ww * x[i1] if x.shape[0] else \
+        np.full((i0.shape[0], *x.shape[1:]), np.nan)
+    out = np.asarray(out, float)
+    out[~ok] = np.nan
+    return out
+
+
+def _pick_reference(streams: list[ImuStream], reference: str | None) -> int:
+    names = [s.name for s in streams]
+    if reference is None:
+        return int(np.argmax([s.size for s in streams]))
+    if reference not in names:
+        raise ConfigError(f"reference IMU {reference!r} is not in the log (it has "
+                          f"{', '.join(names)})")
+    return names.index(reference)
+
+
+def _gaps(tb: np.ndarray, max_gap: float) -> list[dict[str, float]]:
+    d = np.diff(tb)
+    idx = np.flatnonzero(d > max_gap)
+    return [{"t_s": float(tb[i]), "length_s": float(d[i])} for i in idx]
+
+
+def align_streams(read: LogRead, *, reference: str | None = None, gap_factor: float = 2.5,
+                  tol_fraction: float = 0.01) -> tuple[Flight, dict[str, Any]]:
+    """Put the streams of ``read`` on one time base.
+
+    Parameters
+    ----------
+    read : LogRead
+        At least one stream with samples.
+    reference : str, optional
+        Name of the IMU whose time stamps become the base (default: most samples).
+    gap_factor : float
+        Two samples farther apart than ``gap_factor`` × median interval are not
+        interpolated between (a gap in the log).
+    tol_fraction : float
+        A sample within ``tol_fraction`` × the base's median interval of a base time is
+        taken as on it (kept, not resampled).
+
+    Returns
+    -------
+    flight : Flight
+        ``kind="gyro"``, sensors ``imu1.x, imu1.y, imu1.z, imu2.x, ...`` in rad/s, IMU
+        groups set, accelerometers (m/s²) and temperatures (°C) as aux channels.
+    report : dict
+        ``rimu.ingest-report/1``: the time base and, per IMU, the sample accounting.
+
+    Raises
+    ------
+    ConfigError
+        No stream has samples, or ``reference`` names no IMU.
+    """
+    cleaned = [_clean(s) for s in read.streams]
+    streams = [c[0] for c in cleaned]
+    if not streams or all(s.size == 0 for s in streams):
+        raise ConfigError(f"{read.path}: no IMU samples to ingest")
+    r = _pick_reference(streams, reference)
+    tb = streams[r].t
+    dt_b = _median_dt(tb)
+    if not np.isfinite(dt_b) or dt_b <= 0:
+        raise ConfigError(f"{read.path}: reference {streams[r].name} has "
+                          f"{tb.shape[0]} time stamp(s); cannot form a time base")
+    tol = tol_fraction * dt_b
+    m = tb.shape[0]
+    gyro_cols, valid_cols, names, imu_groups = [], [], [], []
+    aux_k, aux_n, aux_g, aux_v = [], [], [], []
+    imus: list[dict[str, Any]] = []
+    for s, (_, dropped) in zip(streams, cleaned, strict=True):
+        dt_s = _median_dt(s.t) if s.size > 1 else dt_b
+        i0, i1, w, how = _placement(s.t, tb, tol, gap_factor * max(dt_s, dt_b))
+        ok = how > 0
+        used = np.zeros(s.size, bool)
+        used[i0[how == 1]] = True
+        kept = int(used.sum())
+        interp = np.zeros(s.size, bool)
+        interp[i0[how == 2]] = True
+        interp[i1[how == 2]] = True
+        interp &= ~used
+        unused = s.size - kept - int(interp.sum())
+        drop = dict(dropped)
+        if unused:
+            inside = (s.t >= tb[0]) & (s.t <= tb[-1]) & ~used & ~interp
+            n_in = int(inside.sum())
+            if n_in:
+                drop["between base times (no base sample needs it)"] = n_in
+            if unused - n_in:
+                drop["outside the time base's span"] = unused - n_in
+        g = _place(s.gyro, i0, i1, w, ok)
+        for k, ax in enumerate(_AXES):
+            gyro_cols.append(g[:, k])
+            valid_cols.append(ok)
+            names.append(f"{s.name}.{ax}")
+            imu_groups.append(s.name)
+        if s.accel is not None:
+            a = _place(s.accel, i0, i1, w, ok)
+            for k, ax in enumerate(_AXES):
+                aux_k.append("accel")
+                aux_n.append(f"{s.name}.{ax}")
+                aux_g.append(s.name)
+                aux_v.append(a[:, k])
+        if s.temperature is not None:
+            aux_k.append("temperature")
+            aux_n.append(s.name)
+            aux_g.append(s.name)
+            aux_v.append(_place(s.temperature, i0, i1, w, ok))
+        imus.append({
+            "name": s.name, "source": s.source, "device_id": s.device_id,
+            "samples_in": int(s.size + sum(dropped.values())), "kept": kept,
+            "used_for_resampling": int(interp.sum()), "dropped": drop,
+            "resampled_on_base": int((how == 2).sum()),
+            "missing_on_base": int((how == 0).sum()),
+            "nonfinite_gyro_values": int((~np.isfinite(g[ok])).sum()),
+            "median_dt_s": dt_s if np.isfinite(dt_s) else None,
+            "accel": s.accel is not None, "temperature": s.temperature is not None,
+            "error_count_max": (int(np.max(s.error_count)) if s.error_count is not None
+                                and s.size else None),
+            "notes": list(s.notes)})
+    raw = np.column_stack(gyro_cols)
+    valid = np.column_stack(valid_cols)
+    aux = None
+    if aux_k:
+        av = np.column_stack(aux_v)
+        aux = AuxChannels(tuple(aux_k), tuple(aux_n), tuple(aux_g), av, np.isfinite(av))
+    fs = 1.0 / dt_b
+    flight = Flight(t=np.asarray(tb, float), raw=raw, valid=valid, sample_rate_hz=fs,
+                    sensor_names=tuple(names), raw_unit="rad/s", source=read.path,
+                    kind="gyro", imu=tuple(imu_groups), aux=aux)
+    gaps = _gaps(tb, gap_factor * dt_b)
+    report = {
+        "schema": INGEST_REPORT_SCHEMA, "source": read.path, "format": read.format,
+        "salvaged": read.damage is not None,
+        "damage": read.damage.to_dict() if read.damage is not None else None,
+        "time_base": {"reference": streams[r].name, "samples": m,
+                      "t_start_s": float(tb[0]), "t_end_s": float(tb[-1]),
+                      "median_dt_s": dt_b, "sample_rate_hz": fs,
+                      "tolerance_s": tol, "gap_factor": gap_factor,
+                      "gaps": gaps[:50], "n_gaps": len(gaps)},
+        "imus": imus, "meta": read.meta}
+    return flight, report

@@ -1,0 +1,223 @@
+"""PX4 ULog files, read with pyulog.
+
+Per IMU instance (``multi_id`` 0, 1, 2, ...): ``sensor_gyro`` (``x, y, z`` rad/s,
+``temperature`` °C, ``device_id``, ``error_count``) and the ``sensor_accel`` instance with
+the same index (``x, y, z`` m/s²), each with its own ``timestamp_sample`` (µs since boot;
+``timestamp`` when absent). The accelerometer is placed on the gyro's times by linear
+interpolation (counted in the stream's notes). A log without ``sensor_gyro`` but with
+``vehicle_imu`` gives rates from its delta angles: ``delta_angle / delta_angle_dt``
+(the mean rate over each integration interval, stamped at the interval's end).
+
+Damage: pyulog stops silently where the file is cut (or where a corrupt header claims more
+bytes than the file has), and flags other corruption (``file_corruption``) while
+resynchronising over it. rimu watches pyulog's reads to find where it stopped short, and
+for flagged corruption finds the offset by reading prefixes of the file; it then refuses
+the log unless asked to salvage, and keeps the samples read before the damage.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from fdi.errors import FileFormatError
+from fdi.units import TIME_UNITS
+from replay.ingest.stream import Damage, ImuStream, LogRead
+
+__all__ = ["TOPICS", "looks_like_ulog", "read_px4"]
+
+TOPICS = ("sensor_gyro", "sensor_accel", "vehicle_imu")
+"""ULog topics the reader loads."""
+_MAGIC = b"ULog\x01\x12\x35"
+
+
+def looks_like_ulog(path: str | Path) -> bool:
+    """True when the file starts with the ULog magic bytes."""
+    try:
+        with open(path, "rb") as fh:
+            return fh.read(7) == _MAGIC
+    except OSError:
+        return False
+
+
+class _TrackedBytes(io.BytesIO):
+    """The file's bytes, remembering pyulog's last two reads (start, asked, got)."""
+
+    def __init__(self, data: bytes) -> None:
+        super().__init__(data)
+        self.reads: list[tuple[int, int, int]] = []
+
+    def read(self, size: int | None = -1) -> bytes:
+        start = self.tell()
+        out = super().read(size)
+        if size is not None and size >= 0:
+            self.reads = [*self.reads[-1:], (start, size, len(out))]
+        return out
+
+
+def _short_read(fh: _TrackedBytes) -> tuple[int, str] | None:
+    """Where pyulog stopped early: a message header or body cut short (truncation, or a
+    corrupt header whose size runs past the end)."""
+    if not fh.reads:
+        return None
+    start, asked, got = fh.reads[-1]
+    if got >= asked or (got == 0 and asked == 3):
+        return None                  # a clean end: the next header read found nothing
+    if asked == 3:
+        return start, f"file ends inside a message header ({got} of 3 bytes)"
+    hdr = fh.reads[0][0] if len(fh.reads) > 1 else start
+    return hdr, (f"message at this offset says {asked} bytes, the file has {got} after its "
+                 f"header (truncated, or a corrupt header)")
+
+
+def _load(p: str) -> Any:
+    from pyulog import ULog
+
+    try:
+        data = Path(p).read_bytes()
+    except OSError as exc:
+        raise FileFormatError(p, f"cannot read ({exc.strerror})") from None
+    fh = _TrackedBytes(data)
+    sink = io.StringIO()
+    try:
+        with contextlib.redirect_stdout(sink), contextlib.redirect_stderr(sink):
+            return ULog(fh, list(TOPICS)), fh, data
+    except Exception as exc:        # pyulog raises ULogException, struct.error, ...
+        raise FileFormatError(p, f"not a readable ULog file ({type(exc).__name__}: "
+                                 f"{exc})") from None
+
+
+def _times(d: dict[str, np.ndarray]) -> np.ndarray:
+    key = "timestamp_sample" if "timestamp_sample" in d else "timestamp"
+    return np.asarray(d[key], float) * TIME_UNITS["us"]
+
+
+def _xyz(d: dict[str, np.ndarray], a: str = "x", b: str = "y", c: str = "z") -> np.ndarray:
+    return np.column_stack([d[a], d[b], d[c]]).astype(float)
+
+
+def _interp(ts: np.ndarray, tq: np.ndarray, x: np.ndarray) -> np.ndarray:
+    out = np.column_stack([np.interp(tq, ts, x[:, k], left=np.nan, right=np.nan)
+                           for k in range(x.shape[1])])
+    return out
+
+
+def _streams(u: Any) -> tuple[list[ImuStream], dict[str, Any]]:
+    by = {(d.name, d.multi_id): d.data for d in u.data_list}
+    gyros = sorted(i for (n, i) in by if n == "sensor_gyro")
+    meta: dict[str, Any] = {"topics": {f"{n}[{i}]": len(d["timestamp"])
+                                       for (n, i), d in sorted(by.items())}}
+    streams = []
+    if gyros:
+        for k, i in enumerate(gyros):
+            g = by[("sensor_gyro", i)]
+            t = _times(g)
+            notes = []
+            acc = None
+            a = by.get(("sensor_accel", i))
+            if a is not None and len(a["timestamp"]) > 1:
+                acc = _interp(_times(a), t, _xyz(a))
+                notes.append(f"sensor_accel[{i}] interpolated onto sensor_gyro[{i}] times "
+                             f"({int(np.isfinite(acc[:, 0]).sum())} of {t.size} samples "
+                             f"inside its span)")
+            temp = np.asarray(g["temperature"], float) if "temperature" in g else None
+            if temp is not None and not np.any(temp != 0):
+                temp = None
+                notes.append(f"sensor_gyro[{i}].temperature is 0 throughout: not logged")
+            dev = np.asarray(g.get("device_id", [0]))
+            streams.append(ImuStream(
+                name=f"imu{k + 1}", t=t, gyro=_xyz(g), accel=acc, temperature=temp,
+                source=f"sensor_gyro[{i}]", device_id=int(dev[0]) if dev.size else None,
+                error_count=(np.asarray(g["error_count"], float) if "error_count" in g
+                             else None), notes=tuple(notes)))
+        return streams, meta
+    imus = sorted(i for (n, i) in by if n == "vehicle_imu")
+    for k, i in enumerate(imus):
+        v = by[("vehicle_imu", i)]
+        t = _times(v)
+        dt = np.asarray(v["delta_angle_dt"], float) * TIME_UNITS["us"]
+        dt[dt <= 0] = np.nan
+        rate = _xyz(v, "delta_angle[0]", "delta_angle[1]", "delta_angle[2]") / dt[:, None]
+        dvdt = np.asarray(v["delta_velocity_dt"], float) * TIME_UNITS["us"]
+        dvdt[dvdt <= 0] = np.nan
+        acc = _xyz(v, "delta_velocity[0]", "delta_velocity[1]", "delta_velocity[2]") \
+            / dvdt[:, None]
+        streams.append(ImuStream(
+            name=f"imu{k + 1}", t=t, gyro=rate, accel=acc, source=f"vehicle_imu[{i}]",
+            device_id=int(v["gyro_device_id"][0]) if len(t) else None,
+            notes=("rates are delta_angle / delta_angle_dt (mean over each interval)",)))
+    return streams, meta
+
+
+def _cut_time(p: str, data: bytes) -> tuple[int, float]:
+    """(byte offset, last readable sample time) before the first corrupt data.
+
+    Bisects on the longest prefix of the file that pyulog reads without a corruption flag.
+    """
+    from pyulog import ULog
+
+    lo, hi = 0, len(data)
+    sink = io.StringIO()
+    while hi - lo > 64:
+        mid = (lo + hi) // 2
+        try:
+            with contextlib.redirect_stdout(sink), contextlib.redirect_stderr(sink):
+                u = ULog(io.BytesIO(data[:mid]), list(TOPICS))
+            ok = not u.file_corruption
+        except Exception:
+            ok = False
+        if ok:
+            lo = mid
+        else:
+            hi = mid
+    try:
+        with contextlib.redirect_stdout(sink), contextlib.redirect_stderr(sink):
+            u = ULog(io.BytesIO(data[:lo]), list(TOPICS))
+        last = max((float(_times(d.data)[-1]) for d in u.data_list
+                    if len(d.data["timestamp"])), default=-np.inf)
+    except Exception:
+        last = -np.inf
+    return hi, last
+
+
+def read_px4(path: str | Path, *, salvage: bool = False) -> LogRead:
+    """Read the IMU instances of a PX4 ULog file.
+
+    Parameters
+    ----------
+    path : str or Path
+    salvage : bool
+        On a corrupt file, return the samples before the damage (with
+        :attr:`LogRead.damage` set) instead of raising.
+
+    Raises
+    ------
+    FileFormatError
+        Unreadable file, no ``sensor_gyro`` or ``vehicle_imu`` data, or corruption
+        (without ``salvage``) naming the byte offset.
+    """
+    p = str(path)
+    u, fh, data = _load(p)
+    streams, meta = _streams(u)
+    meta["start_timestamp_us"] = int(u.start_timestamp)
+    meta["dropouts"] = len(u.dropouts)
+    dmg = None
+    if u.file_corruption:
+        offset, last = _cut_time(p, data)
+        streams = [s.take(s.t <= last) for s in streams]
+        dmg = Damage(p, "corrupt ULog data (pyulog skipped bytes it could not read)",
+                     offset=offset, samples_before=sum(s.size for s in streams))
+    else:
+        short = _short_read(fh)
+        if short is not None:
+            dmg = Damage(p, short[1], offset=short[0],
+                         samples_before=sum(s.size for s in streams))
+    if dmg is not None and not salvage:
+        raise dmg.error()
+    if not streams or all(s.size == 0 for s in streams):
+        raise FileFormatError(p, "no sensor_gyro or vehicle_imu data in the log")
+    return LogRead(p, "px4", tuple(streams), dmg, meta)

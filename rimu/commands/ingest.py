@@ -1,0 +1,63 @@
+"""``rimu ingest LOG``: read a flight log or bench recording into a ``rimu.flight/1`` folder."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from fdi.fileio import to_jsonable
+
+HELP = ("read a flight log or bench recording (ArduPilot .BIN, PX4 .ulg, .mat, CSV, R .rda) "
+        "into a flight folder")
+
+REPORT_FILE = "ingest_report.json"
+"""The accounting file written beside the flight (``rimu.ingest-report/1``)."""
+
+
+def configure(p: argparse.ArgumentParser) -> None:
+    from replay.ingest import FORMATS
+
+    p.add_argument("logs", nargs="+", metavar="LOG",
+                   help="the log; several files recorded together (one IMU each, e.g. "
+                        "imu1.mat imu2.mat) are joined as imu1, imu2, ...")
+    p.add_argument("--format", default="auto", choices=FORMATS,
+                   help="log format (default auto: from the content, else the suffix)")
+    p.add_argument("--map", metavar="MAP.toml", dest="map_path",
+                   help="rimu.ingest-map/1 TOML: columns, units, time base and IMU of each "
+                        "column (CSV and R data; optional for .mat)")
+    p.add_argument("--out", required=True, metavar="DIR", help="flight folder to write")
+    p.add_argument("--reference", metavar="IMU",
+                   help="IMU whose time stamps are the time base (default: most samples)")
+    p.add_argument("--salvage", action="store_true",
+                   help="on a truncated or corrupt log, write the samples before the damage "
+                        "(default: refuse, exit 2)")
+
+
+def run(args: argparse.Namespace) -> int:
+    from replay.flight_io import save_flight_dir
+    from replay.ingest import align_streams, read_any
+    from replay.ingest.readers import merge_reads
+
+    reads = [read_any(log, args.format, map_path=args.map_path, salvage=args.salvage)
+             for log in args.logs]
+    read = merge_reads(reads)
+    flight, report = align_streams(read, reference=args.reference)
+    out = Path(args.out)
+    save_flight_dir(flight, out)
+    (out / REPORT_FILE).write_text(json.dumps(to_jsonable(report), indent=1) + "\n",
+                                   encoding="utf-8")
+    tb = report["time_base"]
+    print(f"wrote {out}: {flight.t.shape[0]} samples of {len(report['imus'])} IMU(s) "
+          f"({flight.n} gyro axes) at {tb['sample_rate_hz']:.4g} Hz, "
+          f"{tb['t_end_s'] - tb['t_start_s']:.1f} s, {tb['n_gaps']} gap(s)")
+    for imu in report["imus"]:
+        dropped = sum(imu["dropped"].values())
+        print(f"  {imu['name']} ({imu['source']}): {imu['samples_in']} in, {imu['kept']} kept, "
+              f"{imu['resampled_on_base']} resampled, {dropped} dropped, "
+              f"{imu['missing_on_base']} missing on the base")
+    if read.damage is not None:
+        d = read.damage
+        where = f" at byte offset {d.offset}" if d.offset is not None else ""
+        print(f"  salvaged: {d.message}{where}; samples after it not read")
+    return 0
