@@ -1,7 +1,7 @@
-"""Test helper: an erle PXF ArduCopter log (two IMUs) as a Flight, read with pymavlink.
+"""Test helper: an erle PXF ArduCopter log (two IMUs) as a Flight, through ``rimu ingest``'s
+reader (``replay.ingest``: pymavlink DataFlash reader, one time base).
 
-Used only for the findings on the real flights when ``rimu ingest`` is not available;
-the data stay in ``../shared/data`` (no licence stated: never copied into the repository).
+The data stay in ``../shared/data`` (no licence stated: never copied into the repository).
 """
 
 from __future__ import annotations
@@ -9,9 +9,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-import numpy as np
-
-from replay.flight_data import AuxChannels, Flight
+from replay.flight_data import Flight
 
 SHARED = Path(os.environ.get("RIMU_SHARED_DATA",
                              Path(__file__).resolve().parents[2] / ".." / "shared" / "data"))
@@ -21,25 +19,12 @@ FLIGHTS = {"83": "pxf_copter_31-3-2015_83.BIN", "41": "pxf_copter_22-12-2014_41.
 
 
 def read_erle(name: str) -> Flight:
-    """IMU and IMU2 of one erle log on their common TimeMS stamps (rad/s, m/s²)."""
-    from pymavlink import DFReader
+    """IMU and IMU2 of one erle log as ``rimu ingest`` reads them.
 
-    path = DATA / FLIGHTS[name]
-    r = DFReader.DFReader_binary(str(path))
-    rows: dict[str, dict[int, list[float]]] = {"IMU": {}, "IMU2": {}}
-    while True:
-        m = r.recv_match(type=["IMU", "IMU2"])
-        if m is None:
-            break
-        rows[m.get_type()][int(m.TimeMS)] = [m.GyrX, m.GyrY, m.GyrZ, m.AccX, m.AccY, m.AccZ]
-    common = sorted(set(rows["IMU"]) & set(rows["IMU2"]))
-    a = np.array([rows["IMU"][k] + rows["IMU2"][k] for k in common], float)
-    t = np.array(common, float) / 1e3
-    gyro = np.hstack([a[:, 0:3], a[:, 6:9]])
-    acc = np.hstack([a[:, 3:6], a[:, 9:12]])
-    names = tuple(f"imu{j}.{x}" for j in (1, 2) for x in "xyz")
-    groups = tuple(f"imu{j}" for j in (1, 2) for _ in "xyz")
-    aux = AuxChannels(("accel",) * 6, names, groups, acc, np.ones(acc.shape, bool))
-    return Flight(t=t, raw=gyro, valid=np.ones(gyro.shape, bool), sample_rate_hz=50.0,
-                  sensor_names=names, raw_unit="rad/s", source=str(path), kind="gyro",
-                  imu=groups, aux=aux)
+    Flight 83 ends inside a truncated RATE message; its IMU samples are all before the
+    damage and are kept (``--salvage``).
+    """
+    from replay.ingest import align_streams, read_any
+
+    flight, _ = align_streams(read_any(DATA / FLIGHTS[name], salvage=True))
+    return flight
