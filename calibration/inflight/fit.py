@@ -314,7 +314,6 @@ def fit_pair(t: np.ndarray, y_ref: np.ndarray, y: np.ndarray, used: np.ndarray, 
                                        border_value=True)
     tau = 0.0
     A = np.eye(3)
-    noise = float(np.std(y[ok] - y_ref[ok] - np.median(y[ok] - y_ref[ok], axis=0)))
     fit = None
     tt = t[ok]
     spline = CubicSpline(tt, y_ref[ok], axis=0)

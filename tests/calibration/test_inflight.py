@@ -174,3 +174,21 @@ def test_cli_refuses_a_static_flight_in_one_line(tmp_path: Path) -> None:
     lines = r.stderr.strip().splitlines()
     assert len(lines) == 1 and "does not excite rotation about" in lines[0]
     assert not (tmp_path / "cal.json").exists()
+
+
+def test_cli_errors_are_one_line(tmp_path: Path) -> None:
+    from replay.flight import simulate_flight
+    from thresholds.synthetic import synthetic_calibration
+
+    cal = synthetic_calibration("cone6", seed=2)
+    save_flight_dir(simulate_flight(cal, 2.0, seed=1), tmp_path / "plain")
+    cases = [(("calibrate", "--in-flight", str(tmp_path / "plain"), "--out",
+               str(tmp_path / "c.json")), "at least two IMU groups"),
+             (("calibrate", "--out", str(tmp_path / "c.json")), "--in-flight"),
+             (("calibrate", "--in-flight", str(tmp_path / "nope"), "--out",
+               str(tmp_path / "c.json")), "manifest.json")]
+    for args, word in cases:
+        r = _rimu(*args)
+        assert r.returncode == 2, (args, r.stderr)
+        lines = r.stderr.strip().splitlines()
+        assert len(lines) == 1 and word in lines[0], lines
