@@ -132,6 +132,8 @@ class ImuSetSpec:
         Sd of each bias (rad/s).
     noise_sd : float
         Gyro white noise per sample (rad/s).
+    noise_scale : tuple of float
+        Per IMU factor on ``noise_sd`` (K values, or empty: all 1).
     accel_noise_sd : float
         Accelerometer white noise per sample (m/s²).
     max_rate_dps : float
@@ -151,6 +153,7 @@ class ImuSetSpec:
     scale_sd: float = 5e-3
     bias_sd: float = 0.01
     noise_sd: float = 2e-3
+    noise_scale: tuple[float, ...] = ()
     accel_noise_sd: float = 0.05
     max_rate_dps: float = 200.0
     linear_accel: float = 1.0
@@ -167,6 +170,10 @@ class ImuSetSpec:
         if self.time_offset_s and len(self.time_offset_s) != self.imus:
             raise ConfigError(f"time offsets: {len(self.time_offset_s)} values for "
                               f"{self.imus} IMUs (give one per IMU)")
+        if self.noise_scale and (len(self.noise_scale) != self.imus or not all(
+                math.isfinite(x) and x >= 0 for x in self.noise_scale)):
+            raise ConfigError(f"noise_scale: expected {self.imus} non-negative numbers, got "
+                              f"{self.noise_scale}")
         if not all(math.isfinite(x) for x in self.time_offset_s):
             raise ConfigError(f"time offsets must be finite, got {self.time_offset_s}")
         for name in ("misalignment_sd", "nonorthogonality_sd", "scale_sd", "bias_sd",
@@ -310,7 +317,8 @@ def simulate_imu_set(spec: ImuSetSpec) -> Flight:
         if e.vibration_hz > 0:
             u += m.vib_amp * np.sin(2 * math.pi * e.vibration_hz * t[:, None] + m.vib_phase)
         nr = np.random.default_rng([int(spec.seed), 12, j])
-        u += spec.noise_sd * nr.standard_normal((N, 3))
+        ns = spec.noise_sd * (spec.noise_scale[j - 1] if spec.noise_scale else 1.0)
+        u += ns * nr.standard_normal((N, 3))
         if e.random_walk > 0 and e.on(j):
             u += np.cumsum(nr.standard_normal((N, 3)), axis=0) * (e.random_walk /
                                                                   math.sqrt(fs))
@@ -355,7 +363,8 @@ def _truth(spec: ImuSetSpec, imus: Sequence[_Imu], N: int) -> dict[str, Any]:
             "kind": "gyro", "sample_rate_hz": float(spec.sample_rate_hz), "samples": N,
             "max_rate_dps": float(spec.max_rate_dps),
             "motion": "replay.motion: sin^2 rate pulses per 2-s segment and axis",
-            "noise_sd": spec.noise_sd, "accel_noise_sd": spec.accel_noise_sd,
+            "noise_sd": spec.noise_sd, "noise_scale": list(spec.noise_scale),
+            "accel_noise_sd": spec.accel_noise_sd,
             "effects": {"g_sensitivity": e.g_sensitivity, "warm_up": e.warm_up,
                         "warm_up_s": e.warm_up_s, "temperature_coeff": e.temperature_coeff,
                         "temperature_rise_c": e.temperature_rise_c,

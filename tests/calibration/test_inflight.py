@@ -192,3 +192,21 @@ def test_cli_errors_are_one_line(tmp_path: Path) -> None:
         assert r.returncode == 2, (args, r.stderr)
         lines = r.stderr.strip().splitlines()
         assert len(lines) == 1 and word in lines[0], lines
+
+
+def test_noise_split_three_cornered_hat_recovers_each_imus_noise() -> None:
+    from calibration.inflight.calfile import noise_split
+
+    sd, scale = 2e-3, (1.0, 2.0, 0.5)
+    f = simulate_imu_set(ImuSetSpec(imus=3, duration_s=60, seed=8, noise_sd=sd,
+                                    noise_scale=scale))
+    noise = noise_split(fit_inflight(f))
+    # the hat's share of IMU j is mean(n_j² − n_j n_k − n_j n_l + n_k n_l): its variance is
+    # (2 v_j² + v_j v_k + v_j v_l + v_k v_l)/N for white noise of variances v
+    N = f.t.shape[0]
+    v = [(s * sd) ** 2 for s in scale]
+    for j, g in enumerate(("imu1", "imu2", "imu3")):
+        vj, (vk, vl) = v[j], [v[i] for i in range(3) if i != j]
+        share_sd = np.sqrt((2 * vj**2 + vj * vk + vj * vl + vk * vl) / N)
+        assert np.all(np.abs(np.diag(noise[g]) - vj) < 4 * share_sd), (g, noise[g], vj)
+    assert np.all(np.diag(noise["imu2"]) > 2 * np.diag(noise["imu1"]))    # not split equally
