@@ -360,6 +360,12 @@ def diagnose_flight(flight: Flight, cal: Calibration, *, alpha: float = 0.01,
                             "estimate": float(est[0]) if est.size == 1 else est.tolist(),
                             "estimate_sd": float(sd[0]) if sd.size == 1 else sd.tolist(),
                             "unit": c.unit, "p_value": p})
+            known = cal.extra.get("inflight", {}).get("imus", {}).get(g, {})
+            if c.name == "time_skew" and "time_offset_ms" in known:
+                effects[-1]["detail"] = (
+                    f"the calibration records {known['time_offset_ms']:+.3f} ± "
+                    f"{known['time_offset_ms_sd']:.3f} ms for {g}; the monitor does not "
+                    f"shift samples, so it stays in the residual")
         if vib[g] is not None:
             sl_, sd_, p, (calm, rough) = _vibration_noise(fit.residual, vib[g][keep])
             if p < alpha_each:

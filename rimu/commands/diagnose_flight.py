@@ -46,6 +46,8 @@ def format_text(doc: dict) -> str:
         else:
             val = f"{est:+.4g} ± {sd:.2g}"
         lines.append(f"  {e['name']:<18s} {e['imu']}: {val} {e['unit']} (p={e['p_value']:.2g})")
+        if e.get("detail"):
+            lines.append(f"      {e['detail']}")
     b, a = doc["error_before"], doc["error_after"]
     for c, x, y in zip(b["channels"], b["rms"], a["rms"], strict=True):
         lines.append(f"  residual {c}: rms {x:.4g} -> {y:.4g} {b['unit']}")
