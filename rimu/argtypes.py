@@ -26,6 +26,7 @@ __all__ = [
     "nonnegative_int",
     "positive_float",
     "positive_int",
+    "probability",
 ]
 
 DAY_S = 86_400.0
@@ -79,6 +80,11 @@ def bounded_float(min_value: float | None = None, max_value: float | None = None
 
     parse.__name__ = name
     return parse
+
+
+def probability() -> Callable[[str], float]:
+    """A probability strictly between 0 and 1 (a test's significance level)."""
+    return bounded_float(0.0, 1.0, min_open=True, max_open=True, name="probability")
 
 
 def positive_float(max_value: float | None = None) -> Callable[[str], float]:

@@ -16,11 +16,13 @@ __all__ = ["add_calibrate_options", "calibrate_with_check"]
 
 def add_calibrate_options(p: argparse.ArgumentParser) -> None:
     """Add ``--effects`` and ``--alpha`` to the ``rimu calibrate`` parser."""
+    from rimu.argtypes import probability  # the CLI layer (imported only by the command)
+
     p.add_argument("--effects", metavar="NAME,...",
                    help="fit these effects jointly with the calibration, on every sensor "
                         "they apply to (rimu.calibration/2 'effects'): "
                         + ", ".join(c.name for c in candidates()))
-    p.add_argument("--alpha", type=float, default=0.01, metavar="A",
+    p.add_argument("--alpha", type=probability(), default=0.01, metavar="A",
                    help="level of the model-adequacy check run before the noise model "
                         "(default 0.01); a suspected effect withholds the Gauss-Markov "
                         "widening")

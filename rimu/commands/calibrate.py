@@ -46,6 +46,9 @@ def configure(p: argparse.ArgumentParser) -> None:
     from calibration.diagnose.cli import add_calibrate_options
 
     add_calibrate_options(p)
+    from rimu.commands.calibrate_inflight import configure_options
+
+    configure_options(p)
 
 
 def _set_summary(s: SensorSet, V_sd: object) -> list[str]:
@@ -145,6 +148,10 @@ def summary_text(cal: Calibration) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
+    if getattr(args, "in_flight", None):
+        from rimu.commands import calibrate_inflight
+
+        return calibrate_inflight.run(args)
     from calibration.diagnose.cli import calibrate_with_check
     from calibration.session_io import load_session
     from fdi.calfile import check_plausible
@@ -153,7 +160,8 @@ def run(args: argparse.Namespace) -> int:
     if args.ferraris:
         return ferraris_command(args)
     if args.session is None:
-        raise ConfigError("rimu calibrate: give a session directory (or --ferraris CSV)")
+        raise ConfigError("rimu calibrate: give a session directory (or --ferraris CSV, "
+                          "or --in-flight DIR)")
     out = output_file(args.out, "--out")
     if args.compare:
         input_path(args.compare, "--compare")

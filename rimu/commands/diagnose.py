@@ -9,14 +9,19 @@ import argparse
 import json
 from pathlib import Path
 
-HELP = "find unmodelled effects in a calibration session, refit, report before and after"
+from rimu.argtypes import probability
+
+HELP = ("find unmodelled effects in a calibration session or a flight folder, refit, "
+        "report before and after")
 
 
 def configure(p: argparse.ArgumentParser) -> None:
-    p.add_argument("session", help="session directory (manifest.json + samples.csv)")
+    p.add_argument("session", metavar="DIR",
+                   help="session directory (rimu.session/1) or flight folder (rimu.flight/1, "
+                        "e.g. from rimu ingest)")
     p.add_argument("--cal", required=True, metavar="FILE",
                    help="calibration of this session (rimu calibrate --out FILE)")
-    p.add_argument("--alpha", type=float, default=0.01, metavar="A",
+    p.add_argument("--alpha", type=probability(), default=0.01, metavar="A",
                    help="family-wise false-claim level of the tests (default 0.01)")
     p.add_argument("--json", action="store_true", help="print the result as JSON")
     p.add_argument("--report", metavar="DIR",
@@ -86,7 +91,26 @@ def text(d) -> str:
     return "\n".join(lines)
 
 
+def _is_flight(path: str) -> bool:
+    """True when ``path`` holds a ``rimu.flight/1`` manifest (else it is read as a session)."""
+    try:
+        doc = json.loads((Path(path) / "manifest.json").read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return False
+    return isinstance(doc, dict) and str(doc.get("schema", "")).startswith("rimu.flight/")
+
+
 def run(args: argparse.Namespace) -> int:
+    if _is_flight(args.session):
+        from rimu.commands.diagnose_flight import run_flight
+
+        if args.truth or args.out:
+            from fdi.errors import ConfigError
+
+            raise ConfigError(f"{args.session}: --truth and --out apply to turntable sessions, "
+                              "not to flight folders")
+        return run_flight(args.session, args.cal, alpha=args.alpha, as_json=args.json,
+                          report_dir=args.report)
     from calibration.diagnose import diagnose
     from calibration.session_io import load_session
     from fdi.calfile import load_calibration

@@ -21,8 +21,8 @@ CAN_SUFFIXES = (".asc", ".blf", ".log")
 
 
 def configure(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--cal", required=True, metavar="FILE",
-                   help="calibration file (rimu.calibration/1)")
+    p.add_argument("--cal", metavar="FILE",
+                   help="calibration file (rimu.calibration/2); required unless --imus")
     p.add_argument("--duration", required=True, type=positive_float(DAY_S), metavar="S",
                    help="flight length (s, at most one day)")
     p.add_argument("--seed", type=nonnegative_int(SEED_MAX), default=0,
@@ -46,6 +46,9 @@ def configure(p: argparse.ArgumentParser) -> None:
                    help="correlation time of that bias (s, default 100)")
     p.add_argument("--out", required=True, metavar="DIR|FILE",
                    help="a flight directory, or a CAN log (.asc, .blf, .log)")
+    from rimu.commands.simulate_imu_set import configure_options
+
+    configure_options(p)
 
 
 def _load_truth(path: str):
@@ -57,6 +60,12 @@ def _load_truth(path: str):
 
 
 def run(args: argparse.Namespace) -> int:
+    if getattr(args, "imus", None):
+        from rimu.commands import simulate_imu_set
+
+        return simulate_imu_set.run(args)
+    if not args.cal:
+        raise ConfigError("rimu simulate flight: --cal is required (or --imus K)")
     from rimu.outputs import atomic_dir, input_path, output_dir, output_file
 
     out = Path(args.out)

@@ -1,0 +1,152 @@
+"""The in-flight calibration as a ``rimu.calibration/1`` file the monitor reads.
+
+Frame and sensor model: the reference IMU defines the frame, so its axes are the unit
+vectors, its scale factors 1 and its biases 0 (its absolute bias is not observable against
+the other IMUs: every bias in the file is relative to the reference's, which leaves the
+parity residual exact and shifts the reconstructed rate by the reference's bias). IMU j's
+axis k follows from ``y_jk = A_k·ω' + c_k`` (``A_k`` row k of A, ω' the reference's
+reading): ``h = A_k/|A_k|``, ``SF = 1/|A_k|``, ``b = c_k/|A_k|`` (seed 000 Eq. 13).
+``input_error_cov`` is the covariance of ``A_k`` (already gain-normalised).
+
+Noise: the fit residual of IMU j holds its own noise and the reference's
+(``Cov r_j = Σ_j + A Σ_r Aᵀ``). With two IMUs the two are taken equal; with three or more
+the reference's follows from pairs (three-cornered hat:
+``Σ_r = (Cov r_i + Cov r_j − Cov(r_i − r_j))/2``, averaged over pairs). The Allan table of
+each sensor is that of its share of the residual, so the thresholds carry the flight's own
+coloured noise. Time offsets are kept under ``extra.inflight`` (the monitor does not shift
+samples).
+"""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+
+from calibration.inflight.fit import InflightFit, decompose
+from calibration.residuals import allan_table
+from fdi.calfile import AllanTable, Calibration, SensorCal, SensorSet, tangent_basis
+from fdi.units import DPH, DPS, RAW_UNITS
+from replay.flight_data import Flight
+
+__all__ = ["INFLIGHT_METHOD", "calibration_from_fit", "noise_split"]
+
+INFLIGHT_METHOD = "in-flight alignment to a reference IMU (calibration.inflight/1)"
+_AXES = "xyz"
+
+
+def _psd_floor(C: np.ndarray, floor: np.ndarray) -> np.ndarray:
+    w, V = np.linalg.eigh(0.5 * (C + C.T))
+    return (V * np.maximum(w, float(np.min(floor)))) @ V.T
+
+
+def noise_split(fit: InflightFit) -> dict[str, np.ndarray]:
+    """Per-sample noise covariance (3×3, rad²/s²) of every IMU (module docstring)."""
+    res = {g: a.residual for g, a in fit.alignments.items()}
+    covs = {g: np.cov(r[np.all(np.isfinite(r), axis=1)].T) for g, r in res.items()}
+    names = list(res)
+    if len(names) >= 2:
+        est = []
+        for i, j in itertools.combinations(names, 2):
+            both = np.all(np.isfinite(res[i]), axis=1) & np.all(np.isfinite(res[j]), axis=1)
+            d = np.cov((res[i][both] - res[j][both]).T)
+            est.append((covs[i] + covs[j] - d) / 2)
+        Sr = np.mean(est, axis=0)
+    else:
+        Sr = covs[names[0]] / 2
+    floor = 1e-3 * np.mean([np.trace(c) / 3 for c in covs.values()]) * np.ones(3)
+    out = {fit.reference: _psd_floor(Sr, floor)}
+    for g in names:
+        out[g] = _psd_floor(covs[g] - Sr, floor)
+    return out
+
+
+def _allan(fit: InflightFit, noise: dict[str, np.ndarray]) -> AllanTable | None:
+    tables = {}
+    for g, a in fit.alignments.items():
+        r = a.residual[np.all(np.isfinite(a.residual), axis=1)]
+        if r.shape[0] < 64:
+            return None
+        tables[g] = (allan_table(r, fit.sample_rate_hz), np.var(r, axis=0))
+    if any(t is None for t, _ in tables.values()):
+        return None
+    first = next(iter(tables))
+    taus = tables[first][0].tau_s
+    cols = []
+    for g in fit.imus:
+        src = first if g == fit.reference else g
+        tab, var = tables[src]
+        share = np.sqrt(np.diag(noise[g]) / np.where(var > 0, var, 1.0))
+        cols.append(tab.adev[:len(taus)] * share)
+    return AllanTable(taus, np.hstack(cols))
+
+
+def _sf_unit(raw_unit: str) -> str:
+    return f"(rad/s)/{raw_unit}" if raw_unit in RAW_UNITS else "(rad/s)/raw"
+
+
+def calibration_from_fit(fit: InflightFit, flight: Flight) -> Calibration:
+    """The ``rimu.calibration/1`` calibration of a flight's gyro set (module docstring)."""
+    noise = noise_split(fit)
+    groups = flight.imu_groups()
+    sensors: list[SensorCal] = []
+    n = flight.n
+    cov = np.zeros((n, n))
+    sfu = _sf_unit(flight.raw_unit)
+    for g, idx in groups.items():
+        cov[np.ix_(idx, idx)] = noise[g]
+        a = fit.alignments.get(g)
+        for k, i in enumerate(idx):
+            if a is None:
+                A_k, C, c, c_sd = np.eye(3)[k], np.zeros((3, 3)), 0.0, 0.0
+            else:
+                A_k = a.A[k]
+                C = a.A_cov[3 * k:3 * k + 3, 3 * k:3 * k + 3]
+                c, c_sd = float(a.c[k]), float(np.sqrt(a.c_cov[k, k]))
+            g_k = float(np.linalg.norm(A_k))
+            h = A_k / g_k
+            nom = np.zeros(3)
+            nom[int(np.argmax(np.abs(h)))] = np.sign(h[int(np.argmax(np.abs(h)))])
+            E = tangent_basis(nom)
+            ms = np.sqrt(np.clip(np.diag(E @ C @ E.T), 0, None)) / g_k
+            r = a.residual[:, k] if a is not None else None
+            rms = float(np.sqrt(np.nanmean(r**2))) if r is not None else float(
+                np.sqrt(noise[g][k, k]))
+            sensors.append(SensorCal(
+                name=flight.sensor_names[i], axis=h, axis_nominal=nom,
+                scale_factor=1.0 / g_k, scale_factor_sd=float(np.sqrt(h @ C @ h)) / g_k**2,
+                bias=c / g_k, bias_sd=c_sd / g_k, input_error_cov=C, misalignment_sd=ms,
+                raw_unit=flight.raw_unit, scale_factor_unit=sfu, bias_unit="deg/h",
+                residual_rms=rms))
+    return Calibration(configuration=f"{len(groups)} IMUs in flight", sets={
+        "gyro": SensorSet("gyro", tuple(sensors), cov, allan=_allan(fit, noise))},
+        sample_rate_hz=fit.sample_rate_hz, extra={"method": INFLIGHT_METHOD,
+                                                 "source": fit.source,
+                                                 "inflight": fit_summary(fit)})
+
+
+def fit_summary(fit: InflightFit) -> dict[str, object]:
+    """The ``extra.inflight`` block: every estimate with its sd, excitation, residuals."""
+    imus = {}
+    for g, a in fit.alignments.items():
+        parts = decompose(a.A, a.A_cov)
+        r = a.residual[np.all(np.isfinite(a.residual), axis=1)]
+        lag1 = [float(np.corrcoef(r[1:, k], r[:-1, k])[0, 1]) for k in range(3)]
+        imus[g] = {
+            "model": a.model, "A": a.A.tolist(),
+            "A_sd": np.sqrt(np.diag(a.A_cov)).reshape(3, 3).tolist(),
+            **{f"{name}": v.tolist() for name, (v, _) in parts.items()},
+            **{f"{name}_sd": s.tolist() for name, (_, s) in parts.items()},
+            "bias_dph": (a.c / DPH).tolist(),
+            "bias_dph_sd": (np.sqrt(np.diag(a.c_cov)) / DPH).tolist(),
+            "time_offset_ms": 1e3 * a.time_offset_s,
+            "time_offset_ms_sd": 1e3 * a.time_offset_sd_s,
+            "residual_rms_dps": (np.sqrt(np.mean(r**2, axis=0)) / DPS).tolist(),
+            "residual_lag1_autocorrelation": lag1,
+            "hac_lags": a.lags, "samples": int(r.shape[0]),
+            "excitation": a.excitation.to_dict(), "notes": list(a.notes)}
+    return {"reference": fit.reference, "units": {
+        "rotation": "rad", "scale": "fraction", "nonorthogonality": "rad"},
+        "imus": imus, "left_out": [s.to_dict() for s in fit.left_out],
+        "samples_used": int(fit.used.sum()), "samples": int(fit.used.shape[0])}
+

@@ -1,0 +1,394 @@
+"""Trace the parity residual of a flight to its causes.
+
+Residual: the calibration compensates every gyro (``y = SF·u − b``); the reference IMU's
+three axes give the body rate ``ω̂ = H_r⁻¹·y_r`` and every other IMU's axes the residual
+``r_j = y_j − H_j·ω̂`` (3 channels per IMU, together a basis of the parity space: ``r = 0``
+for a perfect model). Samples in segments to leave out (:mod:`.segments`) and invalid
+samples are dropped.
+
+Candidate effects, per IMU j (regressors on its three channels):
+
+==================  ===============================================  ==================
+``time_skew``       ``H_j·dω̂/dt`` (one parameter, the skew τ)          ms
+``g_sensitivity``   specific force of IMU j (3×3 matrix)               (deg/s)/g
+``temperature``     logged temperature − mean (per axis)               (deg/s)/degC
+``warm_up``         ``exp(−t/60 s)`` (per axis)                         deg/s at t = 0
+``bias_drift``      Legendre P1…P3 over the flight (per axis)           deg/s per term
+``vibration``       cos/sin of each spectral line of the residual       deg/s amplitude
+==================  ===============================================  ==================
+
+A constant per channel is always in the model. Selection is forward: at each step the
+candidate with the smallest p-value (HAC Wald test of its parameters in the model with
+those already chosen, :mod:`.regression`) enters if p < α/M (Bonferroni over all M
+candidates of all IMUs); effects that are functions of time only (warm-up, drift) enter
+only when no candidate built from a measured signal (angular acceleration, specific force,
+temperature, a spectral line) passes, since a slow temperature change and a warm-up curve
+explain the same residual and the measured one is the physical explanation. The reported
+p-values are those of the final model (each effect removed from it). Spectral lines: bins
+of the Welch spectrum of a channel more than :data:`LINE_FACTOR` times its running median
+(41 bins), local maxima, up to :data:`MAX_LINES`.
+
+Vibration noise (a variance effect, tested after the mean model): the squared residual of
+each channel regressed on the IMU's accelerometer vibration power (1-s mean of the squared
+deviation from the 1-s mean acceleration); one candidate per IMU with accelerometers.
+
+Unexplained: after the final model, a channel whose 1-s block means vary more than its
+short-lag (AR(1)) correlation explains (χ² test at α/M), or that still shows a line.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from scipy import ndimage, signal, stats
+from scipy.interpolate import CubicSpline
+from scipy.special import eval_legendre
+
+from calibration.inflight.regression import stacked_lstsq, wald_test
+from calibration.inflight.segments import find_segments, keep_mask
+from fdi.calfile import Calibration
+from fdi.errors import ConfigError
+from fdi.units import DPS, G0
+from replay.flight_data import Flight
+
+__all__ = ["DIAGNOSE_SCHEMA", "GENERIC", "LINE_FACTOR", "MAX_LINES", "WARM_UP_S", "diagnose_flight",
+           "flight_residual"]
+
+DIAGNOSE_SCHEMA = "rimu.diagnose-flight/1"
+LINE_FACTOR = 10.0
+"""A spectral bin this many times the local median spectrum is a line."""
+_LOCAL_BINS = 41
+"""Width (bins) of the running median a line is compared with."""
+MAX_LINES = 3
+GENERIC = ("warm_up", "bias_drift")
+"""Effects that are functions of time only; they enter after the measured regressors."""
+WARM_UP_S = 60.0
+"""Time constant of the warm-up regressor (s)."""
+
+
+@dataclass(frozen=True)
+class _Cand:
+    name: str
+    imu: str
+    X: np.ndarray           # (N, 3, p)
+    unit: str
+    scale: float            # SI parameter → reported unit
+
+
+def flight_residual(flight: Flight, cal: Calibration, reference: str | None = None
+                    ) -> tuple[str, dict[str, np.ndarray], dict[str, list[int]], np.ndarray,
+                               np.ndarray]:
+    """Compensated residual of every non-reference IMU.
+
+    Returns
+    -------
+    reference : str
+    residual : dict of str to ndarray (N, 3)
+        ``r_j`` (rad/s).
+    index : dict of str to list of int
+        0-based sensor indices of each IMU.
+    omega : ndarray, shape (N, 3)
+        ``ω̂`` from the reference (rad/s).
+    H : ndarray, shape (n, 3)
+        Calibrated axes.
+    """
+    s = cal.kind("gyro")
+    if flight.kind != "gyro" or s.n != flight.n:
+        raise ConfigError(f"{flight.source}: {flight.n} {flight.kind} sensors, the "
+                          f"calibration has {s.n} gyros")
+    groups = flight.imu_groups()
+    if len(groups) < 2 or any(len(v) != 3 for v in groups.values()):
+        raise ConfigError(f"{flight.source}: diagnose of a flight needs two or more IMU "
+                          f"groups of three gyros (manifest 'imu')")
+    ref = reference or str(cal.extra.get("inflight", {}).get("reference", "")) \
+        or next(iter(groups))
+    if ref not in groups:
+        ref = next(iter(groups))
+    y = flight.raw * s.scale_factors - s.biases
+    H = s.H
+    ri = groups[ref]
+    omega = np.linalg.solve(H[ri], y[:, ri].T).T
+    res = {g: y[:, idx] - omega @ H[idx].T for g, idx in groups.items() if g != ref}
+    return ref, res, groups, omega, H
+
+
+def _aux(flight: Flight, kind: str, imu: str) -> np.ndarray | None:
+    if flight.aux is None:
+        return None
+    a = flight.aux.select(kind)
+    cols = [k for k, g in enumerate(a.imu) if g == imu]
+    if not cols:
+        return None
+    return a.values[:, cols]
+
+
+def _lines(r: np.ndarray, fs: float) -> list[float]:
+    """Frequencies (Hz) of the strongest spectral lines of the residual channels."""
+    nper = int(min(r.shape[0], 8192, max(256, 2 ** int(math.log2(max(r.shape[0] / 4, 2))))))
+    found: dict[float, float] = {}
+    for k in range(r.shape[1]):
+        f, p = signal.welch(r[:, k] - r[:, k].mean(), fs=fs, nperseg=nper)
+        med = ndimage.median_filter(p, size=_LOCAL_BINS, mode="nearest")
+        if not np.all(med > 0):
+            continue
+        ratio = p / med
+        pk, _ = signal.find_peaks(ratio, height=LINE_FACTOR)
+        for i in pk:
+            if f[i] > 0.2:                  # slower than 0.2 Hz is drift, not a line
+                key = round(float(f[i]), 2)
+                found[key] = max(found.get(key, 0.0), float(ratio[i]))
+    best = sorted(found, key=lambda x: -found[x])
+    out: list[float] = []
+    for fr in best:
+        if all(abs(fr - o) > 2 * fs / nper for o in out):
+            out.append(fr)
+        if len(out) == MAX_LINES:
+            break
+    return out
+
+
+def _refine(r: np.ndarray, t: np.ndarray, f0: float, fs: float) -> float:
+    """Frequency of a line to a fraction of a Welch bin (grid search of the periodogram)."""
+    grid = f0 + np.linspace(-fs / 256, fs / 256, 41)
+    pw = [float(np.sum(np.abs(np.exp(-2j * np.pi * g * t) @ (r - r.mean(axis=0))) ** 2))
+          for g in grid]
+    return float(grid[int(np.argmax(pw))])
+
+
+def _per_axis(v: np.ndarray) -> np.ndarray:
+    """(N,) regressor → (N, 3, 3): the same regressor on each channel, one parameter each."""
+    X = np.zeros((v.shape[0], 3, 3))
+    for k in range(3):
+        X[:, k, k] = v
+    return X
+
+
+def _candidates(flight: Flight, imu: str, idx: list[int], H: np.ndarray, omega_dot: np.ndarray,
+                r: np.ndarray, t: np.ndarray, keep: np.ndarray
+                ) -> tuple[list[_Cand], list[dict[str, str]]]:
+    N = t.shape[0]
+    cands: list[_Cand] = []
+    untestable: list[dict[str, str]] = []
+    X = (omega_dot @ H[idx].T)[:, :, None]
+    cands.append(_Cand("time_skew", imu, X, "ms", 1e3))
+    f = _aux(flight, "accel", imu)
+    if f is not None and f.shape[1] == 3 and np.isfinite(f[keep]).all():
+        fc = f - f[keep].mean(axis=0)
+        Xg = np.zeros((N, 3, 9))
+        for k in range(3):
+            Xg[:, k, 3 * k:3 * k + 3] = fc
+        cands.append(_Cand("g_sensitivity", imu, Xg, "(deg/s)/g", G0 / DPS))
+    else:
+        untestable.append({"name": "g_sensitivity", "imu": imu,
+                           "reason": "no accelerometer logged beside the gyros"})
+    T = _aux(flight, "temperature", imu)
+    if T is not None and np.isfinite(T[keep, 0]).all() and np.std(T[keep, 0]) > 0.2:
+        cands.append(_Cand("temperature", imu, _per_axis(T[:, 0] - T[keep, 0].mean()),
+                           "(deg/s)/degC", 1 / DPS))
+    else:
+        untestable.append({"name": "temperature", "imu": imu,
+                           "reason": "no temperature logged" if T is None
+                           else "temperature does not vary (sd <= 0.2 degC)"})
+    w = np.exp(-(t - t[0]) / WARM_UP_S)
+    if t[-1] - t[0] > WARM_UP_S:
+        cands.append(_Cand("warm_up", imu, _per_axis(w - w[keep].mean()), "deg/s", 1 / DPS))
+    else:
+        untestable.append({"name": "warm_up", "imu": imu,
+                           "reason": f"flight shorter than {WARM_UP_S:g} s"})
+    u = 2 * (t - t[0]) / max(t[-1] - t[0], 1e-9) - 1
+    Xd = np.zeros((N, 3, 9))
+    for d in range(1, 4):
+        P = eval_legendre(d, u)
+        for k in range(3):
+            Xd[:, k, 3 * (d - 1) + k] = P
+    cands.append(_Cand("bias_drift", imu, Xd, "deg/s per Legendre term (P1, P2, P3 x axes)",
+                       1 / DPS))
+    fs = flight.sample_rate_hz
+    for f0 in _lines(r[keep], fs):
+        f1 = _refine(r[keep], t[keep], f0, fs)
+        Xv = np.zeros((N, 3, 6))
+        for k in range(3):
+            Xv[:, k, k] = np.cos(2 * np.pi * f1 * t)
+            Xv[:, k, 3 + k] = np.sin(2 * np.pi * f1 * t)
+        cands.append(_Cand(f"vibration_{f1:.2f}Hz", imu, Xv, "deg/s amplitude", 1 / DPS))
+    return cands, untestable
+
+
+def _vibration_level(flight: Flight, imu: str) -> np.ndarray | None:
+    """Accelerometer vibration power of an IMU: 1-s mean of |a − 1-s mean of a|², (m/s²)²."""
+    a = _aux(flight, "accel", imu)
+    if a is None or a.shape[1] != 3 or not np.isfinite(a).all():
+        return None
+    q = max(3, round(flight.sample_rate_hz))
+    hp = np.sum((a - ndimage.uniform_filter1d(a, q, axis=0, mode="nearest")) ** 2, axis=1)
+    return ndimage.uniform_filter1d(hp, q, mode="nearest")
+
+
+def _vibration_noise(e: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray, float,
+                                                             list[float]]:
+    """Does the residual power follow the vibration level?  ``e_k² = c_k + s_k·(v − v̄)``.
+
+    Returns the slopes (rad²/s² per (m/s²)²), their HAC sds, the Wald p-value and the
+    residual RMS per axis in the calmest and the roughest quarter of the samples (rad/s).
+    """
+    N = e.shape[0]
+    X = np.zeros((N, 3, 6))
+    vc = v - v.mean()
+    for k in range(3):
+        X[:, k, k] = 1.0
+        X[:, k, 3 + k] = vc
+    fit = stacked_lstsq(X, e**2)
+    p = wald_test(fit, [3, 4, 5])[2]
+    lo, hi = np.quantile(v, [0.25, 0.75])
+    calm = float(np.sqrt(np.mean(e[v <= lo] ** 2)))
+    rough = float(np.sqrt(np.mean(e[v >= hi] ** 2)))
+    return fit.beta[3:], fit.sd[3:], p, [calm, rough]
+
+
+def _design(base: np.ndarray, chosen: list[_Cand]) -> tuple[np.ndarray, list[slice]]:
+    blocks = [base] + [c.X for c in chosen]
+    sl, a = [], base.shape[2]
+    for c in chosen:
+        sl.append(slice(a, a + c.X.shape[2]))
+        a += c.X.shape[2]
+    return np.concatenate(blocks, axis=2), sl
+
+
+def _select(r: np.ndarray, cands: list[_Cand], keep: np.ndarray, alpha_each: float
+            ) -> tuple[list[_Cand], Any, list[slice]]:
+    N = r.shape[0]
+    base = np.zeros((N, 3, 3))
+    for k in range(3):
+        base[:, k, k] = 1.0
+    Y = r[keep]
+    chosen: list[_Cand] = []
+    left = list(cands)
+    while left:
+        ps = []
+        for c in left:
+            X, sl = _design(base, [*chosen, c])
+            fit = stacked_lstsq(X[keep], Y)
+            ps.append(wald_test(fit, np.arange(sl[-1].start, sl[-1].stop))[2])
+        ok = [(c.name in GENERIC, p, i) for i, (c, p) in enumerate(zip(left, ps, strict=True))
+              if p < alpha_each]
+        if not ok:
+            break
+        chosen.append(left.pop(min(ok)[2]))       # measured regressors before generic ones
+    X, sl = _design(base, chosen)
+    return chosen, stacked_lstsq(X[keep], Y), sl
+
+
+def _structure(e: np.ndarray, fs: float, alpha_each: float, names: list[str]) -> list[str]:
+    """Channels whose 1-s block means vary more than AR(1) noise allows."""
+    out = []
+    q = max(2, round(fs))
+    nb = e.shape[0] // q
+    if nb < 10:
+        return out
+    for k in range(e.shape[1]):
+        x = e[:, k] - e[:, k].mean()
+        rho = float(np.clip(np.corrcoef(x[1:], x[:-1])[0, 1], -0.9, 0.9))
+        vr_ar = (1 + rho) / (1 - rho) - 2 * rho * (1 - rho**q) / (q * (1 - rho) ** 2)
+        bm = x[:nb * q].reshape(nb, q).mean(axis=1)
+        vr = float(np.var(bm, ddof=1) * q / np.var(x))
+        stat = (nb - 1) * vr / max(vr_ar, 1e-9)
+        p = float(stats.chi2.sf(stat, nb - 1))
+        if p < alpha_each:
+            out.append(f"{names[k]}: 1-s block means vary {vr / vr_ar:.3g}x more than "
+                       f"short-lag noise explains (p={p:.2g})")
+    return out
+
+
+def diagnose_flight(flight: Flight, cal: Calibration, *, alpha: float = 0.01,
+                    reference: str | None = None) -> dict[str, Any]:
+    """Diagnose the parity residual of a flight (module docstring).
+
+    Parameters
+    ----------
+    flight : Flight
+        Gyro flight with IMU groups.
+    cal : Calibration
+    alpha : float
+        Family-wise significance level.
+    reference : str, optional
+
+    Returns
+    -------
+    dict
+        JSON-ready: ``effects``, ``unexplained``, ``unexplained_detail``, ``not_testable``,
+        ``error_before``, ``error_after``, ``left_out``, ...
+    """
+    if not 0 < alpha < 1:
+        raise ConfigError(f"alpha must be in (0, 1), got {alpha}")
+    ref, res, groups, omega, H = flight_residual(flight, cal, reference)
+    t = flight.t
+    segs = find_segments(flight)
+    keep = keep_mask(t, segs) & np.all(np.isfinite(omega), axis=1)
+    for r in res.values():
+        keep &= np.all(np.isfinite(r), axis=1)
+    if keep.sum() < 100:
+        raise ConfigError(f"{flight.source}: only {int(keep.sum())} usable samples")
+    fin = np.all(np.isfinite(omega), axis=1)
+    omega_dot = CubicSpline(t[fin], omega[fin], axis=0)(t, 1)     # angular acceleration
+    per_imu = {}
+    not_testable: list[dict[str, str]] = []
+    for g, r in res.items():
+        c, u = _candidates(flight, g, groups[g], H, omega_dot, np.nan_to_num(r), t, keep)
+        per_imu[g] = c
+        not_testable += u
+    vib = {g: _vibration_level(flight, g) for g in res}
+    M = sum(len(c) for c in per_imu.values()) + sum(v is not None for v in vib.values())
+    alpha_each = alpha / max(M, 1)
+    effects, detail = [], []
+    chans, before, after = [], [], []
+    for g, r in res.items():
+        r0 = np.nan_to_num(r)
+        chosen, fit, sl = _select(r0, per_imu[g], keep, alpha_each)
+        names = [flight.sensor_names[i] for i in groups[g]]
+        chans += names
+        before += list(np.sqrt(np.mean(r0[keep] ** 2, axis=0)) / DPS)
+        after += list(np.sqrt(np.mean(fit.residual**2, axis=0)) / DPS)
+        for c, s in zip(chosen, sl, strict=True):
+            est = fit.beta[s] * c.scale
+            sd = fit.sd[s] * c.scale
+            p = wald_test(fit, np.arange(s.start, s.stop))[2]
+            effects.append({"name": c.name, "imu": g,
+                            "sensors": [i + 1 for i in groups[g]],
+                            "estimate": float(est[0]) if est.size == 1 else est.tolist(),
+                            "estimate_sd": float(sd[0]) if sd.size == 1 else sd.tolist(),
+                            "unit": c.unit, "p_value": p})
+            known = cal.extra.get("inflight", {}).get("imus", {}).get(g, {})
+            if c.name == "time_skew" and "time_offset_ms" in known:
+                effects[-1]["detail"] = (
+                    f"the calibration records {known['time_offset_ms']:+.3f} ± "
+                    f"{known['time_offset_ms_sd']:.3f} ms for {g}; the monitor does not "
+                    f"shift samples, so it stays in the residual")
+        if vib[g] is not None:
+            sl_, sd_, p, (calm, rough) = _vibration_noise(fit.residual, vib[g][keep])
+            if p < alpha_each:
+                f2 = (G0 / DPS) ** 2                  # rad²/s² per (m/s²)² → (deg/s)² per g²
+                effects.append({
+                    "name": "vibration_noise", "imu": g, "sensors": [i + 1 for i in groups[g]],
+                    "estimate": (sl_ * f2).tolist(), "estimate_sd": (sd_ * f2).tolist(),
+                    "unit": "(deg/s)^2 of residual variance per g^2 of accelerometer "
+                            "vibration power", "p_value": p,
+                    "detail": f"residual rms {calm / DPS:.3g} deg/s in the calmest quarter, "
+                              f"{rough / DPS:.3g} deg/s in the roughest (a variance effect: "
+                              f"not removed from the residual)"})
+        else:
+            not_testable.append({"name": "vibration_noise", "imu": g,
+                                 "reason": "no accelerometer logged beside the gyros"})
+        detail += _structure(fit.residual, flight.sample_rate_hz, alpha_each, names)
+        for f0 in _lines(fit.residual, flight.sample_rate_hz):
+            detail.append(f"{g}: a spectral line at {f0:.2f} Hz remains")
+    return {"schema": DIAGNOSE_SCHEMA, "source": flight.source, "reference": ref,
+            "alpha": alpha, "candidates": M, "correction": "Bonferroni over all candidates",
+            "effects": effects, "unexplained": bool(detail), "unexplained_detail": detail,
+            "not_testable": not_testable,
+            "error_before": {"unit": "deg/s", "channels": chans, "rms": before},
+            "error_after": {"unit": "deg/s", "channels": chans, "rms": after},
+            "left_out": [s.to_dict() for s in segs],
+            "samples_used": int(keep.sum()), "samples": int(t.shape[0])}

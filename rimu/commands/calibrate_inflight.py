@@ -1,0 +1,76 @@
+"""``rimu calibrate --in-flight DIR --out CAL``: calibrate an IMU set against itself in flight.
+
+Reached through ``rimu calibrate`` (its ``--in-flight`` option); fits every IMU of the flight
+folder to the reference IMU (:mod:`calibration.inflight.fit`), writes the
+``rimu.calibration/1`` file (:mod:`calibration.inflight.calfile`) and prints a summary.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+import numpy as np
+
+from calibration.inflight.calfile import calibration_from_fit
+from calibration.inflight.fit import MODELS, fit_inflight
+from replay.flight_io import load_flight_dir
+
+__all__ = ["configure_options", "run", "summary_text"]
+
+
+def configure_options(p: argparse.ArgumentParser) -> None:
+    """The options ``rimu calibrate`` adds for ``--in-flight``."""
+    p.add_argument("--in-flight", metavar="DIR",
+                   help="calibrate the IMUs of a flight folder (rimu.flight/1) against one of "
+                        "them: alignment, bias and time offset from the recorded motion")
+    p.add_argument("--reference", metavar="IMU",
+                   help="with --in-flight: reference IMU group (default: the first)")
+    p.add_argument("--model", choices=MODELS, default="auto",
+                   help="with --in-flight: 'full' (rotation, scale, non-orthogonality), "
+                        "'rotation', or 'auto' (full when the motion excites it; default)")
+    p.add_argument("--no-time-offset", action="store_true",
+                   help="with --in-flight: do not fit the time offsets")
+
+
+def summary_text(doc: dict) -> str:
+    """Readable summary of the ``extra.inflight`` block."""
+    lines = [f"in-flight calibration against {doc['reference']} "
+             f"({doc['samples_used']} of {doc['samples']} samples used)"]
+    for s in doc["left_out"]:
+        lines.append(f"  left out {s['t0_s']:.2f}-{s['t1_s']:.2f} s: {s['reason']} "
+                     f"({s['detail']})")
+    for g, r in doc["imus"].items():
+        th, ths = 1e3 * np.asarray(r["rotation"]), 1e3 * np.asarray(r["rotation_sd"])
+        lines.append(f"  {g} ({r['model']}): rotation [" + ", ".join(
+            f"{a:+.3f} ± {b:.3f}" for a, b in zip(th, ths, strict=True)) + "] mrad")
+        if r["model"] == "full":
+            sc, scs = 1e6 * np.asarray(r["scale"]), 1e6 * np.asarray(r["scale_sd"])
+            lines.append("      scale difference [" + ", ".join(
+                f"{a:+.0f} ± {b:.0f}" for a, b in zip(sc, scs, strict=True)) + "] ppm")
+        lines.append("      bias [" + ", ".join(
+            f"{a:+.1f} ± {b:.1f}" for a, b in zip(r["bias_dph"], r["bias_dph_sd"],
+                                                   strict=True)) + "] deg/h")
+        lines.append(f"      time offset {r['time_offset_ms']:+.3f} ± "
+                     f"{r['time_offset_ms_sd']:.3f} ms; residual rms [" + ", ".join(
+                         f"{x:.3g}" for x in r["residual_rms_dps"]) + f"] deg/s; HAC lags "
+                     f"{r['hac_lags']}")
+        lines.extend(f"      note: {n}" for n in r["notes"])
+    return "\n".join(lines)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run ``rimu calibrate --in-flight``."""
+    from rimu.outputs import atomic_file, input_path, output_file
+
+    out = output_file(args.out, "--out")
+    input_path(args.in_flight, "--in-flight", kind="dir")
+    flight = load_flight_dir(args.in_flight)
+    fit = fit_inflight(flight, reference=getattr(args, "reference", None),
+                       model=getattr(args, "model", "auto"),
+                       time_offset=not getattr(args, "no_time_offset", False))
+    cal = calibration_from_fit(fit, flight)
+    with atomic_file(out) as tmp:
+        cal.save(tmp)
+    print(summary_text(cal.extra["inflight"]))
+    print(f"wrote {out}")
+    return 0
