@@ -159,6 +159,21 @@ def adis(data: Path, tmp: Path) -> dict[str, Any]:
     rep = static_report(f.raw, f.sample_rate_hz, band=(0.5, 10.0))
     out = {k: v for k, v in rep.items() if k != "allan"}
     out["_allan"] = rep["allan"]
+    # where the z axis's narrow band sits in each 1000 s of the record
+    import scipy.signal
+    z = f.raw[:, 2]
+    per = []
+    for b in range(z.shape[0] // 100_000):
+        seg = z[b * 100_000:(b + 1) * 100_000]
+        fr, P = scipy.signal.welch(seg - seg.mean(), fs=f.sample_rate_hz, nperseg=1024)
+        m = (fr > 15) & (fr < 25)
+        per.append(float(fr[m][np.argmax(P[m])]))
+    out["z_band_peak_hz_per_1000s"] = per
+    fr, P = scipy.signal.welch(z - z.mean(), fs=f.sample_rate_hz, nperseg=1024)
+    m = (fr > 17) & (fr < 23)
+    floor = np.median(P[(fr > 5) & (fr < 15)])
+    out["z_band_power_fraction"] = float((P[m] - floor).sum() * (fr[1] - fr[0])
+                                         / z.var())
     out["accel_mean_g"] = (f.aux.select("accel").values.mean(axis=0) / 9.80665).tolist()
     return out
 
