@@ -125,23 +125,28 @@ def mpu4(data: Path) -> dict[str, Any]:
 
 
 def px4(data: Path) -> dict[str, Any]:
-    """The PX4 samples: what six samples per IMU can say."""
+    """The PX4 samples: what a handful of samples per IMU can say, raw (``sensor_gyro``,
+    logged before PX4's calibration) and calibrated (``vehicle_imu``)."""
     out = {}
     for name in ("sample_log_small.ulg", "sample_logging_tagged_and_default_params.ulg"):
-        read = read_any(data / "px4_ulog" / name)
-        f, rep = align_streams(read)
-        g = f.raw.reshape(-1, 3, 3)
-        d = g - g[:, :1]                                   # each IMU minus imu1
-        out[name] = {
-            "samples": int(f.t.shape[0]), "sample_rate_hz": f.sample_rate_hz,
-            "device_ids": [i["device_id"] for i in rep["imus"]],
-            "temperature_degc": [float(np.nanmean(s.temperature))
-                                 if s.temperature is not None else None
-                                 for s in read.streams],
-            "mean_rps": g.mean(axis=0).tolist(),
-            "diff_to_imu1_rps": d.mean(axis=0).tolist(),
-            "diff_to_imu1_sd_rps": (d.std(axis=0, ddof=1) / np.sqrt(g.shape[0])).tolist(),
-        }
+        res: dict[str, Any] = {}
+        for topic in ("sensor_gyro", "vehicle_imu"):
+            read = read_any(data / "px4_ulog" / name, px4_topic=topic)
+            means = np.array([s.gyro.mean(axis=0) for s in read.streams])
+            sds = np.array([s.gyro.std(axis=0, ddof=1) / np.sqrt(s.size)
+                            for s in read.streams])
+            res[topic] = {
+                "samples": [s.size for s in read.streams],
+                "device_ids": [s.device_id for s in read.streams],
+                "mean_rps": means.tolist(),
+                "diff_to_imu1_rps": (means - means[0]).tolist(),
+                "diff_to_imu1_sd_rps": np.sqrt(sds**2 + sds[0] ** 2).tolist(),
+            }
+            if topic == "sensor_gyro":
+                res["temperature_degc"] = [float(np.nanmean(s.temperature))
+                                           if s.temperature is not None else None
+                                           for s in read.streams]
+        out[name] = res
     return out
 
 

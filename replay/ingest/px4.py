@@ -24,14 +24,16 @@ from typing import Any
 
 import numpy as np
 
-from fdi.errors import FileFormatError
+from fdi.errors import ConfigError, FileFormatError
 from fdi.units import TIME_UNITS
 from replay.ingest.stream import Damage, ImuStream, LogRead
 
-__all__ = ["TOPICS", "looks_like_ulog", "read_px4"]
+__all__ = ["PX4_TOPICS", "TOPICS", "looks_like_ulog", "read_px4"]
 
 TOPICS = ("sensor_gyro", "sensor_accel", "vehicle_imu")
 """ULog topics the reader loads."""
+PX4_TOPICS = ("auto", "sensor_gyro", "vehicle_imu")
+"""Values of ``topic``: where the rates come from."""
 _MAGIC = b"ULog\x01\x12\x35"
 
 
@@ -106,9 +108,10 @@ def _interp(ts: np.ndarray, tq: np.ndarray, x: np.ndarray) -> np.ndarray:
     return out
 
 
-def _streams(u: Any) -> tuple[list[ImuStream], dict[str, Any]]:
+def _streams(u: Any, topic: str) -> tuple[list[ImuStream], dict[str, Any]]:
     by = {(d.name, d.multi_id): d.data for d in u.data_list}
-    gyros = sorted(i for (n, i) in by if n == "sensor_gyro")
+    gyros = sorted(i for (n, i) in by if n == "sensor_gyro") if topic != "vehicle_imu" \
+        else []
     meta: dict[str, Any] = {"topics": {f"{n}[{i}]": len(d["timestamp"])
                                        for (n, i), d in sorted(by.items())}}
     streams = []
@@ -134,6 +137,8 @@ def _streams(u: Any) -> tuple[list[ImuStream], dict[str, Any]]:
                 source=f"sensor_gyro[{i}]", device_id=int(dev[0]) if dev.size else None,
                 error_count=(np.asarray(g["error_count"], float) if "error_count" in g
                              else None), notes=tuple(notes)))
+        return streams, meta
+    if topic == "sensor_gyro":
         return streams, meta
     imus = sorted(i for (n, i) in by if n == "vehicle_imu")
     for k, i in enumerate(imus):
@@ -184,12 +189,16 @@ def _cut_time(p: str, data: bytes) -> tuple[int, float]:
     return hi, last
 
 
-def read_px4(path: str | Path, *, salvage: bool = False) -> LogRead:
+def read_px4(path: str | Path, *, salvage: bool = False, topic: str = "auto") -> LogRead:
     """Read the IMU instances of a PX4 ULog file.
 
     Parameters
     ----------
     path : str or Path
+    topic : str
+        ``"sensor_gyro"`` (with ``sensor_accel``), ``"vehicle_imu"`` (rates and specific
+        forces from the delta angles and velocities), or ``"auto"``: ``sensor_gyro`` when
+        the log has it, else ``vehicle_imu``.
     salvage : bool
         On a corrupt file, return the samples before the damage (with
         :attr:`LogRead.damage` set) instead of raising.
@@ -200,9 +209,12 @@ def read_px4(path: str | Path, *, salvage: bool = False) -> LogRead:
         Unreadable file, no ``sensor_gyro`` or ``vehicle_imu`` data, or corruption
         (without ``salvage``) naming the byte offset.
     """
+    if topic not in PX4_TOPICS:
+        raise ConfigError(f"PX4 topic {topic!r} is not one of {', '.join(PX4_TOPICS)}")
     p = str(path)
     u, fh, data = _load(p)
-    streams, meta = _streams(u)
+    streams, meta = _streams(u, topic)
+    meta["topic"] = streams[0].source.split("[")[0] if streams else None
     meta["start_timestamp_us"] = int(u.start_timestamp)
     meta["dropouts"] = len(u.dropouts)
     dmg = None
@@ -219,5 +231,6 @@ def read_px4(path: str | Path, *, salvage: bool = False) -> LogRead:
     if dmg is not None and not salvage:
         raise dmg.error()
     if not streams or all(s.size == 0 for s in streams):
-        raise FileFormatError(p, "no sensor_gyro or vehicle_imu data in the log")
+        what = "sensor_gyro or vehicle_imu" if topic == "auto" else topic
+        raise FileFormatError(p, f"no {what} data in the log")
     return LogRead(p, "px4", tuple(streams), dmg, meta)

@@ -152,8 +152,14 @@ def test_adis16405_z_resonance_near_20_hz(adis):
 def test_px4_raw_biases_differ_between_instances():
     data_file("px4_ulog", "sample_log_small.ulg")
     got = MF.px4(shared_data())["sample_log_small.ulg"]
-    d = np.array(got["diff_to_imu1_rps"])
-    sd = np.array(got["diff_to_imu1_sd_rps"])
-    _same(d, DOC["px4"]["sample_log_small.ulg"]["diff_to_imu1_rps"], sd)
+    doc = DOC["px4"]["sample_log_small.ulg"]
+    raw, cal = got["sensor_gyro"], got["vehicle_imu"]
+    d = np.array(raw["diff_to_imu1_rps"])
+    sd = np.array(raw["diff_to_imu1_sd_rps"])
+    _same(d, doc["sensor_gyro"]["diff_to_imu1_rps"], sd)
     assert abs(d[1, 0]) / sd[1, 0] > 10                       # imu2 x: 3.5 °/s apart
+    dc = np.array(cal["diff_to_imu1_rps"])
+    sdc = np.array(cal["diff_to_imu1_sd_rps"])
+    _same(dc, doc["vehicle_imu"]["diff_to_imu1_rps"], sdc)
+    assert np.all(np.abs(dc) < np.radians(0.4))               # calibrated: within 0.4 °/s
     np.testing.assert_allclose(got["temperature_degc"], [40.2, 28.3, 29.6], atol=0.3)
