@@ -18,6 +18,7 @@ the log unless asked to salvage, and keeps the samples read before the damage.
 from __future__ import annotations
 
 import contextlib
+import errno
 import io
 from pathlib import Path
 from typing import Any
@@ -59,6 +60,14 @@ class _TrackedBytes(io.BytesIO):
         if size is not None and size >= 0:
             self.reads = [*self.reads[-1:], (start, size, len(out))]
         return out
+
+    def seek(self, pos: int, whence: int = 0) -> int:
+        """As a file does: a seek before the start is an OSError (BytesIO raises
+        ValueError, which pyulog catches and retries forever)."""
+        base = {0: 0, 1: self.tell(), 2: len(self.getbuffer())}[whence]
+        if base + pos < 0:
+            raise OSError(errno.EINVAL, "seek before the start of the file")
+        return super().seek(pos, whence)
 
 
 def _short_read(fh: _TrackedBytes) -> tuple[int, str] | None:
@@ -171,7 +180,7 @@ def _cut_time(p: str, data: bytes) -> tuple[int, float]:
         mid = (lo + hi) // 2
         try:
             with contextlib.redirect_stdout(sink), contextlib.redirect_stderr(sink):
-                u = ULog(io.BytesIO(data[:mid]), list(TOPICS))
+                u = ULog(_TrackedBytes(data[:mid]), list(TOPICS))
             ok = not u.file_corruption
         except Exception:
             ok = False
@@ -181,7 +190,7 @@ def _cut_time(p: str, data: bytes) -> tuple[int, float]:
             hi = mid
     try:
         with contextlib.redirect_stdout(sink), contextlib.redirect_stderr(sink):
-            u = ULog(io.BytesIO(data[:lo]), list(TOPICS))
+            u = ULog(_TrackedBytes(data[:lo]), list(TOPICS))
         last = max((float(_times(d.data)[-1]) for d in u.data_list
                     if len(d.data["timestamp"])), default=-np.inf)
     except Exception:
