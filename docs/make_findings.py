@@ -125,23 +125,28 @@ def mpu4(data: Path) -> dict[str, Any]:
 
 
 def px4(data: Path) -> dict[str, Any]:
-    """The PX4 samples: what six samples per IMU can say."""
+    """The PX4 samples: what a handful of samples per IMU can say, raw (``sensor_gyro``,
+    logged before PX4's calibration) and calibrated (``vehicle_imu``)."""
     out = {}
     for name in ("sample_log_small.ulg", "sample_logging_tagged_and_default_params.ulg"):
-        read = read_any(data / "px4_ulog" / name)
-        f, rep = align_streams(read)
-        g = f.raw.reshape(-1, 3, 3)
-        d = g - g[:, :1]                                   # each IMU minus imu1
-        out[name] = {
-            "samples": int(f.t.shape[0]), "sample_rate_hz": f.sample_rate_hz,
-            "device_ids": [i["device_id"] for i in rep["imus"]],
-            "temperature_degc": [float(np.nanmean(s.temperature))
-                                 if s.temperature is not None else None
-                                 for s in read.streams],
-            "mean_rps": g.mean(axis=0).tolist(),
-            "diff_to_imu1_rps": d.mean(axis=0).tolist(),
-            "diff_to_imu1_sd_rps": (d.std(axis=0, ddof=1) / np.sqrt(g.shape[0])).tolist(),
-        }
+        res: dict[str, Any] = {}
+        for topic in ("sensor_gyro", "vehicle_imu"):
+            read = read_any(data / "px4_ulog" / name, px4_topic=topic)
+            means = np.array([s.gyro.mean(axis=0) for s in read.streams])
+            sds = np.array([s.gyro.std(axis=0, ddof=1) / np.sqrt(s.size)
+                            for s in read.streams])
+            res[topic] = {
+                "samples": [s.size for s in read.streams],
+                "device_ids": [s.device_id for s in read.streams],
+                "mean_rps": means.tolist(),
+                "diff_to_imu1_rps": (means - means[0]).tolist(),
+                "diff_to_imu1_sd_rps": np.sqrt(sds**2 + sds[0] ** 2).tolist(),
+            }
+            if topic == "sensor_gyro":
+                res["temperature_degc"] = [float(np.nanmean(s.temperature))
+                                           if s.temperature is not None else None
+                                           for s in read.streams]
+        out[name] = res
     return out
 
 
@@ -159,6 +164,21 @@ def adis(data: Path, tmp: Path) -> dict[str, Any]:
     rep = static_report(f.raw, f.sample_rate_hz, band=(0.5, 10.0))
     out = {k: v for k, v in rep.items() if k != "allan"}
     out["_allan"] = rep["allan"]
+    # where the z axis's narrow band sits in each 1000 s of the record
+    import scipy.signal
+    z = f.raw[:, 2]
+    per = []
+    for b in range(z.shape[0] // 100_000):
+        seg = z[b * 100_000:(b + 1) * 100_000]
+        fr, P = scipy.signal.welch(seg - seg.mean(), fs=f.sample_rate_hz, nperseg=1024)
+        m = (fr > 15) & (fr < 25)
+        per.append(float(fr[m][np.argmax(P[m])]))
+    out["z_band_peak_hz_per_1000s"] = per
+    fr, P = scipy.signal.welch(z - z.mean(), fs=f.sample_rate_hz, nperseg=1024)
+    m = (fr > 17) & (fr < 23)
+    floor = np.median(P[(fr > 5) & (fr < 15)])
+    out["z_band_power_fraction"] = float((P[m] - floor).sum() * (fr[1] - fr[0])
+                                         / z.var())
     out["accel_mean_g"] = (f.aux.select("accel").values.mean(axis=0) / 9.80665).tolist()
     return out
 

@@ -335,8 +335,9 @@ def pair_report(t: np.ndarray, ref: np.ndarray, other: np.ndarray, *, blocks: in
     """Residual between two three-axis IMUs in motion: lag, alignment, what is left.
 
     Steps: the lag τ of ``other`` behind ``ref`` (:func:`time_offset`); ``ref`` moved
-    onto ``other``'s timing (ω_ref − τ·ω̇, ω̇ of the mean of the two); the least-squares map of ``other`` onto
-    it (:func:`fit_alignment`, rotation and scale with block σ); then the residual's RMS
+    onto ``other``'s timing (ω_ref − τ·ω̇, ω̇ of the mean of the two); the least-squares
+    map of ``other`` onto it (:func:`fit_alignment`, rotation and scale with block σ);
+    then the residual's RMS
     after each step, heavy tails and spectral lines (on the longest gap-free run). All
     rates rad/s, times s. The scales carry the errors-in-variables attenuation of a noisy
     regressor (vibration seen by ``other`` alone pulls them below 1).

@@ -18,20 +18,23 @@ the log unless asked to salvage, and keeps the samples read before the damage.
 from __future__ import annotations
 
 import contextlib
+import errno
 import io
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from fdi.errors import FileFormatError
+from fdi.errors import ConfigError, FileFormatError
 from fdi.units import TIME_UNITS
 from replay.ingest.stream import Damage, ImuStream, LogRead
 
-__all__ = ["TOPICS", "looks_like_ulog", "read_px4"]
+__all__ = ["PX4_TOPICS", "TOPICS", "looks_like_ulog", "read_px4"]
 
 TOPICS = ("sensor_gyro", "sensor_accel", "vehicle_imu")
 """ULog topics the reader loads."""
+PX4_TOPICS = ("auto", "sensor_gyro", "vehicle_imu")
+"""Values of ``topic``: where the rates come from."""
 _MAGIC = b"ULog\x01\x12\x35"
 
 
@@ -57,6 +60,14 @@ class _TrackedBytes(io.BytesIO):
         if size is not None and size >= 0:
             self.reads = [*self.reads[-1:], (start, size, len(out))]
         return out
+
+    def seek(self, pos: int, whence: int = 0) -> int:
+        """As a file does: a seek before the start is an OSError (BytesIO raises
+        ValueError, which pyulog catches and retries forever)."""
+        base = {0: 0, 1: self.tell(), 2: len(self.getbuffer())}[whence]
+        if base + pos < 0:
+            raise OSError(errno.EINVAL, "seek before the start of the file")
+        return super().seek(pos, whence)
 
 
 def _short_read(fh: _TrackedBytes) -> tuple[int, str] | None:
@@ -106,9 +117,10 @@ def _interp(ts: np.ndarray, tq: np.ndarray, x: np.ndarray) -> np.ndarray:
     return out
 
 
-def _streams(u: Any) -> tuple[list[ImuStream], dict[str, Any]]:
+def _streams(u: Any, topic: str) -> tuple[list[ImuStream], dict[str, Any]]:
     by = {(d.name, d.multi_id): d.data for d in u.data_list}
-    gyros = sorted(i for (n, i) in by if n == "sensor_gyro")
+    gyros = sorted(i for (n, i) in by if n == "sensor_gyro") if topic != "vehicle_imu" \
+        else []
     meta: dict[str, Any] = {"topics": {f"{n}[{i}]": len(d["timestamp"])
                                        for (n, i), d in sorted(by.items())}}
     streams = []
@@ -134,6 +146,8 @@ def _streams(u: Any) -> tuple[list[ImuStream], dict[str, Any]]:
                 source=f"sensor_gyro[{i}]", device_id=int(dev[0]) if dev.size else None,
                 error_count=(np.asarray(g["error_count"], float) if "error_count" in g
                              else None), notes=tuple(notes)))
+        return streams, meta
+    if topic == "sensor_gyro":
         return streams, meta
     imus = sorted(i for (n, i) in by if n == "vehicle_imu")
     for k, i in enumerate(imus):
@@ -166,7 +180,7 @@ def _cut_time(p: str, data: bytes) -> tuple[int, float]:
         mid = (lo + hi) // 2
         try:
             with contextlib.redirect_stdout(sink), contextlib.redirect_stderr(sink):
-                u = ULog(io.BytesIO(data[:mid]), list(TOPICS))
+                u = ULog(_TrackedBytes(data[:mid]), list(TOPICS))
             ok = not u.file_corruption
         except Exception:
             ok = False
@@ -176,7 +190,7 @@ def _cut_time(p: str, data: bytes) -> tuple[int, float]:
             hi = mid
     try:
         with contextlib.redirect_stdout(sink), contextlib.redirect_stderr(sink):
-            u = ULog(io.BytesIO(data[:lo]), list(TOPICS))
+            u = ULog(_TrackedBytes(data[:lo]), list(TOPICS))
         last = max((float(_times(d.data)[-1]) for d in u.data_list
                     if len(d.data["timestamp"])), default=-np.inf)
     except Exception:
@@ -184,12 +198,16 @@ def _cut_time(p: str, data: bytes) -> tuple[int, float]:
     return hi, last
 
 
-def read_px4(path: str | Path, *, salvage: bool = False) -> LogRead:
+def read_px4(path: str | Path, *, salvage: bool = False, topic: str = "auto") -> LogRead:
     """Read the IMU instances of a PX4 ULog file.
 
     Parameters
     ----------
     path : str or Path
+    topic : str
+        ``"sensor_gyro"`` (with ``sensor_accel``), ``"vehicle_imu"`` (rates and specific
+        forces from the delta angles and velocities), or ``"auto"``: ``sensor_gyro`` when
+        the log has it, else ``vehicle_imu``.
     salvage : bool
         On a corrupt file, return the samples before the damage (with
         :attr:`LogRead.damage` set) instead of raising.
@@ -200,9 +218,12 @@ def read_px4(path: str | Path, *, salvage: bool = False) -> LogRead:
         Unreadable file, no ``sensor_gyro`` or ``vehicle_imu`` data, or corruption
         (without ``salvage``) naming the byte offset.
     """
+    if topic not in PX4_TOPICS:
+        raise ConfigError(f"PX4 topic {topic!r} is not one of {', '.join(PX4_TOPICS)}")
     p = str(path)
     u, fh, data = _load(p)
-    streams, meta = _streams(u)
+    streams, meta = _streams(u, topic)
+    meta["topic"] = streams[0].source.split("[")[0] if streams else None
     meta["start_timestamp_us"] = int(u.start_timestamp)
     meta["dropouts"] = len(u.dropouts)
     dmg = None
@@ -219,5 +240,6 @@ def read_px4(path: str | Path, *, salvage: bool = False) -> LogRead:
     if dmg is not None and not salvage:
         raise dmg.error()
     if not streams or all(s.size == 0 for s in streams):
-        raise FileFormatError(p, "no sensor_gyro or vehicle_imu data in the log")
+        what = "sensor_gyro or vehicle_imu" if topic == "auto" else topic
+        raise FileFormatError(p, f"no {what} data in the log")
     return LogRead(p, "px4", tuple(streams), dmg, meta)

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from pathlib import Path
 
 from fdi.errors import ConfigError
@@ -40,7 +39,7 @@ def detect_format(path: str | Path) -> str:
 
 
 def read_any(path: str | Path, fmt: str = "auto", *, map_path: str | Path | None = None,
-             salvage: bool = False) -> LogRead:
+             salvage: bool = False, px4_topic: str = "auto") -> LogRead:
     """Read one log with the reader of its format.
 
     Parameters
@@ -52,6 +51,9 @@ def read_any(path: str | Path, fmt: str = "auto", *, map_path: str | Path | None
         ``rimu.ingest-map/1`` TOML (needed for CSV and R data; optional for .mat).
     salvage : bool
         Keep the samples before a damage instead of failing.
+    px4_topic : str
+        For ULog files: ``auto``, ``sensor_gyro`` or ``vehicle_imu``
+        (:func:`replay.ingest.px4.read_px4`).
     """
     if fmt not in FORMATS:
         raise ConfigError(f"unknown format {fmt!r}; expected one of {', '.join(FORMATS)}")
@@ -63,12 +65,11 @@ def read_any(path: str | Path, fmt: str = "auto", *, map_path: str | Path | None
     if fmt in ("ardupilot", "px4"):
         if map_path is not None:
             raise ConfigError(f"--map is for mat, csv and rda logs, not {fmt}")
-        reader: Callable[..., LogRead]
         if fmt == "ardupilot":
-            from replay.ingest.ardupilot import read_ardupilot as reader
-        else:
-            from replay.ingest.px4 import read_px4 as reader
-        return reader(path, salvage=salvage)
+            from replay.ingest.ardupilot import read_ardupilot
+            return read_ardupilot(path, salvage=salvage)
+        from replay.ingest.px4 import read_px4
+        return read_px4(path, salvage=salvage, topic=px4_topic)
     from replay.ingest.tabular import read_tabular
     return read_tabular(path, fmt, map_path=map_path, salvage=salvage)
 

@@ -27,6 +27,10 @@ def configure(p: argparse.ArgumentParser) -> None:
                    help="rimu.ingest-map/1 TOML: columns, units, time base and IMU of each "
                         "column (CSV and R data; optional for .mat)")
     p.add_argument("--out", required=True, metavar="DIR", help="flight folder to write")
+    p.add_argument("--px4-topic", default="auto",
+                   choices=("auto", "sensor_gyro", "vehicle_imu"),
+                   help="PX4 logs: rates from sensor_gyro (+ sensor_accel) or from "
+                        "vehicle_imu delta angles (default auto: sensor_gyro if logged)")
     p.add_argument("--reference", metavar="IMU",
                    help="IMU whose time stamps are the time base (default: most samples)")
     p.add_argument("--salvage", action="store_true",
@@ -39,8 +43,8 @@ def run(args: argparse.Namespace) -> int:
     from replay.ingest import align_streams, read_any
     from replay.ingest.readers import merge_reads
 
-    reads = [read_any(log, args.format, map_path=args.map_path, salvage=args.salvage)
-             for log in args.logs]
+    reads = [read_any(log, args.format, map_path=args.map_path, salvage=args.salvage,
+                      px4_topic=args.px4_topic) for log in args.logs]
     read = merge_reads(reads)
     flight, report = align_streams(read, reference=args.reference)
     out = Path(args.out)

@@ -125,3 +125,37 @@ def write_ulog(path: Path, t_us: list[np.ndarray], gyros: list[np.ndarray],
             u._data_list.append(ULog.Data(add))
             msg_id += 1
     u.write_ulog(str(path))
+
+
+_VIMU_FMT = ("vehicle_imu:uint64_t timestamp;uint64_t timestamp_sample;"
+             "uint32_t accel_device_id;uint32_t gyro_device_id;float[3] delta_angle;"
+             "float[3] delta_velocity;uint16_t delta_angle_dt;uint16_t delta_velocity_dt;")
+
+
+def write_vehicle_imu_ulog(path: Path, t_us: np.ndarray, rates: list[np.ndarray],
+                           forces: list[np.ndarray], dt_us: int) -> None:
+    """A ULog with only ``vehicle_imu`` instances: delta angle = rate·dt, delta
+    velocity = force·dt over ``dt_us`` (pyulog objects, ``write_ulog``)."""
+    from pyulog import ULog
+
+    u = ULog(None)
+    u._start_timestamp = int(t_us[0])
+    hdr = ULog._MessageHeader()
+    mf = ULog.MessageFormat(_VIMU_FMT.encode(), hdr)
+    u._message_formats[mf.name] = mf
+    for k, (w, f) in enumerate(zip(rates, forces, strict=True)):
+        add = ULog._MessageAddLogged(struct.pack("<BH", k, k) + b"vehicle_imu", hdr,
+                                     u._message_formats)
+        rec = np.zeros(t_us.size, add.dtype)
+        rec["timestamp"] = t_us + 100
+        rec["timestamp_sample"] = t_us
+        rec["gyro_device_id"] = 100 + k
+        rec["accel_device_id"] = 200 + k
+        for j in range(3):
+            rec[f"delta_angle[{j}]"] = w[:, j] * dt_us * 1e-6
+            rec[f"delta_velocity[{j}]"] = f[:, j] * dt_us * 1e-6
+        rec["delta_angle_dt"] = dt_us
+        rec["delta_velocity_dt"] = dt_us
+        add.buffer = bytearray(rec.tobytes())
+        u._data_list.append(ULog.Data(add))
+    u.write_ulog(str(path))

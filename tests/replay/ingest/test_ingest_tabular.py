@@ -202,3 +202,30 @@ def test_real_adis16405_rda(tmp_path):
     # README: means [0.40, -0.42, -0.29] deg/s, accel z -1.016 g
     np.testing.assert_allclose(s.gyro.mean(axis=0) / DPS, [0.40, -0.42, -0.29], atol=0.01)
     assert s.accel[:, 2].mean() / G0 == pytest.approx(-1.016, abs=0.002)
+
+
+def test_csv_imu_at_half_rate_is_resampled_and_counted(tmp_path):
+    n = 101
+    rng = np.random.default_rng(11)
+    fast = rng.normal(0, 0.1, (n, 3))
+    t = np.arange(n) * 10                                     # ms
+    slow_rows = np.arange(0, n, 2)                            # imu2 every other row
+    slow = rng.normal(0, 0.1, (slow_rows.size, 3))
+    lines = ["time_ms,imu1_gyr_x_rps,imu1_gyr_y_rps,imu1_gyr_z_rps,"
+             "imu2_gyr_x_rps,imu2_gyr_y_rps,imu2_gyr_z_rps"]
+    for i in range(n):
+        two = (",".join(f"{v:.9f}" for v in slow[i // 2]) if i % 2 == 0 else ",,")
+        lines.append(f"{t[i]}," + ",".join(f"{v:.9f}" for v in fast[i]) + "," + two)
+    p = tmp_path / "rates.csv"
+    p.write_text("\n".join(lines) + "\n")
+    out = tmp_path / "f"
+    assert main(["ingest", str(p), "--out", str(out)]) == 0   # rimu's column naming
+    f = load_flight_dir(out)
+    rep = json.loads((out / "ingest_report.json").read_text())
+    im2 = rep["imus"][1]
+    assert rep["time_base"]["reference"] == "imu1"
+    assert im2["samples_in"] == slow_rows.size and im2["kept"] == slow_rows.size
+    assert im2["resampled_on_base"] == n // 2 and im2["missing_on_base"] == 0
+    assert "50 rows with no gyro value" in im2["notes"][-1]
+    np.testing.assert_allclose(f.raw[::2, 3:], slow, atol=1e-9)
+    np.testing.assert_allclose(f.raw[1::2, 3:], 0.5 * (slow[:-1] + slow[1:]), atol=1e-9)
