@@ -33,8 +33,8 @@ import numpy as np
 
 from fdi.errors import FileFormatError
 
-__all__ = ["REQUIRED", "Fields", "check_schema", "read_json_object", "read_toml_object",
-           "to_jsonable", "toml_key_line"]
+__all__ = ["REQUIRED", "Fields", "check_schema", "read_json_object", "read_text",
+           "read_toml_object", "to_jsonable", "toml_key_line"]
 
 
 class _Required:
@@ -133,15 +133,27 @@ def read_json_object(path: str | Path, schema: str | Sequence[str] | None = None
     return doc
 
 
-def _read_toml(path: str | Path) -> tuple[dict[str, Any], str]:
+def read_text(path: str | Path) -> str:
+    """The UTF-8 text of ``path``.
+
+    Raises
+    ------
+    FileFormatError
+        The file cannot be read, or is not UTF-8 (naming the byte).
+    """
     p = str(path)
     try:
-        text = Path(path).read_text(encoding="utf-8")
+        return Path(path).read_text(encoding="utf-8")
     except OSError as exc:
         raise FileFormatError(p, f"cannot read ({exc.strerror})") from None
     except UnicodeDecodeError as exc:
         raise FileFormatError(p, f"not UTF-8 text ({exc.reason} at byte {exc.start})") \
             from None
+
+
+def _read_toml(path: str | Path) -> tuple[dict[str, Any], str]:
+    p = str(path)
+    text = read_text(path)
     try:
         return tomllib.loads(text), text
     except tomllib.TOMLDecodeError as exc:

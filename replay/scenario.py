@@ -46,7 +46,7 @@ from fdi.errors import ConfigError
 from fdi.fileio import Fields
 from replay.faults import Fault, parse_fault
 
-__all__ = ["SCENARIO_SCHEMA", "apply_faults", "inject", "load_scenario"]
+__all__ = ["SCENARIO_SCHEMA", "add_fault_signal", "apply_faults", "inject", "load_scenario"]
 
 SCENARIO_SCHEMA = "rimu.scenario/1"
 
@@ -133,17 +133,7 @@ def apply_faults(t: np.ndarray, raw: np.ndarray, valid: np.ndarray,
             m = (t >= f.onset - 1e-12) & (t < f.end - 1e-12)
         if not m.any():
             continue
-        if f.kind in ("step", "spike"):
-            raw[m, i] += f.size / sf[i]
-        elif f.kind == "ramp":
-            raw[m, i] += f.size * (t[m] - f.onset) / sf[i]
-        elif f.kind == "scale":
-            raw[m, i] += f.size * (sf[i] * raw[m, i] - b[i]) / sf[i]
-        elif f.kind == "noise":
-            # s*s, not s**2: a huge factor gives inf (marked by the monitor), not OverflowError
-            extra = math.sqrt(max(f.size * f.size - 1.0, 0.0)) * sd[i] / sf[i]
-            raw[m, i] += extra * rng.standard_normal(int(m.sum()))
-        elif f.kind == "stuck":
+        if f.kind == "stuck":
             before = np.flatnonzero(~m & (t < f.onset) & valid[:, i])
             if before.size:
                 held = raw[before[-1], i]
@@ -153,8 +143,34 @@ def apply_faults(t: np.ndarray, raw: np.ndarray, valid: np.ndarray,
             raw[m, i] = held
         elif f.kind == "dropout":
             valid[m, i] = False
+        else:
+            add_fault_signal(raw, m, f, t, sf, b, sd, rng)
     raw[~valid] = np.nan
     return raw, valid
+
+
+def add_fault_signal(raw: np.ndarray, m: np.ndarray, f: Fault, t: np.ndarray,
+                     sf: np.ndarray, b: np.ndarray, sd: np.ndarray,
+                     rng: np.random.Generator) -> None:
+    """Add an additive fault (step, spike, ramp, scale, noise) to ``raw[m, f.sensor - 1]``.
+
+    ``raw`` (raw units, shape (N, n)) is changed in place; ``sf``, ``b``, ``sd`` are the
+    calibration's scale factors, biases and noise sd (SI). Stuck and dropout are not
+    additive: the callers handle them (a whole flight and a stream hold values differently).
+    One arithmetic for the whole-flight :func:`apply_faults` and the streamed
+    :class:`replay.stream.ChunkInjector`.
+    """
+    i = f.sensor - 1
+    if f.kind in ("step", "spike"):
+        raw[m, i] += f.size / sf[i]
+    elif f.kind == "ramp":
+        raw[m, i] += f.size * (t[m] - f.onset) / sf[i]
+    elif f.kind == "scale":
+        raw[m, i] += f.size * (sf[i] * raw[m, i] - b[i]) / sf[i]
+    elif f.kind == "noise":
+        # s*s, not s**2: a huge factor gives inf (marked by the monitor), not OverflowError
+        extra = math.sqrt(max(f.size * f.size - 1.0, 0.0)) * sd[i] / sf[i]
+        raw[m, i] += extra * rng.standard_normal(int(m.sum()))
 
 
 def inject(flight: Any, faults: Sequence[Fault], cal: Calibration, *,

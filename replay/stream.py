@@ -22,6 +22,7 @@ import numpy as np
 from fdi.calfile import Calibration
 from fdi.errors import ConfigError
 from replay.faults import Fault
+from replay.scenario import add_fault_signal
 
 __all__ = ["ChunkInjector"]
 
@@ -82,21 +83,14 @@ class ChunkInjector:
                     self._held[j] = float(raw[before[-1], i])
             if not m.any():
                 continue
-            if f.kind in ("step", "spike"):
-                raw[m, i] += f.size / sf[i]
-            elif f.kind == "ramp":
-                raw[m, i] += f.size * (t[m] - f.onset) / sf[i]
-            elif f.kind == "scale":
-                raw[m, i] += f.size * (sf[i] * raw[m, i] - b[i]) / sf[i]
-            elif f.kind == "noise":
-                extra = math.sqrt(max(f.size * f.size - 1.0, 0.0)) * sd[i] / sf[i]
-                raw[m, i] += extra * self.rng.standard_normal(int(m.sum()))
-            elif f.kind == "stuck":
+            if f.kind == "stuck":
                 if j not in self._held:
                     first = np.flatnonzero(m & valid[:, i])
                     self._held[j] = float(raw[first[0], i]) if first.size else math.nan
                 raw[m, i] = self._held[j]
             elif f.kind == "dropout":
                 valid[m, i] = False
+            else:
+                add_fault_signal(raw, m, f, t, sf, b, sd, self.rng)
         raw[~valid] = np.nan
         return replace(piece, raw=raw, valid=valid)

@@ -28,6 +28,7 @@ from typing import Any
 import numpy as np
 
 from fdi.errors import ConfigError, FileFormatError
+from fdi.fileio import read_text
 from fdi.units import DPS, G0, TIME_UNITS
 from replay.ingest.ingest_map import ImuColumns, IngestMap, load_ingest_map
 from replay.ingest.stream import Damage, ImuStream, LogRead
@@ -78,13 +79,7 @@ class Table:
 def read_csv_table(path: str | Path) -> Table:
     """A CSV file with one header line; empty cells are NaN."""
     p = str(path)
-    try:
-        text = Path(path).read_text(encoding="utf-8")
-    except OSError as exc:
-        raise FileFormatError(p, f"cannot read ({exc.strerror})") from None
-    except UnicodeDecodeError as exc:
-        raise FileFormatError(p, f"not UTF-8 text ({exc.reason} at byte {exc.start})") \
-            from None
+    text = read_text(path)
     lines = text.splitlines()
     if not lines or not lines[0].strip():
         raise FileFormatError(p, "empty file: expected a header line", line=1)

@@ -43,7 +43,7 @@ def configure(p: argparse.ArgumentParser) -> None:
     p.add_argument("--plot", metavar="DIR",
                    help="write PNG plots (per-step residuals, Earth-rate fit) into DIR")
     add_ferraris_arguments(p)
-    from calibration.diagnose.cli import add_calibrate_options
+    from rimu.commands.calibrate_effects import add_calibrate_options
 
     add_calibrate_options(p)
     from rimu.commands.calibrate_inflight import configure_options
@@ -152,9 +152,9 @@ def run(args: argparse.Namespace) -> int:
         from rimu.commands import calibrate_inflight
 
         return calibrate_inflight.run(args)
-    from calibration.diagnose.cli import calibrate_with_check
     from calibration.session_io import load_session
     from fdi.calfile import check_plausible
+    from rimu.commands.calibrate_effects import calibrate_with_check
     from rimu.outputs import atomic_file, input_path, output_dir, output_file
 
     if args.ferraris:

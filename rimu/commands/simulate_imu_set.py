@@ -7,12 +7,15 @@ Reached through ``rimu simulate flight`` (its ``--imus`` option); builds a
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
 from fdi.errors import ConfigError
 from fdi.units import DPH, DPS, G0
 from replay.flight_io import save_flight_dir
 from replay.imu_set import ImuEffects, ImuSetSpec, simulate_imu_set
+from rimu.argtypes import nonnegative_float, positive_float, positive_int
+
+MAX_IMUS = 16
+"""At most this many IMUs in one simulated set."""
 
 __all__ = ["configure_options", "run"]
 
@@ -20,29 +23,30 @@ __all__ = ["configure_options", "run"]
 def configure_options(p: argparse.ArgumentParser) -> None:
     """The options ``rimu simulate flight`` adds for ``--imus``."""
     g = p.add_argument_group("several IMUs (--imus K; --cal not needed)")
-    g.add_argument("--imus", type=int, metavar="K",
+    g.add_argument("--imus", type=positive_int(MAX_IMUS), metavar="K",
                    help="simulate K three-axis IMUs (gyros monitored, accelerometers and "
                         "temperatures kept beside them)")
     g.add_argument("--time-offset-ms", default="", metavar="T1,T2,...",
                    help="time offset of each IMU in ms (K values; default all 0)")
-    g.add_argument("--misalignment-mrad", type=float, default=10.0, metavar="X",
+    g.add_argument("--misalignment-mrad", type=nonnegative_float(1e3), default=10.0, metavar="X",
                    help="sd of each IMU's misalignment angles (mrad, default 10)")
-    g.add_argument("--scale-ppm", type=float, default=5000.0, metavar="X",
+    g.add_argument("--scale-ppm", type=nonnegative_float(1e6), default=5000.0, metavar="X",
                    help="sd of each scale error (ppm, default 5000)")
-    g.add_argument("--gyro-noise-dps", type=float, default=2e-3 / DPS, metavar="X",
+    g.add_argument("--gyro-noise-dps", type=nonnegative_float(1e3), default=2e-3 / DPS, metavar="X",
                    help="gyro white noise per sample (deg/s, default 0.115)")
-    g.add_argument("--g-sensitivity", type=float, default=0.0, metavar="DPS_PER_G",
+    g.add_argument("--g-sensitivity", type=nonnegative_float(1e3), default=0.0, metavar="DPS_PER_G",
                    help="sd of each g-sensitivity entry ((deg/s)/g; default 0)")
-    g.add_argument("--warm-up", type=float, default=0.0, metavar="DPS",
+    g.add_argument("--warm-up", type=nonnegative_float(1e3), default=0.0, metavar="DPS",
                    help="sd of the warm-up bias at t=0 (deg/s; decays in --warm-up-s)")
-    g.add_argument("--warm-up-s", type=float, default=60.0, metavar="S")
-    g.add_argument("--temperature-coeff", type=float, default=0.0, metavar="DPS_PER_C",
+    g.add_argument("--warm-up-s", type=positive_float(1e6), default=60.0, metavar="S")
+    g.add_argument("--temperature-coeff", type=nonnegative_float(1e3), default=0.0,
+                   metavar="DPS_PER_C",
                    help="sd of the bias temperature coefficient ((deg/s)/degC; temperatures "
                         "are then logged)")
     g.add_argument("--vibration", default="", metavar="HZ:DPS",
                    help="a vibration line: frequency (aliased above Nyquist) and sd of its "
                         "amplitude per axis")
-    g.add_argument("--drift", type=float, default=0.0, metavar="DPH_PER_RTS",
+    g.add_argument("--drift", type=nonnegative_float(1e6), default=0.0, metavar="DPH_PER_RTS",
                    help="bias random walk ((deg/h)/sqrt(s); default 0)")
     g.add_argument("--effect-imus", default="", metavar="J,...",
                    help="IMUs (1-based) that carry the effects (default all)")
@@ -57,6 +61,15 @@ def _floats(text: str, name: str) -> tuple[float, ...]:
 
 def run(args: argparse.Namespace) -> int:
     """Run ``rimu simulate flight --imus K``."""
+    from rimu.commands.simulate_flight import MAX_SAMPLES
+    from rimu.outputs import atomic_dir, output_dir
+
+    out = output_dir(args.out, "--out")
+    fs = args.rate or 50.0
+    if args.duration * fs * args.imus > MAX_SAMPLES:
+        raise ConfigError(f"--duration {args.duration:g} s at {fs:g} Hz for {args.imus} IMUs is "
+                          f"{args.duration * fs * args.imus:.3g} IMU samples; at most "
+                          f"{MAX_SAMPLES:.0e} are simulated in memory at once")
     vib_hz, vib = 0.0, 0.0
     if args.vibration:
         v = _floats(args.vibration.replace(":", ","), "--vibration")
@@ -68,7 +81,7 @@ def run(args: argparse.Namespace) -> int:
                      vibration_hz=vib_hz, vibration=vib, random_walk=args.drift * DPH,
                      imus=tuple(int(x) for x in _floats(args.effect_imus, "--effect-imus")))
     spec = ImuSetSpec(imus=args.imus, duration_s=args.duration,
-                      sample_rate_hz=args.rate or 50.0, seed=args.seed,
+                      sample_rate_hz=fs, seed=args.seed,
                       time_offset_s=tuple(1e-3 * x for x in _floats(args.time_offset_ms,
                                                                     "--time-offset-ms")),
                       misalignment_sd=1e-3 * args.misalignment_mrad,
@@ -76,8 +89,8 @@ def run(args: argparse.Namespace) -> int:
                       max_rate_dps=args.max_rate if args.max_rate != 300.0 else 200.0,
                       effects=eff)
     flight = simulate_imu_set(spec)
-    out = Path(args.out)
-    save_flight_dir(flight, out)
+    with atomic_dir(out) as tmp:
+        save_flight_dir(flight, tmp)
     print(f"wrote {out}: {flight.t.shape[0]} samples of {spec.imus} IMUs at "
           f"{flight.sample_rate_hz:g} Hz (truth in {out / 'truth.json'})")
     return 0

@@ -67,12 +67,12 @@ def test_calibrate_prints_the_verdict_and_fits_asked_effects(drift_dir, tmp_path
     code, out, err = _run(capsys, "calibrate", drift_dir / "s", "--out", tmp_path / "c.json")
     assert code == 0, err
     assert "model adequacy (alpha 0.01): effects suspected: gyro 2: bias_drift" in out
-    assert "Gauss-Markov noise widening is withheld" in out
+    assert "Gauss-Markov noise widening is withheld" in err  # warnings go to stderr
     code, out, err = _run(capsys, "calibrate", drift_dir / "s", "--out", tmp_path / "c.json",
                           "--effects", "bias_drift")
     assert code == 0, err
     assert "model adequacy (alpha 0.01): adequate" in out and "effect bias_drift on gyro 2" in out
-    assert "monitor does not compensate" in out
+    assert "monitor does not compensate" in out + err
     doc = json.loads((tmp_path / "c.json").read_text())
     assert len(doc["effects"]) == 4 and doc["adequacy"]["verdict"] == "adequate"
 

@@ -181,7 +181,7 @@ def test_cli_errors_are_one_line(tmp_path: Path) -> None:
                str(tmp_path / "c.json")), "at least two IMU groups"),
              (("calibrate", "--out", str(tmp_path / "c.json")), "--in-flight"),
              (("calibrate", "--in-flight", str(tmp_path / "nope"), "--out",
-               str(tmp_path / "c.json")), "manifest.json")]
+               str(tmp_path / "c.json")), "no such directory")]
     for args, word in cases:
         r = _rimu(*args)
         assert r.returncode == 2, (args, r.stderr)

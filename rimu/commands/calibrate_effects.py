@@ -10,14 +10,13 @@ from calibration.diagnose.checked import calibrate_checked
 from calibration.diagnose.library import candidates
 from calibration.session import Session
 from fdi.calfile import Calibration
+from rimu.argtypes import probability
 
 __all__ = ["add_calibrate_options", "calibrate_with_check"]
 
 
 def add_calibrate_options(p: argparse.ArgumentParser) -> None:
     """Add ``--effects`` and ``--alpha`` to the ``rimu calibrate`` parser."""
-    from rimu.argtypes import probability  # the CLI layer (imported only by the command)
-
     p.add_argument("--effects", metavar="NAME,...",
                    help="fit these effects jointly with the calibration, on every sensor "
                         "they apply to (rimu.calibration/2 'effects'): "
