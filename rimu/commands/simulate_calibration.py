@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+from typing import Any
 
 from calibration.effects import effects_help, parse_effect_sensors, parse_effects
 from calibration.presets import PRESETS, default_sequence_name, preset, random_truth
@@ -80,12 +81,8 @@ def _check_size(seq: object, fs: float) -> None:
                           "(check --turns and --table-rate-dps)")
 
 
-def run(args: argparse.Namespace) -> int:
-    from rimu.outputs import atomic_dir, output_dir
-
-    final = output_dir(args.out, "--out")
-    effects = parse_effects(args.effect)
-    sensors = parse_effect_sensors(args.effect_sensors)
+def _setup(args: argparse.Namespace) -> tuple[Any, Any, Any, Any, str]:
+    """Configuration, sequence, truth, noise model and where the parameters came from."""
     if args.preset:
         seq, truth, noise = preset(args.preset)
         if args.config:
@@ -111,24 +108,29 @@ def run(args: argparse.Namespace) -> int:
             or args.turns is not None):
         name = args.sequence or (seq.source if seq is not None else default_sequence_name(cfg))
         seq = load_sequence(name, table_rate_dps=args.table_rate_dps, turns=args.turns)
-    _check_size(seq, float(truth.sample_rate_hz))
+    return cfg, seq, truth, noise, source
+
+
+def _noise(args: argparse.Namespace, noise: Any) -> Any:
+    """The preset's noise model with the gyro bias instability / random walk options."""
     if args.bias_instability_dph < 0 or args.rate_random_walk_dph_rth < 0 \
             or args.bias_correlation_s <= 0:
         raise ConfigError("--bias-instability-dph and --rate-random-walk-dph-rth must be >= 0, "
                           "--bias-correlation-s > 0")
-    if args.bias_instability_dph or args.rate_random_walk_dph_rth:
-        base = noise or NoiseModel()
-        noise = dataclasses.replace(
-            base, bias_instability={**base.bias_instability,
-                                    "gyro": args.bias_instability_dph * DPH},
-            bias_correlation_s=args.bias_correlation_s,
-            random_walk={**base.random_walk,
-                         "gyro": args.rate_random_walk_dph_rth * DPH / 60.0})
-    session = simulate_session(cfg, seq, truth, seed=args.seed, effects=effects,
-                               effect_sensors=sensors, noise=noise)
-    with atomic_dir(final) as tmp:
-        save_simulation(session, truth, tmp)
-    out = final
+    if not (args.bias_instability_dph or args.rate_random_walk_dph_rth):
+        return noise
+    base = noise or NoiseModel()
+    return dataclasses.replace(
+        base, bias_instability={**base.bias_instability,
+                                "gyro": args.bias_instability_dph * DPH},
+        bias_correlation_s=args.bias_correlation_s,
+        random_walk={**base.random_walk,
+                     "gyro": args.rate_random_walk_dph_rth * DPH / 60.0})
+
+
+def _summary(args: argparse.Namespace, out: Any, cfg: Any, seq: Any, session: Any,
+             effects: dict[str, float], source: str) -> str:
+    """The one-paragraph description of what was written."""
     n_rate = len(seq.rate_steps())
     n_pos = len(seq.position_steps())
     kinds = f"{cfg.n} gyros" + ("" if session.raw_accel is None
@@ -141,11 +143,27 @@ def run(args: argparse.Namespace) -> int:
                         f"(correlation {args.bias_correlation_s:g} s)")
     if args.rate_random_walk_dph_rth:
         extra_noise += f" + gyro bias random walk {args.rate_random_walk_dph_rth:g} deg/h/sqrt(h)"
-    print(f"Wrote a simulated calibration session to {out}/ (manifest.json, samples.csv, "
-          f"truth.json): configuration {cfg.name} ({kinds}), sequence {seq.name} "
-          f"({len(seq.steps)} steps: {n_rate} rate, {n_pos} position; table rate "
-          f"{seq.table_rate_dps:g} deg/s), {session.t.size} samples at "
-          f"{session.sample_rate_hz:g} Hz ({session.t.size / session.sample_rate_hz:g} s), "
-          f"latitude {session.latitude_deg:g} deg, true parameters from {source}, seed "
-          f"{args.seed}, noise: white per the truth{extra_noise}, effects: {eff}.")
+    return (f"Wrote a simulated calibration session to {out}/ (manifest.json, samples.csv, "
+            f"truth.json): configuration {cfg.name} ({kinds}), sequence {seq.name} "
+            f"({len(seq.steps)} steps: {n_rate} rate, {n_pos} position; table rate "
+            f"{seq.table_rate_dps:g} deg/s), {session.t.size} samples at "
+            f"{session.sample_rate_hz:g} Hz ({session.t.size / session.sample_rate_hz:g} s), "
+            f"latitude {session.latitude_deg:g} deg, true parameters from {source}, seed "
+            f"{args.seed}, noise: white per the truth{extra_noise}, effects: {eff}.")
+
+
+def run(args: argparse.Namespace) -> int:
+    from rimu.outputs import atomic_dir, output_dir
+
+    final = output_dir(args.out, "--out")
+    effects = parse_effects(args.effect)
+    sensors = parse_effect_sensors(args.effect_sensors)
+    cfg, seq, truth, noise, source = _setup(args)
+    _check_size(seq, float(truth.sample_rate_hz))
+    noise = _noise(args, noise)
+    session = simulate_session(cfg, seq, truth, seed=args.seed, effects=effects,
+                               effect_sensors=sensors, noise=noise)
+    with atomic_dir(final) as tmp:
+        save_simulation(session, truth, tmp)
+    print(_summary(args, final, cfg, seq, session, effects, source))
     return 0
