@@ -128,6 +128,70 @@ def _column(fmt: Any, *names: str) -> str | None:
     return None
 
 
+def _imu_fields(p: str, fmt: Any, t: str) -> tuple[str | None, ...]:
+    """Columns of an IMU message type: time, instance, temperature, error count, accel."""
+    f = (_column(fmt, "TimeUS", "TimeMS"), _column(fmt, "I"), _column(fmt, "Temp", "T"),
+         _column(fmt, "ErrG", "EG"), _column(fmt, "AccX"))
+    if f[0] is None or not all(c in fmt.columns for c in ("GyrX", "GyrY", "GyrZ")):
+        raise FileFormatError(p, f"{t} message has columns {fmt.columns}; expected "
+                                 f"TimeUS or TimeMS and GyrX, GyrY, GyrZ", field=t)
+    return f
+
+
+def _collect(r: Any, types: list[str], fields: dict[str, tuple[str | None, ...]],
+             limit: int) -> dict[tuple[str, int], dict[str, list[float]]]:
+    """The IMU messages before byte ``limit``, as columns per (type, instance)."""
+    cols: dict[tuple[str, int], dict[str, list[float]]] = {}
+    with _quiet():
+        while True:
+            m = r.recv_match(type=types)
+            if m is None or r.offset > limit:
+                break
+            t = m.get_type()
+            tcol, icol, tempcol, ecol, acol = fields[t]
+            inst = int(getattr(m, icol)) if icol else 0
+            c = cols.setdefault((t, inst), {k: [] for k in
+                                            ("t", "gx", "gy", "gz", "ax", "ay", "az",
+                                             "temp", "err")})
+            c["t"].append(getattr(m, tcol))
+            c["gx"].append(m.GyrX)
+            c["gy"].append(m.GyrY)
+            c["gz"].append(m.GyrZ)
+            if acol:
+                c["ax"].append(m.AccX)
+                c["ay"].append(m.AccY)
+                c["az"].append(m.AccZ)
+            if tempcol:
+                c["temp"].append(getattr(m, tempcol))
+            if ecol:
+                c["err"].append(getattr(m, ecol))
+    return cols
+
+
+def _streams(cols: dict[tuple[str, int], dict[str, list[float]]],
+             fields: dict[str, tuple[str | None, ...]]) -> list[ImuStream]:
+    """One :class:`ImuStream` per (type, instance), in IMU, IMU2, IMU3 / instance order."""
+    streams = []
+    for k, (t, inst) in enumerate(sorted(cols, key=lambda ti: (IMU_TYPES.index(ti[0]),
+                                                               ti[1]))):
+        c = cols[(t, inst)]
+        tcol = fields[t][0]
+        ts = np.asarray(c["t"], float) * TIME_UNITS["us" if tcol == "TimeUS" else "ms"]
+        notes = []
+        temp = np.asarray(c["temp"], float) if c["temp"] else None
+        if temp is not None and not np.any(temp != 0):
+            temp = None
+            notes.append(f"{t}.{fields[t][2]} is 0 throughout: temperature not logged")
+        acc = np.column_stack([c["ax"], c["ay"], c["az"]]).astype(float) if c["ax"] else None
+        src = f"{t}[I={inst}]" if fields[t][1] else t
+        streams.append(ImuStream(
+            name=f"imu{k + 1}", t=ts, gyro=np.column_stack([c["gx"], c["gy"], c["gz"]])
+            .astype(float), accel=acc, temperature=temp, source=src,
+            error_count=np.asarray(c["err"], float) if c["err"] else None,
+            notes=tuple(notes)))
+    return streams
+
+
 def read_ardupilot(path: str | Path, *, salvage: bool = False) -> LogRead:
     """Read the IMU samples of a DataFlash log.
 
@@ -157,59 +221,9 @@ def read_ardupilot(path: str | Path, *, salvage: bool = False) -> LogRead:
         raise FileFormatError(p, f"no IMU messages ({', '.join(IMU_TYPES)}) in the log")
     damage = _first_damage(r)
     limit = damage[0] if damage is not None else r.data_len
-    cols: dict[tuple[str, int], dict[str, list[float]]] = {}
-    fields: dict[str, tuple[str | None, ...]] = {}
-    for t in types:
-        fmt = r.formats[r.name_to_id[t]]
-        fields[t] = (_column(fmt, "TimeUS", "TimeMS"), _column(fmt, "I"),
-                     _column(fmt, "Temp", "T"), _column(fmt, "ErrG", "EG"),
-                     _column(fmt, "AccX"))
-        if fields[t][0] is None or not all(c in fmt.columns for c in ("GyrX", "GyrY", "GyrZ")):
-            raise FileFormatError(p, f"{t} message has columns {fmt.columns}; expected "
-                                     f"TimeUS or TimeMS and GyrX, GyrY, GyrZ", field=t)
-    with _quiet():
-        while True:
-            m = r.recv_match(type=types)
-            if m is None:
-                break
-            if r.offset > limit:
-                break
-            t = m.get_type()
-            tcol, icol, tempcol, ecol, acol = fields[t]
-            inst = int(getattr(m, icol)) if icol else 0
-            c = cols.setdefault((t, inst), {k: [] for k in
-                                            ("t", "gx", "gy", "gz", "ax", "ay", "az",
-                                             "temp", "err")})
-            c["t"].append(getattr(m, tcol))
-            c["gx"].append(m.GyrX)
-            c["gy"].append(m.GyrY)
-            c["gz"].append(m.GyrZ)
-            if acol:
-                c["ax"].append(m.AccX)
-                c["ay"].append(m.AccY)
-                c["az"].append(m.AccZ)
-            if tempcol:
-                c["temp"].append(getattr(m, tempcol))
-            if ecol:
-                c["err"].append(getattr(m, ecol))
-    streams = []
-    for k, (t, inst) in enumerate(sorted(cols, key=lambda ti: (IMU_TYPES.index(ti[0]),
-                                                               ti[1]))):
-        c = cols[(t, inst)]
-        tcol = fields[t][0]
-        ts = np.asarray(c["t"], float) * TIME_UNITS["us" if tcol == "TimeUS" else "ms"]
-        notes = []
-        temp = np.asarray(c["temp"], float) if c["temp"] else None
-        if temp is not None and not np.any(temp != 0):
-            temp = None
-            notes.append(f"{t}.{fields[t][2]} is 0 throughout: temperature not logged")
-        acc = np.column_stack([c["ax"], c["ay"], c["az"]]).astype(float) if c["ax"] else None
-        src = f"{t}[I={inst}]" if fields[t][1] else t
-        streams.append(ImuStream(
-            name=f"imu{k + 1}", t=ts, gyro=np.column_stack([c["gx"], c["gy"], c["gz"]])
-            .astype(float), accel=acc, temperature=temp, source=src,
-            error_count=np.asarray(c["err"], float) if c["err"] else None,
-            notes=tuple(notes)))
+    fields = {t: _imu_fields(p, r.formats[r.name_to_id[t]], t) for t in types}
+    cols = _collect(r, types, fields, limit)
+    streams = _streams(cols, fields)
     meta: dict[str, Any] = {"messages": {t: int(r.counts[r.name_to_id[t]]) for t in types},
                             "bytes": int(r.data_len)}
     dmg = None
