@@ -114,6 +114,31 @@ def select(datas: Mapping[str, KindData], cands: Iterable[Candidate], alpha: flo
     cands = list(cands)
     out = Selection()
     forced = list(forced or [])
+    family = _family(datas, cands, out)
+    if forced:
+        for kind, i, c in family:
+            if c.name in forced:
+                d, model = datas[kind], out.models[(kind, i)]
+                p, _, params, Z, rank, _ = _evaluate(d, i, c, model)
+                if rank:
+                    model.add(Z)
+                out.claimed.append(Selected(c, kind, i, params, p, float("nan")))
+        _probe(datas, out, alpha, demote=False)
+        return out
+    cache = _first_pass(datas, family, out)
+    _forward(datas, {c.name: c for c in cands}, cache, out, alpha)
+    _probe(datas, out, alpha)
+    return out
+
+
+_Cached = tuple[float, float, dict[str, Any], np.ndarray, float]
+"""(p, log p, params, basis, sum of squares explained) of one (kind, sensor, effect)."""
+
+
+def _family(datas: Mapping[str, KindData], cands: list[Candidate],
+            out: Selection) -> list[tuple[str, int, Candidate]]:
+    """Base models per sensor, and every (kind, sensor, candidate) that can be tested;
+    the others go to ``out.not_testable`` with the reason."""
     family: list[tuple[str, int, Candidate]] = []
     for kind, d in datas.items():
         for i in range(d.n):
@@ -125,38 +150,52 @@ def select(datas: Mapping[str, KindData], cands: Iterable[Candidate], alpha: flo
                     out.not_testable.append({"name": c.name, "kind": kind, "reason": why})
                 continue
             family.extend((kind, i, c) for i in range(d.n))
-    if forced:
-        for kind, i, c in family:
-            if c.name in forced:
-                d, model = datas[kind], out.models[(kind, i)]
-                p, _, params, Z, rank, _ = _evaluate(d, i, c, model)
-                if rank:
-                    model.add(Z)
-                out.claimed.append(Selected(c, kind, i, params, p, float("nan")))
-        _probe(datas, out, alpha, demote=False)
-        return out
+    return family
 
-    # first pass: rank-0 candidates are not identifiable on this sequence
-    # (p, log p, params, basis, sum of squares explained): ranked by log p, then by the sum
-    # of squares (log p underflows to -inf for strong effects)
-    cache: dict[tuple[str, int, str], tuple[float, float, dict[str, Any], np.ndarray,
-                                            float]] = {}
+
+def _first_pass(datas: Mapping[str, KindData], family: list[tuple[str, int, Candidate]],
+                out: Selection) -> dict[tuple[str, int, str], _Cached]:
+    """Evaluate every member once; rank-0 candidates are not identifiable on this sequence
+    (listed as not testable, collinear with the calibration model)."""
+    cache: dict[tuple[str, int, str], _Cached] = {}
     collinear: dict[tuple[str, str], list[int]] = {}
-    live = []
     for kind, i, c in family:
         p, logp, params, Z, rank, ss = _evaluate(datas[kind], i, c, out.models[(kind, i)])
         if rank == 0:
             collinear.setdefault((c.name, kind), []).append(i + 1)
             continue
         cache[(kind, i, c.name)] = (p, logp, params, Z, ss)
-        live.append((kind, i, c))
     for (name, kind), sens in collinear.items():
         out.not_testable.append({"name": name, "kind": kind, "sensors": sens,
                                  "reason": "collinear with the calibration model on this "
                                            "sequence (cannot be told apart from bias and "
                                            "scale factor)"})
-    by_name = {c.name: c for c in cands}
-    m_total = len(live)
+    return cache
+
+
+def _aliases(cache: dict[tuple[str, int, str], _Cached], key: tuple[str, int, str],
+             accepted: set[tuple[str, int, str]], model: LinModel, Z: np.ndarray,
+             thr: float) -> list[str]:
+    """Other significant candidates of the same sensor strongly correlated with ``key``'s."""
+    aliases = []
+    basis = None
+    for k2, (_, lp2, _, Z2, _) in cache.items():
+        if k2 in accepted or k2 == key or k2[:2] != key[:2] or not lp2 < np.log(thr):
+            continue
+        basis = model.basis(Z) if basis is None else basis
+        if np.linalg.norm(basis.T @ model.basis(Z2), 2) > ALIAS_CORRELATION:
+            aliases.append(k2[2])
+    return aliases
+
+
+def _forward(datas: Mapping[str, KindData], by_name: dict[str, Candidate],
+             cache: dict[tuple[str, int, str], _Cached], out: Selection,
+             alpha: float) -> None:
+    """Forward selection with Holm's step-down at α/2: take the most significant
+    remaining member while its p beats (α/2)/m, refit that sensor, re-evaluate the rest.
+    Members are ranked by log p, then by the sum of squares (log p underflows to -inf for
+    strong effects)."""
+    m_total = len(cache)
     accepted: set[tuple[str, int, str]] = set()
     while len(accepted) < m_total:
         m = m_total - len(accepted)
@@ -168,14 +207,7 @@ def select(datas: Mapping[str, KindData], cands: Iterable[Candidate], alpha: flo
             break
         kind, i, name = key
         model = out.models[(kind, i)]
-        aliases = []
-        basis = None
-        for k2, (_, lp2, _, Z2, _) in cache.items():
-            if k2 in accepted or k2 == key or k2[:2] != key[:2] or not lp2 < np.log(thr):
-                continue
-            basis = model.basis(Z) if basis is None else basis
-            if np.linalg.norm(basis.T @ model.basis(Z2), 2) > ALIAS_CORRELATION:
-                aliases.append(k2[2])
+        aliases = _aliases(cache, key, accepted, model, Z, thr)
         accepted.add(key)
         out.claimed.append(Selected(by_name[name], kind, i, params, p, thr, tuple(aliases),
                                     logp))
@@ -184,8 +216,6 @@ def select(datas: Mapping[str, KindData], cands: Iterable[Candidate], alpha: flo
             if k2[:2] == (kind, i) and k2 not in accepted:
                 p2, lp2, par2, Z2, _, ss2 = _evaluate(datas[kind], i, by_name[k2[2]], model)
                 cache[k2] = (p2, lp2, par2, Z2, ss2)
-    _probe(datas, out, alpha)
-    return out
 
 
 def _probe(datas: Mapping[str, KindData], out: Selection, alpha: float, *,
