@@ -76,6 +76,21 @@ class Table:
 
 
 # -- CSV -------------------------------------------------------------------------------
+def _first_non_number(lines: list[str], header: list[str],
+                      rows: np.ndarray) -> tuple[int, str, str] | None:
+    """The first of ``rows`` (0-based in ``lines``) holding a cell that is neither empty,
+    NaN nor a number: (row, the cell, its column name)."""
+    for r in rows:
+        for c, cell in enumerate(lines[r].split(",")):
+            text = cell.strip().lower()
+            if text and text not in ("nan", "+nan", "-nan"):
+                try:
+                    float(text)
+                except ValueError:
+                    return int(r), cell.strip(), header[c]
+    return None
+
+
 def read_csv_table(path: str | Path) -> Table:
     """A CSV file with one header line; empty cells are NaN."""
     p = str(path)
@@ -104,21 +119,11 @@ def read_csv_table(path: str | Path) -> Table:
                                  ndmin=2, invalid_raise=False)
         vals = vals.reshape(-1, ncol)
         rows = np.flatnonzero(np.isnan(vals).any(axis=1))
-        for r in rows:
-            cells = good[r].split(",")
-            for c, cell in enumerate(cells):
-                s = cell.strip().lower()
-                if s and s not in ("nan", "+nan", "-nan"):
-                    try:
-                        float(s)
-                    except ValueError:
-                        if damage is None or r + 2 < (damage.line or 0):
-                            damage = Damage(p, f"{cell.strip()!r} is not a number "
-                                               f"(column {header[c]!r})", line=r + 2)
-                        break
-            if damage is not None and damage.line == r + 2:
-                vals = vals[:r]
-                break
+        found = _first_non_number(good, header, rows)
+        if found is not None and (damage is None or found[0] + 2 < (damage.line or 0)):
+            r, cell, column = found
+            damage = Damage(p, f"{cell!r} is not a number (column {column!r})", line=r + 2)
+            vals = vals[:r]
     cols = {h: vals[:, j] for j, h in enumerate(header)}
     return Table(p, cols, damage=damage)
 
