@@ -118,6 +118,40 @@ def _gaps(tb: np.ndarray, max_gap: float) -> list[dict[str, float]]:
     return [{"t_s": float(tb[i]), "length_s": float(d[i])} for i in idx]
 
 
+def _accounting(t: np.ndarray, dropped: dict[str, int], tb: np.ndarray, i0: np.ndarray,
+                i1: np.ndarray, how: np.ndarray) -> tuple[int, int, dict[str, int]]:
+    """Samples of one stream kept on the base, used for resampling, and dropped (why)."""
+    used = np.zeros(t.shape[0], bool)
+    used[i0[how == 1]] = True
+    kept = int(used.sum())
+    interp = np.zeros(t.shape[0], bool)
+    interp[i0[how == 2]] = True
+    interp[i1[how == 2]] = True
+    interp &= ~used
+    unused = t.shape[0] - kept - int(interp.sum())
+    drop = dict(dropped)
+    if unused:
+        inside = (t >= tb[0]) & (t <= tb[-1]) & ~used & ~interp
+        n_in = int(inside.sum())
+        if n_in:
+            drop["between base times (no base sample needs it)"] = n_in
+        if unused - n_in:
+            drop["outside the time base's span"] = unused - n_in
+    return kept, int(interp.sum()), drop
+
+
+def _aux_columns(s: Any, i0: np.ndarray, i1: np.ndarray, w: np.ndarray,
+                 ok: np.ndarray) -> list[tuple[str, str, np.ndarray]]:
+    """(kind, name, values on the base) of a stream's accelerometer axes and temperature."""
+    cols = []
+    if s.accel is not None:
+        a = _place(s.accel, i0, i1, w, ok)
+        cols.extend(("accel", f"{s.name}.{ax}", a[:, k]) for k, ax in enumerate(_AXES))
+    if s.temperature is not None:
+        cols.append(("temperature", s.name, _place(s.temperature, i0, i1, w, ok)))
+    return cols
+
+
 def align_streams(read: LogRead, *, reference: str | None = None, gap_factor: float = 2.5,
                   tol_fraction: float = 0.01) -> tuple[Flight, dict[str, Any]]:
     """Put the streams of ``read`` on one time base.
@@ -167,44 +201,22 @@ def align_streams(read: LogRead, *, reference: str | None = None, gap_factor: fl
         dt_s = _median_dt(s.t) if s.size > 1 else dt_b
         i0, i1, w, how = _placement(s.t, tb, tol, gap_factor * max(dt_s, dt_b))
         ok = how > 0
-        used = np.zeros(s.size, bool)
-        used[i0[how == 1]] = True
-        kept = int(used.sum())
-        interp = np.zeros(s.size, bool)
-        interp[i0[how == 2]] = True
-        interp[i1[how == 2]] = True
-        interp &= ~used
-        unused = s.size - kept - int(interp.sum())
-        drop = dict(dropped)
-        if unused:
-            inside = (s.t >= tb[0]) & (s.t <= tb[-1]) & ~used & ~interp
-            n_in = int(inside.sum())
-            if n_in:
-                drop["between base times (no base sample needs it)"] = n_in
-            if unused - n_in:
-                drop["outside the time base's span"] = unused - n_in
+        kept, n_interp, drop = _accounting(s.t, dropped, tb, i0, i1, how)
         g = _place(s.gyro, i0, i1, w, ok)
         for k, ax in enumerate(_AXES):
             gyro_cols.append(g[:, k])
             valid_cols.append(ok)
             names.append(f"{s.name}.{ax}")
             imu_groups.append(s.name)
-        if s.accel is not None:
-            a = _place(s.accel, i0, i1, w, ok)
-            for k, ax in enumerate(_AXES):
-                aux_k.append("accel")
-                aux_n.append(f"{s.name}.{ax}")
-                aux_g.append(s.name)
-                aux_v.append(a[:, k])
-        if s.temperature is not None:
-            aux_k.append("temperature")
-            aux_n.append(s.name)
+        for kind, name, values in _aux_columns(s, i0, i1, w, ok):
+            aux_k.append(kind)
+            aux_n.append(name)
             aux_g.append(s.name)
-            aux_v.append(_place(s.temperature, i0, i1, w, ok))
+            aux_v.append(values)
         imus.append({
             "name": s.name, "source": s.source, "device_id": s.device_id,
             "samples_in": int(s.size + sum(dropped.values())), "kept": kept,
-            "used_for_resampling": int(interp.sum()), "dropped": drop,
+            "used_for_resampling": n_interp, "dropped": drop,
             "resampled_on_base": int((how == 2).sum()),
             "missing_on_base": int((how == 0).sum()),
             "nonfinite_gyro_values": int((~np.isfinite(g[ok])).sum()),
