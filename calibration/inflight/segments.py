@@ -67,39 +67,48 @@ def _clipped(x: np.ndarray) -> np.ndarray:
     return out
 
 
+def _saturation_and_shock(flight: Flight) -> tuple[np.ndarray, np.ndarray]:
+    """Samples where a gyro or accelerometer channel sits at full scale, and samples whose
+    specific force (per IMU, three accelerometer axes) exceeds ``SHOCK_G``; shape (N,)."""
+    N = flight.t.shape[0]
+    sat = np.zeros(N, bool)
+    for i in range(flight.n):
+        sat |= _clipped(flight.raw[:, i])
+    acc = flight.aux.select("accel") if flight.aux is not None else None
+    shock = np.zeros(N, bool)
+    if acc is None or not acc.m:
+        return sat, shock
+    for j in range(acc.m):
+        sat |= _clipped(acc.values[:, j])
+    for g in sorted(set(acc.imu)):
+        cols = [k for k, h in enumerate(acc.imu) if h == g]
+        if len(cols) == 3:
+            mag = np.linalg.norm(acc.values[:, cols], axis=1)
+            shock |= np.nan_to_num(mag, nan=0.0) > SHOCK_G * G0
+    return sat, shock
+
+
+def _gap_samples(flight: Flight) -> np.ndarray:
+    """The samples on either side of a jump of the time base by more than two periods."""
+    t = flight.t
+    gap = np.zeros(t.shape[0], bool)
+    if t.shape[0] > 1 and flight.sample_rate_hz > 0:
+        big = np.flatnonzero(np.diff(t) > 2.0 / flight.sample_rate_hz)
+        gap[big] = True
+        gap[big + 1] = True
+    return gap
+
+
 def find_segments(flight: Flight) -> list[Segment]:
     """Segments to leave out (module docstring), sorted by time, merged, padded."""
     t = flight.t
     N = t.shape[0]
     if N == 0:
         return []
-    flags: list[tuple[np.ndarray, str, str]] = []
-    sat = np.zeros(N, bool)
-    for i in range(flight.n):
-        c = _clipped(flight.raw[:, i])
-        if c.any():
-            sat |= c
-    detail = []
-    if sat.any():
-        detail.append("gyro")
-    acc = flight.aux.select("accel") if flight.aux is not None else None
-    shock = np.zeros(N, bool)
-    if acc is not None and acc.m:
-        for j in range(acc.m):
-            c = _clipped(acc.values[:, j])
-            sat |= c
-        for g in sorted(set(acc.imu)):
-            cols = [k for k, h in enumerate(acc.imu) if h == g]
-            if len(cols) == 3:
-                mag = np.linalg.norm(acc.values[:, cols], axis=1)
-                shock |= np.nan_to_num(mag, nan=0.0) > SHOCK_G * G0
-    flags.append((sat, "saturation", "a channel repeats its full-scale value"))
-    gap = np.zeros(N, bool)
-    if N > 1 and flight.sample_rate_hz > 0:
-        big = np.flatnonzero(np.diff(t) > 2.0 / flight.sample_rate_hz)
-        gap[big] = True
-        gap[big + 1] = True
-    flags.append((gap, "gap", "time base jumps by more than two sample periods"))
+    sat, shock = _saturation_and_shock(flight)
+    flags: list[tuple[np.ndarray, str, str]] = [
+        (sat, "saturation", "a channel repeats its full-scale value"),
+        (_gap_samples(flight), "gap", "time base jumps by more than two sample periods")]
     flags.append((~flight.valid.all(axis=1), "invalid", "a sensor sent no sample"))
     moving = _moving(flight)
     first_move = int(np.argmax(moving)) if moving.any() else N
