@@ -289,42 +289,58 @@ def _norm_channel(c: Any) -> Any:
 
 def _consume(it: Iterator[can.Message], g: _Gather, lines: _Lines | None,
              acct: FrameAccounting, bar: Any) -> None:
+    """Gather python-can's messages into ``g``; with ``lines`` (text logs) also account
+    for the lines python-can skipped."""
+    if lines is None:
+        _consume_plain(it, g, bar)
+    else:
+        _consume_lines(it, g, lines, acct, bar)
+
+
+def _consume_plain(it: Iterator[can.Message], g: _Gather, bar: Any) -> None:
+    """The hot path: one pass over python-can's messages, plain appends, in chunks (the
+    progress bar moves between chunks)."""
     t_app, a_app, e_app, c_app, l_app = (g.t.append, g.arb.append, g.ext.append,
                                          g.ch.append, g.lengths.append)
     s_app = g.special.append
     buf = g.data
     step = min(_CHUNK, g.chunk) if g.sink is not None else _CHUNK
-    if lines is None:
-        # the hot path: one pass over python-can's messages, plain appends, in chunks
-        # (the progress bar moves between chunks)
-        while True:
-            n0 = len(g.t)
-            for msg in islice(it, step):
-                if msg.is_error_frame or msg.is_remote_frame:
-                    s_app((len(g.t), FRAME_ERROR if msg.is_error_frame else FRAME_REMOTE))
-                t_app(msg.timestamp)
-                a_app(msg.arbitration_id)
-                e_app(msg.is_extended_id)
-                c_app(msg.channel)
-                x = msg.data
-                buf += x
-                l_app(len(x))
-            got = len(g.t) - n0
-            if bar is not None:
-                bar.update(got)
-            g.spill()
-            if got < step:
-                return
+    while True:
+        n0 = len(g.t)
+        for msg in islice(it, step):
+            if msg.is_error_frame or msg.is_remote_frame:
+                s_app((len(g.t), FRAME_ERROR if msg.is_error_frame else FRAME_REMOTE))
+            t_app(msg.timestamp)
+            a_app(msg.arbitration_id)
+            e_app(msg.is_extended_id)
+            c_app(msg.channel)
+            x = msg.data
+            buf += x
+            l_app(len(x))
+        got = len(g.t) - n0
+        if bar is not None:
+            bar.update(got)
+        g.spill()
+        if got < step:
+            return
+
+
+def _consume_lines(it: Iterator[can.Message], g: _Gather, lines: _Lines,
+                   acct: FrameAccounting, bar: Any) -> None:
+    """Text logs: as :func:`_consume_plain`, and every line python-can passed over
+    without a frame is reported (unless it is a known non-frame line)."""
+    t_app, a_app, e_app, c_app, l_app = (g.t.append, g.arb.append, g.ext.append,
+                                         g.ch.append, g.lengths.append)
+    s_app = g.special.append
+    buf = g.data
     for msg in it:
-        if lines is not None:
-            pend = lines.pending
-            if len(pend) > 1:
-                first = lines.lineno - len(pend) + 1
-                for k, line in enumerate(pend[:-1]):
-                    if not _ASC_NON_FRAME.match(line):
-                        _garbage(acct, first + k, line,
-                                 "not a frame line (skipped by python-can)")
-            pend.clear()
+        pend = lines.pending
+        if len(pend) > 1:
+            first = lines.lineno - len(pend) + 1
+            for k, line in enumerate(pend[:-1]):
+                if not _ASC_NON_FRAME.match(line):
+                    _garbage(acct, first + k, line, "not a frame line (skipped by python-can)")
+        pend.clear()
         if msg.is_error_frame or msg.is_remote_frame:
             s_app((len(g.t), FRAME_ERROR if msg.is_error_frame else FRAME_REMOTE))
         t_app(msg.timestamp)
