@@ -203,27 +203,16 @@ class RunningReport:
                 norm = np.linalg.norm(omega - tru, axis=1)
                 self._breaches = (self._breaches or 0) + int(np.sum(ok & (norm > pl)))
 
-    def build(self, flight: Flight, cal: Calibration, *,
-              frames: Mapping[str, Any] | None = None, kind: str | None = None,
-              extra: Mapping[str, Any] | None = None) -> dict[str, Any]:
-        """The ``rimu.report/1`` dictionary (see :func:`build_report`); ``flight`` gives
-        the source, names, rate, faults and truth (its arrays are not read)."""
-        kind = kind or flight.kind
-        fs = float(flight.sample_rate_hz)
-        truth = _has_truth(flight)
-        events = sorted((_event_dict(e) for e in self.events),
-                        key=lambda e: float(e["t"]))      # stable: keeps in-sample order
-        faults = list(flight.faults)
-        for e in events:
-            e["false_alarm"] = _is_false_alarm(e, faults) if truth else None
-        outcomes = [_fault_outcome(f, events, fs, faults) for f in faults] if truth else []
+    def _summary(self, events: list[dict[str, Any]], outcomes: list[dict[str, Any]],
+                 truth: bool, n: int) -> dict[str, Any]:
+        """The report's ``summary``: events, isolations, delays, rate error, integrity."""
         isolated = sorted({int(e["sensor"]) for e in events
                            if e["type"] in _ISOLATING and e.get("sensor") is not None})
         summary: dict[str, Any] = {
             "events": len(events),
             "isolated_sensors": isolated,
             "healthy_at_end": (self.healthy_end if self.healthy_end is not None
-                               else [True] * flight.n),
+                               else [True] * n),
             "capability_at_end": self.capability_end,
             "false_alarms": (sum(bool(e["false_alarm"]) for e in events) if truth else None),
             "detection_delay_s": [o["detection_delay_s"] for o in outcomes],
@@ -240,6 +229,23 @@ class RunningReport:
                                                           / (3 * self._n_err)))
             summary["rate_error_rms_axis_dps"] = np.sqrt(self._err_sq / self._n_err).tolist()
             summary["integrity_breaches"] = self._breaches
+        return summary
+
+    def build(self, flight: Flight, cal: Calibration, *,
+              frames: Mapping[str, Any] | None = None, kind: str | None = None,
+              extra: Mapping[str, Any] | None = None) -> dict[str, Any]:
+        """The ``rimu.report/1`` dictionary (see :func:`build_report`); ``flight`` gives
+        the source, names, rate, faults and truth (its arrays are not read)."""
+        kind = kind or flight.kind
+        fs = float(flight.sample_rate_hz)
+        truth = _has_truth(flight)
+        events = sorted((_event_dict(e) for e in self.events),
+                        key=lambda e: float(e["t"]))      # stable: keeps in-sample order
+        faults = list(flight.faults)
+        for e in events:
+            e["false_alarm"] = _is_false_alarm(e, faults) if truth else None
+        outcomes = [_fault_outcome(f, events, fs, faults) for f in faults] if truth else []
+        summary = self._summary(events, outcomes, truth, flight.n)
         report: dict[str, Any] = {
             "schema": REPORT_SCHEMA, "source": flight.source,
             "configuration": cal.configuration, "kind": kind, "samples": self.samples,
