@@ -302,6 +302,40 @@ def _structure(e: np.ndarray, fs: float, alpha_each: float, names: list[str]) ->
     return out
 
 
+def _effect_record(c: Any, s: slice, fit: Any, g: str, sensors: list[int],
+                   cal: Calibration) -> dict[str, Any]:
+    """The JSON record of a selected effect (estimate and sd in the candidate's unit)."""
+    est = fit.beta[s] * c.scale
+    sd = fit.sd[s] * c.scale
+    rec = {"name": c.name, "imu": g, "sensors": sensors,
+           "estimate": float(est[0]) if est.size == 1 else est.tolist(),
+           "estimate_sd": float(sd[0]) if sd.size == 1 else sd.tolist(),
+           "unit": c.unit, "p_value": wald_test(fit, np.arange(s.start, s.stop))[2]}
+    known = cal.extra.get("inflight", {}).get("imus", {}).get(g, {})
+    if c.name == "time_skew" and "time_offset_ms" in known:
+        rec["detail"] = (f"the calibration records {known['time_offset_ms']:+.3f} ± "
+                         f"{known['time_offset_ms_sd']:.3f} ms for {g}; the monitor does not "
+                         f"shift samples, so it stays in the residual")
+    return rec
+
+
+def _vibration_record(residual: np.ndarray, vibration: np.ndarray, g: str,
+                      sensors: list[int], alpha_each: float) -> dict[str, Any] | None:
+    """The ``vibration_noise`` record when the residual variance grows with the
+    accelerometer vibration power at ``alpha_each``, else None."""
+    sl_, sd_, p, (calm, rough) = _vibration_noise(residual, vibration)
+    if not p < alpha_each:
+        return None
+    f2 = (G0 / DPS) ** 2                  # rad²/s² per (m/s²)² → (deg/s)² per g²
+    return {"name": "vibration_noise", "imu": g, "sensors": sensors,
+            "estimate": (sl_ * f2).tolist(), "estimate_sd": (sd_ * f2).tolist(),
+            "unit": "(deg/s)^2 of residual variance per g^2 of accelerometer "
+                    "vibration power", "p_value": p,
+            "detail": f"residual rms {calm / DPS:.3g} deg/s in the calmest quarter, "
+                      f"{rough / DPS:.3g} deg/s in the roughest (a variance effect: "
+                      f"not removed from the residual)"}
+
+
 def diagnose_flight(flight: Flight, cal: Calibration, *, alpha: float = 0.01,
                     reference: str | None = None) -> dict[str, Any]:
     """Diagnose the parity residual of a flight (module docstring).
@@ -351,33 +385,12 @@ def diagnose_flight(flight: Flight, cal: Calibration, *, alpha: float = 0.01,
         chans += names
         before += list(np.sqrt(np.mean(r0[keep] ** 2, axis=0)) / DPS)
         after += list(np.sqrt(np.mean(fit.residual**2, axis=0)) / DPS)
-        for c, s in zip(chosen, sl, strict=True):
-            est = fit.beta[s] * c.scale
-            sd = fit.sd[s] * c.scale
-            p = wald_test(fit, np.arange(s.start, s.stop))[2]
-            effects.append({"name": c.name, "imu": g,
-                            "sensors": [i + 1 for i in groups[g]],
-                            "estimate": float(est[0]) if est.size == 1 else est.tolist(),
-                            "estimate_sd": float(sd[0]) if sd.size == 1 else sd.tolist(),
-                            "unit": c.unit, "p_value": p})
-            known = cal.extra.get("inflight", {}).get("imus", {}).get(g, {})
-            if c.name == "time_skew" and "time_offset_ms" in known:
-                effects[-1]["detail"] = (
-                    f"the calibration records {known['time_offset_ms']:+.3f} ± "
-                    f"{known['time_offset_ms_sd']:.3f} ms for {g}; the monitor does not "
-                    f"shift samples, so it stays in the residual")
+        sensors = [i + 1 for i in groups[g]]
+        effects += [_effect_record(c, s, fit, g, sensors, cal)
+                    for c, s in zip(chosen, sl, strict=True)]
         if vib[g] is not None:
-            sl_, sd_, p, (calm, rough) = _vibration_noise(fit.residual, vib[g][keep])
-            if p < alpha_each:
-                f2 = (G0 / DPS) ** 2                  # rad²/s² per (m/s²)² → (deg/s)² per g²
-                effects.append({
-                    "name": "vibration_noise", "imu": g, "sensors": [i + 1 for i in groups[g]],
-                    "estimate": (sl_ * f2).tolist(), "estimate_sd": (sd_ * f2).tolist(),
-                    "unit": "(deg/s)^2 of residual variance per g^2 of accelerometer "
-                            "vibration power", "p_value": p,
-                    "detail": f"residual rms {calm / DPS:.3g} deg/s in the calmest quarter, "
-                              f"{rough / DPS:.3g} deg/s in the roughest (a variance effect: "
-                              f"not removed from the residual)"})
+            rec = _vibration_record(fit.residual, vib[g][keep], g, sensors, alpha_each)
+            effects += [rec] if rec is not None else []
         else:
             not_testable.append({"name": "vibration_noise", "imu": g,
                                  "reason": "no accelerometer logged beside the gyros"})
