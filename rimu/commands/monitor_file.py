@@ -24,6 +24,9 @@ def configure(p: argparse.ArgumentParser) -> None:
     p.add_argument("--report", metavar="FILE", help="write the rimu.report/1 JSON here")
     p.add_argument("--max-events", type=nonnegative_int(), default=50,
                    help="events to print (default 50)")
+    p.add_argument("--no-time-offsets", action="store_true",
+                   help="do not move each IMU by the time offset its in-flight calibration "
+                        "records (default: moved onto the reference's timing)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -46,9 +49,18 @@ def run(args: argparse.Namespace) -> int:
     choice = select(cal, kind=flight.kind, thresholds_file=args.thresholds,
                     false_alarms_per_hour=args.false_alarms_per_hour)
     thr, how = choice.thresholds, choice.to_dict()
+    extra: dict = {"thresholds": how}
+    if not args.no_time_offsets:
+        from calibration.inflight.timing import apply_time_offsets
+
+        flight, shifted = apply_time_offsets(flight, cal)
+        if shifted:
+            extra["time_offsets_applied_ms"] = shifted
+            print("moved onto the reference's timing: " + ", ".join(
+                f"{g} {ms:+.3f} ms" for g, ms in shifted.items()))
     mon = Monitor(cal, thr, kind=flight.kind)
     result = mon.run(flight.t, flight.raw, flight.valid)
-    report = build_report(result, flight, cal, extra={"thresholds": how})
+    report = build_report(result, flight, cal, extra=extra)
     print(format_report(report, max_events=args.max_events))
     if args.report:
         atomic_write_text(args.report, json.dumps(report, indent=1, allow_nan=False) + "\n")

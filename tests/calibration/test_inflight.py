@@ -152,6 +152,12 @@ def test_cli_simulate_calibrate_diagnose(tmp_path: Path) -> None:
     r = _rimu("calibrate", "--in-flight", str(d), "--out", str(tmp_path / "cal.json"))
     assert r.returncode == 0, r.stderr
     assert "time offset +5.0" in r.stdout
+    r = _rimu("monitor-file", str(d), "--cal", str(tmp_path / "cal.json"), "--report",
+              str(tmp_path / "rep.json"))
+    assert r.returncode == 0, r.stderr
+    assert "moved onto the reference's timing: imu2 +5.0" in r.stdout
+    moved = json.loads((tmp_path / "rep.json").read_text())["time_offsets_applied_ms"]
+    assert abs(moved["imu2"] - 5.0) < 0.1
     r = _rimu("diagnose", str(d), "--cal", str(tmp_path / "cal.json"), "--json",
               "--report", str(tmp_path / "rep"))
     assert r.returncode == 0, r.stderr
