@@ -130,8 +130,9 @@ def _column(fmt: Any, *names: str) -> str | None:
 
 def _imu_fields(p: str, fmt: Any, t: str) -> tuple[str | None, ...]:
     """Columns of an IMU message type: time, instance, temperature, error count, accel."""
+    accel = "AccX" if all(c in fmt.columns for c in ("AccX", "AccY", "AccZ")) else None
     f = (_column(fmt, "TimeUS", "TimeMS"), _column(fmt, "I"), _column(fmt, "Temp", "T"),
-         _column(fmt, "ErrG", "EG"), _column(fmt, "AccX"))
+         _column(fmt, "ErrG", "EG"), accel)
     if f[0] is None or not all(c in fmt.columns for c in ("GyrX", "GyrY", "GyrZ")):
         raise FileFormatError(p, f"{t} message has columns {fmt.columns}; expected "
                                  f"TimeUS or TimeMS and GyrX, GyrY, GyrZ", field=t)

@@ -19,9 +19,11 @@ its library cannot read has no usable rows (compressed formats), which the error
 
 from __future__ import annotations
 
+import contextlib
 import io
 import re
 import warnings
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -143,22 +145,29 @@ def _flatten_mat(prefix: str, v: Any, out: dict[str, np.ndarray]) -> None:
         out[prefix] = a
 
 
+@contextlib.contextmanager
+def _whole_file_errors(p: str, what: str, ext: str) -> Iterator[None]:
+    """Turn what a whole-file reader library raises into one :class:`FileFormatError`
+    (such files are read whole: a damaged one has nothing to salvage)."""
+    try:
+        yield
+    except OSError as exc:
+        if exc.errno is not None:
+            raise FileFormatError(p, f"cannot read ({exc.strerror})") from None
+        raise FileFormatError(p, f"truncated or corrupt {what} ({exc}); a damaged {ext} "
+                                 f"has no samples to salvage") from None
+    except Exception as exc:
+        raise FileFormatError(p, f"not a readable {what} ({type(exc).__name__}: {exc}); a "
+                                 f"damaged {ext} has no samples to salvage") from None
+
+
 def read_mat_table(path: str | Path) -> Table:
     """A MATLAB v4/v5/v7 ``.mat`` file, structs flattened to ``var.field``."""
     import scipy.io
 
     p = str(path)
-    try:
+    with _whole_file_errors(p, "MATLAB file", ".mat"):   # scipy: ValueError, MatReadError...
         m = scipy.io.loadmat(p)
-    except OSError as exc:
-        if exc.errno is not None:
-            raise FileFormatError(p, f"cannot read ({exc.strerror})") from None
-        raise FileFormatError(p, f"truncated or corrupt MATLAB file (scipy.io: {exc}); a "
-                                 f"damaged .mat has no samples to salvage") from None
-    except Exception as exc:        # scipy raises ValueError, TypeError, MatReadError...
-        raise FileFormatError(p, f"not a readable MATLAB file ({type(exc).__name__}: "
-                                 f"{exc}); a damaged .mat has no samples to salvage") \
-            from None
     cols: dict[str, np.ndarray] = {}
     for k, v in m.items():
         if not k.startswith("__"):
@@ -210,19 +219,11 @@ def read_rda_table(path: str | Path, obj: str | None = None) -> Table:
     import rdata
 
     p = str(path)
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            parsed = rdata.parser.parse_file(p)
-            conv = rdata.conversion.convert(parsed)
-    except OSError as exc:
-        if exc.errno is not None:
-            raise FileFormatError(p, f"cannot read ({exc.strerror})") from None
-        raise FileFormatError(p, f"truncated or corrupt R data file ({exc}); a damaged "
-                                 f".rda has no samples to salvage") from None
-    except Exception as exc:        # rdata raises ValueError, NotImplementedError, EOFError...
-        raise FileFormatError(p, f"not a readable R data file ({type(exc).__name__}: "
-                                 f"{exc}); a damaged .rda has no samples to salvage") from None
+    # rdata raises ValueError, NotImplementedError, EOFError...
+    with _whole_file_errors(p, "R data file", ".rda"), warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        parsed = rdata.parser.parse_file(p)
+        conv = rdata.conversion.convert(parsed)
     names = list(conv)
     if obj is None:
         if len(names) != 1:
