@@ -222,7 +222,12 @@ def read_px4(path: str | Path, *, salvage: bool = False, topic: str = "auto") ->
         raise ConfigError(f"PX4 topic {topic!r} is not one of {', '.join(PX4_TOPICS)}")
     p = str(path)
     u, fh, data = _load(p)
-    streams, meta = _streams(u, topic)
+    try:
+        streams, meta = _streams(u, topic)
+    except KeyError as exc:        # a damaged format definition lost a field
+        raise FileFormatError(str(path), f"an IMU topic lacks the field {exc.args[0]!r} "
+                                         "(corrupt format definition?)",
+                              field=str(exc.args[0])) from None
     meta["topic"] = streams[0].source.split("[")[0] if streams else None
     meta["start_timestamp_us"] = int(u.start_timestamp)
     meta["dropouts"] = len(u.dropouts)
