@@ -12,7 +12,8 @@ answers). Per sample, with the constants of the current healthy set (:mod:`fdi.s
    reconstruction (|y_i − h_iᵀω̂|² < 9 var) for ``readmit_dwell_s`` stops the kernel.
 3. A healthy sensor without a sample stops the kernel (the monitor reconstructs from the
    sensors present; no parity test, infinite protection level).
-4. :func:`compensate`: y = SF·u − b, parity p = V·y, whitened parity z = A·p (Cov z = I),
+4. :func:`compensate`: y = SF·u − b − c (c: run-time correction of the effect terms),
+   parity p = V·y, whitened parity z = A·p (Cov z = I),
    ω̂ = G·y and ρ = max_i ω̂ᵀC_iω̂/Σ_ii (seed 001 Eq. 21 for the zeroed rows of H̃).
 5. Windows (:func:`fdi.windows.window_update`) and the CUSUM bank
    (:func:`fdi.cusum.cusum_update`).
@@ -123,15 +124,23 @@ def members(sensors):
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def compensate(raw, r, idx, sensors, mats, df, has_omega, y, p, z, w) -> float:
-    """y = SF·u − b, p = V·y, z = A·p, ω̂ = G·y of the sensors ``idx`` of row r; returns ρ.
+def _finite(x):
+    """x when finite, else 0."""
+    return x if math.isfinite(x) else 0.0
 
-    Sums run over the sensors of the set in ascending order (left to right). Without three
-    independent sensors ω̂ is NaN and ρ is 0.
+
+@njit(cache=True, error_model="numpy", inline="always")
+def compensate(raw, r, corr, cr, idx, sensors, mats, df, has_omega, y, p, z, w) -> float:
+    """y = SF·u − b − c, p = V·y, z = A·p, ω̂ = G·y of the sensors ``idx`` of row r; returns ρ.
+
+    ``c = corr[cr]`` is the run-time correction of the effect terms (rad/s; a non-finite entry
+    counts as 0, so a bad input of an effect never reaches the parity). Sums run over the
+    sensors of the set in ascending order (left to right). Without three independent
+    sensors ω̂ is NaN and ρ is 0.
     """
     for k_ in range(idx.shape[0]):
         i = idx[k_]
-        y[i] = sensors[i, SF] * raw[r, i] - sensors[i, BIAS]
+        y[i] = sensors[i, SF] * raw[r, i] - sensors[i, BIAS] - _finite(corr[cr, i])
     for j in range(df):
         acc = 0.0
         for k_ in range(idx.shape[0]):
@@ -205,8 +214,8 @@ def health_checks(t, raw, r, valid, vr, sensors, fconst, iconst, sensor, counter
 
 
 @njit(cache=True, error_model="numpy")
-def readmission_check(t, raw, r, valid, vr, idx, sensors, mats, iconst, sensor, counters, dwell_s,
-                      y, p, z, w) -> int:
+def readmission_check(t, raw, r, corr, cr, valid, vr, idx, sensors, mats, iconst, sensor,
+                      counters, dwell_s, y, p, z, w) -> int:
     """First isolated sensor that behaved for ``dwell_s`` (−1: none).
 
     Good behaviour: valid, within the raw bounds, not repeating, and |y_i − h_iᵀω̂|² below
@@ -218,7 +227,7 @@ def readmission_check(t, raw, r, valid, vr, idx, sensors, mats, iconst, sensor, 
     for i in range(n):
         if sensors[i, IN_SET] != 0.0 and not valid[vr, i]:
             return -1
-    compensate(raw, r, idx, sensors, mats, iconst[DF], True, y, p, z, w)
+    compensate(raw, r, corr, cr, idx, sensors, mats, iconst[DF], True, y, p, z, w)
     for i in range(n):
         if sensors[i, IN_SET] != 0.0:
             continue
@@ -226,7 +235,7 @@ def readmission_check(t, raw, r, valid, vr, idx, sensors, mats, iconst, sensor, 
         good = (valid[vr, i] and sensors[i, LO] < v and v < sensors[i, HI]
                 and v != sensor[i, LAST_RAW])
         if good:
-            yi = sensors[i, SF] * v - sensors[i, BIAS]
+            yi = sensors[i, SF] * v - sensors[i, BIAS] - _finite(corr[cr, i])
             hw = (sensors[i, AXIS0] * w[0] + sensors[i, AXIS0 + 1] * w[1]
                   + sensors[i, AXIS0 + 2] * w[2])
             var = sensors[i, SIGMA_II] + sensors[i, H_P_H]
@@ -320,7 +329,7 @@ def parity_tests(z, rho, p, df, sensors, scales, mats, fconst, iconst, windows, 
 
 
 @njit(error_model="numpy")
-def _advance(t, raw, valid, r0, r1, sensors, scales, mats, fconst, iconst, windows, cusum,
+def _advance(t, raw, corr, valid, r0, r1, sensors, scales, mats, fconst, iconst, windows, cusum,
             sensor, counters, out, dwell_s) -> None:
     """Run samples r0 … r1−1 until one needs the monitor; see the module docstring.
 
@@ -328,6 +337,8 @@ def _advance(t, raw, valid, r0, r1, sensors, scales, mats, fconst, iconst, windo
     ----------
     t : ndarray, shape (N,)
     raw : ndarray, shape (N, n)
+    corr : ndarray, shape (N, n), or (1, n) for one correction of every sample
+        Run-time correction of the effect terms (rad/s), subtracted from y.
     valid : ndarray of bool, shape (N, n), or (1, n) when every sample is valid
     r0, r1 : int
     sensors, scales, mats, fconst, iconst : ndarray
@@ -352,6 +363,7 @@ def _advance(t, raw, valid, r0, r1, sensors, scales, mats, fconst, iconst, windo
     K = iconst[N_WINDOWS] + (1 if iconst[HAS_CUSUM] != 0 else 0)
     parity0 = STATS0 + 2 * K
     has_valid = counters[HAS_VALID] != 0
+    per_row_corr = corr.shape[0] > 1
     y = np.zeros(n)
     p = np.zeros(max(df, 1))
     z = np.zeros(max(df, 1))
@@ -362,6 +374,7 @@ def _advance(t, raw, valid, r0, r1, sensors, scales, mats, fconst, iconst, windo
     for r in range(r0, r1):
         tr = t[r]
         vr = r if has_valid else 0
+        cr = r if per_row_corr else 0
         if phase == PHASE_HEALTH:
             if counters[STARTED] == 0:
                 counters[STARTED] = 1
@@ -372,8 +385,8 @@ def _advance(t, raw, valid, r0, r1, sensors, scales, mats, fconst, iconst, windo
                 counters[STOP_CODE] = STOP_HEALTH
                 return
         if phase <= PHASE_READMIT and iconst[READMISSION] != 0:
-            k = readmission_check(tr, raw, r, valid, vr, idx, sensors, mats, iconst, sensor,
-                                  counters, dwell_s, y, p, z, w)
+            k = readmission_check(tr, raw, r, corr, cr, valid, vr, idx, sensors, mats, iconst,
+                                  sensor, counters, dwell_s, y, p, z, w)
             if k >= 0:
                 counters[READMIT_SENSOR] = k
                 counters[STOP_ROW] = r
@@ -391,7 +404,7 @@ def _advance(t, raw, valid, r0, r1, sensors, scales, mats, fconst, iconst, windo
             counters[STOP_ROW] = r
             counters[STOP_CODE] = STOP_INCOMPLETE
             return
-        rho = compensate(raw, r, idx, sensors, mats, df, has_omega, y, p, z, w)
+        rho = compensate(raw, r, corr, cr, idx, sensors, mats, df, has_omega, y, p, z, w)
         out[r, OMEGA0] = w[0]
         out[r, OMEGA0 + 1] = w[1]
         out[r, OMEGA0 + 2] = w[2]
@@ -411,7 +424,7 @@ def _advance(t, raw, valid, r0, r1, sensors, scales, mats, fconst, iconst, windo
 
 
 @njit(error_model="numpy")
-def _reconstruct_row(raw, r, sensors, mats, iconst, fconst, row) -> None:
+def _reconstruct_row(raw, corr, r, sensors, mats, iconst, fconst, row) -> None:
     """ω̂ of one sample from the sensors of a set (row[OMEGA0 …]) and its protection level
     (row[PROTECTION]); used for incomplete samples and right after an isolation."""
     n = sensors.shape[0]
@@ -420,8 +433,9 @@ def _reconstruct_row(raw, r, sensors, mats, iconst, fconst, row) -> None:
     p = np.zeros(max(df, 1))
     z = np.zeros(max(df, 1))
     w = np.zeros(3)
-    rho = compensate(raw, r, members(sensors), sensors, mats, df, iconst[HAS_OMEGA] != 0,
-                     y, p, z, w)
+    cr = r if corr.shape[0] > 1 else 0
+    rho = compensate(raw, r, corr, cr, members(sensors), sensors, mats, df,
+                     iconst[HAS_OMEGA] != 0, y, p, z, w)
     row[OMEGA0] = w[0]
     row[OMEGA0 + 1] = w[1]
     row[OMEGA0 + 2] = w[2]
@@ -444,16 +458,16 @@ def _entry_points(sources: str):
     their closure, which numba's cache key includes, so an edit anywhere recompiles."""
 
     @njit(cache=True, error_model="numpy")
-    def advance(t, raw, valid, r0, r1, sensors, scales, mats, fconst, iconst, windows, cusum,
-                sensor, counters, out, dwell_s):
+    def advance(t, raw, corr, valid, r0, r1, sensors, scales, mats, fconst, iconst, windows,
+                cusum, sensor, counters, out, dwell_s):
         sources  # noqa: B018
-        _advance(t, raw, valid, r0, r1, sensors, scales, mats, fconst, iconst, windows, cusum,
+        _advance(t, raw, corr, valid, r0, r1, sensors, scales, mats, fconst, iconst, windows, cusum,
                  sensor, counters, out, dwell_s)
 
     @njit(cache=True, error_model="numpy")
-    def reconstruct_row(raw, r, sensors, mats, iconst, fconst, row):
+    def reconstruct_row(raw, corr, r, sensors, mats, iconst, fconst, row):
         sources  # noqa: B018
-        _reconstruct_row(raw, r, sensors, mats, iconst, fconst, row)
+        _reconstruct_row(raw, corr, r, sensors, mats, iconst, fconst, row)
 
     advance.__doc__ = _advance.__doc__
     reconstruct_row.__doc__ = _reconstruct_row.__doc__

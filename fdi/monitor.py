@@ -108,6 +108,7 @@ class Monitor:
         self._full_mask = (1 << self.n) - 1
         self._healthy_arr: dict[int, np.ndarray] = {}
         self._all_valid = np.ones((1, self.n), bool)
+        self._no_correction = np.zeros((1, self.n))
         self._row = np.empty((1, self._layout.width(True)))
         self._t1 = np.empty(1)
         self._dwell_s = float(self.settings.readmit_dwell_s)
@@ -205,7 +206,7 @@ class Monitor:
         return np.array(ok, bool).reshape(1, n) if len(ok) == n else None
 
     # ------------------------------------------------------------------ step
-    def step(self, t: float, raw: Any, valid: Any = None) -> Answer:
+    def step(self, t: float, raw: Any, valid: Any = None, correction: Any = None) -> Answer:
         """Process one sample; never raises.
 
         Parameters
@@ -216,13 +217,17 @@ class Monitor:
             Raw sensor outputs.
         valid : array_like of bool, shape (n,), optional
             False where a sensor delivered no sample this time.
+        correction : array_like, shape (n,), optional
+            Run-time correction of the calibration's effect terms (rad/s), subtracted from
+            the compensated outputs: y = SF·u − b − c. A non-finite entry counts as 0; a
+            correction of the wrong shape is ignored (no correction).
         """
         try:
             tf = float(t)
         except Exception:
             tf = _NAN
         try:
-            return self._step(tf, raw, valid)
+            return self._step(tf, raw, valid, self._correction(correction, 1))
         except Exception as exc:
             ev = Event(tf, None, "health", f"internal error: {type(exc).__name__}: {exc}")
             return Answer(tf, np.full(3, _NAN), np.full(3, _NAN),
@@ -230,7 +235,22 @@ class Monitor:
                           np.full(max(self.n - 3, 0), _NAN), np.full(self.K, _NAN),
                           np.full(self.K, _NAN), (ev,), self._model.capability, _INF)
 
-    def _step(self, t: float, raw: Any, valid: Any) -> Answer:
+    def _correction(self, correction: Any, N: int) -> np.ndarray:
+        """The correction as a C-contiguous float array of shape (N, n) or (1, n); zeros when
+        absent or not of a usable shape."""
+        if correction is None:
+            return self._no_correction
+        try:
+            c = np.asarray(correction, dtype=np.float64)
+        except (TypeError, ValueError):
+            return self._no_correction
+        if c.shape == (self.n,):
+            return np.ascontiguousarray(c).reshape(1, self.n)
+        if c.ndim == 2 and c.shape[1] == self.n and c.shape[0] in (1, N):
+            return np.ascontiguousarray(c)
+        return self._no_correction
+
+    def _step(self, t: float, raw: Any, valid: Any, corr: np.ndarray) -> Answer:
         events: list[Event] = []
         u, ok = self._parse(raw, valid, t, events)
         self._t1[0] = t
@@ -240,15 +260,15 @@ class Monitor:
         has_valid = ok is not self._all_valid
         c[S.HAS_VALID] = has_valid
         c[S.PHASE] = S.PHASE_HEALTH                          # (HAS_PARITY stays 1 between runs)
-        advance(self._t1, u, ok, 0, 1, ks.sensors, ks.scales, ks.mats, ks.fconst, ks.iconst,
+        advance(self._t1, u, corr, ok, 0, 1, ks.sensors, ks.scales, ks.mats, ks.fconst, ks.iconst,
                 st.windows, st.cusum, st.sensor, c, row, self._dwell_s)
         osd = None
         code = c[S.STOP_CODE]
         if code != S.STOP_NONE:                              # rare: the monitor's turn
-            r, osd = self._handle(int(c[S.STOP_ROW]), int(code), self._t1, u, ok, has_valid,
-                                  row, events, None)
+            r, osd = self._handle(int(c[S.STOP_ROW]), int(code), self._t1, u, corr, ok,
+                                  has_valid, row, events, None)
             if r == 0:
-                osd = self._advance(self._t1, u, ok, has_valid, row, events, None)
+                osd = self._advance(self._t1, u, corr, ok, has_valid, row, events, None)
         r = row[0].copy()
         o, s0, t0, p0 = self._columns
         if c[S.DETECTED]:
@@ -260,8 +280,8 @@ class Monitor:
                        tuple(events), self._model.capability, float(r[S.PROTECTION]))
 
     # ------------------------------------------------------------------ the loop
-    def _advance(self, t: np.ndarray, raw: np.ndarray, valid: np.ndarray, has_valid: bool,
-                 out: np.ndarray, events: list[Event], rows: _Rows | None,
+    def _advance(self, t: np.ndarray, raw: np.ndarray, corr: np.ndarray, valid: np.ndarray,
+                 has_valid: bool, out: np.ndarray, events: list[Event], rows: _Rows | None,
                  chunk: int = _CHUNK) -> np.ndarray | None:
         """Run the kernel over every row, handling the samples it hands back.
 
@@ -274,24 +294,24 @@ class Monitor:
         r = 0
         osd = None
         while r < N:
-            stop, code = self._kernel(t, raw, valid, r, min(N, r + chunk), out)
+            stop, code = self._kernel(t, raw, corr, valid, r, min(N, r + chunk), out)
             if rows is not None:
                 rows.fill(r, stop, self)
-            r, osd = self._handle(stop, code, t, raw, valid, has_valid, out, events, rows)
+            r, osd = self._handle(stop, code, t, raw, corr, valid, has_valid, out, events, rows)
         return osd
 
-    def _kernel(self, t: np.ndarray, raw: np.ndarray, valid: np.ndarray, r0: int, r1: int,
-                out: np.ndarray) -> tuple[int, int]:
+    def _kernel(self, t: np.ndarray, raw: np.ndarray, corr: np.ndarray, valid: np.ndarray,
+                r0: int, r1: int, out: np.ndarray) -> tuple[int, int]:
         """One call of the compiled kernel; returns where and why it stopped."""
         ks, st = self._kset, self._state
         c = st.counters
-        advance(t, raw, valid, r0, r1, ks.sensors, ks.scales, ks.mats, ks.fconst, ks.iconst,
+        advance(t, raw, corr, valid, r0, r1, ks.sensors, ks.scales, ks.mats, ks.fconst, ks.iconst,
                 st.windows, st.cusum, st.sensor, c, out, self._dwell_s)
         return int(c[S.STOP_ROW]), int(c[S.STOP_CODE])
 
-    def _handle(self, stop: int, code: int, t: np.ndarray, raw: np.ndarray, valid: np.ndarray,
-                has_valid: bool, out: np.ndarray, events: list[Event], rows: _Rows | None
-                ) -> tuple[int, np.ndarray | None]:
+    def _handle(self, stop: int, code: int, t: np.ndarray, raw: np.ndarray, corr: np.ndarray,
+                valid: np.ndarray, has_valid: bool, out: np.ndarray, events: list[Event],
+                rows: _Rows | None) -> tuple[int, np.ndarray | None]:
         """Handle the sample the kernel stopped at; returns the next row and the sample's
         ω̂ sd when it is not the model's (incomplete sample)."""
         if code == S.STOP_NONE:
@@ -308,9 +328,9 @@ class Monitor:
             return stop, None
         osd = None
         if code == S.STOP_INCOMPLETE:
-            osd = self._on_incomplete(raw, stop, valid[stop if has_valid else 0], out[stop])
+            osd = self._on_incomplete(raw, corr, stop, valid[stop if has_valid else 0], out[stop])
         else:
-            self._on_detection(tr, code, raw, stop, out[stop], events)
+            self._on_detection(tr, code, raw, corr, stop, out[stop], events)
         if rows is not None:
             rows.fill(stop, stop + 1, self, osd)
         return stop + 1, osd
@@ -349,20 +369,20 @@ class Monitor:
                             self.settings.readmit_dwell_s))
         self._set_model(self._mask | (1 << i))
 
-    def _on_incomplete(self, raw: np.ndarray, r: int, ok: np.ndarray, row: np.ndarray
-                       ) -> np.ndarray:
+    def _on_incomplete(self, raw: np.ndarray, corr: np.ndarray, r: int, ok: np.ndarray,
+                       row: np.ndarray) -> np.ndarray:
         """ω̂ from the sensors present; the kernel wrote the untested statistics."""
         present = 0
         for i in self._model.idx:
             if ok[i]:
                 present |= 1 << i
         ks = self._kernel_set(present)
-        reconstruct_row(raw, r, ks.sensors, ks.mats, ks.iconst, ks.fconst, row)
+        reconstruct_row(raw, corr, r, ks.sensors, ks.mats, ks.iconst, ks.fconst, row)
         row[S.PROTECTION] = _INF
         return self.cache.get(present).omega_sd
 
-    def _on_detection(self, t: float, code: int, raw: np.ndarray, r: int, row: np.ndarray,
-                      events: list[Event]) -> None:
+    def _on_detection(self, t: float, code: int, raw: np.ndarray, corr: np.ndarray, r: int,
+                      row: np.ndarray, events: list[Event]) -> None:
         """Name a detection and/or isolate; ω̂ and PL of the sample from the new set."""
         mdl = self._model
         fired = int(self._state.counters[S.FIRED])
@@ -377,7 +397,7 @@ class Monitor:
             events.append(Event(t, sensor, "isolated", reason, stat, thr, scale, mag))
             self._isolate(sensor - 1, "isolated")
             ks = self._kset
-            reconstruct_row(raw, r, ks.sensors, ks.mats, ks.iconst, ks.fconst, row)
+            reconstruct_row(raw, corr, r, ks.sensors, ks.mats, ks.iconst, ks.fconst, row)
 
     def _attribute(self, mdl: SetModel, fired: int) -> tuple[int, float | None, str,
                                                             int | None]:
@@ -402,7 +422,7 @@ class Monitor:
 
     # ------------------------------------------------------------------ block
     def run(self, t: Any, raw: Any, valid: Any = None, *, parity: bool = False,
-            chunk: int = _CHUNK) -> BlockResult:
+            chunk: int = _CHUNK, correction: Any = None) -> BlockResult:
         """Process a block of samples; answers bit-identical to :meth:`step` on each row.
 
         Parameters
@@ -414,6 +434,8 @@ class Monitor:
             Also return the parity vectors (``BlockResult.parity``; costs memory).
         chunk : int
             Most rows per kernel call.
+        correction : array_like, shape (N, n) or (n,), optional
+            Run-time correction of the effect terms (rad/s), as in :meth:`step`.
 
         Returns
         -------
@@ -434,7 +456,7 @@ class Monitor:
         except (TypeError, ValueError):
             shaped = False
         if not shaped:
-            return self._run_rows(t, raw, valid, parity)
+            return self._run_rows(t, raw, valid, parity, correction)
         N = ta.shape[0]
         out = np.empty((N, self._layout.width(parity)))
         rows = _Rows(N, n)
@@ -446,13 +468,15 @@ class Monitor:
             c[S.HAS_PARITY] = parity
             c[S.PHASE] = S.PHASE_HEALTH
             try:
-                self._advance(ta, ra, self._all_valid if va is None else va, va is not None,
+                self._advance(ta, ra, self._correction(correction, N),
+                              self._all_valid if va is None else va, va is not None,
                               out, events, rows, max(1, int(chunk)))
             finally:
                 c[S.HAS_PARITY] = 1                          # step() always fills the parity
         return rows.result(ta, out, self._layout, parity, events)
 
-    def _run_rows(self, t: Any, raw: Any, valid: Any, parity: bool) -> BlockResult:
+    def _run_rows(self, t: Any, raw: Any, valid: Any, parity: bool, correction: Any
+                  ) -> BlockResult:
         """Fallback for blocks of odd shape: step row by row."""
         try:
             rows = list(raw)
@@ -469,8 +493,9 @@ class Monitor:
                 vl = list(valid)
             except TypeError:
                 vl = None
-        answers = [self.step(ts[r], rows[r], vl[r] if vl is not None and r < len(vl) else None)
-                   for r in range(N)]
+        cl = self._correction(correction, N) if N else self._no_correction
+        answers = [self.step(ts[r], rows[r], vl[r] if vl is not None and r < len(vl) else None,
+                             cl[r if cl.shape[0] > 1 else 0]) for r in range(N)]
         return _from_answers(np.asarray(ts[:N], float), answers, self, parity)
 
 
