@@ -33,7 +33,7 @@ def _triads(flight: Flight) -> dict[str, np.ndarray]:
         return {}
     cols: dict[str, dict[str, int]] = {}
     for j, (k, name, imu) in enumerate(zip(aux.kinds, aux.names, aux.imu, strict=True)):
-        if k != "accel" or "." not in name and name not in _AXES:
+        if k != "accel":
             continue
         prefix, _, ax = name.rpartition(".")
         if ax not in _AXES:
