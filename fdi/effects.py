@@ -311,10 +311,10 @@ class Compensator:
                     v = term_correction(t, self._H[i], s=s_hat[:, i],
                                         s_sq=s_hat[:, i] ** 2 - self._var[i])
                 elif a.input == "specific_force":
-                    f = _force_of(force, N, i)
+                    f = _force_of(force, N, self.n, i)
                     v = term_correction(t, self._H[i], force=f)
                 else:
-                    v = term_correction(t, self._H[i], temperature=_temp_of(temperature, N, i))
+                    v = term_correction(t, self._H[i], temperature=_temp_of(temperature, N, self.n, i))
                 bad = ~np.isfinite(v)
                 if bad.any():
                     v = np.where(bad, 0.0, v)
@@ -384,22 +384,22 @@ def _arr(x: Any) -> np.ndarray | None:
         return None
 
 
-def _force_of(force: np.ndarray | None, N: int, i: int) -> np.ndarray:
+def _force_of(force: np.ndarray | None, N: int, n: int, i: int) -> np.ndarray:
     """Sensor i's specific force, shape (N, 3) (NaN when none or malformed)."""
     if force is not None:
         if force.shape == (N, 3):
             return force
         if force.ndim == 3 and force.shape[0] == N and force.shape[2] == 3 \
-                and i < force.shape[1]:
+                and force.shape[1] == n:
             return force[:, i]
     return np.full((N, 3), np.nan)
 
 
-def _temp_of(temperature: np.ndarray | None, N: int, i: int) -> np.ndarray:
+def _temp_of(temperature: np.ndarray | None, N: int, n: int, i: int) -> np.ndarray:
     """Sensor i's temperature, shape (N,) (NaN when none or malformed)."""
     if temperature is not None:
         if temperature.shape == (N,):
             return temperature
-        if temperature.ndim == 2 and temperature.shape[0] == N and i < temperature.shape[1]:
+        if temperature.shape == (N, n):
             return temperature[:, i]
     return np.full(N, np.nan)
