@@ -16,13 +16,13 @@ import dataclasses
 
 import numpy as np
 import pytest
+from _effects_flight import FLIGHT_S, effect_calibration, flight_with_effects, residual_z
 from scipy.stats import poisson
 
 from calibration.diagnose.context import kind_data
 from calibration.diagnose.library import get_candidate
 from calibration.presets import preset
-from calibration.simulate import EffectContext, NoiseModel, _asymmetry, _g_sensitivity, \
-    simulate_session
+from calibration.simulate import NoiseModel, simulate_session
 from fdi.calfile import EffectTerm
 from fdi.effects import COMPENSABLE, Compensator, term_correction
 from fdi.effects_monitor import CompensatedMonitor
@@ -30,8 +30,6 @@ from fdi.monitor import Monitor
 from fdi.units import DPH
 from replay.effect_inputs import flight_effect_inputs
 from replay.flight import simulate_flight
-from replay.flight_data import AuxChannels
-from replay.imu_set import _attitude_gravity
 from thresholds.synthetic import synthetic_calibration
 
 
@@ -182,56 +180,15 @@ def test_no_terms_means_the_plain_monitor_bit_for_bit():
 
 
 # -- end to end ---------------------------------------------------------------------------
-A_ASYM = 5e-3                   # fraction: 0.75 °/s at 300 °/s, 7.5 σ of one sample
-K_G = 300.0                     # °/h per g: 0.083 °/s at 1 g, 0.8 σ of one sample
-FLIGHT_S = 60.0
-
-
-def _flight_with_effects(cal, seed):
-    """A flight whose gyros carry scale asymmetry (sensor 1) and g-sensitivity (sensors 2
-    and 4, opposite signs), added with the calibration simulator's effect functions, and
-    an accelerometer triad measuring the specific force (gravity reaction, 0.05 m/s² noise)."""
-    fl = simulate_flight(cal, FLIGHT_S, seed=seed, truth=cal)
-    g = cal.gyro
-    s = fl.omega_true @ g.H.T
-    f = _attitude_gravity(fl.t, fl.omega_true)
-    ctx = EffectContext(t=fl.t, duration_s=FLIGHT_S, table_rate=1.0, f_along=f @ g.H.T)
-    s2 = s.copy()
-    s2[:, [0]] = _asymmetry(s[:, [0]], A_ASYM, ctx)
-    for i, k in ((1, K_G), (3, -K_G)):
-        s2[:, [i]] = _g_sensitivity(s[:, [i]], k,
-                                    dataclasses.replace(ctx, f_along=ctx.f_along[:, [i]]))
-    raw = fl.raw + (s2 - s) / g.scale_factors
-    fm = f + 0.05 * np.random.default_rng([seed, 99]).standard_normal(f.shape)
-    aux = AuxChannels(("accel",) * 3, ("imu.x", "imu.y", "imu.z"), ("",) * 3, fm,
-                      np.ones(fm.shape, bool))
-    return dataclasses.replace(fl, raw=raw, aux=aux)
-
-
-def _residual_z(cal, y):
-    """Per-sensor parity residual mean over its standard deviation (white noise)."""
-    g = cal.gyro
-    P = np.eye(g.n) - g.H @ np.linalg.pinv(g.H)
-    e = y @ P.T
-    sd = np.sqrt(np.diag(P @ g.noise_covariance @ P.T) / y.shape[0])
-    return e.mean(axis=0) / sd
-
-
 @pytest.fixture(scope="module")
 def effect_cal():
-    cal = synthetic_calibration("cone6", seed=3)
-    terms = (EffectTerm("scale_asymmetry", "gyro", 0, A_ASYM, 1e-5, "fraction", ("rate_sign",)),
-             EffectTerm("g_sensitivity", "gyro", 1, K_G, 1.0, "deg/h per g",
-                        ("specific_force",)),
-             EffectTerm("g_sensitivity", "gyro", 3, -K_G, 1.0, "deg/h per g",
-                        ("specific_force",)))
-    return dataclasses.replace(cal, effects=terms)
+    return effect_calibration()
 
 
 @pytest.mark.parametrize("seed", [1, 2, 3])
 def test_compensation_removes_the_parity_bias_and_the_alarms(effect_cal, seed):
     cal = effect_cal
-    fl = _flight_with_effects(cal, seed)
+    fl = flight_with_effects(cal, seed)
     force, temp, avail = flight_effect_inputs(fl)
     assert avail["specific_force"] == list(range(6)) and temp is None
     g = cal.gyro
@@ -239,7 +196,7 @@ def test_compensation_removes_the_parity_bias_and_the_alarms(effect_cal, seed):
     thr_rate = Monitor(cal).thresholds.false_alarms_per_hour
     allowed = int(poisson.isf(1e-3, thr_rate * FLIGHT_S / 3600.0))
     # without compensation: the premise (a parity bias of many σ, alarms)
-    z_off = _residual_z(cal, y0)
+    z_off = residual_z(cal, y0)
     off = CompensatedMonitor(Monitor(cal), Compensator(cal, enabled=False)).run(
         fl.t, fl.raw, fl.valid, force=force)
     assert np.max(np.abs(z_off)) > 10, z_off
@@ -258,6 +215,6 @@ def test_compensation_removes_the_parity_bias_and_the_alarms(effect_cal, seed):
     z_on = (on.parity @ V).mean(axis=0) / np.sqrt(
         np.diag(V.T @ V @ g.noise_covariance @ V.T @ V) / len(fl.t))
     assert np.all(np.abs(z_on) < 3), z_on
-    np.testing.assert_allclose(z_on, _residual_z(cal, y0 - comp.block(fl.raw, force)),
+    np.testing.assert_allclose(z_on, residual_z(cal, y0 - comp.block(fl.raw, force)),
                                rtol=1e-6, atol=1e-6)
     assert comp.missing == {("g_sensitivity", 1): 0, ("g_sensitivity", 3): 0}
