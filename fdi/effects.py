@@ -314,7 +314,8 @@ class Compensator:
                     f = _force_of(force, N, self.n, i)
                     v = term_correction(t, self._H[i], force=f)
                 else:
-                    v = term_correction(t, self._H[i], temperature=_temp_of(temperature, N, self.n, i))
+                    T = _temp_of(temperature, N, self.n, i)
+                    v = term_correction(t, self._H[i], temperature=T)
                 bad = ~np.isfinite(v)
                 if bad.any():
                     v = np.where(bad, 0.0, v)
@@ -361,6 +362,9 @@ class Compensator:
 
         if not self.applied and not self.skipped:
             return "compensating: nothing (the calibration has no effect terms)"
+        if not self.enabled:
+            return (f"compensating: nothing (--no-effects: {len(self.skipped)} effect term(s) "
+                    "switched off: " + ", ".join(who(s.term) for s in self.skipped) + ")")
         on = ", ".join(f"{who(a.term)} (from {a.reads})" for a in self.applied) or "nothing"
         off = "; ".join(f"{who(s.term)} ({s.reason})" for s in self.skipped)
         return f"compensating: {on}" + (f"; not applied: {off}" if off else "")

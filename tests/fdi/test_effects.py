@@ -284,3 +284,20 @@ def test_fitted_terms_compensate_a_flight(fitted_tetrad, seed):
     assert sum(e.type == "detected" for e in off.events) > allowed
     assert np.all(np.abs(z_on) < 3), z_on
     assert sum(e.type == "detected" for e in on.events) <= allowed
+
+
+def test_step_path_equals_block_path(effect_cal):
+    """CompensatedMonitor.step (live, realtime replay) gives the block path's answers."""
+    cal = effect_cal
+    fl = flight_with_effects(cal, 4, duration_s=8.0)
+    force, _, avail = flight_effect_inputs(fl)
+    blk = CompensatedMonitor(Monitor(cal), Compensator(cal, available=avail)).run(
+        fl.t, fl.raw, fl.valid, force=force)
+    mon = CompensatedMonitor(Monitor(cal), Compensator(cal, available=avail))
+    answers = [mon.step(float(fl.t[k]), fl.raw[k], fl.valid[k], force=force[k])
+               for k in range(len(fl.t))]
+    np.testing.assert_allclose(np.array([a.omega for a in answers]), blk.omega, rtol=1e-12,
+                               atol=1e-15)
+    np.testing.assert_allclose(np.array([a.statistics for a in answers]), blk.statistics,
+                               rtol=1e-9, atol=1e-12)
+    assert mon.sensor_names == tuple(c.name for c in cal.gyro.sensors)     # delegated
