@@ -8,7 +8,8 @@ A flight keeps accelerometers and temperatures beside its monitored sensors
   the sensor has no group or its group no triad, the one triad of the flight, or the mean of
   the triads valid at each sample when there are several;
 - **temperature** (°C): the temperature channel of sensor i's IMU group, else one named
-  after the sensor, else the flight's only temperature channel.
+  after the sensor, else the flight's only temperature channel unless that one belongs to
+  another IMU.
 
 A sample the channel lacks is NaN (the term then contributes 0 there and is counted).
 """
@@ -81,7 +82,8 @@ def flight_effect_inputs(flight: Flight) -> tuple[np.ndarray | None, np.ndarray 
         for i in range(n):
             pick = [j for j in chans if groups[i] and groups[i] in (aux.imu[j], aux.names[j])]
             pick = pick or [j for j in chans if aux.names[j] == flight.sensor_names[i]]
-            pick = pick or (chans if len(chans) == 1 else [])
+            if not pick and len(chans) == 1 and not (groups[i] and aux.imu[chans[0]]):
+                pick = chans                # the one channel, unless it is another IMU's
             if pick:
                 j = pick[0]
                 temperature[:, i] = np.where(aux.valid[:, j], aux.values[:, j], np.nan)

@@ -301,3 +301,36 @@ def test_step_path_equals_block_path(effect_cal):
     np.testing.assert_allclose(np.array([a.statistics for a in answers]), blk.statistics,
                                rtol=1e-9, atol=1e-12)
     assert mon.sensor_names == tuple(c.name for c in cal.gyro.sensors)     # delegated
+
+
+def test_temperature_term_compensated_from_the_flight_temperature(effect_cal):
+    """A temperature coefficient on sensor 5 and a warming temperature channel: compensated,
+    the residual mean is within 3 σ; uncompensated many σ; a NaN stretch is counted."""
+    from replay.flight_data import AuxChannels
+
+    cal = dataclasses.replace(effect_cal, effects=(
+        *effect_cal.effects, EffectTerm("temperature", "gyro", 4, 20.0, 0.1, "deg/h per degC",
+                                        ("temperature",), {"reference_degC": 25.0})))
+    fl = flight_with_effects(cal, 5)
+    t = fl.t - fl.t[0]
+    T = 25.0 + 30.0 * (1 - np.exp(-t / 20.0))
+    Tm = T + 0.05 * np.random.default_rng(8).standard_normal(T.size)
+    Tm[100:150] = np.nan                                    # logger dropout
+    g = cal.gyro
+    raw = fl.raw.copy()
+    raw[:, 4] += 20.0 * DPH * (T - 25.0) / g.scale_factors[4]
+    aux = fl.aux
+    aux = AuxChannels((*aux.kinds, "temperature"), (*aux.names, "board"), (*aux.imu, ""),
+                      np.column_stack([aux.values, Tm]),
+                      np.column_stack([aux.valid, np.isfinite(Tm)]))
+    fl = dataclasses.replace(fl, raw=raw, aux=aux)
+    force, temp, avail = flight_effect_inputs(fl)
+    comp = Compensator(cal, available=avail)
+    assert [a.term.name for a in comp.applied][-1] == "temperature"
+    y0 = fl.raw * g.scale_factors - g.biases
+    c = comp.block(fl.raw, force, temp)
+    assert comp.missing[("temperature", 4)] == 50
+    z_on, z_off = residual_z(cal, y0 - c), residual_z(cal, y0)
+    # the 50 uncompensated samples leave a bias of 50/N of the effect there (≈ 0.3 σ here)
+    assert np.all(np.abs(z_on) < 3), z_on
+    assert np.max(np.abs(z_off)) > 10, z_off
