@@ -334,3 +334,24 @@ def test_temperature_term_compensated_from_the_flight_temperature(effect_cal):
     # the 50 uncompensated samples leave a bias of 50/N of the effect there (≈ 0.3 σ here)
     assert np.all(np.abs(z_on) < 3), z_on
     assert np.max(np.abs(z_off)) > 10, z_off
+
+
+@pytest.mark.slow
+def test_compensated_residual_is_honest_over_seeds(effect_cal):
+    """30 flights: the compensated per-sensor residual mean over its noise σ has an RMS
+    near 1 (the asymmetry's |ŝ| noise bias and the accelerometer noise add no visible bias)
+    and its mean near 0."""
+    cal = effect_cal
+    g = cal.gyro
+    zs = []
+    for seed in range(100, 130):
+        fl = flight_with_effects(cal, seed)
+        force, _, avail = flight_effect_inputs(fl)
+        c = Compensator(cal, available=avail).block(fl.raw, force)
+        zs.append(residual_z(cal, fl.raw * g.scale_factors - g.biases - c))
+    z = np.array(zs)                                       # (30, 6)
+    rms = float(np.sqrt(np.mean(z ** 2)))
+    print(f"RMS of z over 30 seeds x 6 sensors: {rms:.3f}; means {np.round(z.mean(axis=0), 3)}")
+    assert 0.6 < rms < 1.5, rms
+    # per sensor, the mean over 30 seeds is within 3 σ (σ = 1/sqrt(30))
+    assert np.all(np.abs(z.mean(axis=0)) < 3 / np.sqrt(30)), z.mean(axis=0)
