@@ -24,6 +24,8 @@ from _effects_flight import (
     flight_with_effects,
     residual_z,
 )
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from scipy.stats import poisson
 
 from calibration.diagnose.context import kind_data
@@ -355,3 +357,39 @@ def test_compensated_residual_is_honest_over_seeds(effect_cal):
     assert 0.6 < rms < 1.5, rms
     # per sensor, the mean over 30 seeds is within 3 σ (σ = 1/sqrt(30))
     assert np.all(np.abs(z.mean(axis=0)) < 3 / np.sqrt(30)), z.mean(axis=0)
+
+
+def test_accelerometer_temperature_term():
+    """A monitored accelerometer set: its temperature term (mg per °C) is applied, the gyro
+    terms are listed as of the other kind."""
+    from fdi.units import MG
+
+    base = synthetic_calibration("tetrad", seed=1)
+    acc = dataclasses.replace(base.gyro, kind="accel")
+    cal = dataclasses.replace(base, sets={"gyro": base.gyro, "accel": acc}, effects=(
+        EffectTerm("temperature", "accel", 2, 0.4, 0.01, "mg per degC", ("temperature",),
+                   {"reference_degC": 21.0}),
+        _t("scale_asymmetry", 0, "fraction", 1e-3)))
+    comp = Compensator(cal, "accel", available={"temperature": [2]})
+    assert [(a.term.kind, a.term.name) for a in comp.applied] == [("accel", "temperature")]
+    assert comp.skipped[0].reason == "a gyro term; this stream monitors accel sensors"
+    c = comp.block(np.zeros((3, 4)), temperature=np.array([21.0, 31.0, np.nan]))
+    assert c[:, 2].tolist() == [0.0, pytest.approx(0.4 * MG * 10.0, rel=1e-12), 0.0]
+    assert comp.missing == {("temperature", 2): 1}
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.floats(allow_nan=True, allow_infinity=True, width=64), min_size=4,
+                max_size=4),
+       st.lists(st.floats(allow_nan=True, allow_infinity=True), min_size=3, max_size=3),
+       st.floats(allow_nan=True, allow_infinity=True))
+def test_any_numbers_give_a_finite_correction_and_block_equals_one(raw, force, temp):
+    cal = _cal_with(_t("g_sensitivity", 0, "deg/h per g", 100.0),
+                    _t("temperature", 1, "deg/h per degC", 2.0, reference_degC=20.0),
+                    _t("scale_asymmetry", 2, "fraction", 1e-2),
+                    _t("scale_nonlinearity", 2, "fraction", 1e-3, table_rate_dps=10.0))
+    comp = Compensator(cal, available={"specific_force": [0], "temperature": [1]})
+    one = comp.one(raw, force, temp)
+    blk = comp.block(np.array([raw]), np.array([force]), np.array([temp]))[0]
+    assert np.all(np.isfinite(one))
+    np.testing.assert_array_equal(one, blk)
