@@ -9,8 +9,9 @@ import dataclasses
 
 import numpy as np
 
-from calibration.simulate import EffectContext, _asymmetry, _g_sensitivity
+from calibration.simulate import EffectContext, _asymmetry, _g_sensitivity, _nonlinearity
 from fdi.calfile import EffectTerm
+from fdi.units import DPS
 from replay.flight import simulate_flight
 from replay.flight_data import AuxChannels
 from replay.imu_set import _attitude_gravity
@@ -46,10 +47,11 @@ def effect_calibration():
 
 
 def flight_with_effects(cal, seed, *, truth=None, duration_s=FLIGHT_S, effects=None,
-                        max_rate_dps=300.0):
+                        max_rate_dps=300.0, table_rate_dps=1.0):
     """A flight of ``cal``'s sensors (true model ``truth``, default ``cal`` itself) with
     ``effects`` ``{(name, sensor): value}`` (default: the terms of :func:`effect_calibration`)
-    and an accelerometer triad ``accel:imu.x/y/z`` (gravity reaction plus noise)."""
+    and an accelerometer triad ``accel:imu.x/y/z`` (gravity reaction plus noise);
+    ``table_rate_dps``: the ``w`` of ``scale_nonlinearity``."""
     truth = cal if truth is None else truth
     if effects is None:
         effects = {("scale_asymmetry", 0): A_ASYM, ("g_sensitivity", 1): K_G,
@@ -58,9 +60,11 @@ def flight_with_effects(cal, seed, *, truth=None, duration_s=FLIGHT_S, effects=N
     g = truth.gyro
     s = fl.omega_true @ g.H.T
     f = _attitude_gravity(fl.t, fl.omega_true)
-    ctx = EffectContext(t=fl.t, duration_s=duration_s, table_rate=1.0, f_along=f @ g.H.T)
+    ctx = EffectContext(t=fl.t, duration_s=duration_s, table_rate=table_rate_dps * DPS,
+                        f_along=f @ g.H.T)
     s2 = s.copy()
-    for name, fn in (("scale_asymmetry", _asymmetry), ("g_sensitivity", _g_sensitivity)):
+    for name, fn in (("scale_asymmetry", _asymmetry), ("scale_nonlinearity", _nonlinearity),
+                     ("g_sensitivity", _g_sensitivity)):
         for (nm, i), v in effects.items():                   # the simulator's order
             if nm == name:
                 s2[:, [i]] = fn(s2[:, [i]], v,

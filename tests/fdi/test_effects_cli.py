@@ -104,3 +104,71 @@ def test_replay_compensates_the_rate_terms(files, capsys):
     for r in (off, plain):
         r.pop("timing_s", None)
     assert off == plain
+
+
+def test_calibrate_effects_then_monitor_file(tmp_path, capsys):
+    """The whole chain through files: ``simulate calibration`` with scale_nonlinearity and
+    temperature on gyro 2, ``calibrate --effects``, a 300 s flight of the true sensors with
+    the same effects and a temperature channel, ``monitor-file``. The terms round-trip with
+    their parameters (table rate, reference temperature) and are applied; the residual mean
+    is within 3 σ with them (σ: flight noise and the calibration's reported uncertainties)
+    and beyond 3 σ without."""
+    import numpy as np
+
+    from calibration.truth import load_truth
+    from fdi.effects import Compensator
+    from fdi.parity import parity_matrix
+    from fdi.units import DPH, DPS
+    from replay.effect_inputs import flight_effect_inputs
+    from replay.flight import load_flight_dir
+    from replay.flight_data import AuxChannels
+
+    s = tmp_path / "S"
+    _run(capsys, "simulate", "calibration", "--preset", "tetrad-paper", "--effect",
+         "scale_nonlinearity=3e-4,temperature=2", "--effect-sensors", "2", "--out", s,
+         "--seed", "3")
+    _run(capsys, "calibrate", s, "--effects", "scale_nonlinearity,temperature", "--out",
+         tmp_path / "cal.json")
+    cal = load_calibration(tmp_path / "cal.json")
+    nl = next(t for t in cal.effects if t.name == "scale_nonlinearity" and t.sensor == 1)
+    tc = next(t for t in cal.effects if t.name == "temperature" and t.sensor == 1)
+    assert nl.params["table_rate_dps"] == 10.0 and 20 < tc.params["reference_degC"] < 35
+    truth, _, _ = load_truth(s / "truth.json")
+    fl = flight_with_effects(cal, 1, truth=truth, duration_s=300.0, max_rate_dps=30.0,
+                             effects={("scale_nonlinearity", 1): 3e-4}, table_rate_dps=10.0)
+    T = 20.0 + 20.0 * (1 - np.exp(-(fl.t - fl.t[0]) / 100.0))    # the simulator's T0 = 20
+    raw = fl.raw.copy()
+    raw[:, 1] += 2.0 * DPH * (T - 20.0) / truth.gyro.scale_factors[1]
+    a = fl.aux
+    fl = dataclasses.replace(fl, raw=raw, aux=AuxChannels(
+        (*a.kinds, "temperature"), (*a.names, "board"), (*a.imu, ""),
+        np.column_stack([a.values, T]), np.column_stack([a.valid, np.ones(T.size, bool)])))
+    save_flight_dir(fl, tmp_path / "F")
+    out = _run(capsys, "monitor-file", tmp_path / "F", "--cal", tmp_path / "cal.json",
+               "--report", tmp_path / "r.json")
+    assert "scale_nonlinearity on g2 (from rate squared), temperature on g2 (from " \
+           "temperature)" in out.splitlines()[0]
+    assert "not applied" not in out.splitlines()[0]
+    rep = json.loads((tmp_path / "r.json").read_text())
+    assert len(rep["effects"]["applied"]) == 8
+    # the residual mean, from the folder as monitor-file read it
+    fl = load_flight_dir(tmp_path / "F")
+    force, temp, avail = flight_effect_inputs(fl)
+    comp = Compensator(cal, available=avail)
+    g = cal.gyro
+    s_hat = fl.raw * g.scale_factors - g.biases
+    w = fl.omega_true.mean(axis=0)
+    var = np.array([c.bias_sd ** 2 + w @ c.input_error_cov @ w for c in g.sensors])
+    for ap in comp.applied:
+        i, t = ap.term.sensor, ap.term
+        zbar = (np.mean(s_hat[:, i] ** 2 - g.noise_covariance[i, i]) / (10.0 * DPS)
+                if t.name == "scale_nonlinearity"
+                else DPH * np.mean(temp[:, i] - t.params["reference_degC"]))
+        var[i] += (t.estimate_sd * zbar) ** 2
+    V = parity_matrix(g.H)
+    P = V.T @ V
+    sd = np.sqrt(np.diag(P @ (np.diag(var) + g.noise_covariance / len(fl.t)) @ P.T))
+    z_on = ((s_hat - comp.block(fl.raw, force, temp)) @ P.T).mean(axis=0) / sd
+    z_off = (s_hat @ P.T).mean(axis=0) / sd
+    assert np.all(np.abs(z_on) < 3), z_on
+    assert np.max(np.abs(z_off)) > 5, z_off
