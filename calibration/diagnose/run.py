@@ -30,8 +30,9 @@ __all__ = ["BLAS_THREADS", "DIAGNOSIS_SCHEMA", "MONITOR_NOTE", "Diagnosis", "ade
            "diagnose"]
 
 DIAGNOSIS_SCHEMA = "rimu.diagnosis/1"
-MONITOR_NOTE = ("the runtime monitor does not compensate effect terms yet: a calibration "
-                "with effects is used by the monitor without them")
+MONITOR_NOTE = ("the runtime monitor compensates the effect terms whose inputs it has at "
+                "run time (rate sign, rate squared, specific force, temperature) and lists "
+                "the others with the reason (docs/effects-runtime.md)")
 
 
 @dataclass(frozen=True)
