@@ -156,7 +156,7 @@ def _effects_json(sel: Selection, new: Calibration) -> list[dict[str, Any]]:
 
 
 def diagnose(session: Session, cal: Calibration, *, alpha: float = 0.01,
-             truth: tuple[Calibration, Mapping[str, float]] | None = None,
+             truth: tuple[Any, ...] | None = None,
              cal_path: str = "<calibration>",
              effects: Iterable[str] | None = None) -> Diagnosis:
     """Diagnose a session under a calibration (see the module docstring).
@@ -168,7 +168,7 @@ def diagnose(session: Session, cal: Calibration, *, alpha: float = 0.01,
         A calibration of this session (``rimu calibrate``).
     alpha : float
         Family-wise level of the tests (0 < α < 1).
-    truth : (Calibration, effects), optional
+    truth : (Calibration, effects) or (Calibration, effects, effect_sensors), optional
         From :func:`calibration.truth.load_truth`: adds parameter errors in σ.
     cal_path : str
         For error messages.
@@ -189,7 +189,7 @@ def diagnose(session: Session, cal: Calibration, *, alpha: float = 0.01,
 
 
 def _diagnose(session: Session, cal: Calibration, alpha: float,
-              truth: tuple[Calibration, Mapping[str, float]] | None,
+              truth: tuple[Any, ...] | None,
               effects: Iterable[str] | None, cal_path: str) -> Diagnosis:
     datas = model_effects(kind_data(session, cal), cal.effects)
     check_same_session(datas, cal, session.source, cal_path)
