@@ -269,9 +269,13 @@ def load_channel_map(path: str | Path) -> ChannelMap:
         time_tolerance_s=tol, max_counter_delta=r.integer("max_counter_delta", 3, lo=1),
         source=str(p))
     names = [sc.name for sc in cmap.sensors]
-    aux = tuple(_aux_channel(e, k, j1939, names)
-                for k, e in enumerate(r.tables("auxiliary", []), start=1))
-    cmap = replace(cmap, auxiliary=aux)
+    aux: list[AuxChannel] = []
+    for k, e in enumerate(r.tables("auxiliary", []), start=1):
+        a = _aux_channel(e, k, j1939, names)
+        if a.name in {b.name for b in aux}:
+            raise e.error("name", f"auxiliary name {a.name!r} used twice")
+        aux.append(a)
+    cmap = replace(cmap, auxiliary=tuple(aux))
     _check_assignment(cmap, r)
     r.finish()
     return cmap
