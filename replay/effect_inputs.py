@@ -111,10 +111,11 @@ def map_available(cmap: ChannelMap) -> dict[str, list[int]]:
 
 def map_reasons(cmap: ChannelMap) -> dict[str, str]:
     """What a term lacking an input is told, per input: which map, and what it lacks."""
-    return {"specific_force": f"the channel map {cmap.source} names no specific-force "
-                              "(accelerometer) channel for this sensor",
-            "temperature": f"the channel map {cmap.source} names no temperature channel for "
-                           "this sensor"}
+    which = ("the default channel map (give --map with [[auxiliary]] channels)"
+             if cmap.source.startswith("<") else f"the channel map {cmap.source}")
+    return {"specific_force": f"{which} names no specific-force (accelerometer) channel "
+                              "for this sensor",
+            "temperature": f"{which} names no temperature channel for this sensor"}
 
 
 def _columns(cmap: ChannelMap) -> dict[int, list[int]]:
