@@ -22,7 +22,6 @@ from replay.channel_map import (
     load_channel_map,
     write_channel_map,
 )
-from replay.crc import crc8_j1850_block
 from replay.effect_inputs import map_available, map_effect_inputs
 from replay.frames import encode_imu_frames, load_dbc
 
@@ -179,8 +178,8 @@ T0 = 1.7e9
 
 def _frames(rng, *, temp_times, temp_values, acc_times, acc_values):
     """Four gyro sensors of the shipped DBC every 10 ms (sample k at T0 + k/FS + i·0.2 ms;
-    sample 40 of sensor 3 and sample 60 of every sensor lost), temperature frames (RIMU_TEMP_01, degC) and three
-    accelerometer axes (RIMU_ACCEL_01..03, m/s², one frame per axis) at the given times."""
+    sample 40 of sensor 3 and sample 60 of every sensor lost), temperature frames
+    (RIMU_TEMP_01, degC) and three accelerometer axes (RIMU_ACCEL_01..03, m/s², one frame per axis) at the given times."""
     db = load_dbc()
     msgs = []
     for i in range(4):
@@ -209,12 +208,13 @@ def _frames(rng, *, temp_times, temp_values, acc_times, acc_values):
 
 
 def _aux_map(timeout_temp=0.25):
-    aux = (AuxChannel("board", "temperature", "RIMU_TEMP_01", ("RAW",), "degC",
-                      sensors=("g1", "g2"), timeout_s=timeout_temp, counter_signal="COUNTER",
-                      crc_signal="CRC", status_signal="STATUS"),) + tuple(
-        AuxChannel(f"acc{ax}", "specific_force", f"RIMU_ACCEL_{ax + 1:02d}", ("RAW",), "m/s^2",
-                   axes=np.eye(3)[[ax]], timeout_s=0.05, counter_signal="COUNTER",
-                   crc_signal="CRC", status_signal="STATUS") for ax in range(3))
+    checks = {"counter_signal": "COUNTER", "crc_signal": "CRC", "status_signal": "STATUS"}
+    temp = AuxChannel("board", "temperature", "RIMU_TEMP_01", ("RAW",), "degC",
+                      sensors=("g1", "g2"), timeout_s=timeout_temp, **checks)
+    acc = [AuxChannel(f"acc{ax}", "specific_force", f"RIMU_ACCEL_{ax + 1:02d}", ("RAW",),
+                      "m/s^2", axes=np.eye(3)[[ax]], timeout_s=0.05, **checks)
+           for ax in range(3)]
+    aux = (temp, *acc)
     return default_channel_map(4, names=("g1", "g2", "g3", "g4"), auxiliary=aux)
 
 
@@ -234,7 +234,7 @@ def scene():
     temp_t = np.array([0.205, 0.305, 0.405, 0.505, 0.605])       # then silent
     temp_v = np.array([20.0, 21.0, 22.0, 23.5, 24.0])
     acc_t = np.concatenate([np.arange(0, 0.5, 0.01), np.arange(0.8, N / FS, 0.01)]) + 0.0013
-    acc_v = rng.normal(0, 3, (acc_t.size, 3)) + [0, 0, -9.8]
+    acc_v = rng.normal(0, 3, (acc_t.size, 3)) + np.array([0.0, 0.0, -9.8])
     fr = _frames(rng, temp_times=temp_t, temp_values=temp_v, acc_times=acc_t, acc_values=acc_v)
     return fr, temp_t, temp_v, acc_t, acc_v
 
