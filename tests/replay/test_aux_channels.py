@@ -179,7 +179,8 @@ T0 = 1.7e9
 def _frames(rng, *, temp_times, temp_values, acc_times, acc_values):
     """Four gyro sensors of the shipped DBC every 10 ms (sample k at T0 + k/FS + i·0.2 ms;
     sample 40 of sensor 3 and sample 60 of every sensor lost), temperature frames
-    (RIMU_TEMP_01, degC) and three accelerometer axes (RIMU_ACCEL_01..03, m/s², one frame per axis) at the given times."""
+    (RIMU_TEMP_01, degC) and three accelerometer axes (RIMU_ACCEL_01..03, m/s², one frame
+    per axis) at the given times."""
     db = load_dbc()
     msgs = []
     for i in range(4):
