@@ -23,7 +23,9 @@ def add_monitor_options(p: argparse.ArgumentParser) -> None:
                    help="DBC file (default: the map's, else rimu's shipped rimu_imu.dbc)")
     p.add_argument("--map", metavar="FILE", dest="channel_map",
                    help="channel map TOML (rimu.channel_map/1): which message/signal is "
-                        "sensor i (default: the shipped DBC's RIMU_GYRO_ii messages)")
+                        "sensor i, and optional [[auxiliary]] temperature and accelerometer "
+                        "channels for the effect terms (default: the shipped DBC's "
+                        "RIMU_GYRO_ii messages, no auxiliary channel)")
     p.add_argument("--thresholds", metavar="FILE",
                    help="a rimu.thresholds/1 or rimu.tuning/1 (rimu tune) file")
     p.add_argument("--false-alarms-per-hour", type=positive_float(1e9), metavar="X",
