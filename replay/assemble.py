@@ -471,7 +471,11 @@ def _counter_check(slot: Slot, st: _SlotState, t: np.ndarray, le: np.ndarray, be
 
 def _decode_slot(slot: Slot, frames: RawFrames, idx: np.ndarray, j1939: bool,
                  max_counter_delta: int, acct: FrameAccounting,
-                 st: _SlotState | None = None, fs: float = 100.0) -> _SlotFrames:
+                 st: _SlotState | None = None, fs: float = 100.0,
+                 keep_unavailable: bool = False) -> _SlotFrames:
+    """Checks and decoding of one slot's frames. ``keep_unavailable``: J1939 frames whose
+    every value is 'not available' are counted as rejected but still returned (all values
+    NaN, ``valid`` False), so that an auxiliary hold ends there."""
     st = st if st is not None else _SlotState()
     lay = slot.layout
     ok = frames.lengths[idx] == lay.length
@@ -516,8 +520,9 @@ def _decode_slot(slot: Slot, frames: RawFrames, idx: np.ndarray, j1939: bool,
         acct.reject("j1939_not_available", int(np.count_nonzero(none)))
         keep = ~none
         acct.values_not_available += int(np.count_nonzero(~valid[keep]))
-        idx, t, le, be = idx[keep], t[keep], le[keep], be[keep]
-        values, valid = values[keep], valid[keep]
+        if not keep_unavailable:
+            idx, t, le, be = idx[keep], t[keep], le[keep], be[keep]
+            values, valid = values[keep], valid[keep]
     sc = None
     if slot.sample_counter is not None:
         sc = lay.signals[slot.sample_counter].raw(le, be)
@@ -777,8 +782,8 @@ class BlockDecoder:
             # any forward step of a rolling counter is accepted (auxiliary rates are not
             # the sample rate); a repeat is rejected
             p = _decode_slot(slot, frames, np.flatnonzero(sel), self.cmap.j1939, 1 << 30,
-                             sub, self._aux_state[k], self.fs)
-            used += p.idx.size
+                             sub, self._aux_state[k], self.fs, keep_unavailable=True)
+            used += int(np.count_nonzero(p.valid.any(axis=1)))    # the rest: rejected
             for j, col in enumerate(slot.sensors):
                 self.hold.add(col, p.t, p.values[:, j])
         other = int(np.count_nonzero(is_aux & ~claimed))

@@ -347,3 +347,57 @@ def test_specific_force_from_skewed_axes_and_a_missing_axis():
 
 def test_default_timeouts():
     assert AUX_TIMEOUT_S == {"temperature": 5.0, "specific_force": 0.1}
+
+
+def test_j1939_example_map_decodes_each_imus_acc_and_temperature():
+    """The shipped J1939 example: ARI (gyros), ACC and IMUT from three source addresses;
+    each IMU's gyros get that IMU's specific force and temperature; a 'not available'
+    temperature is held as no value (not the previous one)."""
+    cmap = load_channel_map(EXAMPLE_J1939_AUX_MAP)
+    db = load_dbc(cmap.dbc)
+    ari, acc, imut = (db.get_message_by_name(m) for m in ("ARI", "ACC", "IMUT"))
+    rng = np.random.default_rng(5)
+    n_s = 50
+    force = rng.normal(0, 2, (n_s, 3, 3)) + np.array([0.0, 0.0, -9.8])
+    temp = {0: 30.0, 1: 35.5, 2: 41.25}
+    msgs = []
+    for k in range(n_s):
+        t = T0 + k / FS
+        for i, sa in enumerate((0x80, 0x81, 0x82)):
+            d = ari.encode({"PitchRate": 1.0, "RollRate": 2.0, "YawRate": 3.0,
+                            "PitchRateFigureOfMerit": 0, "RollRateFigureOfMerit": 0,
+                            "YawRateFigureOfMerit": 0, "RateMeasurementLatency": 1},
+                           strict=False)
+            msgs.append(Message(timestamp=t + 3e-4 * i, arbitration_id=(ari.frame_id & ~0xFF)
+                                | sa, is_extended_id=True, data=d))
+            lon, lat, ver = force[k, i]
+            d = acc.encode({"LongitudinalAcceleration": lon, "LateralAcceleration": lat,
+                            "VerticalAcceleration": ver,
+                            "LateralAccelerationFigureOfMerit": 0,
+                            "LongitudinalAccelerationFigureOfMerit": 0,
+                            "VerticalAccelerationFigureOfMerit": 0}, strict=False)
+            msgs.append(Message(timestamp=t + 3e-4 * i + 1e-4,
+                                arbitration_id=(acc.frame_id & ~0xFF) | sa,
+                                is_extended_id=True, data=d))
+            if k in (10, 30):
+                raw = 0xFFFF if (k == 30 and i == 1) else round((temp[i] + 273) / 0.03125)
+                d = imut.encode({"SensorTemperature": raw}, scaling=False, strict=False)
+                msgs.append(Message(timestamp=t + 3e-4 * i + 2e-4,
+                                    arbitration_id=(imut.frame_id & ~0xFF) | sa,
+                                    is_extended_id=True, data=d))
+    acct = FrameAccounting()
+    s = decode_frames(RawFrames.from_messages(msgs), db, cmap, acct, sample_rate_hz=FS)
+    assert s.t.size == n_s and acct.balanced()
+    assert acct.rejected == {"j1939_not_available": 1}        # IMU 2's second temperature
+    f, T = map_effect_inputs(cmap, s.aux)
+    for i in range(3):
+        rows = slice(3 * i, 3 * i + 3)
+        # the sample's ACC frame leaves after its ARI frame: sample k holds sample k-1's
+        np.testing.assert_allclose(f[1:, rows], np.repeat(force[:-1, i][:, None], 3, axis=1),
+                                   atol=0.006)                       # 0.01 m/s² resolution
+        assert np.isnan(f[0]).all()
+        assert np.isnan(T[:11, rows]).all()
+        np.testing.assert_allclose(T[11:31, rows], temp[i])
+    np.testing.assert_allclose(T[31:, 0:3], temp[0])
+    assert np.isnan(T[31:, 3:6]).all()                               # 'not available'
+    np.testing.assert_allclose(T[31:, 6:9], temp[2])
