@@ -227,3 +227,47 @@ def test_live_monitor_and_realtime_replay_get_the_same_inputs(cal, tmp_path):
     bare = CompensatedMonitor(Monitor(cal), Compensator(cal)).run(flight.t, flight.raw,
                                                                  flight.valid)
     assert np.max(np.abs(bare.omega - blk.omega)) > 1e-4
+
+
+@pytest.mark.slow
+def test_monitor_command_on_a_virtual_bus_with_an_aux_map(cal, tmp_path, capsys):
+    """``rimu monitor --map`` with auxiliary channels on a live (virtual) bus: the terms are
+    applied and the report carries the auxiliary frames (about 8 s: the log is played at its
+    recorded pace)."""
+    import threading
+    import time
+    import uuid
+
+    import can
+
+    from rimu.cli import main
+
+    fl = _flight(cal, 6)
+    k = slice(0, 100)
+    fl = dataclasses.replace(fl, t=fl.t[k], raw=fl.raw[k], valid=fl.valid[k],
+                             omega_true=fl.omega_true[k], aux=fl.aux.slice(k))
+    log = tmp_path / "live.blf"
+    write_channel_map(_maps(cal, write_flight_log(fl, log))[0], tmp_path / "map.toml")
+    cal.save(tmp_path / "cal.json")
+    channel = f"rimu-aux-{uuid.uuid4().hex}"
+
+    def play():
+        time.sleep(2.0)                                    # the monitor opens its bus first
+        with can.Bus(interface="virtual", channel=channel, ignore_config=True,
+                     preserve_timestamps=True) as tx, can.LogReader(str(log)) as r:
+            for m in can.MessageSync(r, timestamps=True):
+                tx.send(m)
+
+    th = threading.Thread(target=play, daemon=True)
+    th.start()
+    rc = main(["monitor", "--interface", "virtual", "--channel", channel, "--cal",
+               str(tmp_path / "cal.json"), "--map", str(tmp_path / "map.toml"),
+               "--idle-timeout", "4", "--report", str(tmp_path / "r.json")])
+    th.join(5)
+    assert rc == 0
+    assert "temperature on y2 (from temperature)" in capsys.readouterr().out.splitlines()[0]
+    rep = json.loads((tmp_path / "r.json").read_text())
+    assert rep["frames"]["balanced"] and rep["frames"]["rejected"] == {}
+    assert rep["auxiliary"]["frames"]["used"] == 3 * 100 + 10
+    assert [a["name"] for a in rep["effects"]["applied"]] == [
+        "scale_asymmetry", "g_sensitivity", "g_sensitivity", "temperature"]
