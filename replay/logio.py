@@ -138,6 +138,9 @@ def _aux_to_write(flight: Any, temperature_every: int) -> list[tuple[int, str, i
                 counter_signal="COUNTER", crc_signal="CRC", status_signal="STATUS")))
         elif kind == "temperature":
             n_temp += 1
+            if n_temp > 12:
+                raise ConfigError("the shipped DBC carries temperatures 1..12 "
+                                  "(RIMU_TEMP_01..12), the flight has more")
             if not members and name in names:
                 members = (name,)
             msg = f"RIMU_TEMP_{n_temp:02d}"

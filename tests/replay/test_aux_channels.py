@@ -401,3 +401,30 @@ def test_j1939_example_map_decodes_each_imus_acc_and_temperature():
     np.testing.assert_allclose(T[31:, 0:3], temp[0])
     assert np.isnan(T[31:, 3:6]).all()                               # 'not available'
     np.testing.assert_allclose(T[31:, 6:9], temp[2])
+
+
+def test_imu_set_log_gives_the_folder_inputs_one_sample_late(tmp_path):
+    """A simulated set of three IMUs (accelerometer triad and temperature per IMU) written
+    as a CAN log: the map ``write_flight_log`` returns gives each gyro its own IMU's specific
+    force and temperature, equal (float32) to what the flight folder gives, one sample late
+    (the auxiliary frames leave after their sample's first frame)."""
+    from replay.effect_inputs import flight_effect_inputs
+    from replay.imu_set import ImuEffects, ImuSetSpec, simulate_imu_set
+    from replay.logio import read_frames, write_flight_log
+
+    fl = simulate_imu_set(ImuSetSpec(imus=3, duration_s=4.0, seed=2,
+                                     effects=ImuEffects(temperature_coeff=1e-4)))
+    assert fl.aux.kinds.count("temperature") == 3
+    log = tmp_path / "set.log"
+    aux = write_flight_log(fl, log, temperature_every=1)
+    assert [a.sensors for a in aux[:3]] == [("imu1.x", "imu1.y", "imu1.z")] * 3
+    cmap = default_channel_map(fl.n, names=fl.sensor_names, auxiliary=aux)
+    frames, acct = read_frames(log, progress=False)
+    s = decode_frames(frames, load_dbc(), cmap, acct, sample_rate_hz=fl.sample_rate_hz)
+    assert acct.balanced() and acct.n_rejected == 0 and s.t.size == fl.t.size
+    f_can, T_can = map_effect_inputs(cmap, s.aux)
+    f_dir, T_dir, avail = flight_effect_inputs(fl)
+    assert map_available(cmap) == avail
+    np.testing.assert_allclose(f_can[1:], f_dir[:-1], rtol=1e-6, atol=1e-5)
+    np.testing.assert_allclose(T_can[1:], T_dir[:-1], rtol=1e-6, atol=1e-4)
+    assert np.isnan(f_can[0]).all() and np.isnan(T_can[0]).all()
