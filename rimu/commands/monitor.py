@@ -13,6 +13,7 @@ from rimu.commands.replay import (
     aux_record,
     check_monitor_paths,
     effects_extra,
+    format_aux,
     make_monitor,
     warn_silent_aux,
     write_report,
@@ -91,5 +92,7 @@ def run(args: argparse.Namespace) -> int:
         warn_silent_aux(extra["auxiliary"], f"{args.interface}:{args.channel}")
     report = acc.build(header, cal, frames=frames, extra=extra)
     print(format_report(report, max_events=0))
+    if cmap.auxiliary:
+        print(format_aux(extra["auxiliary"]))
     write_report(report, args.report)
     return 0

@@ -132,6 +132,15 @@ def aux_record(cmap: Any, decoder: Any) -> dict[str, Any]:
     return {"channels": chans, "frames": {k: v for k, v in st.items() if k != "received"}}
 
 
+def format_aux(rec: dict[str, Any]) -> str:
+    """One line on the auxiliary channels of a report."""
+    fr = rec["frames"]
+    chans = ", ".join(f"{c['name']} {sum(c['values_received'])}" for c in rec["channels"])
+    rej = ", ".join(f"{v} {k}" for k, v in sorted(fr["rejected"].items())) or "none"
+    return (f"auxiliary channels (values received): {chans}; frames used {fr['used']}, "
+            f"rejected {rej}, lost {fr['lost_frames']}")
+
+
 def warn_silent_aux(rec: dict[str, Any], source: str) -> None:
     """Warn about auxiliary channels that never delivered a value."""
     silent = [ch["name"] for ch in rec["channels"] if not any(ch["values_received"])]
@@ -275,6 +284,8 @@ def run(args: argparse.Namespace) -> int:
             extra["injected"] = str(args.inject)
         report = acc.build(header, cal, frames=frames, extra=extra)
         print(format_report(report, max_events=args.max_events))
+        if cmap.auxiliary:
+            print(format_aux(extra["auxiliary"]))
         if recorder is not None:
             tim = recorder.close()
             timing["rerun"] = tim["log_s"] + tim["flush_s"]

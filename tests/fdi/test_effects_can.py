@@ -138,14 +138,18 @@ def test_replay_command_with_an_aux_map(cal, tmp_path, capsys):
     assert main(["replay", str(log), "--cal", str(tmp_path / "cal.json"), "--map",
                  str(tmp_path / "map.toml"), "--no-progress", "--report",
                  str(tmp_path / "on.json")]) == 0
-    first = capsys.readouterr().out.splitlines()[0]
+    lines = capsys.readouterr().out.splitlines()
+    first = lines[0]
+    n = len(fl.t)
+    assert (f"auxiliary channels (values received): accel:imu.x {n}, accel:imu.y {n}, "
+            f"accel:imu.z {n}, temperature:board {n // 10}; frames used {3 * n + n // 10}, "
+            "rejected none, lost 0") in lines
     assert first == ("compensating: scale_asymmetry on x1 (from rate sign), g_sensitivity on "
                      "y1 (from specific force), g_sensitivity on x2 (from specific force), "
                      "temperature on y2 (from temperature)"), first
     rep = json.loads((tmp_path / "on.json").read_text())
     assert sum(e["type"] == "detected" for e in rep["events"]) <= _allowed(cal)
     frames = rep["auxiliary"]["frames"]
-    n = len(fl.t)
     assert frames["used"] == frames["read"] == 3 * n + n // 10 and frames["lost_frames"] == 0
     assert [c["values_received"] for c in rep["auxiliary"]["channels"]] == [[n]] * 3 + [[n // 10]]
     assert rep["frames"]["balanced"] and rep["frames"]["used"] == rep["frames"]["read"]
