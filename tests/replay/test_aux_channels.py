@@ -8,6 +8,8 @@ import dataclasses
 import numpy as np
 import pytest
 from can import Message
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from fdi.errors import ConfigError, FileFormatError
 from replay.accounting import FrameAccounting
@@ -428,3 +430,36 @@ def test_imu_set_log_gives_the_folder_inputs_one_sample_late(tmp_path):
     np.testing.assert_allclose(f_can[1:], f_dir[:-1], rtol=1e-6, atol=1e-5)
     np.testing.assert_allclose(T_can[1:], T_dir[:-1], rtol=1e-6, atol=1e-4)
     assert np.isnan(f_can[0]).all() and np.isnan(T_can[0]).all()
+
+
+@settings(max_examples=60, deadline=None)
+@given(data=st.data())
+def test_hold_with_trimming_equals_brute_force(data):
+    """Any aux times and values, any increasing sample times, queried block by block with
+    the history trimmed after each block (as the decoder does): the brute-force hold."""
+    from replay.assemble import AuxHold
+
+    timeout = data.draw(st.floats(0.01, 2.0), label="timeout")
+    cmap = default_channel_map(1, auxiliary=(AuxChannel(
+        "t", "temperature", "RIMU_TEMP_01", ("RAW",), "degC", timeout_s=timeout),))
+    gaps = data.draw(st.lists(st.floats(0.0, 1.5), min_size=0, max_size=40), label="aux")
+    at = np.cumsum(gaps)
+    av = np.array(data.draw(st.lists(st.floats(-50, 150) | st.just(float("nan")),
+                                     min_size=at.size, max_size=at.size), label="values"))
+    sg = data.draw(st.lists(st.floats(0.0, 1.0), min_size=1, max_size=60), label="samples")
+    ts = np.cumsum(sg) - 0.5
+    hold = AuxHold(cmap)
+    cuts = sorted(data.draw(st.lists(st.integers(0, ts.size), max_size=5), label="cuts"))
+    got, a0 = [], 0
+    for lo, hi in zip([0, *cuts], [*cuts, ts.size], strict=True):
+        a1 = int(np.searchsorted(at, ts[hi - 1], side="right")) if hi > lo else a0
+        a1 = max(a1, a0)
+        hold.add(0, at[a0:a1], av[a0:a1])             # what has arrived by then
+        a0 = a1
+        if hi > lo:
+            got.append(hold.at(ts[lo:hi])[:, 0])
+            hold.trim(float(ts[hi - 1]))
+    got = np.concatenate(got)
+    exp = _held(at, av, ts, timeout)
+    np.testing.assert_array_equal(np.isnan(got), np.isnan(exp))
+    np.testing.assert_allclose(got[~np.isnan(got)], exp[~np.isnan(exp)])
