@@ -158,7 +158,8 @@ class AuxChannel:
     sensors : tuple of str or None
         Names of the monitored sensors it applies to (None: all).
     timeout_s : float
-        A held value older than this is stale (NaN).
+        A held value older than this is stale (NaN); default by quantity
+        (:data:`AUX_TIMEOUT_S`).
     source_address : int or None
     channel : int or str or None
     counter_signal, crc_signal, status_signal : str or None
@@ -171,12 +172,26 @@ class AuxChannel:
     unit: str
     axes: np.ndarray | None = None
     sensors: tuple[str, ...] | None = None
-    timeout_s: float = 5.0
+    timeout_s: float | None = None
     source_address: int | None = None
     channel: int | str | None = None
     counter_signal: str | None = None
     crc_signal: str | None = None
     status_signal: str | None = None
+
+    def __post_init__(self) -> None:
+        if self.quantity not in AUX_UNITS:
+            raise ConfigError(f"auxiliary channel {self.name}: quantity {self.quantity!r} is "
+                              f"not one of {AUX_QUANTITIES}")
+        if self.unit not in AUX_UNITS[self.quantity]:
+            raise ConfigError(f"auxiliary channel {self.name}: unit {self.unit!r} is not one "
+                              f"of {tuple(AUX_UNITS[self.quantity])}")
+        if self.quantity == "specific_force" and (
+                self.axes is None or np.shape(self.axes) != (len(self.signals), 3)):
+            raise ConfigError(f"auxiliary channel {self.name}: a specific force needs one "
+                              "body axis per signal")
+        if self.timeout_s is None:
+            object.__setattr__(self, "timeout_s", AUX_TIMEOUT_S[self.quantity])
 
     @property
     def to_si(self) -> tuple[float, float]:

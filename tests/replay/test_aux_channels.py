@@ -347,8 +347,15 @@ def test_specific_force_from_skewed_axes_and_a_missing_axis():
     assert np.isnan(force[2]).all()
 
 
-def test_default_timeouts():
+def test_default_timeouts_and_programmatic_checks():
     assert AUX_TIMEOUT_S == {"temperature": 5.0, "specific_force": 0.1}
+    assert AuxChannel("t", "temperature", "M", ("S",), "K").timeout_s == 5.0
+    assert AuxChannel("f", "specific_force", "M", ("S",), "g",
+                      axes=np.eye(3)[:1]).timeout_s == 0.1
+    with pytest.raises(ConfigError, match="unit 'g' is not one of"):
+        AuxChannel("t", "temperature", "M", ("S",), "g")
+    with pytest.raises(ConfigError, match="one body axis per signal"):
+        AuxChannel("f", "specific_force", "M", ("X", "Y"), "g", axes=np.eye(3)[:1])
 
 
 def test_j1939_example_map_decodes_each_imus_acc_and_temperature():
