@@ -200,7 +200,8 @@ class SkippedTerm:
 
 
 def _why_not(term: EffectTerm, kind: str, n: int,
-             available: Mapping[str, Collection[int]]) -> str | None:
+             available: Mapping[str, Collection[int]],
+             lacking: Mapping[str, str] | None = None) -> str | None:
     """None when ``term`` can be applied, else the reason."""
     if term.kind != kind:
         return f"a {term.kind} term; this stream monitors {kind} sensors"
@@ -227,10 +228,12 @@ def _why_not(term: EffectTerm, kind: str, n: int,
     if term.name == "temperature" and _finite_param(term.params, "reference_degC") is None:
         return "the term does not record its reference temperature (params.reference_degC)"
     need = COMPENSABLE[term.name][0]
+    lacking = lacking or {}
     if need == "specific_force" and term.sensor not in available.get(need, ()):
-        return "needs specific force: no accelerometers in the stream"
+        return "needs specific force: " + lacking.get(need, "no accelerometers in the stream")
     if need == "temperature" and term.sensor not in available.get(need, ()):
-        return "needs temperature: the stream carries none for this sensor"
+        return "needs temperature: " + lacking.get(
+            need, "the stream carries none for this sensor")
     return None
 
 
@@ -247,6 +250,10 @@ class Compensator:
         time (the rate is always there). Default: neither.
     enabled : bool
         False: no term applied (``--no-effects``); every term listed as switched off.
+    lacking : mapping of input name to str, optional
+        What a term whose input is not available is told lacks it (default: "no
+        accelerometers in the stream", "the stream carries none for this sensor"); e.g. the
+        channel map that names no such channel.
 
     Attributes
     ----------
@@ -266,7 +273,7 @@ class Compensator:
 
     def __init__(self, cal: Calibration, kind: str = "gyro", *,
                  available: Mapping[str, Collection[int]] | None = None,
-                 enabled: bool = True) -> None:
+                 enabled: bool = True, lacking: Mapping[str, str] | None = None) -> None:
         s = cal.kind(kind)
         self.kind = kind
         self.n = s.n
@@ -278,7 +285,8 @@ class Compensator:
         av = {k: frozenset(int(i) for i in v) for k, v in (available or {}).items()}
         applied, skipped = [], []
         for t in cal.effects:
-            why = "switched off (--no-effects)" if not enabled else _why_not(t, kind, s.n, av)
+            why = ("switched off (--no-effects)" if not enabled
+                   else _why_not(t, kind, s.n, av, lacking))
             if why is None:
                 inp, reads = COMPENSABLE[t.name]
                 applied.append(AppliedTerm(t, inp, reads))

@@ -15,11 +15,22 @@ Pipeline (:func:`decode_frames`), every frame ends in exactly one bucket of the
    belong to one sample). A second frame of one slot in one sample is a ``duplicate``.
    A sample's time is its earliest frame's; a sensor without a value in a sample is
    missing (``valid = False``, raw NaN), never zero.
+
+Auxiliary channels of the map (temperature, specific force: the effect terms' inputs,
+:class:`~replay.channel_map.AuxChannel`) are decoded beside, with the same frame checks
+(length, CRC, order, rolling counter: a repeat is rejected, any forward step accepted,
+status, J1939 'not available'), but they take no part in the assembly: their frames never
+hold a sample back, and their losses are counted apart (:attr:`BlockDecoder.aux_stats`,
+not in ``lost_frames``/``lost_samples``). Each frame still ends used or rejected in the
+accounting. :class:`AuxHold` keeps each auxiliary column's history and gives every handed
+over sample the latest value not later than its time (``Samples.aux``, in °C or m/s²),
+NaN before the first value and once the latest is older than the entry's ``timeout_s``.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from collections import Counter
+from dataclasses import dataclass, field, replace
 
 import cantools
 import numpy as np
@@ -34,11 +45,14 @@ __all__ = [
     "FRAME_DATA",
     "FRAME_ERROR",
     "FRAME_REMOTE",
+    "AuxHold",
     "BlockDecoder",
     "RawFrames",
     "Samples",
     "Slot",
     "assemble_samples",
+    "aux_columns",
+    "build_aux_slots",
     "build_slots",
     "decode_frames",
     "j1939_not_available",
@@ -230,6 +244,134 @@ def build_slots(db: cantools.database.can.Database, cmap: ChannelMap) -> list[Sl
     return slots
 
 
+def aux_columns(cmap: ChannelMap) -> list[tuple[int, int]]:
+    """The auxiliary columns: (entry, signal) indices, entry by entry, in signal order."""
+    return [(k, j) for k, a in enumerate(cmap.auxiliary) for j in range(len(a.signals))]
+
+
+def build_aux_slots(db: cantools.database.can.Database, cmap: ChannelMap,
+                    taken: set[int] | None = None) -> list[Slot]:
+    """Group the auxiliary columns into slots (one per message, source address, channel).
+
+    A slot's ``sensors`` are the column numbers (:func:`aux_columns`); it has no sample
+    counter.
+
+    Raises
+    ------
+    ConfigError
+        A message or signal not in the DBC, entries of one message naming different check
+        signals, or a message a monitored sensor already uses (``taken``).
+    """
+    groups: dict[tuple[int, object], list[int]] = {}
+    msgs: dict[tuple[int, object], cantools.database.can.Message] = {}
+    cols = aux_columns(cmap)
+    for c, (k, j) in enumerate(cols):
+        a = cmap.auxiliary[k]
+        where = f"channel map {cmap.source}: auxiliary {k + 1} ({a.name})"
+        try:
+            msg = db.get_message_by_name(a.message)
+        except KeyError:
+            raise ConfigError(f"{where}: message {a.message!r} is not in the DBC") from None
+        names = {sg.name for sg in msg.signals}
+        for what in (a.signals[j], a.counter_signal, a.crc_signal, a.status_signal):
+            if what is not None and what not in names:
+                raise ConfigError(f"{where}: signal {what!r} is not in message {a.message}")
+        key = (_message_key(msg, a.source_address, cmap.j1939), a.channel)
+        if taken and key[0] in taken:
+            raise ConfigError(f"{where}: message {a.message} also carries monitored sensors; "
+                              "an auxiliary channel needs a message of its own")
+        groups.setdefault(key, []).append(c)
+        msgs[key] = msg
+    slots = []
+    for (key, ch), idx in groups.items():
+        entries = [cmap.auxiliary[cols[c][0]] for c in idx]
+        checks = (entries[0].counter_signal, entries[0].crc_signal, entries[0].status_signal)
+        for a in entries[1:]:
+            if (a.counter_signal, a.crc_signal, a.status_signal) != checks:
+                raise ConfigError(f"channel map {cmap.source}: auxiliary channels "
+                                  f"{entries[0].name} and {a.name} share message {a.message} "
+                                  "but name different counter/CRC/status signals")
+        msg = msgs[(key, ch)]
+        lay = message_layout(msg)
+        if checks[1] is not None:
+            cs = lay.signals[checks[1]]
+            if cs.length != 8 or cs.big_endian or cs.shift != 8 * (msg.length - 1):
+                raise ConfigError(f"channel map {cmap.source}: CRC signal {checks[1]} of "
+                                  f"{msg.name} must be the last byte")
+        if not lay.vectorisable:
+            raise ConfigError(f"message {msg.name}: payloads over 8 bytes or multiplexed "
+                              "messages are not supported by the block decoder")
+        slots.append(Slot(key=key, channel=ch, layout=lay, sensors=tuple(idx),
+                          signals=tuple(cmap.auxiliary[cols[c][0]].signals[cols[c][1]]
+                                        for c in idx),
+                          counter=checks[0], crc=checks[1], sample_counter=None,
+                          status=checks[2], message=msg))
+    return slots
+
+
+class AuxHold:
+    """Sample-and-hold of the auxiliary columns onto sample times.
+
+    Each column keeps its decoded values (converted to °C or m/s² along the signal's axis)
+    with their frame times, in time order; :meth:`at` gives, for each sample time, the latest
+    value not later than it, NaN before the first value and when that value is older than
+    the column's ``timeout_s`` (stale). A J1939 'not available' value is held as NaN.
+
+    Parameters
+    ----------
+    cmap : ChannelMap
+    keep_s : float
+        History kept before the latest sample handed over (:meth:`trim`).
+    """
+
+    def __init__(self, cmap: ChannelMap, keep_s: float = 1.0) -> None:
+        self.columns = aux_columns(cmap)
+        self.m = len(self.columns)
+        aux = cmap.auxiliary
+        self.timeout_s = np.array([aux[k].timeout_s for k, _ in self.columns], float)
+        conv = [aux[k].to_si for k, _ in self.columns]
+        self.factor = np.array([f for f, _ in conv], float)
+        self.offset = np.array([o for _, o in conv], float)
+        self.keep_s = float(max(keep_s, float(self.timeout_s.max()) if self.m else 0.0))
+        self._t = [np.zeros(0) for _ in range(self.m)]
+        self._v = [np.zeros(0) for _ in range(self.m)]
+        self.received = np.zeros(self.m, np.int64)
+        """Values received per column (finite or not)."""
+
+    def add(self, col: int, t: np.ndarray, value: np.ndarray) -> None:
+        """Append decoded values (decoded unit) of column ``col`` at times ``t`` (ascending,
+        not earlier than the column's last)."""
+        if t.size == 0:
+            return
+        v = np.asarray(value, float) * self.factor[col] + self.offset[col]
+        self._t[col] = np.concatenate([self._t[col], np.asarray(t, float)])
+        self._v[col] = np.concatenate([self._v[col], v])
+        self.received[col] += t.size
+
+    def at(self, ts: np.ndarray) -> np.ndarray:
+        """Held values at sample times ``ts``, shape (S, m): °C or m/s², NaN where none."""
+        ts = np.asarray(ts, float)
+        out = np.full((ts.size, self.m), np.nan)
+        for c in range(self.m):
+            tc = self._t[c]
+            if tc.size == 0:
+                continue
+            k = np.searchsorted(tc, ts, side="right") - 1
+            has = k >= 0
+            kk = np.where(has, k, 0)
+            fresh = has & (ts - tc[kk] <= self.timeout_s[c])
+            out[:, c] = np.where(fresh, self._v[c][kk], np.nan)
+        return out
+
+    def trim(self, t_done: float) -> None:
+        """Forget values older than ``keep_s`` before ``t_done`` (keeping the one held)."""
+        for c in range(self.m):
+            tc = self._t[c]
+            k = int(np.searchsorted(tc, t_done - self.keep_s, side="right")) - 1
+            if k > 0:
+                self._t[c], self._v[c] = tc[k:], self._v[c][k:]
+
+
 def j1939_not_available(raw: np.ndarray, length: int) -> np.ndarray:
     """J1939 'error' / 'not available' raw values (SAE J1939-71 ranges).
 
@@ -329,7 +471,11 @@ def _counter_check(slot: Slot, st: _SlotState, t: np.ndarray, le: np.ndarray, be
 
 def _decode_slot(slot: Slot, frames: RawFrames, idx: np.ndarray, j1939: bool,
                  max_counter_delta: int, acct: FrameAccounting,
-                 st: _SlotState | None = None, fs: float = 100.0) -> _SlotFrames:
+                 st: _SlotState | None = None, fs: float = 100.0,
+                 keep_unavailable: bool = False) -> _SlotFrames:
+    """Checks and decoding of one slot's frames. ``keep_unavailable``: J1939 frames whose
+    every value is 'not available' are counted as rejected but still returned (all values
+    NaN, ``valid`` False), so that an auxiliary hold ends there."""
     st = st if st is not None else _SlotState()
     lay = slot.layout
     ok = frames.lengths[idx] == lay.length
@@ -374,8 +520,9 @@ def _decode_slot(slot: Slot, frames: RawFrames, idx: np.ndarray, j1939: bool,
         acct.reject("j1939_not_available", int(np.count_nonzero(none)))
         keep = ~none
         acct.values_not_available += int(np.count_nonzero(~valid[keep]))
-        idx, t, le, be = idx[keep], t[keep], le[keep], be[keep]
-        values, valid = values[keep], valid[keep]
+        if not keep_unavailable:
+            idx, t, le, be = idx[keep], t[keep], le[keep], be[keep]
+            values, valid = values[keep], valid[keep]
     sc = None
     if slot.sample_counter is not None:
         sc = lay.signals[slot.sample_counter].raw(le, be)
@@ -395,31 +542,38 @@ class Samples:
     valid : ndarray of bool, shape (S, n)
     sample_index : ndarray of int64, shape (S,)
         Unwrapped sample counter (counter assembly) or cluster number (time assembly).
+    aux : ndarray, shape (S, m) or None
+        The map's auxiliary columns (:func:`aux_columns`) held onto the samples
+        (:class:`AuxHold`: °C or m/s² along the signal's axis; NaN where none or stale);
+        None when the map has no auxiliary channel.
     """
 
     t: np.ndarray
     raw: np.ndarray
     valid: np.ndarray
     sample_index: np.ndarray
+    aux: np.ndarray | None = None
 
     @classmethod
-    def empty(cls, n: int) -> Samples:
-        """No sample, ``n`` sensors."""
+    def empty(cls, n: int, m_aux: int | None = None) -> Samples:
+        """No sample, ``n`` sensors (``m_aux`` auxiliary columns; None: no aux)."""
         return cls(np.zeros(0), np.zeros((0, n)), np.zeros((0, n), bool),
-                   np.zeros(0, np.int64))
+                   np.zeros(0, np.int64), None if m_aux is None else np.zeros((0, m_aux)))
 
     @classmethod
     def concat(cls, parts: list[Samples], n: int) -> Samples:
         """Samples of several blocks, in order."""
+        m_aux = next((p.aux.shape[1] for p in parts if p.aux is not None), None)
         parts = [p for p in parts if p.t.size]
         if not parts:
-            return cls.empty(n)
+            return cls.empty(n, m_aux)
         if len(parts) == 1:
             return parts[0]
         return cls(np.concatenate([p.t for p in parts]),
                    np.concatenate([p.raw for p in parts]),
                    np.concatenate([p.valid for p in parts]),
-                   np.concatenate([p.sample_index for p in parts]))
+                   np.concatenate([p.sample_index for p in parts]),
+                   None if parts[0].aux is None else np.concatenate([p.aux for p in parts]))
 
 
 @dataclass
@@ -502,6 +656,13 @@ class BlockDecoder:
         self.acct = acct if acct is not None else FrameAccounting()
         self.fs = float(sample_rate_hz)
         self.slots = build_slots(db, cmap)
+        self.aux_slots = build_aux_slots(db, cmap, {sl.key for sl in self.slots})
+        self.hold = AuxHold(cmap) if cmap.auxiliary else None
+        self._aux_known = np.array(sorted({s.key for s in self.aux_slots}), np.int64)
+        self._aux_state = [_SlotState() for _ in self.aux_slots]
+        self.aux_acct = FrameAccounting()
+        """Checks of the auxiliary frames (their rejections are also in ``acct``; their
+        ``lost_frames`` and ``values_not_available`` only here)."""
         self.by_counter = cmap.uses_sample_counter
         self.tol = (cmap.time_tolerance_s if cmap.time_tolerance_s is not None
                     else 0.4 / self.fs)
@@ -585,6 +746,10 @@ class BlockDecoder:
         keys = frame_keys(frames.arbitration_id, frames.extended, cmap.j1939)
         is_known = alive & np.isin(keys, self._known)
         unknown = alive & ~is_known
+        if self.aux_slots:
+            is_aux = alive & ~is_known & np.isin(keys, self._aux_known)
+            unknown &= ~is_aux
+            self._decode_aux(frames, keys, is_aux)
         acct.reject("unknown_id", int(np.count_nonzero(unknown)))
         if self._siblings and unknown.any():
             self.siblings_seen.update(self._siblings[k] for k in np.unique(keys[unknown]).tolist()
@@ -601,6 +766,43 @@ class BlockDecoder:
         acct.reject("other_channel", int(np.count_nonzero(is_known & ~claimed)))
         self.delivered += np.array([p.idx.size for p in parts], np.int64)
         return parts
+
+    def _decode_aux(self, frames: RawFrames, keys: np.ndarray, is_aux: np.ndarray) -> None:
+        """Check and decode the auxiliary frames into :attr:`hold`; count each frame used
+        or rejected in ``acct`` (losses and missing values in :attr:`aux_acct` only)."""
+        sub = self.aux_acct
+        before = Counter(sub.rejected)
+        claimed = np.zeros(len(frames), bool)
+        used = 0
+        for k, slot in enumerate(self.aux_slots):
+            sel = is_aux & (keys == slot.key) & ~claimed
+            if slot.channel is not None:
+                sel &= frames.channel == slot.channel
+            claimed |= sel
+            # any forward step of a rolling counter is accepted (auxiliary rates are not
+            # the sample rate); a repeat is rejected
+            p = _decode_slot(slot, frames, np.flatnonzero(sel), self.cmap.j1939, 1 << 30,
+                             sub, self._aux_state[k], self.fs, keep_unavailable=True)
+            used += int(np.count_nonzero(p.valid.any(axis=1)))    # the rest: rejected
+            for j, col in enumerate(slot.sensors):
+                self.hold.add(col, p.t, p.values[:, j])
+        other = int(np.count_nonzero(is_aux & ~claimed))
+        sub.reject("other_channel", other)
+        sub.read += int(np.count_nonzero(is_aux))
+        sub.used += used
+        self.acct.used += used
+        for reason, cnt in (sub.rejected - before).items():
+            self.acct.reject(reason, cnt)
+
+    @property
+    def aux_stats(self) -> dict:
+        """Auxiliary frames: read, used, rejected by reason, lost (rolling counters),
+        values not available (J1939), values received per column."""
+        d = self.aux_acct.to_dict()
+        return {"read": d["read"], "used": d["used"], "rejected": d["rejected"],
+                "lost_frames": d["lost_frames"],
+                "values_not_available": d["values_not_available"],
+                "received": [] if self.hold is None else self.hold.received.tolist()}
 
     def _number(self, t: np.ndarray, sc: np.ndarray | None) -> np.ndarray:
         """Sample index of each decoded frame (time order), continuing the numbering."""
@@ -619,10 +821,12 @@ class BlockDecoder:
 
     # -- assembly --------------------------------------------------------------------
     def _assemble(self, rows: _Rows, *, final: bool) -> Samples:
+        hold = getattr(self, "hold", None)
+        m_aux = None if hold is None else hold.m
         allr = _Rows.cat(self._pending, rows)
         if allr.t.size == 0:
             self._pending = allr
-            return Samples.empty(self.n)
+            return Samples.empty(self.n, m_aux)
         ns = len(self.slots)
         # a slot twice in one sample: keep the earliest (pending rows come first)
         key = allr.cluster * ns + allr.slot
@@ -644,7 +848,7 @@ class BlockDecoder:
         out = allr.take(out_sel)
         self._pending = allr.take(~out_sel)
         if n_out == 0:
-            return Samples.empty(self.n)
+            return Samples.empty(self.n, m_aux)
         inv_o = inv[out_sel]
         ids_o = ids[:n_out]
         ts = np.full(n_out, np.inf)
@@ -662,7 +866,11 @@ class BlockDecoder:
         self.acct.used += int(out.t.size)
         self._count_lost(ids_o, ts)
         self._emitted, self._emitted_t = int(ids_o[-1]), float(ts[-1])
-        return Samples(t=ts, raw=raw, valid=valid, sample_index=ids_o)
+        aux = None
+        if hold is not None:
+            aux = hold.at(ts)
+            hold.trim(float(ts.max()))
+        return Samples(t=ts, raw=raw, valid=valid, sample_index=ids_o, aux=aux)
 
     def _count_lost(self, ids: np.ndarray, ts: np.ndarray) -> None:
         if self.by_counter:
@@ -731,5 +939,5 @@ def decode_frames(frames: RawFrames, db: cantools.database.can.Database, cmap: C
     dec = BlockDecoder(db, cmap, acct, sample_rate_hz=sample_rate_hz)
     s = Samples.concat([dec.feed(frames), dec.flush()], cmap.n)
     if s.sample_index.size:
-        s = Samples(s.t, s.raw, s.valid, s.sample_index - s.sample_index.min())
+        s = replace(s, sample_index=s.sample_index - s.sample_index.min())
     return s

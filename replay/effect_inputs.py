@@ -12,6 +12,15 @@ A flight keeps accelerometers and temperatures beside its monitored sensors
   another IMU.
 
 A sample the channel lacks is NaN (the term then contributes 0 there and is counted).
+
+A CAN stream (``rimu replay``, ``rimu monitor``) has the channel map's auxiliary channels
+instead (:class:`replay.channel_map.AuxChannel`, held onto the samples by
+:class:`replay.assemble.AuxHold`): :func:`map_available` says which sensors have which input
+(from the map alone, before any frame), :func:`map_effect_inputs` turns the held columns
+into the specific force and temperature of each sensor. A sensor's specific force is the
+least-squares solution ``f = A⁺·a`` over the accelerometer axes ``A`` (one unit body axis per
+row) that apply to it and have a value at that sample; NaN where those do not span three
+dimensions (a stale or missing axis of a triad).
 """
 
 from __future__ import annotations
@@ -20,9 +29,10 @@ import warnings
 
 import numpy as np
 
+from replay.channel_map import ChannelMap, aux_assignment
 from replay.flight_data import Flight
 
-__all__ = ["flight_effect_inputs"]
+__all__ = ["flight_effect_inputs", "map_available", "map_effect_inputs", "map_reasons"]
 
 _AXES = ("x", "y", "z")
 
@@ -89,3 +99,99 @@ def flight_effect_inputs(flight: Flight) -> tuple[np.ndarray | None, np.ndarray 
                 temperature[:, i] = np.where(aux.valid[:, j], aux.values[:, j], np.nan)
                 avail["temperature"].append(i)
     return force, temperature, avail
+
+
+def map_available(cmap: ChannelMap) -> dict[str, list[int]]:
+    """``{"specific_force": [sensors], "temperature": [sensors]}`` (0-based) that the map's
+    auxiliary channels give an input (:class:`fdi.effects.Compensator`'s ``available``)."""
+    asg = aux_assignment(cmap)
+    return {q: [i for i, ks in enumerate(asg[q]) if ks] for q in ("specific_force",
+                                                                    "temperature")}
+
+
+def map_reasons(cmap: ChannelMap) -> dict[str, str]:
+    """What a term lacking an input is told, per input: which map, and what it lacks."""
+    which = ("the default channel map (give --map with [[auxiliary]] channels)"
+             if cmap.source.startswith("<") else f"the channel map {cmap.source}")
+    return {"specific_force": f"{which} names no specific-force (accelerometer) channel "
+                              "for this sensor",
+            "temperature": f"{which} names no temperature channel for this sensor"}
+
+
+def _columns(cmap: ChannelMap) -> dict[int, list[int]]:
+    """Auxiliary entry → its column numbers (:func:`replay.assemble.aux_columns` order)."""
+    out: dict[int, list[int]] = {}
+    c = 0
+    for k, a in enumerate(cmap.auxiliary):
+        out[k] = list(range(c, c + len(a.signals)))
+        c += len(a.signals)
+    return out
+
+
+def _solve_force(A: np.ndarray, a: np.ndarray) -> np.ndarray:
+    """``f = A⁺·a`` per row over the finite columns of ``a`` (N, m); NaN where the finite
+    axes do not span three dimensions."""
+    N, m = a.shape
+    f = np.full((N, 3), np.nan)
+    ok = np.isfinite(a)
+    if N == 0:
+        return f
+    codes = ok @ (1 << np.arange(m, dtype=np.int64)) if m < 62 else None
+    if codes is None:                                    # pragma: no cover (62+ axes)
+        codes = np.unique(ok, axis=0, return_inverse=True)[1]
+    for code in np.unique(codes):
+        rows = codes == code
+        cols = ok[np.flatnonzero(rows)[0]]
+        if cols.sum() < 3:
+            continue
+        Ak = A[cols]
+        if np.linalg.matrix_rank(Ak, tol=1e-6) < 3:
+            continue
+        f[rows] = a[np.ix_(rows, cols)] @ np.linalg.pinv(Ak).T
+    return f
+
+
+def map_effect_inputs(cmap: ChannelMap, aux: np.ndarray | None
+                      ) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """Specific force and temperature of each monitored sensor from the held auxiliary
+    columns.
+
+    Parameters
+    ----------
+    cmap : ChannelMap
+    aux : ndarray, shape (N, m), or None
+        ``Samples.aux``: the columns of :func:`replay.assemble.aux_columns`, °C or m/s²
+        along each signal's axis, NaN where none or stale.
+
+    Returns
+    -------
+    force : ndarray, shape (N, n, 3), or None
+        m/s², body frame; NaN where the sensor has none at that sample. None when the map
+        has no specific-force channel.
+    temperature : ndarray, shape (N, n), or None
+        °C; NaN where none. None when the map has no temperature channel.
+    """
+    if aux is None or not cmap.auxiliary:
+        return None, None
+    aux = np.asarray(aux, float)
+    N, n = aux.shape[0], cmap.n
+    asg = aux_assignment(cmap)
+    cols = _columns(cmap)
+    force = temperature = None
+    if any(asg["specific_force"]):
+        force = np.full((N, n, 3), np.nan)
+        solved: dict[tuple[int, ...], np.ndarray] = {}
+        for i, ks in enumerate(asg["specific_force"]):
+            if not ks:
+                continue
+            if ks not in solved:
+                A = np.vstack([cmap.auxiliary[k].axes for k in ks])
+                c = [col for k in ks for col in cols[k]]
+                solved[ks] = _solve_force(A, aux[:, c])
+            force[:, i] = solved[ks]
+    if any(asg["temperature"]):
+        temperature = np.full((N, n), np.nan)
+        for i, ks in enumerate(asg["temperature"]):
+            if ks:
+                temperature[:, i] = aux[:, cols[ks[0]][0]]
+    return force, temperature

@@ -124,6 +124,15 @@ class StreamDecoder:
         """Hand over every pending sample (end of stream)."""
         return _as_list(self.block.flush())
 
+    def feed_samples(self, messages: Sequence[can.Message]) -> Samples:
+        """As :meth:`feed_many`, as :class:`~replay.assemble.Samples` (with the held
+        auxiliary columns)."""
+        return self.block.feed(_frames_of(messages))
+
+    def flush_samples(self) -> Samples:
+        """As :meth:`flush`, as :class:`~replay.assemble.Samples`."""
+        return self.block.flush()
+
 
 class Pacer:
     """Feed a monitor sample by sample at the recorded pace (``rimu replay --realtime``).
@@ -142,17 +151,27 @@ class Pacer:
         self._start: float | None = None
         self._t0 = 0.0
 
-    def run(self, monitor: Any, t: np.ndarray, raw: np.ndarray, valid: np.ndarray
+    def run(self, monitor: Any, t: np.ndarray, raw: np.ndarray, valid: np.ndarray, *,
+            force: np.ndarray | None = None, temperature: np.ndarray | None = None
             ) -> BlockResult:
-        """Step ``monitor`` through the samples at their pace; returns their answers."""
+        """Step ``monitor`` through the samples at their pace; returns their answers.
+
+        ``force`` (N, ...) and ``temperature`` (N, ...): the effect terms' inputs of a
+        :class:`~fdi.effects_monitor.CompensatedMonitor`, passed row by row when given.
+        """
         answers = []
         for k in range(len(t)):
+            kw = {}
+            if force is not None:
+                kw["force"] = force[k]
+            if temperature is not None:
+                kw["temperature"] = temperature[k]
             if self._start is None:
                 self._start, self._t0 = time.monotonic(), float(t[k])
             delay = (float(t[k]) - self._t0) - (time.monotonic() - self._start)
             if delay > 0:
                 time.sleep(delay)
-            ans = monitor.step(float(t[k]), raw[k], valid[k])
+            ans = monitor.step(float(t[k]), raw[k], valid[k], **kw)
             if self.on_event is not None:
                 for e in ans.events:
                     self.on_event(e)
@@ -193,11 +212,26 @@ def run_live(bus: can.BusABC, decoder: StreamDecoder, monitor: Any, *,
     got = 0
     K = 0
 
-    def consume(samples: list[_Sample]) -> None:
+    comp = getattr(monitor, "compensator", None)
+    wants = bool(comp is not None and decoder.cmap.auxiliary
+                 and comp.needs & {"specific_force", "temperature"})
+
+    def consume(smp: Samples) -> None:
         nonlocal K
         new = []
-        for t, raw, valid in samples:
-            ans = monitor.step(t - decoder.t_first + t_start, raw, valid)
+        force = temp = None
+        if wants and smp.aux is not None and smp.t.size:
+            from replay.effect_inputs import map_effect_inputs
+
+            force, temp = map_effect_inputs(decoder.cmap, smp.aux)
+        for k in range(smp.t.size):
+            kw = {}
+            if force is not None:
+                kw["force"] = force[k]
+            if temp is not None:
+                kw["temperature"] = temp[k]
+            ans = monitor.step(float(smp.t[k]) - decoder.t_first + t_start, smp.raw[k],
+                               smp.valid[k], **kw)
             new.append(ans)
             if on_event is not None:
                 for e in ans.events:
@@ -229,8 +263,8 @@ def run_live(bus: can.BusABC, decoder: StreamDecoder, monitor: Any, *,
                 batch.append(m)
             got += len(batch)
             last_rx = time.monotonic()
-            consume(decoder.feed_many(batch))
+            consume(decoder.feed_samples(batch))
     except KeyboardInterrupt:
         pass
-    consume(decoder.flush())
+    consume(decoder.flush_samples())
     return block_from_answers(list(answers), decoder.n, K), decoder.acct.to_dict()

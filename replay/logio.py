@@ -72,6 +72,7 @@ __all__ = [
     "DEFAULT_T0_EPOCH_S",
     "LOG_SUFFIXES",
     "LogStream",
+    "aux_channels",
     "read_frames",
     "read_log",
     "resolve_map",
@@ -105,9 +106,57 @@ def _suffix(path: Path) -> str:
 
 
 # -- writing -----------------------------------------------------------------------------
+_AXIS_OF = {"x": (1.0, 0.0, 0.0), "y": (0.0, 1.0, 0.0), "z": (0.0, 0.0, 1.0)}
+
+
+def _aux_to_write(flight: Any, temperature_every: int) -> list[tuple[int, str, int, Any]]:
+    """The flight's auxiliary channels a CAN log carries: (aux column, message, every,
+    AuxChannel) — accelerometer axes (gyro flights) as ``RIMU_ACCEL_ii``, temperatures as
+    ``RIMU_TEMP_ii``, each applied to its IMU group's sensors (else to all)."""
+    from replay.channel_map import AUX_TIMEOUT_S, AuxChannel
+
+    aux = getattr(flight, "aux", None)
+    if aux is None:
+        return []
+    names = tuple(flight.sensor_names)
+    groups = tuple(flight.imu) if getattr(flight, "imu", ()) else ()
+    out = []
+    n_acc = n_temp = 0
+    for j, (kind, name, imu) in enumerate(zip(aux.kinds, aux.names, aux.imu, strict=True)):
+        members = tuple(nm for nm, g in zip(names, groups, strict=True) if imu and g == imu) \
+            if groups else ()
+        if kind == "accel" and getattr(flight, "kind", "gyro") == "gyro":
+            ax = name.rpartition(".")[2]
+            if ax not in _AXIS_OF:
+                continue
+            n_acc += 1
+            msg = imu_message_name("accel", n_acc)
+            out.append((j, msg, 1, AuxChannel(
+                name=f"accel:{name}", quantity="specific_force", message=msg,
+                signals=("RAW",), unit="m/s^2", axes=np.array([_AXIS_OF[ax]]),
+                sensors=members or None, timeout_s=AUX_TIMEOUT_S["specific_force"],
+                counter_signal="COUNTER", crc_signal="CRC", status_signal="STATUS")))
+        elif kind == "temperature":
+            n_temp += 1
+            if n_temp > 12:
+                raise ConfigError("the shipped DBC carries temperatures 1..12 "
+                                  "(RIMU_TEMP_01..12), the flight has more")
+            if not members and name in names:
+                members = (name,)
+            msg = f"RIMU_TEMP_{n_temp:02d}"
+            period = temperature_every / float(flight.sample_rate_hz)
+            out.append((j, msg, temperature_every, AuxChannel(
+                name=f"temperature:{name}", quantity="temperature", message=msg,
+                signals=("RAW",), unit="degC", sensors=members or None,
+                timeout_s=max(AUX_TIMEOUT_S["temperature"], 3 * period),
+                counter_signal="COUNTER", crc_signal="CRC", status_signal="STATUS")))
+    return out
+
+
 def write_flight_log(flight: Any, path: str | Path, *, dbc: str | Path | None = None,
                      t0_epoch_s: float = DEFAULT_T0_EPOCH_S, frame_gap_s: float = 130e-6,
-                     jitter_s: float = 60e-6, seed: int = 0, channel: int = 0) -> None:
+                     jitter_s: float = 60e-6, seed: int = 0, channel: int = 0,
+                     auxiliary: bool = True, temperature_every: int = 10) -> tuple:
     """Write a flight as a CAN log (python-can writer picked by suffix) + truth sidecar.
 
     Parameters
@@ -125,6 +174,19 @@ def write_flight_log(flight: Any, path: str | Path, *, dbc: str | Path | None = 
     seed : int
         Seed of the jitter.
     channel : int
+    auxiliary : bool
+        Also write the flight's auxiliary channels (``flight.aux``): accelerometer axes of a
+        gyro flight as ``RIMU_ACCEL_ii`` (m/s², every sample) and temperatures as
+        ``RIMU_TEMP_ii`` (°C, every ``temperature_every``-th sample), after the sensors'
+        frames of the sample.
+    temperature_every : int
+        Temperature frames go out every this many samples.
+
+    Returns
+    -------
+    tuple of replay.channel_map.AuxChannel
+        The auxiliary channels written, for a channel map
+        (``default_channel_map(..., auxiliary=...)``); empty when none.
 
     Raises
     ------
@@ -138,8 +200,10 @@ def write_flight_log(flight: Any, path: str | Path, *, dbc: str | Path | None = 
     db = load_dbc(dbc)
     N, n = flight.raw.shape
     fs = float(flight.sample_rate_hz)
-    if n * frame_gap_s + jitter_s >= 1.0 / fs:
-        raise ConfigError(f"{n} frames of {frame_gap_s * 1e6:.0f} µs do not fit in one "
+    extra = _aux_to_write(flight, int(temperature_every)) if auxiliary else []
+    nf = n + len(extra)
+    if nf * frame_gap_s + jitter_s >= 1.0 / fs:
+        raise ConfigError(f"{nf} frames of {frame_gap_s * 1e6:.0f} µs do not fit in one "
                           f"{1e3 / fs:.2f} ms sample period")
     kind = getattr(flight, "kind", "gyro")
     rng = np.random.default_rng([seed, 7])
@@ -153,6 +217,15 @@ def write_flight_log(flight: Any, path: str | Path, *, dbc: str | Path | None = 
         times.append(t0_epoch_s + t[k] + i * frame_gap_s + jit)
         ids.append(np.full(k.size, msg.frame_id, np.int64))
         payloads.extend(encode_imu_frames(msg, flight.raw[k, i], k, np.arange(k.size)))
+    for j, (col, name, every, _) in enumerate(extra):
+        msg = db.get_message_by_name(name)
+        ok = np.asarray(flight.aux.valid[:, col], bool) & (np.arange(N) % every == 0)
+        k = np.flatnonzero(ok)
+        times.append(t0_epoch_s + t[k] + (n + j) * frame_gap_s
+                     + rng.uniform(0.0, jitter_s, k.size))
+        ids.append(np.full(k.size, msg.frame_id, np.int64))
+        payloads.extend(encode_imu_frames(msg, flight.aux.values[k, col], k,
+                                          np.arange(k.size)))
     ts = np.concatenate(times)
     fid = np.concatenate(ids)
     order = np.argsort(ts, kind="stable")
@@ -170,7 +243,13 @@ def write_flight_log(flight: Any, path: str | Path, *, dbc: str | Path | None = 
                         "t0_epoch_s": t0_epoch_s, "t_start_s": float(t[0]) if N else 0.0,
                         "frame_gap_s": frame_gap_s, "jitter_s": jitter_s,
                         "frames": int(ts.size)}
+    if extra:
+        truth["can_log"]["auxiliary"] = [
+            {"name": a.name, "quantity": a.quantity, "message": a.message,
+             "every_samples": every, "sensors": "all" if a.sensors is None else list(a.sensors)}
+            for _, _, every, a in extra]
     write_truth_sidecar(replace(flight, truth=truth), truth_path(p))
+    return tuple(a for _, _, _, a in extra)
 
 
 # -- reading raw frames --------------------------------------------------------------------
@@ -585,7 +664,25 @@ def samples_to_flight(samples: Samples, cal: Calibration, cmap: ChannelMap, *,
     return Flight(t=t, raw=samples.raw, valid=samples.valid, sample_rate_hz=fs,
                   sensor_names=tuple(c.name for c in s.sensors),
                   raw_unit=s.sensors[0].raw_unit if s.n else "raw", omega_true=rates,
-                  faults=tuple(faults), truth=truth, source=str(source), kind=cmap.kind)
+                  faults=tuple(faults), truth=truth, source=str(source), kind=cmap.kind,
+                  aux=aux_channels(cmap, samples.aux))
+
+
+def aux_channels(cmap: ChannelMap, aux: np.ndarray | None) -> Any:
+    """The held auxiliary columns of a map as a flight's
+    :class:`~replay.flight_data.AuxChannels` (specific-force columns as ``accel``, along
+    their own axis; names ``<entry>`` or ``<entry>.<signal>``), or None without any."""
+    from replay.flight_data import AuxChannels
+
+    if aux is None or not cmap.auxiliary:
+        return None
+    kinds, names = [], []
+    for a in cmap.auxiliary:
+        for sig in a.signals:
+            kinds.append("accel" if a.quantity == "specific_force" else "temperature")
+            names.append(a.name if len(a.signals) == 1 else f"{a.name}.{sig}")
+    return AuxChannels(tuple(kinds), tuple(names), ("",) * len(kinds), aux,
+                       np.isfinite(aux))
 
 
 def read_log(path: str | Path, cal: Calibration, *, dbc: str | Path | None = None,
@@ -710,7 +807,8 @@ class LogStream:
         if self._rates is not None:
             k = np.clip(np.rint(t * self.fs).astype(np.int64), 0, self._rates.shape[0] - 1)
             rates = np.asarray(self._rates[k], float)
-        return replace(self.header, t=t, raw=smp.raw, valid=smp.valid, omega_true=rates)
+        return replace(self.header, t=t, raw=smp.raw, valid=smp.valid, omega_true=rates,
+                       aux=aux_channels(self.cmap, smp.aux))
 
     def run(self, on_samples: Any) -> dict[str, Any]:
         """Read the whole log, calling ``on_samples(flight_piece)``; returns the accounting.

@@ -70,6 +70,12 @@ def test_channel_map_and_scenario_against_a_tetrad_calibration(examples):
     cmap = load_channel_map(examples / "channel_map.toml")
     assert cmap.n == 4 and cmap.uses_sample_counter
     check_against_calibration(cmap, cal)
+    from replay.effect_inputs import map_available
+
+    assert [a.quantity for a in cmap.auxiliary] == ["temperature"] + ["specific_force"] * 3
+    assert cmap.auxiliary[3].to_si == (9.80665, 0.0)
+    assert map_available(cmap) == {"specific_force": [0, 1, 2, 3],
+                                   "temperature": [0, 1, 2, 3]}
     faults, seed = load_scenario(examples / "scenario.toml", cal)
     assert seed == 7 and [f.kind for f in faults] == ["step", "ramp"]
     assert faults[0].sensor == 3 and faults[0].onset == 2.0

@@ -90,7 +90,7 @@ def pristine(tmp_path_factory) -> Path:
     cal = load_calibration(d / "cal.json")
     default_thresholds(cal).save(d / "thresholds.json")
     shutil.copy(ROOT / "calibration" / "sequences" / "tetrad_paper.toml", d / "seq.toml")
-    shutil.copy(ROOT / "replay" / "dbc" / "j1939_ari_3imu.toml", d / "map.toml")
+    shutil.copy(ROOT / "replay" / "dbc" / "j1939_ari_acc_3imu.toml", d / "map.toml")
     shutil.copy(ROOT / "replay" / "dbc" / "j1939_ari.dbc", d / "j1939_ari.dbc")
     (d / "scenario.toml").write_text(SCENARIO)
     rows = cone6().H[:5]

@@ -10,9 +10,12 @@ from fdi.errors import ConfigError, ReplayError
 from rimu.argtypes import positive_float, positive_int
 from rimu.commands.replay import (
     add_monitor_options,
+    aux_record,
     check_monitor_paths,
     effects_extra,
+    format_aux,
     make_monitor,
+    warn_silent_aux,
     write_report,
 )
 
@@ -51,7 +54,7 @@ def run(args: argparse.Namespace) -> int:
     check_monitor_paths(args)
     cal = load_calibration(args.cal)
     db, cmap = resolve_map(cal, dbc=args.dbc, channel_map=args.channel_map)
-    mon, how = make_monitor(cal, args, cmap.kind)
+    mon, how = make_monitor(cal, args, cmap.kind, cmap)
     kw = {}
     if args.bitrate:
         kw["bitrate"] = args.bitrate
@@ -82,9 +85,14 @@ def run(args: argparse.Namespace) -> int:
     header = Flight(t=np.zeros(0), raw=np.zeros((0, s.n)), valid=np.zeros((0, s.n), bool),
                     sample_rate_hz=cal.sample_rate_hz, sensor_names=names,
                     source=f"{args.interface}:{args.channel}", kind=cmap.kind)
-    report = acc.build(header, cal, frames=frames, extra={"thresholds": how, "live": True,
-                                                     "window": args.window,
-                                                     **effects_extra(mon, cal)})
+    extra = {"thresholds": how, "live": True, "window": args.window,
+             **effects_extra(mon, cal)}
+    if cmap.auxiliary:
+        extra["auxiliary"] = aux_record(cmap, dec.block)
+        warn_silent_aux(extra["auxiliary"], f"{args.interface}:{args.channel}")
+    report = acc.build(header, cal, frames=frames, extra=extra)
     print(format_report(report, max_events=0))
+    if cmap.auxiliary:
+        print(format_aux(extra["auxiliary"]))
     write_report(report, args.report)
     return 0

@@ -23,7 +23,9 @@ def add_monitor_options(p: argparse.ArgumentParser) -> None:
                    help="DBC file (default: the map's, else rimu's shipped rimu_imu.dbc)")
     p.add_argument("--map", metavar="FILE", dest="channel_map",
                    help="channel map TOML (rimu.channel_map/1): which message/signal is "
-                        "sensor i (default: the shipped DBC's RIMU_GYRO_ii messages)")
+                        "sensor i, and optional [[auxiliary]] temperature and accelerometer "
+                        "channels for the effect terms (default: the shipped DBC's "
+                        "RIMU_GYRO_ii messages, no auxiliary channel)")
     p.add_argument("--thresholds", metavar="FILE",
                    help="a rimu.thresholds/1 or rimu.tuning/1 (rimu tune) file")
     p.add_argument("--false-alarms-per-hour", type=positive_float(1e9), metavar="X",
@@ -35,7 +37,9 @@ def add_monitor_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-effects", action="store_true",
                    help="do not compensate the calibration's effect terms (default: those "
                         "read from the sensors' own outputs, rate sign and rate squared, are "
-                        "compensated; a CAN stream carries no accelerometers or temperatures)")
+                        "compensated, and g-sensitivity and temperature terms when the "
+                        "channel map has [[auxiliary]] specific-force or temperature "
+                        "channels for the sensor)")
 
 
 def configure(p: argparse.ArgumentParser) -> None:
@@ -55,7 +59,8 @@ def configure(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
-def make_monitor(cal: Calibration, args: argparse.Namespace, kind: str) -> tuple[Any, dict]:
+def make_monitor(cal: Calibration, args: argparse.Namespace, kind: str,
+                 cmap: Any = None) -> tuple[Any, dict]:
     """The monitor the options ask for, and how its thresholds were chosen."""
     from fdi.monitor import Monitor
     from thresholds.select import select
@@ -64,25 +69,85 @@ def make_monitor(cal: Calibration, args: argparse.Namespace, kind: str) -> tuple
                     false_alarms_per_hour=args.false_alarms_per_hour)
     thr, how = choice.thresholds, choice.to_dict()
     return compensated(Monitor(cal, thr, kind=kind), cal, kind,
-                       enabled=not getattr(args, "no_effects", False)), how
+                       enabled=not getattr(args, "no_effects", False), cmap=cmap), how
 
 
-def compensated(mon: Any, cal: Calibration, kind: str, *, enabled: bool) -> Any:
-    """The monitor wrapped with the compensation of the effect terms a CAN stream allows
-    (the sensors' own outputs only); prints what is and is not compensated."""
+def compensated(mon: Any, cal: Calibration, kind: str, *, enabled: bool,
+                cmap: Any = None) -> Any:
+    """The monitor wrapped with the compensation of the effect terms a CAN stream allows:
+    the sensors' own outputs, plus the specific force and temperature of the channel map's
+    auxiliary channels (``cmap``); prints what is and is not compensated."""
     from fdi.effects import Compensator
     from fdi.effects_monitor import CompensatedMonitor
 
-    out = CompensatedMonitor(mon, Compensator(cal, kind, enabled=enabled))
+    avail: dict = {}
+    lacking = None
+    if cmap is not None:
+        from replay.effect_inputs import map_available, map_reasons
+
+        avail, lacking = map_available(cmap), map_reasons(cmap)
+    out = CompensatedMonitor(mon, Compensator(cal, kind, available=avail, enabled=enabled,
+                                              lacking=lacking))
     if cal.effects:
         print(out.compensator.summary(mon.sensor_names), flush=True)
     return out
+
+
+def stream_inputs(mon: Any, cmap: Any, aux: Any) -> dict[str, Any]:
+    """``force``/``temperature`` keyword arguments of the compensated monitor for samples
+    whose held auxiliary columns are ``aux`` ((N, m) array, or AuxChannels); empty when the
+    applied terms read neither."""
+    comp = getattr(mon, "compensator", None)
+    if comp is None or cmap is None or aux is None \
+            or not comp.needs & {"specific_force", "temperature"}:
+        return {}
+    from replay.effect_inputs import map_effect_inputs
+
+    force, temp = map_effect_inputs(cmap, getattr(aux, "values", aux))
+    kw = {}
+    if force is not None:
+        kw["force"] = force
+    if temp is not None:
+        kw["temperature"] = temp
+    return kw
 
 
 def effects_extra(mon: Any, cal: Calibration) -> dict[str, Any]:
     """``{"effects": record}`` for a report when the calibration has effect terms."""
     comp = getattr(mon, "compensator", None)
     return {"effects": comp.to_dict()} if cal.effects and comp is not None else {}
+
+
+def aux_record(cmap: Any, decoder: Any) -> dict[str, Any]:
+    """The report's ``auxiliary`` block: the map's auxiliary channels and their frames."""
+    st = decoder.aux_stats
+    chans, c = [], 0
+    for a in cmap.auxiliary:
+        m = len(a.signals)
+        chans.append({"name": a.name, "quantity": a.quantity, "message": a.message,
+                      "signals": list(a.signals), "unit": a.unit,
+                      "sensors": "all" if a.sensors is None else list(a.sensors),
+                      "timeout_s": a.timeout_s, "values_received": st["received"][c:c + m]})
+        c += m
+    return {"channels": chans, "frames": {k: v for k, v in st.items() if k != "received"}}
+
+
+def format_aux(rec: dict[str, Any]) -> str:
+    """One line on the auxiliary channels of a report."""
+    fr = rec["frames"]
+    chans = ", ".join(f"{c['name']} {sum(c['values_received'])}" for c in rec["channels"])
+    rej = ", ".join(f"{v} {k}" for k, v in sorted(fr["rejected"].items())) or "none"
+    return (f"auxiliary channels (values received): {chans}; frames used {fr['used']}, "
+            f"rejected {rej}, lost {fr['lost_frames']}")
+
+
+def warn_silent_aux(rec: dict[str, Any], source: str) -> None:
+    """Warn about auxiliary channels that never delivered a value."""
+    silent = [ch["name"] for ch in rec["channels"] if not any(ch["values_received"])]
+    if silent:
+        logging.getLogger("rimu").warning(
+            f"{source}: no frame at all from auxiliary channel(s) {', '.join(silent)}: the "
+            "effect terms they feed got no input (counted in the report's effects block)")
 
 
 def write_report(report: dict, path: str | None) -> None:
@@ -165,7 +230,7 @@ def run(args: argparse.Namespace) -> int:
         truth["injected"] = {"faults": [f.to_dict() for f in faults], "seed": int(seed),
                              "source": str(args.inject)}
         header = replace(header, faults=tuple(header.faults) + tuple(faults), truth=truth)
-    mon, how = make_monitor(cal, args, cmap.kind)
+    mon, how = make_monitor(cal, args, cmap.kind, cmap)
     acc = RunningReport()
     names = header.sensor_names
     pacer = Pacer(lambda e: print(format_event(e, names), flush=True)) if args.realtime \
@@ -188,10 +253,11 @@ def run(args: argparse.Namespace) -> int:
             timing["read_decode"] += t1 - clock[0]
             if injector is not None:
                 piece = injector.apply(piece)
+            kw = stream_inputs(mon, cmap, piece.aux)
             if pacer is not None:
-                result = pacer.run(mon, piece.t, piece.raw, piece.valid)
+                result = pacer.run(mon, piece.t, piece.raw, piece.valid, **kw)
             else:
-                result = mon.run(piece.t, piece.raw, piece.valid)
+                result = mon.run(piece.t, piece.raw, piece.valid, **kw)
             acc.update(result, piece.omega_true)
             if recorder is not None:
                 recorder.log(result, piece)
@@ -211,10 +277,15 @@ def run(args: argparse.Namespace) -> int:
                               f"frames read, rejected {frames['rejected']})")
         extra: dict[str, Any] = {"thresholds": how, "timing_s": timing,
                                  **effects_extra(mon, cal)}
+        if cmap.auxiliary:
+            extra["auxiliary"] = aux_record(cmap, stream.decoder)
+            warn_silent_aux(extra["auxiliary"], str(args.log))
         if args.inject:
             extra["injected"] = str(args.inject)
         report = acc.build(header, cal, frames=frames, extra=extra)
         print(format_report(report, max_events=args.max_events))
+        if cmap.auxiliary:
+            print(format_aux(extra["auxiliary"]))
         if recorder is not None:
             tim = recorder.close()
             timing["rerun"] = tim["log_s"] + tim["flush_s"]

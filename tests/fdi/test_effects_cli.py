@@ -91,7 +91,8 @@ def test_replay_compensates_the_rate_terms(files, capsys):
                "--report", d / "r_on.json")
     assert out.splitlines()[0].startswith(
         "compensating: scale_asymmetry on x1 (from rate sign); not applied: g_sensitivity on "
-        "y1 (needs specific force: no accelerometers in the stream)")
+        "y1 (needs specific force: the default channel map (give --map with [[auxiliary]] "
+        "channels) names no specific-force (accelerometer) channel for this sensor)")
     on = json.loads((d / "r_on.json").read_text())
     assert [a["name"] for a in on["effects"]["applied"]] == ["scale_asymmetry"]
     _run(capsys, "replay", d / "flight.log", "--cal", d / "cal.json", "--no-progress",
