@@ -22,7 +22,7 @@ from fdi.state import BETA, IN_SET, KAPPA, MIN_DOWN, MIN_UP, NU, S_DOWN, S_UP
 __all__ = ["cusum_update"]
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", inline="always", _nrt=False)
 def cusum_update(z, rho: float, df: int, sensors, mats,
                  fconst, cusum) -> float:
     """Advance every sensor's two CUSUMs by one sample; returns the bank's statistic.

@@ -47,6 +47,7 @@ from fdi.state import (
     DETECTED,
     DETECTED_ROWS,
     DF,
+    F_SLOTS,
     FIRED,
     GOOD_SINCE_T,
     H_P_H,
@@ -78,9 +79,17 @@ from fdi.state import (
     PL_E,
     PROTECTION,
     READMISSION,
+    READMIT_DWELL_S,
     READMIT_SENSOR,
+    RETURN_DETECTED,
     RHO_COEF0,
+    RING_LEN,
     SAME_RUN,
+    SCALE_COLS,
+    SENSOR_COLS,
+    SENSOR_STATE_COLS,
+    SET_ICONST0,
+    SET_SENSORS0,
     SF,
     SIGMA_II,
     STALE_TIMEOUT_S,
@@ -96,56 +105,70 @@ from fdi.state import (
     STOP_ROW,
     STUCK_COUNT,
     THRESHOLD,
+    set_layout,
+    state_layout,
 )
 from fdi.windows import window_update
 
 __all__ = ["advance", "compensate", "reconstruct_row"]
 
-
+# Every kernel function is compiled without numba's reference counting (``_nrt=False``): the
+# kernel allocates nothing (its scratch vectors live in the detector state), and with
+# counting on, the array arguments of the inlined helpers cost an atomic increment and
+# decrement each per sample, most of the kernel's time.
+_KERNEL = dict(cache=True, error_model="numpy", _nrt=False)
+_INLINE = dict(_KERNEL, inline="always")
 
 _ISOLATE = 0                                # CAPABILITY_CODE["isolate"]
 _NONE = 3                                   # CAPABILITY_CODE["none"]
 
 
-@njit(cache=True, error_model="numpy", inline="always")
-def members(sensors):
-    """Indices of the sensors in the set, ascending, shape (m,)."""
-    m = 0
-    for i in range(sensors.shape[0]):
-        if sensors[i, IN_SET] != 0.0:
-            m += 1
-    idx = np.empty(m, np.int64)
-    m = 0
-    for i in range(sensors.shape[0]):
-        if sensors[i, IN_SET] != 0.0:
-            idx[m] = i
-            m += 1
-    return idx
-
-
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(**_INLINE)
 def _finite(x):
     """x when finite, else 0."""
     return x if math.isfinite(x) else 0.0
 
 
-@njit(cache=True, error_model="numpy", inline="always")
-def compensate(raw, r, corr, cr, idx, sensors, mats, df, has_omega, y, p, z, w) -> float:
-    """y = SF·u − b − c, p = V·y, z = A·p, ω̂ = G·y of the sensors ``idx`` of row r; returns ρ.
+@njit(**_INLINE)
+def set_views(kset, n):
+    """The packed constants of a set (:class:`fdi.state.KernelSet`) as (fconst, sensors,
+    scales, mats, df, nw)."""
+    df = int(kset[SET_ICONST0 + DF])
+    nw = int(kset[SET_ICONST0 + N_WINDOWS])
+    o_scales, o_mats, end = set_layout(n, df, nw)
+    return (kset[:F_SLOTS], kset[SET_SENSORS0:o_scales].reshape(n, SENSOR_COLS),
+            kset[o_scales:o_mats].reshape(nw, SCALE_COLS),
+            kset[o_mats:end].reshape(3 * df + 3, n), df, nw)
+
+
+@njit(**_INLINE)
+def scratch_views(values, n):
+    """The kernel's scratch vectors y, p, z (n each) and ω̂ (3) in the detector state."""
+    o_scratch = state_layout(n, 0)[1]
+    return (values[o_scratch:o_scratch + n], values[o_scratch + n:o_scratch + 2 * n],
+            values[o_scratch + 2 * n:o_scratch + 3 * n],
+            values[o_scratch + 3 * n:o_scratch + 3 * n + 3])
+
+
+@njit(**_INLINE)
+def compensate(raw, r, corr, cr, sensors, mats, df, has_omega, y, p, z, w) -> float:
+    """y = SF·u − b − c, p = V·y, z = A·p, ω̂ = G·y of the sensors of the set, row r;
+    returns ρ.
 
     ``c = corr[cr]`` is the run-time correction of the effect terms (rad/s; a non-finite entry
     counts as 0, so a bad input of an effect never reaches the parity). Sums run over the
     sensors of the set in ascending order (left to right). Without three independent
     sensors ω̂ is NaN and ρ is 0.
     """
-    for k_ in range(idx.shape[0]):
-        i = idx[k_]
-        y[i] = sensors[i, SF] * raw[r, i] - sensors[i, BIAS] - _finite(corr[cr, i])
+    n = sensors.shape[0]
+    for i in range(n):
+        if sensors[i, IN_SET] != 0.0:
+            y[i] = sensors[i, SF] * raw[r, i] - sensors[i, BIAS] - _finite(corr[cr, i])
     for j in range(df):
         acc = 0.0
-        for k_ in range(idx.shape[0]):
-            i = idx[k_]
-            acc = acc + mats[j, i] * y[i]
+        for i in range(n):
+            if sensors[i, IN_SET] != 0.0:
+                acc = acc + mats[j, i] * y[i]
         p[j] = acc
     a0 = df + 3
     for j in range(df):
@@ -158,32 +181,36 @@ def compensate(raw, r, corr, cr, idx, sensors, mats, df, has_omega, y, p, z, w) 
         w[1] = np.nan
         w[2] = np.nan
         return 0.0
-    for a in range(3):
-        acc = 0.0
-        for k_ in range(idx.shape[0]):
-            i = idx[k_]
-            acc = acc + mats[df + a, i] * y[i]
-        w[a] = acc
-    q0, q1, q2 = w[0] * w[0], w[1] * w[1], w[2] * w[2]
-    q3, q4, q5 = w[0] * w[1], w[0] * w[2], w[1] * w[2]
+    w0 = 0.0
+    w1 = 0.0
+    w2 = 0.0
+    for i in range(n):
+        if sensors[i, IN_SET] != 0.0:
+            w0 = w0 + mats[df, i] * y[i]
+            w1 = w1 + mats[df + 1, i] * y[i]
+            w2 = w2 + mats[df + 2, i] * y[i]
+    w[0] = w0
+    w[1] = w1
+    w[2] = w2
+    q0, q1, q2 = w0 * w0, w1 * w1, w2 * w2
+    q3, q4, q5 = w0 * w1, w0 * w2, w1 * w2
     rho = 0.0
     c = RHO_COEF0
-    for k_ in range(idx.shape[0]):
-        i = idx[k_]
-        s = (sensors[i, c] * q0 + sensors[i, c + 1] * q1 + sensors[i, c + 2] * q2
-             + sensors[i, c + 3] * q3 + sensors[i, c + 4] * q4 + sensors[i, c + 5] * q5)
-        if s > rho:
-            rho = s
+    for i in range(n):
+        if sensors[i, IN_SET] != 0.0:
+            s = (sensors[i, c] * q0 + sensors[i, c + 1] * q1 + sensors[i, c + 2] * q2
+                 + sensors[i, c + 3] * q3 + sensors[i, c + 4] * q4 + sensors[i, c + 5] * q5)
+            if s > rho:
+                rho = s
     return rho
 
 
-@njit(cache=True, error_model="numpy", inline="always")
-def health_checks(t, raw, r, valid, vr, sensors, fconst, iconst, sensor, counters) -> int:
+@njit(**_INLINE)
+def health_checks(t, raw, r, valid, vr, sensors, sensor, counters, stuck, stale_s) -> int:
     """Health verdict per sensor of the set (``counters[HEALTH0 + i]``); returns how many
     failed. Each sensor's check reads only its own history, so the order of isolation does
     not change the verdicts."""
     failed = 0
-    stuck = iconst[STUCK_COUNT]
     for i in range(sensors.shape[0]):
         counters[HEALTH0 + i] = HEALTH_OK
         if sensors[i, IN_SET] == 0.0:
@@ -207,27 +234,27 @@ def health_checks(t, raw, r, valid, vr, sensors, fconst, iconst, sensor, counter
             lvt = sensor[i, LAST_VALID_T]
             if t > lvt or lvt != lvt:
                 sensor[i, LAST_VALID_T] = t
-        elif t - sensor[i, LAST_VALID_T] > fconst[STALE_TIMEOUT_S]:
+        elif t - sensor[i, LAST_VALID_T] > stale_s:
             counters[HEALTH0 + i] = HEALTH_STALE
             failed += 1
     return failed
 
 
-@njit(cache=True, error_model="numpy")
-def readmission_check(t, raw, r, corr, cr, valid, vr, idx, sensors, mats, iconst, sensor,
+@njit(**_INLINE)
+def readmission_check(t, raw, r, corr, cr, valid, vr, sensors, mats, df, capability, sensor,
                       counters, dwell_s, y, p, z, w) -> int:
     """First isolated sensor that behaved for ``dwell_s`` (−1: none).
 
     Good behaviour: valid, within the raw bounds, not repeating, and |y_i − h_iᵀω̂|² below
     9·(Σ_ii + h_iᵀPh_i) with ω̂ from the healthy set.
     """
-    if iconst[CAPABILITY] == _NONE or counters[DETECTED] != 0:
+    if capability == _NONE or counters[DETECTED] != 0:
         return -1
     n = sensors.shape[0]
     for i in range(n):
         if sensors[i, IN_SET] != 0.0 and not valid[vr, i]:
             return -1
-    compensate(raw, r, corr, cr, idx, sensors, mats, iconst[DF], True, y, p, z, w)
+    compensate(raw, r, corr, cr, sensors, mats, df, True, y, p, z, w)
     for i in range(n):
         if sensors[i, IN_SET] != 0.0:
             continue
@@ -251,8 +278,9 @@ def readmission_check(t, raw, r, corr, cr, valid, vr, idx, sensors, mats, iconst
     return -1
 
 
-@njit(cache=True, error_model="numpy", inline="always")
-def detection_machine(alarm, clear, fired, iconst, counters) -> int:
+@njit(**_INLINE)
+def detection_machine(alarm, clear, fired, can_isolate, persistence, clear_samples,
+                      counters) -> int:
     """Detection state machine for one complete sample; returns the stop code.
 
     The first alarm detects; ``persistence`` consecutive alarms isolate (when the set can
@@ -273,25 +301,24 @@ def detection_machine(alarm, clear, fired, iconst, counters) -> int:
         counters[DETECTED_ROWS] += 1
         counters[ALARM_RUN] = counters[ALARM_RUN] + 1 if alarm else 0
         counters[CLEAR_RUN] = counters[CLEAR_RUN] + 1 if clear else 0
-    if iconst[CAPABILITY] == _ISOLATE and counters[ALARM_RUN] >= iconst[PERSISTENCE]:
+    if can_isolate and counters[ALARM_RUN] >= persistence:
         counters[FIRED] = fired
         code |= STOP_ISOLATE
-    elif counters[DETECTED] != 0 and counters[CLEAR_RUN] >= iconst[CLEAR_SAMPLES]:
+    elif counters[DETECTED] != 0 and counters[CLEAR_RUN] >= clear_samples:
         counters[DETECTED] = 0
     return code
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(**_INLINE)
 def protection_level(fconst, rho) -> float:
     """PL(ρ) = a·sqrt(1 + bρ) + c·sqrt(d + eρ) (rad/s), :mod:`fdi.integrity`."""
     return (fconst[PL_A] * math.sqrt(1.0 + fconst[PL_B] * rho)
             + fconst[PL_C] * math.sqrt(fconst[PL_D] + fconst[PL_E] * rho))
 
 
-@njit(cache=True, error_model="numpy", inline="always")
-def _untested_row(out, r, scales, fconst, iconst, K, parity0):
+@njit(**_INLINE)
+def _untested_row(out, r, scales, fconst, nw, K, parity0):
     """Statistics NaN, base thresholds, parity NaN: a sample without a parity test."""
-    nw = iconst[N_WINDOWS]
     for k in range(nw):
         out[r, STATS0 + k] = np.nan
         out[r, STATS0 + K + k] = scales[k, THRESHOLD]
@@ -302,14 +329,14 @@ def _untested_row(out, r, scales, fconst, iconst, K, parity0):
         out[r, j] = np.nan
 
 
-@njit(cache=True, error_model="numpy", inline="always")
-def parity_tests(z, rho, p, df, sensors, scales, mats, fconst, iconst, windows, cusum,
-                 counters, K, parity0, out, r) -> int:
-    """Windows, CUSUM bank, parity output and state machine of one complete sample;
-    returns the stop code (a detection or an isolation)."""
-    nw = iconst[N_WINDOWS]
+@njit(**_INLINE)
+def parity_tests(z, rho, p, df, sensors, scales, mats, fconst, has_cusum, windows, cusum,
+                 counters, K, parity0, out, r) -> tuple[bool, bool, int]:
+    """Windows, CUSUM bank and parity output of one complete sample; returns (alarm,
+    clear, fired) for the state machine."""
+    nw = scales.shape[0]
     alarm, clear, fired, best = window_update(z, rho, df, windows, counters, scales, K, out, r)
-    if iconst[HAS_CUSUM] != 0:
+    if has_cusum:
         g = cusum_update(z, rho, df, sensors, mats, fconst, cusum)
         h = fconst[CUSUM_H]
         out[r, STATS0 + nw] = g
@@ -325,12 +352,11 @@ def parity_tests(z, rho, p, df, sensors, scales, mats, fconst, iconst, windows, 
             out[r, parity0 + j] = p[j]
         for j in range(parity0 + df, out.shape[1]):
             out[r, j] = np.nan
-    return detection_machine(alarm, clear, fired, iconst, counters)
+    return alarm, clear, fired
 
 
-@njit(error_model="numpy")
-def _advance(t, raw, corr, valid, r0, r1, sensors, scales, mats, fconst, iconst, windows, cusum,
-            sensor, counters, out, dwell_s) -> None:
+@njit(**_KERNEL)
+def _advance(t, raw, corr, valid, r0, r1, kset, values, counters, out) -> int:
     """Run samples r0 … r1−1 until one needs the monitor; see the module docstring.
 
     Parameters
@@ -341,14 +367,20 @@ def _advance(t, raw, corr, valid, r0, r1, sensors, scales, mats, fconst, iconst,
         Run-time correction of the effect terms (rad/s), subtracted from y.
     valid : ndarray of bool, shape (N, n), or (1, n) when every sample is valid
     r0, r1 : int
-    sensors, scales, mats, fconst, iconst : ndarray
-        Constants of the healthy set (:class:`fdi.state.KernelSet`).
-    windows, cusum, sensor, counters : ndarray
-        Detector state (:class:`fdi.state.DetectorState`), updated in place.
+    kset : ndarray
+        Constants of the healthy set (:attr:`fdi.state.KernelSet.packed`).
+    values : ndarray
+        Float detector state (:attr:`fdi.state.DetectorState.values`), updated in place.
+    counters : ndarray of int64
+        Integer detector state (:attr:`fdi.state.DetectorState.counters`), updated in place.
     out : ndarray, shape (N, width)
         Output rows (:class:`fdi.state.OutLayout`).
-    dwell_s : float
-        Re-admission dwell (s).
+
+    Returns
+    -------
+    int
+        The stop code (``counters[STOP_CODE]``), plus :data:`fdi.state.RETURN_DETECTED`
+        while a detection is active.
 
     Notes
     -----
@@ -357,18 +389,29 @@ def _advance(t, raw, corr, valid, r0, r1, sensors, scales, mats, fconst, iconst,
     sample; health, re-admission and incomplete samples *during* it (``PHASE`` tells where
     the next call resumes).
     """
-    n = sensors.shape[0]
-    df = iconst[DF]
-    has_omega = iconst[HAS_OMEGA] != 0
-    K = iconst[N_WINDOWS] + (1 if iconst[HAS_CUSUM] != 0 else 0)
+    n = raw.shape[1]
+    fconst, sensors, scales, mats, df, nw = set_views(kset, n)
+    ic = SET_ICONST0
+    has_omega = kset[ic + HAS_OMEGA] != 0.0
+    has_cusum = kset[ic + HAS_CUSUM] != 0.0
+    can_isolate = int(kset[ic + CAPABILITY]) == _ISOLATE
+    capability = int(kset[ic + CAPABILITY])
+    readmission = kset[ic + READMISSION] != 0.0
+    stuck = kset[ic + STUCK_COUNT]
+    persistence = int(kset[ic + PERSISTENCE])
+    clear_samples = int(kset[ic + CLEAR_SAMPLES])
+    stale_s = fconst[STALE_TIMEOUT_S]
+    dwell_s = fconst[READMIT_DWELL_S]
+    R = counters[RING_LEN]
+    o_cusum, o_scratch, o_windows, _ = state_layout(n, R)
+    sensor = values[:o_cusum].reshape(n, SENSOR_STATE_COLS)
+    cusum = values[o_cusum:o_scratch].reshape(4, n)
+    windows = values[o_windows:o_windows + (R + 1) * (df + 1)].reshape(R + 1, df + 1)
+    y, p, z, w = scratch_views(values, n)
+    K = nw + (1 if has_cusum else 0)
     parity0 = STATS0 + 2 * K
     has_valid = counters[HAS_VALID] != 0
     per_row_corr = corr.shape[0] > 1
-    y = np.zeros(n)
-    p = np.zeros(max(df, 1))
-    z = np.zeros(max(df, 1))
-    w = np.zeros(3)
-    idx = members(sensors)
     phase = counters[PHASE]
     counters[PHASE] = PHASE_HEALTH
     for r in range(r0, r1):
@@ -380,62 +423,63 @@ def _advance(t, raw, corr, valid, r0, r1, sensors, scales, mats, fconst, iconst,
                 counters[STARTED] = 1
                 for i in range(n):
                     sensor[i, LAST_VALID_T] = tr
-            if health_checks(tr, raw, r, valid, vr, sensors, fconst, iconst, sensor, counters) > 0:
-                counters[STOP_ROW] = r
-                counters[STOP_CODE] = STOP_HEALTH
-                return
-        if phase <= PHASE_READMIT and iconst[READMISSION] != 0:
-            k = readmission_check(tr, raw, r, corr, cr, valid, vr, idx, sensors, mats, iconst,
-                                  sensor, counters, dwell_s, y, p, z, w)
+            if health_checks(tr, raw, r, valid, vr, sensors, sensor, counters, stuck,
+                             stale_s) > 0:
+                return _stop(counters, r, STOP_HEALTH)
+        if phase <= PHASE_READMIT and readmission:
+            k = readmission_check(tr, raw, r, corr, cr, valid, vr, sensors, mats, df,
+                                  capability, sensor, counters, dwell_s, y, p, z, w)
             if k >= 0:
                 counters[READMIT_SENSOR] = k
-                counters[STOP_ROW] = r
-                counters[STOP_CODE] = STOP_READMIT
-                return
+                return _stop(counters, r, STOP_READMIT)
         phase = PHASE_HEALTH
         complete = True
-        for k_ in range(idx.shape[0]):
-            i = idx[k_]
-            if not valid[vr, i]:
-                complete = False
+        if has_valid:
+            for i in range(n):
+                if sensors[i, IN_SET] != 0.0 and not valid[vr, i]:
+                    complete = False
         if not complete:
-            _untested_row(out, r, scales, fconst, iconst, K, parity0)
+            _untested_row(out, r, scales, fconst, nw, K, parity0)
             out[r, PROTECTION] = np.inf
-            counters[STOP_ROW] = r
-            counters[STOP_CODE] = STOP_INCOMPLETE
-            return
-        rho = compensate(raw, r, corr, cr, idx, sensors, mats, df, has_omega, y, p, z, w)
+            return _stop(counters, r, STOP_INCOMPLETE)
+        rho = compensate(raw, r, corr, cr, sensors, mats, df, has_omega, y, p, z, w)
         out[r, OMEGA0] = w[0]
         out[r, OMEGA0 + 1] = w[1]
         out[r, OMEGA0 + 2] = w[2]
+        code = STOP_NONE
         if df > 0:
-            code = parity_tests(z, rho, p, df, sensors, scales, mats, fconst, iconst, windows,
-                                cusum, counters, K, parity0, out, r)
+            alarm, clear, fired = parity_tests(z, rho, p, df, sensors, scales, mats, fconst,
+                                               has_cusum, windows, cusum, counters, K,
+                                               parity0, out, r)
+            code = detection_machine(alarm, clear, fired, can_isolate, persistence,
+                                     clear_samples, counters)
         else:
-            code = STOP_NONE
-            _untested_row(out, r, scales, fconst, iconst, K, parity0)
+            _untested_row(out, r, scales, fconst, nw, K, parity0)
         out[r, PROTECTION] = protection_level(fconst, rho)
         if code != STOP_NONE:
-            counters[STOP_ROW] = r
-            counters[STOP_CODE] = code
-            return
-    counters[STOP_ROW] = r1
-    counters[STOP_CODE] = STOP_NONE
+            return _stop(counters, r, code)
+    return _stop(counters, r1, STOP_NONE)
 
 
-@njit(error_model="numpy")
-def _reconstruct_row(raw, corr, r, sensors, mats, iconst, fconst, row) -> None:
+@njit(**_INLINE)
+def _stop(counters, r, code) -> int:
+    """Record where and why the kernel stopped; the return value of :func:`advance`."""
+    counters[STOP_ROW] = r
+    counters[STOP_CODE] = code
+    return code + (RETURN_DETECTED if counters[DETECTED] != 0 else 0)
+
+
+@njit(**_KERNEL)
+def _reconstruct_row(raw, corr, r, kset, values, row) -> None:
     """ω̂ of one sample from the sensors of a set (row[OMEGA0 …]) and its protection level
-    (row[PROTECTION]); used for incomplete samples and right after an isolation."""
-    n = sensors.shape[0]
-    df = iconst[DF]
-    y = np.zeros(n)
-    p = np.zeros(max(df, 1))
-    z = np.zeros(max(df, 1))
-    w = np.zeros(3)
+    (row[PROTECTION]); used for incomplete samples and right after an isolation. The
+    scratch vectors of the detector state ``values`` are overwritten."""
+    n = raw.shape[1]
+    fconst, sensors, _, mats, df, _ = set_views(kset, n)
+    y, p, z, w = scratch_views(values, n)
     cr = r if corr.shape[0] > 1 else 0
-    rho = compensate(raw, r, corr, cr, members(sensors), sensors, mats, df,
-                     iconst[HAS_OMEGA] != 0, y, p, z, w)
+    rho = compensate(raw, r, corr, cr, sensors, mats, df,
+                     kset[SET_ICONST0 + HAS_OMEGA] != 0.0, y, p, z, w)
     row[OMEGA0] = w[0]
     row[OMEGA0 + 1] = w[1]
     row[OMEGA0 + 2] = w[2]
@@ -457,17 +501,15 @@ def _entry_points(sources: str):
     cached function, not of what it calls; the digest of every source compiled in sits in
     their closure, which numba's cache key includes, so an edit anywhere recompiles."""
 
-    @njit(cache=True, error_model="numpy")
-    def advance(t, raw, corr, valid, r0, r1, sensors, scales, mats, fconst, iconst, windows,
-                cusum, sensor, counters, out, dwell_s):
+    @njit(**_KERNEL)
+    def advance(t, raw, corr, valid, r0, r1, kset, values, counters, out):
         sources  # noqa: B018
-        _advance(t, raw, corr, valid, r0, r1, sensors, scales, mats, fconst, iconst, windows, cusum,
-                 sensor, counters, out, dwell_s)
+        return _advance(t, raw, corr, valid, r0, r1, kset, values, counters, out)
 
-    @njit(cache=True, error_model="numpy")
-    def reconstruct_row(raw, corr, r, sensors, mats, iconst, fconst, row):
+    @njit(**_KERNEL)
+    def reconstruct_row(raw, corr, r, kset, values, row):
         sources  # noqa: B018
-        _reconstruct_row(raw, corr, r, sensors, mats, iconst, fconst, row)
+        _reconstruct_row(raw, corr, r, kset, values, row)
 
     advance.__doc__ = _advance.__doc__
     reconstruct_row.__doc__ = _reconstruct_row.__doc__

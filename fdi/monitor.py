@@ -111,7 +111,6 @@ class Monitor:
         self._no_correction = np.zeros((1, self.n))
         self._row = np.empty((1, self._layout.width(True)))
         self._t1 = np.empty(1)
-        self._dwell_s = float(self.settings.readmit_dwell_s)
         self._columns = (S.OMEGA0, S.STATS0, self._layout.thresholds0, self._layout.parity0)
         self.reset()
 
@@ -260,8 +259,7 @@ class Monitor:
         has_valid = ok is not self._all_valid
         c[S.HAS_VALID] = has_valid
         c[S.PHASE] = S.PHASE_HEALTH                          # (HAS_PARITY stays 1 between runs)
-        advance(self._t1, u, corr, ok, 0, 1, ks.sensors, ks.scales, ks.mats, ks.fconst, ks.iconst,
-                st.windows, st.cusum, st.sensor, c, row, self._dwell_s)
+        advance(self._t1, u, corr, ok, 0, 1, ks.packed, st.values, c, row)
         osd = None
         code = c[S.STOP_CODE]
         if code != S.STOP_NONE:                              # rare: the monitor's turn
@@ -305,8 +303,7 @@ class Monitor:
         """One call of the compiled kernel; returns where and why it stopped."""
         ks, st = self._kset, self._state
         c = st.counters
-        advance(t, raw, corr, valid, r0, r1, ks.sensors, ks.scales, ks.mats, ks.fconst, ks.iconst,
-                st.windows, st.cusum, st.sensor, c, out, self._dwell_s)
+        advance(t, raw, corr, valid, r0, r1, ks.packed, st.values, c, out)
         return int(c[S.STOP_ROW]), int(c[S.STOP_CODE])
 
     def _handle(self, stop: int, code: int, t: np.ndarray, raw: np.ndarray, corr: np.ndarray,
@@ -377,7 +374,7 @@ class Monitor:
             if ok[i]:
                 present |= 1 << i
         ks = self._kernel_set(present)
-        reconstruct_row(raw, corr, r, ks.sensors, ks.mats, ks.iconst, ks.fconst, row)
+        reconstruct_row(raw, corr, r, ks.packed, self._state.values, row)
         row[S.PROTECTION] = _INF
         return self.cache.get(present).omega_sd
 
@@ -397,7 +394,7 @@ class Monitor:
             events.append(Event(t, sensor, "isolated", reason, stat, thr, scale, mag))
             self._isolate(sensor - 1, "isolated")
             ks = self._kset
-            reconstruct_row(raw, corr, r, ks.sensors, ks.mats, ks.iconst, ks.fconst, row)
+            reconstruct_row(raw, corr, r, ks.packed, self._state.values, row)
 
     def _attribute(self, mdl: SetModel, fired: int) -> tuple[int, float | None, str,
                                                             int | None]:
