@@ -110,6 +110,8 @@ class Monitor:
         self._all_valid = np.ones((1, self.n), bool)
         self._no_correction = np.zeros((1, self.n))
         self._row = np.empty((1, self._layout.width(True)))
+        self._row0 = self._row[0]
+        self._shape1 = (self.n,)
         self._t1 = np.empty(1)
         self._columns = (S.OMEGA0, S.STATS0, self._layout.thresholds0, self._layout.parity0)
         self.reset()
@@ -136,6 +138,12 @@ class Monitor:
         self._model = self.cache.get(mask)
         self._kset = self._kernel_set(mask)
         self._state.new_set(self._model.df)
+        # what every answer of this set repeats (the status changes only with the set)
+        self._healthy_now = self._healthy_array(mask)
+        self._status_now = tuple(self._status)
+        self._status_detected = tuple("detected" if s == "ok" else s for s in self._status)
+        self._omega_sd = self._model.omega_sd
+        self._capability = self._model.capability
 
     def _healthy_array(self, mask: int) -> np.ndarray:
         a = self._healthy_arr.get(mask)
@@ -226,8 +234,16 @@ class Monitor:
         except Exception:
             tf = _NAN
         try:
-            return self._step(tf, raw, valid, self._correction(correction, 1))
+            if (valid is None and correction is None and type(raw) is np.ndarray
+                    and raw.dtype is _F64 and raw.shape == self._shape1
+                    and raw.flags.c_contiguous):              # the common case, quickly
+                self._length_bad = False
+                return self._step(tf, raw[None], self._all_valid, self._no_correction, [])
+            events: list[Event] = []
+            u, ok = self._parse(raw, valid, tf, events)
+            return self._step(tf, u, ok, self._correction(correction, 1), events)
         except Exception as exc:
+            self._state.counters[S.PHASE] = S.PHASE_HEALTH
             ev = Event(tf, None, "health", f"internal error: {type(exc).__name__}: {exc}")
             return Answer(tf, np.full(3, _NAN), np.full(3, _NAN),
                           self._healthy_array(self._mask), tuple(self._status),
@@ -249,33 +265,40 @@ class Monitor:
             return np.ascontiguousarray(c)
         return self._no_correction
 
-    def _step(self, t: float, raw: Any, valid: Any, corr: np.ndarray) -> Answer:
-        events: list[Event] = []
-        u, ok = self._parse(raw, valid, t, events)
+    def _step(self, t: float, u: np.ndarray, ok: np.ndarray, corr: np.ndarray,
+              events: list[Event]) -> Answer:
+        """One parsed sample: u and ok of shape (1, n), corr (1, n)."""
         self._t1[0] = t
         row = self._row
-        st, ks = self._state, self._kset
-        c = st.counters
+        st = self._state
         has_valid = ok is not self._all_valid
-        c[S.HAS_VALID] = has_valid
-        c[S.PHASE] = S.PHASE_HEALTH                          # (HAS_PARITY stays 1 between runs)
-        advance(self._t1, u, corr, ok, 0, 1, ks.packed, st.values, c, row)
+        if has_valid:                                        # (HAS_VALID only picks the row
+            st.counters[S.HAS_VALID] = 1                     # of ``valid``: 0 here either way)
+        code = advance(self._t1, u, corr, ok, 0, 1, self._kset.packed, st.values, st.counters,
+                       row)
         osd = None
-        code = c[S.STOP_CODE]
-        if code != S.STOP_NONE:                              # rare: the monitor's turn
-            r, osd = self._handle(int(c[S.STOP_ROW]), int(code), self._t1, u, corr, ok,
-                                  has_valid, row, events, None)
+        if code & S.STOP_MASK:                               # rare: the monitor's turn
+            c = st.counters
+            r, osd = self._handle(int(c[S.STOP_ROW]), code & S.STOP_MASK, self._t1, u, corr,
+                                  ok, has_valid, row, events, None)
             if r == 0:
                 osd = self._advance(self._t1, u, corr, ok, has_valid, row, events, None)
-        r = row[0].copy()
-        o, s0, t0, p0 = self._columns
-        if c[S.DETECTED]:
-            status = tuple("detected" if s == "ok" else s for s in self._status)
+            detected = c[S.DETECTED] != 0
         else:
-            status = tuple(self._status)
-        return _answer(t, r[o:o + 3], self._model.omega_sd if osd is None else osd,
-                       self._healthy_array(self._mask), status, r[p0:], r[s0:t0], r[t0:p0],
-                       tuple(events), self._model.capability, float(r[S.PROTECTION]))
+            detected = code >= S.RETURN_DETECTED
+        r = self._row0.copy()
+        o, s0, t0, p0 = self._columns
+        # an Answer without the frozen dataclass's per-field __setattr__ calls (a third of
+        # the step's Python time once); same fields, same object
+        a = object.__new__(Answer)
+        object.__setattr__(a, "__dict__", {
+            "t": t, "omega": r[o:o + 3], "omega_sd": self._omega_sd if osd is None else osd,
+            "healthy": self._healthy_now,
+            "status": self._status_detected if detected else self._status_now,
+            "parity": r[p0:], "statistics": r[s0:t0], "thresholds": r[t0:p0],
+            "events": tuple(events) if events else (), "capability": self._capability,
+            "protection_level": float(r[S.PROTECTION])})
+        return a
 
     # ------------------------------------------------------------------ the loop
     def _advance(self, t: np.ndarray, raw: np.ndarray, corr: np.ndarray, valid: np.ndarray,
@@ -301,10 +324,10 @@ class Monitor:
     def _kernel(self, t: np.ndarray, raw: np.ndarray, corr: np.ndarray, valid: np.ndarray,
                 r0: int, r1: int, out: np.ndarray) -> tuple[int, int]:
         """One call of the compiled kernel; returns where and why it stopped."""
-        ks, st = self._kset, self._state
-        c = st.counters
-        advance(t, raw, corr, valid, r0, r1, ks.packed, st.values, c, out)
-        return int(c[S.STOP_ROW]), int(c[S.STOP_CODE])
+        st = self._state
+        code = advance(t, raw, corr, valid, r0, r1, self._kset.packed, st.values, st.counters,
+                       out)
+        return int(st.counters[S.STOP_ROW]), code & S.STOP_MASK
 
     def _handle(self, stop: int, code: int, t: np.ndarray, raw: np.ndarray, corr: np.ndarray,
                 valid: np.ndarray, has_valid: bool, out: np.ndarray, events: list[Event],
@@ -494,20 +517,6 @@ class Monitor:
         answers = [self.step(ts[r], rows[r], vl[r] if vl is not None and r < len(vl) else None,
                              cl[r if cl.shape[0] > 1 else 0]) for r in range(N)]
         return _from_answers(np.asarray(ts[:N], float), answers, self, parity)
-
-
-def _answer(t: float, omega: np.ndarray, omega_sd: np.ndarray, healthy: np.ndarray,
-            status: tuple[str, ...], parity: np.ndarray, statistics: np.ndarray,
-            thresholds: np.ndarray, events: tuple[Event, ...], capability: str,
-            protection_level: float) -> Answer:
-    """An :class:`Answer` without the frozen dataclass's per-field ``__setattr__`` calls
-    (a third of the step's Python time); same fields, same object."""
-    a = object.__new__(Answer)
-    object.__setattr__(a, "__dict__", {
-        "t": t, "omega": omega, "omega_sd": omega_sd, "healthy": healthy, "status": status,
-        "parity": parity, "statistics": statistics, "thresholds": thresholds,
-        "events": events, "capability": capability, "protection_level": protection_level})
-    return a
 
 
 def _to_float(x: Any) -> float:

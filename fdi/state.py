@@ -87,6 +87,7 @@ STOP_NONE, STOP_HEALTH, STOP_READMIT, STOP_INCOMPLETE, STOP_DETECTED, STOP_ISOLA
     0, 1, 2, 3, 4, 8
 # added to the stop code that fdi.kernel.advance returns while a detection is active
 RETURN_DETECTED = 16
+STOP_MASK = 15                              # the stop code in advance's return value
 # PHASE: where the kernel resumes a stopped sample
 PHASE_HEALTH, PHASE_READMIT, PHASE_PARITY = 0, 1, 2
 # health verdicts
