@@ -115,8 +115,10 @@ __all__ = ["advance", "compensate", "reconstruct_row"]
 # Every kernel function is compiled without numba's reference counting (``_nrt=False``): the
 # kernel allocates nothing (its scratch vectors live in the detector state), and with
 # counting on, the array arguments of the inlined helpers cost an atomic increment and
-# decrement each per sample, most of the kernel's time.
-_KERNEL = dict(cache=True, error_model="numpy", _nrt=False)
+# decrement each per sample, most of the kernel's time. Only the two entry points are cached
+# (see _entry_points): a cached inner function would be reloaded after an edit of a module
+# it inlines.
+_KERNEL = dict(error_model="numpy", _nrt=False)
 _INLINE = dict(_KERNEL, inline="always")
 
 _ISOLATE = 0                                # CAPABILITY_CODE["isolate"]
@@ -136,7 +138,7 @@ def set_views(kset, n):
     df = int(kset[SET_ICONST0 + DF])
     nw = int(kset[SET_ICONST0 + N_WINDOWS])
     o_scales, o_mats, end = set_layout(n, df, nw)
-    return (kset[:F_SLOTS], kset[SET_SENSORS0:o_scales].reshape(n, SENSOR_COLS),
+    return (kset[:F_SLOTS], kset[SET_SENSORS0:o_scales].reshape(SENSOR_COLS, n),
             kset[o_scales:o_mats].reshape(nw, SCALE_COLS),
             kset[o_mats:end].reshape(3 * df + 3, n), df, nw)
 
@@ -153,22 +155,25 @@ def scratch_views(values, n):
 @njit(**_INLINE)
 def compensate(raw, r, corr, cr, sensors, mats, df, has_omega, y, p, z, w) -> float:
     """y = SF·u − b − c, p = V·y, z = A·p, ω̂ = G·y of the sensors of the set, row r;
-    returns ρ.
+    returns ρ. ``sensors`` is laid out (SENSOR_COLS, n): one row per quantity.
 
     ``c = corr[cr]`` is the run-time correction of the effect terms (rad/s; a non-finite entry
     counts as 0, so a bad input of an effect never reaches the parity). Sums run over the
     sensors of the set in ascending order (left to right). Without three independent
     sensors ω̂ is NaN and ρ is 0.
     """
-    n = sensors.shape[0]
+    n = sensors.shape[1]
+    # Dense loops over all n sensors: a sensor outside the set has y = −0.0 and zero columns
+    # in V and G and zero ρ coefficients (:func:`fdi.state.pack_set`), and x + (+0·−0) = x
+    # for every x (also −0, ±inf, NaN), so the sums equal those over the set's sensors alone,
+    # bit for bit, in the same order.
     for i in range(n):
-        if sensors[i, IN_SET] != 0.0:
-            y[i] = sensors[i, SF] * raw[r, i] - sensors[i, BIAS] - _finite(corr[cr, i])
+        yi = sensors[SF, i] * raw[r, i] - sensors[BIAS, i] - _finite(corr[cr, i])
+        y[i] = yi if sensors[IN_SET, i] != 0.0 else -0.0
     for j in range(df):
         acc = 0.0
         for i in range(n):
-            if sensors[i, IN_SET] != 0.0:
-                acc = acc + mats[j, i] * y[i]
+            acc = acc + mats[j, i] * y[i]
         p[j] = acc
     a0 = df + 3
     for j in range(df):
@@ -185,23 +190,21 @@ def compensate(raw, r, corr, cr, sensors, mats, df, has_omega, y, p, z, w) -> fl
     w1 = 0.0
     w2 = 0.0
     for i in range(n):
-        if sensors[i, IN_SET] != 0.0:
-            w0 = w0 + mats[df, i] * y[i]
-            w1 = w1 + mats[df + 1, i] * y[i]
-            w2 = w2 + mats[df + 2, i] * y[i]
+        w0 = w0 + mats[df, i] * y[i]
+        w1 = w1 + mats[df + 1, i] * y[i]
+        w2 = w2 + mats[df + 2, i] * y[i]
     w[0] = w0
     w[1] = w1
     w[2] = w2
     q0, q1, q2 = w0 * w0, w1 * w1, w2 * w2
     q3, q4, q5 = w0 * w1, w0 * w2, w1 * w2
-    rho = 0.0
+    rho = 0.0                       # a sensor outside the set gives s = 0 (or NaN): no change
     c = RHO_COEF0
     for i in range(n):
-        if sensors[i, IN_SET] != 0.0:
-            s = (sensors[i, c] * q0 + sensors[i, c + 1] * q1 + sensors[i, c + 2] * q2
-                 + sensors[i, c + 3] * q3 + sensors[i, c + 4] * q4 + sensors[i, c + 5] * q5)
-            if s > rho:
-                rho = s
+        s = (sensors[c, i] * q0 + sensors[c + 1, i] * q1 + sensors[c + 2, i] * q2
+             + sensors[c + 3, i] * q3 + sensors[c + 4, i] * q4 + sensors[c + 5, i] * q5)
+        if s > rho:
+            rho = s
     return rho
 
 
@@ -211,13 +214,13 @@ def health_checks(t, raw, r, valid, vr, sensors, sensor, counters, stuck, stale_
     failed. Each sensor's check reads only its own history, so the order of isolation does
     not change the verdicts."""
     failed = 0
-    for i in range(sensors.shape[0]):
+    for i in range(sensors.shape[1]):
         counters[HEALTH0 + i] = HEALTH_OK
-        if sensors[i, IN_SET] == 0.0:
+        if sensors[IN_SET, i] == 0.0:
             continue
         if valid[vr, i]:
             v = raw[r, i]
-            if not (sensors[i, LO] < v and v < sensors[i, HI]):
+            if not (sensors[LO, i] < v and v < sensors[HI, i]):
                 counters[HEALTH0 + i] = HEALTH_RANGE if math.isfinite(v) else HEALTH_NONFINITE
                 failed += 1
                 continue
@@ -250,22 +253,22 @@ def readmission_check(t, raw, r, corr, cr, valid, vr, sensors, mats, df, capabil
     """
     if capability == _NONE or counters[DETECTED] != 0:
         return -1
-    n = sensors.shape[0]
+    n = sensors.shape[1]
     for i in range(n):
-        if sensors[i, IN_SET] != 0.0 and not valid[vr, i]:
+        if sensors[IN_SET, i] != 0.0 and not valid[vr, i]:
             return -1
     compensate(raw, r, corr, cr, sensors, mats, df, True, y, p, z, w)
     for i in range(n):
-        if sensors[i, IN_SET] != 0.0:
+        if sensors[IN_SET, i] != 0.0:
             continue
         v = raw[r, i]
-        good = (valid[vr, i] and sensors[i, LO] < v and v < sensors[i, HI]
+        good = (valid[vr, i] and sensors[LO, i] < v and v < sensors[HI, i]
                 and v != sensor[i, LAST_RAW])
         if good:
-            yi = sensors[i, SF] * v - sensors[i, BIAS] - _finite(corr[cr, i])
-            hw = (sensors[i, AXIS0] * w[0] + sensors[i, AXIS0 + 1] * w[1]
-                  + sensors[i, AXIS0 + 2] * w[2])
-            var = sensors[i, SIGMA_II] + sensors[i, H_P_H]
+            yi = sensors[SF, i] * v - sensors[BIAS, i] - _finite(corr[cr, i])
+            hw = (sensors[AXIS0, i] * w[0] + sensors[AXIS0 + 1, i] * w[1]
+                  + sensors[AXIS0 + 2, i] * w[2])
+            var = sensors[SIGMA_II, i] + sensors[H_P_H, i]
             good = (yi - hw) ** 2 < 9.0 * var
         sensor[i, LAST_RAW] = v
         since = sensor[i, GOOD_SINCE_T]
@@ -436,7 +439,7 @@ def _advance(t, raw, corr, valid, r0, r1, kset, values, counters, out) -> int:
         complete = True
         if has_valid:
             for i in range(n):
-                if sensors[i, IN_SET] != 0.0 and not valid[vr, i]:
+                if sensors[IN_SET, i] != 0.0 and not valid[vr, i]:
                     complete = False
         if not complete:
             _untested_row(out, r, scales, fconst, nw, K, parity0)
@@ -501,12 +504,12 @@ def _entry_points(sources: str):
     cached function, not of what it calls; the digest of every source compiled in sits in
     their closure, which numba's cache key includes, so an edit anywhere recompiles."""
 
-    @njit(**_KERNEL)
+    @njit(cache=True, **_KERNEL)
     def advance(t, raw, corr, valid, r0, r1, kset, values, counters, out):
         sources  # noqa: B018
         return _advance(t, raw, corr, valid, r0, r1, kset, values, counters, out)
 
-    @njit(**_KERNEL)
+    @njit(cache=True, **_KERNEL)
     def reconstruct_row(raw, corr, r, kset, values, row):
         sources  # noqa: B018
         _reconstruct_row(raw, corr, r, kset, values, row)

@@ -6,9 +6,10 @@ monitor use the names, never bare numbers.
 
 Per healthy set (constants, :class:`KernelSet`, built once per set by :func:`pack_set`):
 
-- ``sensors`` (n, :data:`SENSOR_COLS`): per sensor the compensation y = sf·u − bias, the raw
-  health bounds lo < u < hi, whether it is in the set, Σ_ii, h_iᵀ P h_i (P = G Σ Gᵀ, for
-  re-admission), the calibrated axis h_i and the six coefficients of ρ_i = ω̂ᵀC_iω̂/Σ_ii.
+- ``sensors`` (:data:`SENSOR_COLS`, n; one row per quantity): per sensor the compensation
+  y = sf·u − bias, the raw health bounds lo < u < hi, whether it is in the set, Σ_ii,
+  h_iᵀ P h_i (P = G Σ Gᵀ, for re-admission), the calibrated axis h_i and the six
+  coefficients of ρ_i = ω̂ᵀC_iω̂/Σ_ii (zero outside the set).
 - ``scales`` (K_w, :data:`SCALE_COLS`): per dyadic window w the χ² threshold T_w,
   1/(w·f_w), κ/f_w, 1 + w·β/f_w and the clearing threshold (hysteresis).
 - ``mats`` (3·df + 3, n): the parity matrix V (rows 0 … df−1), the reconstruction matrix G
@@ -51,7 +52,7 @@ __all__ = [
     "state_layout",
 ]
 
-# ---------------------------------------------------------------- sensors (n, SENSOR_COLS)
+# ---------------------------------------------------------------- sensors (SENSOR_COLS, n)
 SF, BIAS, LO, HI, IN_SET, SIGMA_II, H_P_H, AXIS0 = range(8)
 RHO_COEF0 = AXIS0 + 3                       # six coefficients of ρ_i
 SENSOR_COLS = RHO_COEF0 + 6
@@ -183,6 +184,9 @@ def pack_set(model, H: np.ndarray, sigma_diag: np.ndarray, lo: tuple[float, ...]
     sensors[:, H_P_H] = np.einsum("ia,ab,ib->i", H, cov, H)
     sensors[:, AXIS0:AXIS0 + 3] = H
     sensors[:, RHO_COEF0:RHO_COEF0 + 6] = model.cal_coef
+    # the kernel's dense loops need zeros (+0.0) outside the set: ρ coefficients, V and G
+    out_of_set = [i for i in range(n) if i not in model.idx]
+    sensors[out_of_set, RHO_COEF0:RHO_COEF0 + 6] = 0.0
     nw = len(thresholds.scales)
     scales = np.zeros((nw, SCALE_COLS))
     scales[:, WINDOW] = thresholds.scales
@@ -199,6 +203,7 @@ def pack_set(model, H: np.ndarray, sigma_diag: np.ndarray, lo: tuple[float, ...]
         norms = np.linalg.norm(model.U, axis=0)
         unit = np.where(norms > 0, model.U / np.where(norms > 0, norms, 1.0), 0.0)
         mats[2 * df + 3:, list(model.idx)] = unit
+    mats[:df + 3, out_of_set] = 0.0
     fconst = np.zeros(F_SLOTS)
     fconst[KAPPA] = model.kappa
     fconst[BETA] = model.beta
@@ -224,10 +229,10 @@ def pack_set(model, H: np.ndarray, sigma_diag: np.ndarray, lo: tuple[float, ...]
     packed = np.zeros(end)
     packed[:F_SLOTS] = fconst
     packed[SET_ICONST0:SET_SENSORS0] = iconst
-    packed[SET_SENSORS0:o_scales] = sensors.ravel()
+    packed[SET_SENSORS0:o_scales] = sensors.T.ravel()      # one row per quantity
     packed[o_scales:o_mats] = scales.ravel()
     packed[o_mats:end] = mats.ravel()
-    return KernelSet(packed, packed[SET_SENSORS0:o_scales].reshape(n, SENSOR_COLS),
+    return KernelSet(packed, packed[SET_SENSORS0:o_scales].reshape(SENSOR_COLS, n),
                      packed[o_scales:o_mats].reshape(nw, SCALE_COLS),
                      packed[o_mats:end].reshape(3 * df + 3, n), packed[:F_SLOTS], iconst)
 

@@ -31,7 +31,7 @@ from fdi.state import (
 __all__ = ["window_update"]
 
 
-@njit(cache=True, error_model="numpy", inline="always", _nrt=False)
+@njit(error_model="numpy", inline="always", _nrt=False)
 def window_update(z: np.ndarray, rho: float, df: int, windows: np.ndarray,
                   counters: np.ndarray, scales: np.ndarray, K: int, out: np.ndarray,
                   r: int) -> tuple[bool, bool, int, float]:
