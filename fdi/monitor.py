@@ -493,6 +493,7 @@ class Monitor:
                               out, events, rows, max(1, int(chunk)))
             finally:
                 c[S.HAS_PARITY] = 1                          # step() always fills the parity
+                c[S.PHASE] = S.PHASE_HEALTH                  # and starts a sample afresh
         return rows.result(ta, out, self._layout, parity, events)
 
     def _run_rows(self, t: Any, raw: Any, valid: Any, parity: bool, correction: Any
