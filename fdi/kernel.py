@@ -39,6 +39,7 @@ from fdi.state import (
     ALARM_RUN,
     AXIS0,
     BIAS,
+    BLOCK_ROWS,
     CAPABILITY,
     CLEAR_RUN,
     CLEAR_SAMPLES,
@@ -145,11 +146,13 @@ def set_views(kset, n):
 
 @njit(**_INLINE)
 def scratch_views(values, n):
-    """The kernel's scratch vectors y, p, z (n each) and ω̂ (3) in the detector state."""
-    o_scratch = state_layout(n, 0)[1]
-    return (values[o_scratch:o_scratch + n], values[o_scratch + n:o_scratch + 2 * n],
-            values[o_scratch + 2 * n:o_scratch + 3 * n],
-            values[o_scratch + 3 * n:o_scratch + 3 * n + 3])
+    """The kernel's scratch vectors y, p, z (n each) and ω̂ (3) in the detector state, and
+    the block of (z, ρ) rows, shape (BLOCK_ROWS, n + 1)."""
+    o = state_layout(n, 0)[1]
+    return (values[o:o + n], values[o + n:o + 2 * n], values[o + 2 * n:o + 3 * n],
+            values[o + 3 * n:o + 3 * n + 3],
+            values[o + 3 * n + 3:o + 3 * n + 3 + BLOCK_ROWS * (n + 1)].reshape(BLOCK_ROWS,
+                                                                              n + 1))
 
 
 @njit(**_INLINE)
@@ -333,10 +336,10 @@ def _untested_row(out, r, scales, fconst, nw, K, parity0):
 
 
 @njit(**_INLINE)
-def parity_tests(z, rho, p, df, sensors, scales, mats, fconst, has_cusum, windows, cusum,
-                 counters, K, parity0, out, r) -> tuple[bool, bool, int]:
-    """Windows, CUSUM bank and parity output of one complete sample; returns (alarm,
-    clear, fired) for the state machine."""
+def parity_tests(z, rho, df, sensors, scales, mats, fconst, has_cusum, windows, cusum,
+                 counters, K, out, r) -> tuple[bool, bool, int]:
+    """Windows and CUSUM bank of one complete sample; returns (alarm, clear, fired) for the
+    state machine."""
     nw = scales.shape[0]
     alarm, clear, fired, best = window_update(z, rho, df, windows, counters, scales, K, out, r)
     if has_cusum:
@@ -350,11 +353,6 @@ def parity_tests(z, rho, p, df, sensors, scales, mats, fconst, has_cusum, window
                 fired = nw
         if g >= fconst[CUSUM_CLEAR]:
             clear = False
-    if counters[HAS_PARITY] != 0:
-        for j in range(df):
-            out[r, parity0 + j] = p[j]
-        for j in range(parity0 + df, out.shape[1]):
-            out[r, j] = np.nan
     return alarm, clear, fired
 
 
@@ -410,14 +408,22 @@ def _advance(t, raw, corr, valid, r0, r1, kset, values, counters, out) -> int:
     sensor = values[:o_cusum].reshape(n, SENSOR_STATE_COLS)
     cusum = values[o_cusum:o_scratch].reshape(4, n)
     windows = values[o_windows:o_windows + (R + 1) * (df + 1)].reshape(R + 1, df + 1)
-    y, p, z, w = scratch_views(values, n)
+    y, p, z, w, block = scratch_views(values, n)
     K = nw + (1 if has_cusum else 0)
     parity0 = STATS0 + 2 * K
     has_valid = counters[HAS_VALID] != 0
     per_row_corr = corr.shape[0] > 1
     phase = counters[PHASE]
     counters[PHASE] = PHASE_HEALTH
+    has_parity = counters[HAS_PARITY] != 0
+    b0 = r0                                 # rows b0 … b1−1 compensated ahead, in ``block``
+    b1 = r0
     for r in range(r0, r1):
+        if r >= b1:
+            b0 = r
+            b1 = min(r1, r + BLOCK_ROWS)
+            compensate_ahead(raw, corr, b0, b1, sensors, mats, fconst, df, has_omega,
+                             has_parity, parity0, y, p, z, w, block, out)
         tr = t[r]
         vr = r if has_valid else 0
         cr = r if per_row_corr else 0
@@ -445,23 +451,52 @@ def _advance(t, raw, corr, valid, r0, r1, kset, values, counters, out) -> int:
             _untested_row(out, r, scales, fconst, nw, K, parity0)
             out[r, PROTECTION] = np.inf
             return _stop(counters, r, STOP_INCOMPLETE)
-        rho = compensate(raw, r, corr, cr, sensors, mats, df, has_omega, y, p, z, w)
-        out[r, OMEGA0] = w[0]
-        out[r, OMEGA0 + 1] = w[1]
-        out[r, OMEGA0 + 2] = w[2]
         code = STOP_NONE
         if df > 0:
-            alarm, clear, fired = parity_tests(z, rho, p, df, sensors, scales, mats, fconst,
-                                               has_cusum, windows, cusum, counters, K,
-                                               parity0, out, r)
+            zr = block[r - b0]              # z (first df entries) and ρ (entry n) of row r
+            alarm, clear, fired = parity_tests(zr, zr[n], df, sensors, scales, mats, fconst,
+                                               has_cusum, windows, cusum, counters, K, out, r)
             code = detection_machine(alarm, clear, fired, can_isolate, persistence,
                                      clear_samples, counters)
         else:
             _untested_row(out, r, scales, fconst, nw, K, parity0)
-        out[r, PROTECTION] = protection_level(fconst, rho)
         if code != STOP_NONE:
             return _stop(counters, r, code)
     return _stop(counters, r1, STOP_NONE)
+
+
+@njit(**_INLINE)
+def compensate_ahead(raw, corr, b0, b1, sensors, mats, fconst, df, has_omega, has_parity,
+                     parity0, y, p, z, w, block, out) -> None:
+    """Compensate rows b0 … b1−1 (at most BLOCK_ROWS) with the current set, before their
+    health checks: ω̂, the protection level and the parity go straight into their output
+    rows, z and ρ into ``block`` for the windows and the CUSUM bank.
+
+    These quantities depend on the row and the set only, not on the detector state, so the
+    rows are independent and the processor overlaps them (the sequential part of the
+    recursion starts at the windows). A row the kernel stops at or before is compensated
+    again by the next call, with the set the monitor chose; rows it never tests (health
+    verdicts, incomplete samples) are overwritten, so the extra work changes no answer.
+    A bad raw value only gives non-finite numbers here (no exception: error_model numpy).
+    """
+    n = sensors.shape[1]
+    per_row_corr = corr.shape[0] > 1
+    for q in range(b0, b1):
+        rho = compensate(raw, q, corr, q if per_row_corr else 0, sensors, mats, df,
+                         has_omega, y, p, z, w)
+        out[q, OMEGA0] = w[0]
+        out[q, OMEGA0 + 1] = w[1]
+        out[q, OMEGA0 + 2] = w[2]
+        out[q, PROTECTION] = protection_level(fconst, rho)
+        k = q - b0
+        for j in range(df):
+            block[k, j] = z[j]
+        block[k, n] = rho
+        if has_parity and df > 0:
+            for j in range(df):
+                out[q, parity0 + j] = p[j]
+            for j in range(parity0 + df, out.shape[1]):
+                out[q, j] = np.nan
 
 
 @njit(**_INLINE)
@@ -479,7 +514,7 @@ def _reconstruct_row(raw, corr, r, kset, values, row) -> None:
     scratch vectors of the detector state ``values`` are overwritten."""
     n = raw.shape[1]
     fconst, sensors, _, mats, df, _ = set_views(kset, n)
-    y, p, z, w = scratch_views(values, n)
+    y, p, z, w, _ = scratch_views(values, n)
     cr = r if corr.shape[0] > 1 else 0
     rho = compensate(raw, r, corr, cr, sensors, mats, df,
                      kset[SET_ICONST0 + HAS_OMEGA] != 0.0, y, p, z, w)

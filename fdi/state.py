@@ -238,16 +238,19 @@ def pack_set(model, H: np.ndarray, sigma_diag: np.ndarray, lo: tuple[float, ...]
 
 
 SENSOR_STATE_COLS = 4
+# rows the kernel compensates ahead (independent of the detector state; see fdi.kernel)
+BLOCK_ROWS = 32
 
 
 @register_jitable(inline="always")
 def state_layout(n: int, ring: int) -> tuple[int, int, int, int]:
     """Offsets in the detector's float state of the CUSUM bank, the kernel's scratch
-    (y, p, z: n each; ω̂: 3), the windows and the end (``sensor`` starts at 0); the windows
-    take (R + 1)·(n + 1) entries, room for any parity dimension df ≤ n."""
+    (y, p, z: n each; ω̂: 3; then (z, ρ) of :data:`BLOCK_ROWS` rows, n + 1 each), the
+    windows and the end (``sensor`` starts at 0); the windows take (R + 1)·(n + 1) entries,
+    room for any parity dimension df ≤ n."""
     o_cusum = n * SENSOR_STATE_COLS
     o_scratch = o_cusum + 4 * n
-    o_windows = o_scratch + 3 * n + 3
+    o_windows = o_scratch + 3 * n + 3 + BLOCK_ROWS * (n + 1)
     return o_cusum, o_scratch, o_windows, o_windows + (ring + 1) * (n + 1)
 
 
