@@ -541,9 +541,9 @@ class _Rows:
     def fill(self, r0: int, r1: int, mon: Monitor, omega_sd: np.ndarray | None = None) -> None:
         if r1 <= r0:
             return
-        self.healthy[r0:r1] = mon._healthy_array(mon._mask)
+        _fill_rows(self.healthy, r0, r1, mon._healthy_array(mon._mask))
         self.cap[r0:r1] = _CAP_CODE[mon.model.capability]
-        self.omega_sd[r0:r1] = mon.model.omega_sd if omega_sd is None else omega_sd
+        _fill_rows(self.omega_sd, r0, r1, mon.model.omega_sd if omega_sd is None else omega_sd)
 
     def result(self, t: np.ndarray, out: np.ndarray, lay: S.OutLayout, parity: bool,
                events: list[Event]) -> BlockResult:
@@ -553,6 +553,17 @@ class _Rows:
                            protection_level=out[:, S.PROTECTION],
                            capability=_CAP_NAMES[self.cap], events=events,
                            parity=out[:, lay.parity0:] if parity else None)
+
+
+def _fill_rows(a: np.ndarray, r0: int, r1: int, row: np.ndarray) -> None:
+    """a[r0:r1] = row by doubling contiguous copies (a row-major array with a few columns:
+    ~6× faster than numpy's broadcast, which loops over the rows)."""
+    a[r0] = row
+    k = 1
+    while r0 + k < r1:
+        m = min(k, r1 - r0 - k)
+        a[r0 + k:r0 + k + m] = a[r0:r0 + m]
+        k += m
 
 
 def _from_answers(t: np.ndarray, answers: list[Answer], mon: Monitor,
