@@ -429,9 +429,7 @@ def _advance(t, raw, corr, valid, r0, r1, kset, values, counters, out) -> int:
         cr = r if per_row_corr else 0
         if phase == PHASE_HEALTH:
             if counters[STARTED] == 0:
-                counters[STARTED] = 1
-                for i in range(n):
-                    sensor[i, LAST_VALID_T] = tr
+                _start(tr, sensor, counters)
             if health_checks(tr, raw, r, valid, vr, sensors, sensor, counters, stuck,
                              stale_s) > 0:
                 return _stop(counters, r, STOP_HEALTH)
@@ -442,12 +440,7 @@ def _advance(t, raw, corr, valid, r0, r1, kset, values, counters, out) -> int:
                 counters[READMIT_SENSOR] = k
                 return _stop(counters, r, STOP_READMIT)
         phase = PHASE_HEALTH
-        complete = True
-        if has_valid:
-            for i in range(n):
-                if sensors[IN_SET, i] != 0.0 and not valid[vr, i]:
-                    complete = False
-        if not complete:
+        if has_valid and not _complete(sensors, valid, vr):
             _untested_row(out, r, scales, fconst, nw, K, parity0)
             out[r, PROTECTION] = np.inf
             return _stop(counters, r, STOP_INCOMPLETE)
@@ -497,6 +490,23 @@ def compensate_ahead(raw, corr, b0, b1, sensors, mats, fconst, df, has_omega, ha
                 out[q, parity0 + j] = p[j]
             for j in range(parity0 + df, out.shape[1]):
                 out[q, j] = np.nan
+
+
+@njit(**_INLINE)
+def _complete(sensors, valid, vr) -> bool:
+    """Every sensor of the set delivered row ``vr`` of ``valid``."""
+    for i in range(sensors.shape[1]):
+        if sensors[IN_SET, i] != 0.0 and not valid[vr, i]:
+            return False
+    return True
+
+
+@njit(**_INLINE)
+def _start(t, sensor, counters) -> None:
+    """The first sample: every sensor's stale clock starts at its time."""
+    counters[STARTED] = 1
+    for i in range(sensor.shape[0]):
+        sensor[i, LAST_VALID_T] = t
 
 
 @njit(**_INLINE)
