@@ -15,14 +15,19 @@ answers). Per sample, with the constants of the current healthy set (:mod:`fdi.s
 4. :func:`compensate`: y = SF·u − b − c (c: run-time correction of the effect terms),
    parity p = V·y, whitened parity z = A·p (Cov z = I),
    ω̂ = G·y and ρ = max_i ω̂ᵀC_iω̂/Σ_ii (seed 001 Eq. 21 for the zeroed rows of H̃).
+   These depend on the row and the set only, so :func:`compensate_ahead` computes them
+   (and the protection level, step 7) for up to ``BLOCK_ROWS`` rows before their health
+   checks; a row the kernel stops at or before is computed again by the next call.
 5. Windows (:func:`fdi.windows.window_update`) and the CUSUM bank
    (:func:`fdi.cusum.cusum_update`).
 6. Detection state machine (:func:`detection_machine`): a detection or an isolation stops
    the kernel after the sample (the monitor attributes it, names the events, isolates).
 7. Protection level PL(ρ) = a·sqrt(1 + bρ) + c·sqrt(d + eρ) (:mod:`fdi.integrity`).
 
-The kernel never raises on numbers: every bad value is caught by the health checks before
-it reaches the arithmetic.
+The kernel never raises on numbers: a bad raw value only makes non-finite numbers in the
+compensation ahead (``error_model="numpy"``, no floating-point traps), and the health
+checks stop the kernel before any of them enters the windows, the CUSUM bank or a kept
+output row.
 """
 
 from __future__ import annotations
