@@ -234,11 +234,12 @@ class Monitor:
         except Exception:
             tf = _NAN
         try:
-            if (valid is None and correction is None and type(raw) is np.ndarray
-                    and raw.dtype is _F64 and raw.shape == self._shape1
-                    and raw.flags.c_contiguous):              # the common case, quickly
-                self._length_bad = False
-                return self._step(tf, raw[None], self._all_valid, self._no_correction, [])
+            if (valid is None and type(raw) is np.ndarray and raw.dtype is _F64
+                    and raw.shape == self._shape1 and raw.flags.c_contiguous):
+                corr = self._plain_correction(correction)  # the common case, quickly
+                if corr is not None:
+                    self._length_bad = False
+                    return self._step(tf, raw[None], self._all_valid, corr, [])
             events: list[Event] = []
             u, ok = self._parse(raw, valid, tf, events)
             return self._step(tf, u, ok, self._correction(correction, 1), events)
@@ -249,6 +250,16 @@ class Monitor:
                           self._healthy_array(self._mask), tuple(self._status),
                           np.full(max(self.n - 3, 0), _NAN), np.full(self.K, _NAN),
                           np.full(self.K, _NAN), (ev,), self._model.capability, _INF)
+
+    def _plain_correction(self, correction: Any) -> np.ndarray | None:
+        """No correction, or a C-contiguous float64 (n,) one, as a (1, n) row; None for
+        anything else (the general path then reads it)."""
+        if correction is None:
+            return self._no_correction
+        if (type(correction) is np.ndarray and correction.dtype is _F64
+                and correction.shape == self._shape1 and correction.flags.c_contiguous):
+            return correction[None]
+        return None
 
     def _correction(self, correction: Any, N: int) -> np.ndarray:
         """The correction as a C-contiguous float array of shape (N, n) or (1, n); zeros when
