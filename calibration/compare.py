@@ -13,16 +13,19 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from calibration.effects import TEMP_START_DEGC
 from fdi.calfile import Calibration, misalignment_angles
 from fdi.errors import ConfigError
 from fdi.units import (
+    DPH,
     EARTH_RATE_DPH,
     input_unit_factor,
     scale_factor_from_si,
     scale_factor_sd_from_si,
 )
 
-__all__ = ["ComparisonRow", "compare", "format_comparison", "true_earth_rate_dph"]
+__all__ = ["ComparisonRow", "compare", "format_comparison", "true_bias",
+           "true_earth_rate_dph"]
 
 
 @dataclass(frozen=True)
@@ -69,9 +72,39 @@ def true_earth_rate_dph(truth: Calibration, effects: Mapping[str, float] | None 
     return truth.earth_rate_dph if truth.earth_rate_dph is not None else EARTH_RATE_DPH
 
 
+def true_bias(cal: Calibration, truth: Calibration, kind: str, i: int,
+              effects: Mapping[str, float] | None,
+              effect_sensors: Mapping[str, tuple[int, ...]] | None) -> float:
+    """The true bias (SI) of sensor ``i`` of ``kind`` at the calibration's reference.
+
+    A calibration with a ``temperature`` term states its bias at the term's reference
+    temperature T_ref (``params.reference_degC``, the session mean); the simulator's bias
+    is at T₀ = :data:`calibration.effects.TEMP_START_DEGC`. When the truth has the
+    temperature knob on this sensor (value k in °/h per °C), the bias the calibration
+    estimates is b₀ + k·(T_ref − T₀). Otherwise the truth's bias as it is.
+    """
+    b0 = truth.sets[kind].sensors[i].bias
+    k = (effects or {}).get("temperature", 0.0)
+    on = (effect_sensors or {}).get("temperature", ())
+    if kind != "gyro" or k == 0.0 or (i + 1) not in on:
+        return b0
+    for term in cal.effects:
+        if (term.name, term.kind, term.sensor) == ("temperature", kind, i) \
+                and "reference_degC" in term.params:
+            t_ref = float(term.params["reference_degC"])
+            return b0 + k * DPH * (t_ref - TEMP_START_DEGC)
+    return b0
+
+
 def compare(cal: Calibration, truth: Calibration,
-            effects: Mapping[str, float] | None = None) -> list[ComparisonRow]:
+            effects: Mapping[str, float] | None = None,
+            effect_sensors: Mapping[str, tuple[int, ...]] | None = None
+            ) -> list[ComparisonRow]:
     """Rows of every parameter both calibrations hold.
+
+    ``effects`` and ``effect_sensors`` are the truth sidecar's knobs
+    (:func:`calibration.truth.load_truth`): they set the true Earth rate and the true bias at
+    the calibration's temperature reference (:func:`true_bias`).
 
     Raises
     ------
@@ -85,15 +118,16 @@ def compare(cal: Calibration, truth: Calibration,
         tru = truth.sets[kind]
         if tru.n != est.n:
             raise ConfigError(f"{kind}: calibration has {est.n} sensors, truth has {tru.n}")
-        for e, t in zip(est.sensors, tru.sensors, strict=True):
+        for i, (e, t) in enumerate(zip(est.sensors, tru.sensors, strict=True)):
             u = e.scale_factor_unit
             rows.append(ComparisonRow(
                 kind, e.name, "scale_factor", u, scale_factor_from_si(e.scale_factor, u),
                 scale_factor_from_si(t.scale_factor, u),
                 scale_factor_sd_from_si(e.scale_factor, e.scale_factor_sd, u)))
             bf = input_unit_factor(e.bias_unit)
+            tb = true_bias(cal, truth, kind, i, effects, effect_sensors)
             rows.append(ComparisonRow(kind, e.name, "bias", e.bias_unit, e.bias / bf,
-                                      t.bias / bf, e.bias_sd / bf))
+                                      tb / bf, e.bias_sd / bf))
             me = e.misalignment
             mt = misalignment_angles(e.axis_nominal, t.axis)
             for j in range(2):

@@ -92,22 +92,20 @@ def whiteness_warnings(res: FitResiduals, names: tuple[str, ...],
     consequence = ("the Gauss-Markov noise model (extra['noise_model']) widens the "
                    "uncertainties for correlated noise; an unmodelled effect would not be "
                    "covered") if widened else None
-    out = []
-    dof = res.rate_dof
-    if dof > 0:
+    out: list[str] = []
+    checks = (
+        (res.rate_dof, res.rate_chi2_dof, "the rate-step differences",
+         "correlated noise or an unmodelled effect: ", "the uncertainties are too small"),
+        (res.step_dof, res.step_chi2_dof, "the step means of the residuals",
+         "correlated noise (bias instability) or an unmodelled effect: ",
+         "the bias uncertainty is too small"),
+    )
+    for dof, chi2_dof, what, cause, default in checks:
+        if dof <= 0:
+            continue
         lim = float(scipy.stats.chi2.isf(WARN_ALPHA, dof)) / dof
-        for i in np.flatnonzero(res.rate_chi2_dof > lim):
-            out.append(
-                f"gyro {names[i]}: the rate-step differences scatter more than white noise "
-                f"explains (chi2/dof {res.rate_chi2_dof[i]:.2f}, 0.1 % limit {lim:.2f}); "
-                "correlated noise or an unmodelled effect: "
-                + (consequence or "the uncertainties are too small"))
-    sdof = res.step_dof
-    slim = float(scipy.stats.chi2.isf(WARN_ALPHA, sdof)) / sdof
-    for i in np.flatnonzero(res.step_chi2_dof > slim):
-        out.append(
-            f"gyro {names[i]}: the step means of the residuals scatter more than white noise "
-            f"explains (chi2/dof {res.step_chi2_dof[i]:.2f}, 0.1 % limit {slim:.2f}); "
-            "correlated noise (bias instability) or an unmodelled effect: "
-            + (consequence or "the bias uncertainty is too small"))
+        for i in np.flatnonzero(chi2_dof > lim):
+            out.append(f"gyro {names[i]}: {what} scatter more than white noise explains "
+                       f"(chi2/dof {chi2_dof[i]:.2f}, 0.1 % limit {lim:.2f}); {cause}"
+                       + (consequence or default))
     return out

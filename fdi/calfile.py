@@ -35,7 +35,10 @@ effects and no adequacy record; it is migrated on the next save)::
 
 Each effect term adds ``estimate · g(inputs; params)`` to the sensor's output in the
 model (see :mod:`calibration.diagnose.library` for the regressors ``g``).
-The runtime monitor does not compensate effect terms yet: it reads them and ignores them.
+The runtime monitor compensates the terms whose inputs it has at run time (rate sign,
+rate squared, specific force when accelerometers are present, temperature when the
+stream carries it) and lists the others with the reason (:mod:`fdi.effects`,
+``docs/effects-runtime.md``).
 
 ``input_error_cov`` (3×3, dimensionless) is the covariance of the error of the estimated
 ``h̃_i/SF_i`` scaled to unit gain: the compensated output errs by ``e_iᵀ·x`` with

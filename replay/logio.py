@@ -246,6 +246,19 @@ class _Gather:
             x.clear()
         del self.data[:]
 
+    def add(self, msg: can.Message) -> None:
+        """Append one message (the text-log path; the binary path inlines these appends,
+        :func:`_consume_plain`)."""
+        if msg.is_error_frame or msg.is_remote_frame:
+            self.special.append((len(self.t), FRAME_ERROR if msg.is_error_frame
+                                 else FRAME_REMOTE))
+        self.t.append(msg.timestamp)
+        self.arb.append(msg.arbitration_id)
+        self.ext.append(msg.is_extended_id)
+        self.ch.append(msg.channel)
+        self.data += msg.data
+        self.lengths.append(len(msg.data))
+
     def spill(self, force: bool = False) -> None:
         """Hand the frames gathered so far to the sink (when ``chunk`` are there)."""
         if self.sink is not None and self.t and (force or len(self.t) >= self.chunk):
@@ -329,10 +342,6 @@ def _consume_lines(it: Iterator[can.Message], g: _Gather, lines: _Lines,
                    acct: FrameAccounting, bar: Any) -> None:
     """Text logs: as :func:`_consume_plain`, and every line python-can passed over
     without a frame is reported (unless it is a known non-frame line)."""
-    t_app, a_app, e_app, c_app, l_app = (g.t.append, g.arb.append, g.ext.append,
-                                         g.ch.append, g.lengths.append)
-    s_app = g.special.append
-    buf = g.data
     for msg in it:
         pend = lines.pending
         if len(pend) > 1:
@@ -341,15 +350,7 @@ def _consume_lines(it: Iterator[can.Message], g: _Gather, lines: _Lines,
                 if not _ASC_NON_FRAME.match(line):
                     _garbage(acct, first + k, line, "not a frame line (skipped by python-can)")
         pend.clear()
-        if msg.is_error_frame or msg.is_remote_frame:
-            s_app((len(g.t), FRAME_ERROR if msg.is_error_frame else FRAME_REMOTE))
-        t_app(msg.timestamp)
-        a_app(msg.arbitration_id)
-        e_app(msg.is_extended_id)
-        c_app(msg.channel)
-        x = msg.data
-        buf += x
-        l_app(len(x))
+        g.add(msg)
         if bar is not None and not len(g.t) & 0xFFFF:
             bar.update(0x10000)
         if len(g.t) >= g.chunk and g.sink is not None:

@@ -41,7 +41,7 @@ from calibration.diagnose.context import KindData
 from calibration.effects import WARMUP_TAU_S
 from fdi.calfile import tangent_basis
 from fdi.errors import ConfigError
-from fdi.units import DPH, G0, MG
+from fdi.units import DPH, DPS, G0, MG
 
 __all__ = [
     "BIAS_UNITS",
@@ -317,7 +317,8 @@ _BUILTIN = (
     Candidate("scale_nonlinearity", ("gyro",), "quadratic scale-factor term, k·s²/w (k·w at "
               "the table rate w)", "fraction",
               lambda d, i, p: d.s[:, i] ** 2 / max(d.table_rate, 1e-300), ("table_rate",),
-              needs=_needs_rates, monitor_input="rate squared"),
+              needs=_needs_rates, monitor_input="rate squared",
+              fixed_params=lambda d, i: {"table_rate_dps": d.table_rate / DPS}),
     Candidate("warmup", ("gyro",), f"bias transient after switch-on, A·exp(-t/{WARMUP_TAU_S:g}"
               " s)", "deg/h", lambda d, i, p: DPH * np.exp(-d.t / WARMUP_TAU_S), ("time",),
               monitor_input="time since switch-on"),

@@ -79,7 +79,7 @@ def error_summary(datas: Mapping[str, KindData], residual: Mapping[str, np.ndarr
             p = r @ parity_matrix(H).T
             out["parity_rms"][kind] = (np.sqrt(np.mean(p**2, axis=0)) / f).tolist()
     if truth is not None:
-        rows = compare(cal, truth[0], truth[1])
+        rows = compare(cal, *truth)
         z = np.array([row.z for row in rows], float)
         ok = np.isfinite(z)
         out["truth"] = {

@@ -30,8 +30,9 @@ __all__ = ["BLAS_THREADS", "DIAGNOSIS_SCHEMA", "MONITOR_NOTE", "Diagnosis", "ade
            "diagnose"]
 
 DIAGNOSIS_SCHEMA = "rimu.diagnosis/1"
-MONITOR_NOTE = ("the runtime monitor does not compensate effect terms yet: a calibration "
-                "with effects is used by the monitor without them")
+MONITOR_NOTE = ("the runtime monitor compensates the effect terms whose inputs it has at "
+                "run time (rate sign, rate squared, specific force, temperature) and lists "
+                "the others with the reason (docs/effects-runtime.md)")
 
 
 @dataclass(frozen=True)
@@ -155,7 +156,7 @@ def _effects_json(sel: Selection, new: Calibration) -> list[dict[str, Any]]:
 
 
 def diagnose(session: Session, cal: Calibration, *, alpha: float = 0.01,
-             truth: tuple[Calibration, Mapping[str, float]] | None = None,
+             truth: tuple[Any, ...] | None = None,
              cal_path: str = "<calibration>",
              effects: Iterable[str] | None = None) -> Diagnosis:
     """Diagnose a session under a calibration (see the module docstring).
@@ -167,7 +168,7 @@ def diagnose(session: Session, cal: Calibration, *, alpha: float = 0.01,
         A calibration of this session (``rimu calibrate``).
     alpha : float
         Family-wise level of the tests (0 < α < 1).
-    truth : (Calibration, effects), optional
+    truth : (Calibration, effects) or (Calibration, effects, effect_sensors), optional
         From :func:`calibration.truth.load_truth`: adds parameter errors in σ.
     cal_path : str
         For error messages.
@@ -188,7 +189,7 @@ def diagnose(session: Session, cal: Calibration, *, alpha: float = 0.01,
 
 
 def _diagnose(session: Session, cal: Calibration, alpha: float,
-              truth: tuple[Calibration, Mapping[str, float]] | None,
+              truth: tuple[Any, ...] | None,
               effects: Iterable[str] | None, cal_path: str) -> Diagnosis:
     datas = model_effects(kind_data(session, cal), cal.effects)
     check_same_session(datas, cal, session.source, cal_path)

@@ -172,7 +172,7 @@ def run(args: argparse.Namespace) -> int:
     if args.compare:
         from calibration.truth import load_truth
 
-        truth, effects, _ = load_truth(args.compare)
+        truth, effects, effect_sensors = load_truth(args.compare)
     cal = calibrate_with_check(session, args, bias_method=args.bias_method,
                                denoise=not args.no_denoise, noise_model=args.noise_model)
     check_plausible(cal, str(args.session))
@@ -180,7 +180,7 @@ def run(args: argparse.Namespace) -> int:
     if truth is not None:
         from calibration.compare import compare, format_comparison
 
-        compared = format_comparison(compare(cal, truth, effects))
+        compared = format_comparison(compare(cal, truth, effects, effect_sensors))
     with atomic_file(out) as tmp:
         cal.save(tmp)
     print(summary_text(cal))

@@ -121,8 +121,7 @@ def run(args: argparse.Namespace) -> int:
     if args.truth:
         from calibration.truth import load_truth
 
-        t, effects, _ = load_truth(args.truth)
-        truth = (t, effects)
+        truth = load_truth(args.truth)
     d = diagnose(session, cal, alpha=args.alpha, truth=truth, cal_path=str(args.cal))
     if args.out:
         d.calibration.save(Path(args.out))

@@ -11,6 +11,7 @@ from rimu.argtypes import positive_float, positive_int
 from rimu.commands.replay import (
     add_monitor_options,
     check_monitor_paths,
+    effects_extra,
     make_monitor,
     write_report,
 )
@@ -82,7 +83,8 @@ def run(args: argparse.Namespace) -> int:
                     sample_rate_hz=cal.sample_rate_hz, sensor_names=names,
                     source=f"{args.interface}:{args.channel}", kind=cmap.kind)
     report = acc.build(header, cal, frames=frames, extra={"thresholds": how, "live": True,
-                                                     "window": args.window})
+                                                     "window": args.window,
+                                                     **effects_extra(mon, cal)})
     print(format_report(report, max_events=0))
     write_report(report, args.report)
     return 0

@@ -27,6 +27,10 @@ def configure(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-time-offsets", action="store_true",
                    help="do not move each IMU by the time offset its in-flight calibration "
                         "records (default: moved onto the reference's timing)")
+    p.add_argument("--no-effects", action="store_true",
+                   help="do not compensate the calibration's effect terms (default: the "
+                        "terms whose inputs the flight carries are compensated: rate sign, "
+                        "rate squared, specific force from its accelerometers, temperature)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -58,11 +62,31 @@ def run(args: argparse.Namespace) -> int:
             extra["time_offsets_applied_ms"] = shifted
             print("moved onto the reference's timing: " + ", ".join(
                 f"{g} {ms:+.3f} ms" for g, ms in shifted.items()))
-    mon = Monitor(cal, thr, kind=flight.kind)
-    result = mon.run(flight.t, flight.raw, flight.valid)
+    mon, force, temp = _compensated(Monitor(cal, thr, kind=flight.kind), cal, flight,
+                                    enabled=not args.no_effects)
+    if cal.effects:
+        print(mon.compensator.summary(flight.sensor_names))
+    result = mon.run(flight.t, flight.raw, flight.valid, force=force, temperature=temp)
+    if cal.effects:
+        extra["effects"] = mon.compensator.to_dict()     # with the missing-input counts
     report = build_report(result, flight, cal, extra=extra)
     print(format_report(report, max_events=args.max_events))
     if args.report:
         atomic_write_text(args.report, json.dumps(report, indent=1, allow_nan=False) + "\n")
         print(f"wrote {args.report}")
     return 0
+
+
+def _compensated(mon, cal, flight, *, enabled: bool):
+    """The monitor wrapped with the effect compensation, and the flight's force and
+    temperature arrays (None when not needed)."""
+    from fdi.effects import Compensator
+    from fdi.effects_monitor import CompensatedMonitor
+    from replay.effect_inputs import flight_effect_inputs
+
+    force = temp = None
+    avail: dict = {}
+    if enabled and cal.effects:
+        force, temp, avail = flight_effect_inputs(flight)
+    comp = Compensator(cal, flight.kind, available=avail, enabled=enabled)
+    return CompensatedMonitor(mon, comp), force, temp

@@ -32,6 +32,10 @@ def add_monitor_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--report", metavar="FILE", help="write the rimu.report/1 JSON here")
     p.add_argument("--max-events", type=nonnegative_int(), default=50,
                    help="events to print (default 50)")
+    p.add_argument("--no-effects", action="store_true",
+                   help="do not compensate the calibration's effect terms (default: those "
+                        "read from the sensors' own outputs, rate sign and rate squared, are "
+                        "compensated; a CAN stream carries no accelerometers or temperatures)")
 
 
 def configure(p: argparse.ArgumentParser) -> None:
@@ -59,7 +63,26 @@ def make_monitor(cal: Calibration, args: argparse.Namespace, kind: str) -> tuple
     choice = select(cal, kind=kind, thresholds_file=args.thresholds,
                     false_alarms_per_hour=args.false_alarms_per_hour)
     thr, how = choice.thresholds, choice.to_dict()
-    return Monitor(cal, thr, kind=kind), how
+    return compensated(Monitor(cal, thr, kind=kind), cal, kind,
+                       enabled=not getattr(args, "no_effects", False)), how
+
+
+def compensated(mon: Any, cal: Calibration, kind: str, *, enabled: bool) -> Any:
+    """The monitor wrapped with the compensation of the effect terms a CAN stream allows
+    (the sensors' own outputs only); prints what is and is not compensated."""
+    from fdi.effects import Compensator
+    from fdi.effects_monitor import CompensatedMonitor
+
+    out = CompensatedMonitor(mon, Compensator(cal, kind, enabled=enabled))
+    if cal.effects:
+        print(out.compensator.summary(mon.sensor_names), flush=True)
+    return out
+
+
+def effects_extra(mon: Any, cal: Calibration) -> dict[str, Any]:
+    """``{"effects": record}`` for a report when the calibration has effect terms."""
+    comp = getattr(mon, "compensator", None)
+    return {"effects": comp.to_dict()} if cal.effects and comp is not None else {}
 
 
 def write_report(report: dict, path: str | None) -> None:
@@ -186,7 +209,8 @@ def run(args: argparse.Namespace) -> int:
         if acc.samples == 0:
             raise ConfigError(f"{args.log}: no sample could be decoded ({frames['read']} "
                               f"frames read, rejected {frames['rejected']})")
-        extra: dict[str, Any] = {"thresholds": how, "timing_s": timing}
+        extra: dict[str, Any] = {"thresholds": how, "timing_s": timing,
+                                 **effects_extra(mon, cal)}
         if args.inject:
             extra["injected"] = str(args.inject)
         report = acc.build(header, cal, frames=frames, extra=extra)

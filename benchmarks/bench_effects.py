@@ -1,0 +1,92 @@
+"""Benchmark: the run-time compensation of effect terms (fdi.effects) against the monitor.
+
+A 10 min cone6 flight at 100 Hz (60 000 × 6 samples) with three compensated terms
+(scale asymmetry, two g-sensitivities) and an accelerometer triad. Measured in the same
+run: ``Monitor.run`` alone (the baseline), ``Compensator.block`` alone, and the
+compensated monitor (``CompensatedMonitor.run``); and per sample, ``Monitor.step`` against
+``CompensatedMonitor.step``. min/median/max over the repeats; ratios to the baseline of the
+same run. Prints the figures and writes ``benchmarks/results/effects.json``.
+
+Run: ``python benchmarks/bench_effects.py [--repeats 5]``
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "tests" / "fdi"))
+
+from _effects_flight import effect_calibration, flight_with_effects  # noqa: E402
+
+from fdi.effects import Compensator  # noqa: E402
+from fdi.effects_monitor import CompensatedMonitor  # noqa: E402
+from fdi.monitor import Monitor  # noqa: E402
+from replay.effect_inputs import flight_effect_inputs  # noqa: E402
+
+
+def _times(fn, repeats: int) -> dict[str, float]:
+    """min / median / max wall time (s) over ``repeats`` calls after one warm-up."""
+    fn()
+    ts = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn()
+        ts.append(time.perf_counter() - t0)
+    return {"min": float(np.min(ts)), "median": float(np.median(ts)), "max": float(np.max(ts))}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--repeats", type=int, default=5)
+    ap.add_argument("--duration", type=float, default=600.0)
+    ap.add_argument("--step-samples", type=int, default=2000)
+    a = ap.parse_args()
+    cal = effect_calibration()
+    fl = flight_with_effects(cal, 1, duration_s=a.duration)
+    force, _, avail = flight_effect_inputs(fl)
+    comp = Compensator(cal, available=avail)
+    res: dict = {"samples": int(fl.t.size), "sensors": int(fl.n),
+                 "terms_applied": len(comp.applied), "repeats": a.repeats,
+                 "python": platform.python_version(), "machine": platform.machine()}
+    res["monitor_run_s"] = _times(lambda: Monitor(cal).run(fl.t, fl.raw, fl.valid), a.repeats)
+    res["compensator_block_s"] = _times(lambda: comp.block(fl.raw, force), a.repeats)
+    res["compensated_run_s"] = _times(
+        lambda: CompensatedMonitor(Monitor(cal), comp).run(fl.t, fl.raw, fl.valid,
+                                                             force=force), a.repeats)
+    k = min(a.step_samples, fl.t.size)
+
+    def steps(wrapped: bool):
+        mon = CompensatedMonitor(Monitor(cal), comp) if wrapped else Monitor(cal)
+        for i in range(k):
+            if wrapped:
+                mon.step(float(fl.t[i]), fl.raw[i], fl.valid[i], force=force[i])
+            else:
+                mon.step(float(fl.t[i]), fl.raw[i], fl.valid[i])
+
+    res["monitor_step_us"] = {q: v / k * 1e6 for q, v in
+                              _times(lambda: steps(False), a.repeats).items()}
+    res["compensated_step_us"] = {q: v / k * 1e6 for q, v in
+                                  _times(lambda: steps(True), a.repeats).items()}
+    base = res["monitor_run_s"]["median"]
+    res["ratio_block_to_monitor_run"] = res["compensator_block_s"]["median"] / base
+    res["ratio_compensated_to_monitor_run"] = res["compensated_run_s"]["median"] / base
+    res["ratio_step"] = (res["compensated_step_us"]["median"]
+                         / res["monitor_step_us"]["median"])
+    for key, v in res.items():
+        print(f"{key}: {v}")
+    out = ROOT / "benchmarks" / "results" / "effects.json"
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps(res, indent=1) + "\n")
+    print(f"wrote {out}")
+
+
+if __name__ == "__main__":
+    main()
