@@ -45,6 +45,7 @@ __all__ = ["Monitor"]
 
 _NAN = float("nan")
 _F64 = np.dtype(np.float64)
+_BOOL = np.dtype(bool)
 _INF = float("inf")
 _CHUNK = 1 << 16
 _CAP_CODE = {c: k for k, c in enumerate(CAPABILITIES)}
@@ -234,12 +235,14 @@ class Monitor:
         except Exception:
             tf = _NAN
         try:
-            if (valid is None and type(raw) is np.ndarray and raw.dtype is _F64
-                    and raw.shape == self._shape1 and raw.flags.c_contiguous):
-                corr = self._plain_correction(correction)  # the common case, quickly
-                if corr is not None:
+            if (type(raw) is np.ndarray and raw.dtype is _F64 and raw.shape == self._shape1
+                    and raw.flags.c_contiguous):                      # the common case,
+                corr = (self._no_correction if correction is None     # quickly
+                        else self._plain_array(correction, _F64))
+                ok = self._all_valid if valid is None else self._plain_array(valid, _BOOL)
+                if corr is not None and ok is not None:
                     self._length_bad = False
-                    return self._step(tf, raw[None], self._all_valid, corr, [])
+                    return self._step(tf, raw[None], ok, corr, [])
             events: list[Event] = []
             u, ok = self._parse(raw, valid, tf, events)
             return self._step(tf, u, ok, self._correction(correction, 1), events)
@@ -251,14 +254,12 @@ class Monitor:
                           np.full(max(self.n - 3, 0), _NAN), np.full(self.K, _NAN),
                           np.full(self.K, _NAN), (ev,), self._model.capability, _INF)
 
-    def _plain_correction(self, correction: Any) -> np.ndarray | None:
-        """No correction, or a C-contiguous float64 (n,) one, as a (1, n) row; None for
-        anything else (the general path then reads it)."""
-        if correction is None:
-            return self._no_correction
-        if (type(correction) is np.ndarray and correction.dtype is _F64
-                and correction.shape == self._shape1 and correction.flags.c_contiguous):
-            return correction[None]
+    def _plain_array(self, a: Any, dtype: np.dtype) -> np.ndarray | None:
+        """A C-contiguous (n,) array of ``dtype`` as a (1, n) row; None for anything else
+        (the general path then reads it)."""
+        if (type(a) is np.ndarray and a.dtype is dtype and a.shape == self._shape1
+                and a.flags.c_contiguous):
+            return a[None]
         return None
 
     def _correction(self, correction: Any, N: int) -> np.ndarray:
