@@ -45,6 +45,8 @@ __all__ = ["Monitor"]
 
 _NAN = float("nan")
 _F64 = np.dtype(np.float64)
+_STOP_MASK = S.STOP_MASK
+_RETURN_DETECTED = S.RETURN_DETECTED
 _BOOL = np.dtype(bool)
 _INF = float("inf")
 _CHUNK = 1 << 16
@@ -235,17 +237,45 @@ class Monitor:
         except Exception:
             tf = _NAN
         try:
+            u = ok = corr = events = None
             if (type(raw) is np.ndarray and raw.dtype is _F64 and raw.shape == self._shape1
                     and raw.flags.c_contiguous):                      # the common case,
                 corr = (self._no_correction if correction is None     # quickly
                         else self._plain_array(correction, _F64))
                 ok = self._all_valid if valid is None else self._plain_array(valid, _BOOL)
-                if corr is not None and ok is not None:
-                    self._length_bad = False
-                    return self._step(tf, raw[None], ok, corr, [])
-            events: list[Event] = []
-            u, ok = self._parse(raw, valid, tf, events)
-            return self._step(tf, u, ok, self._correction(correction, 1), events)
+                u = raw[None]
+                self._length_bad = False
+            if corr is None or ok is None:
+                u, ok, corr, events = self._parse_sample(raw, valid, correction, tf)
+            # one sample through the kernel (the same entry point as run's)
+            self._t1[0] = tf
+            st = self._state
+            has_valid = ok is not self._all_valid
+            if has_valid:                                    # (HAS_VALID only picks the row
+                st.counters[S.HAS_VALID] = 1                 # of ``valid``: 0 here either way)
+            code = advance(self._t1, u, corr, ok, 0, 1, self._kset.packed, st.values,
+                           st.counters, self._row)
+            osd = None
+            if code & _STOP_MASK:                            # rare: the monitor's turn
+                events = [] if events is None else events
+                osd, detected = self._step_stop(code & _STOP_MASK, u, corr, ok, has_valid,
+                                                events)
+            else:
+                detected = code >= _RETURN_DETECTED
+            r = self._row0.copy()
+            o, s0, t0, p0 = self._columns
+            # an Answer without the frozen dataclass's per-field __setattr__ calls (a third
+            # of the step's Python time once); same fields, same object
+            a = object.__new__(Answer)
+            object.__setattr__(a, "__dict__", {
+                "t": tf, "omega": r[o:o + 3],
+                "omega_sd": self._omega_sd if osd is None else osd,
+                "healthy": self._healthy_now,
+                "status": self._status_detected if detected else self._status_now,
+                "parity": r[p0:], "statistics": r[s0:t0], "thresholds": r[t0:p0],
+                "events": tuple(events) if events else (), "capability": self._capability,
+                "protection_level": float(r[S.PROTECTION])})
+            return a
         except Exception as exc:
             self._state.counters[S.PHASE] = S.PHASE_HEALTH
             ev = Event(tf, None, "health", f"internal error: {type(exc).__name__}: {exc}")
@@ -253,6 +283,26 @@ class Monitor:
                           self._healthy_array(self._mask), tuple(self._status),
                           np.full(max(self.n - 3, 0), _NAN), np.full(self.K, _NAN),
                           np.full(self.K, _NAN), (ev,), self._model.capability, _INF)
+
+    def _parse_sample(self, raw: Any, valid: Any, correction: Any, t: float
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[Event]]:
+        """Any sample as (1, n) raw, valid and correction rows, and the events of reading
+        it (a wrong length); never raises."""
+        events: list[Event] = []
+        u, ok = self._parse(raw, valid, t, events)
+        return u, ok, self._correction(correction, 1), events
+
+    def _step_stop(self, code: int, u: np.ndarray, corr: np.ndarray, ok: np.ndarray,
+                   has_valid: bool, events: list[Event]) -> tuple[np.ndarray | None, bool]:
+        """The monitor's turn in a step (the kernel stopped at the sample): handle it, run
+        the rest of the sample; returns the sample's ω̂ sd when it is not the model's, and
+        whether a detection is active."""
+        c = self._state.counters
+        r, osd = self._handle(int(c[S.STOP_ROW]), code, self._t1, u, corr, ok, has_valid,
+                              self._row, events, None)
+        if r == 0:
+            osd = self._advance(self._t1, u, corr, ok, has_valid, self._row, events, None)
+        return osd, c[S.DETECTED] != 0
 
     def _plain_array(self, a: Any, dtype: np.dtype) -> np.ndarray | None:
         """A C-contiguous (n,) array of ``dtype`` as a (1, n) row; None for anything else
@@ -276,41 +326,6 @@ class Monitor:
         if c.ndim == 2 and c.shape[1] == self.n and c.shape[0] in (1, N):
             return np.ascontiguousarray(c)
         return self._no_correction
-
-    def _step(self, t: float, u: np.ndarray, ok: np.ndarray, corr: np.ndarray,
-              events: list[Event]) -> Answer:
-        """One parsed sample: u and ok of shape (1, n), corr (1, n)."""
-        self._t1[0] = t
-        row = self._row
-        st = self._state
-        has_valid = ok is not self._all_valid
-        if has_valid:                                        # (HAS_VALID only picks the row
-            st.counters[S.HAS_VALID] = 1                     # of ``valid``: 0 here either way)
-        code = advance(self._t1, u, corr, ok, 0, 1, self._kset.packed, st.values, st.counters,
-                       row)
-        osd = None
-        if code & S.STOP_MASK:                               # rare: the monitor's turn
-            c = st.counters
-            r, osd = self._handle(int(c[S.STOP_ROW]), code & S.STOP_MASK, self._t1, u, corr,
-                                  ok, has_valid, row, events, None)
-            if r == 0:
-                osd = self._advance(self._t1, u, corr, ok, has_valid, row, events, None)
-            detected = c[S.DETECTED] != 0
-        else:
-            detected = code >= S.RETURN_DETECTED
-        r = self._row0.copy()
-        o, s0, t0, p0 = self._columns
-        # an Answer without the frozen dataclass's per-field __setattr__ calls (a third of
-        # the step's Python time once); same fields, same object
-        a = object.__new__(Answer)
-        object.__setattr__(a, "__dict__", {
-            "t": t, "omega": r[o:o + 3], "omega_sd": self._omega_sd if osd is None else osd,
-            "healthy": self._healthy_now,
-            "status": self._status_detected if detected else self._status_now,
-            "parity": r[p0:], "statistics": r[s0:t0], "thresholds": r[t0:p0],
-            "events": tuple(events) if events else (), "capability": self._capability,
-            "protection_level": float(r[S.PROTECTION])})
-        return a
 
     # ------------------------------------------------------------------ the loop
     def _advance(self, t: np.ndarray, raw: np.ndarray, corr: np.ndarray, valid: np.ndarray,
