@@ -13,12 +13,10 @@ Run: ``python benchmarks/bench_calibration.py [--repeats 15]``
 from __future__ import annotations
 
 import argparse
-import json
-import platform
 import time
-from pathlib import Path
 
 import numpy as np
+from _common import RESULTS, header, spread, write_results
 
 from calibration.calibrate import calibrate
 from calibration.presets import preset
@@ -33,7 +31,7 @@ def _times(fn, repeats: int) -> dict[str, float]:
         t0 = time.perf_counter()
         fn()
         ts.append(time.perf_counter() - t0)
-    return {"min": float(np.min(ts)), "median": float(np.median(ts)), "max": float(np.max(ts))}
+    return spread(ts)
 
 
 def _median_time(fn, repeats: int) -> float:
@@ -73,7 +71,7 @@ def _fmt(t: dict[str, float]) -> str:
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeats", type=int, default=15)
-    ap.add_argument("--out", default=str(Path(__file__).parent / "results" / "calibration.json"))
+    ap.add_argument("--out", default=str(RESULTS / "calibration.json"))
     args = ap.parse_args()
     from threadpoolctl import threadpool_limits
 
@@ -100,9 +98,7 @@ def _run(args: argparse.Namespace) -> int:
     t_nodenoise = _median_time(lambda: calibrate(s, allan=False, denoise=False), r)
     t_mean = _median_time(lambda: np.mean(raw, axis=0), max(r, 50))
     t_lstsq = _median_time(lambda: np.linalg.lstsq(design, raw, rcond=None), r)
-    res = {
-        "schema": "rimu.benchmark/1",
-        "name": "calibration",
+    res = header("calibration") | {
         "session": {"preset": "tetrad-paper", "steps": len(s.steps), "samples": raw.shape[0],
                     "sensors": raw.shape[1], "sample_rate_hz": s.sample_rate_hz},
         "repeats": r,
@@ -118,8 +114,6 @@ def _run(args: argparse.Namespace) -> int:
         "baseline_lstsq_s": t_lstsq,
         "ratio_to_mean": t_full / t_mean,
         "ratio_to_lstsq": t_full / t_lstsq,
-        "machine": {"python": platform.python_version(), "numpy": np.__version__,
-                    "processor": platform.machine()},
     }
     print(f"calibrate() tetrad-paper ({raw.shape[0]} samples x {raw.shape[1]} gyros, "
           f"{len(s.steps)} steps), median of {r}:")
@@ -134,9 +128,7 @@ def _run(args: argparse.Namespace) -> int:
     print(f"baseline np.linalg.lstsq (N x 4, 4 rhs):{1e3 * t_lstsq:7.2f} ms  "
           f"(calibrate = {t_full / t_lstsq:.1f} x)")
     print(f"ferraris_calibrate ({fs_.gyro.shape[0]} samples x 6 sensors): {_fmt(ferraris)}")
-    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-    Path(args.out).write_text(json.dumps(res, indent=1) + "\n", encoding="utf-8")
-    print(f"wrote {args.out}")
+    write_results(res, args.out)
     return 0
 
 

@@ -13,12 +13,9 @@ Run: ``python benchmarks/bench_diagnose.py [--repeats 7]``
 from __future__ import annotations
 
 import argparse
-import json
-import platform
 import time
-from pathlib import Path
 
-import numpy as np
+from _common import RESULTS, header, spread, write_results
 
 from calibration.calibrate import calibrate
 from calibration.diagnose import assess, diagnose
@@ -39,21 +36,17 @@ def _times(fn, repeats: int) -> list[float]:
 
 
 def _stats(ts: list[float]) -> dict[str, float]:
-    return {"min_s": float(np.min(ts)), "median_s": float(np.median(ts)),
-            "max_s": float(np.max(ts))}
+    return spread(ts, "_s")
 
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeats", type=int, default=7)
-    ap.add_argument("--out", default=str(Path(__file__).parent / "results" / "diagnose.json"))
+    ap.add_argument("--out", default=str(RESULTS / "diagnose.json"))
     args = ap.parse_args()
     seq, truth, noise = preset("tetrad-paper")
     r = args.repeats
-    res = {"schema": "rimu.benchmark/1", "name": "diagnose", "repeats": r, "limit_s": LIMIT_S,
-           "cases": {},
-           "machine": {"python": platform.python_version(), "numpy": np.__version__,
-                       "processor": platform.machine()}}
+    res = header("diagnose", repeats=r, limit_s=LIMIT_S, cases={})
     ok = True
     for label, eff in (("clean", {}), ("warmup on gyro 3", {"warmup": 30.0})):
         s = simulate_session(None, seq, truth, seed=0, noise=noise, effects=eff,
@@ -77,9 +70,7 @@ def main() -> int:
         print(f"  diagnose / calibrate = {ratio:.1f} x (median); limit {LIMIT_S:g} s: "
               + ("met" if t_diag["max_s"] < LIMIT_S else "NOT met"))
     res["limit_met"] = bool(ok)
-    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-    Path(args.out).write_text(json.dumps(res, indent=1) + "\n", encoding="utf-8")
-    print(f"wrote {args.out}")
+    write_results(res, args.out)
     return 0 if ok else 1
 
 

@@ -13,23 +13,19 @@ Run: ``python benchmarks/bench_effects.py [--repeats 5]``
 from __future__ import annotations
 
 import argparse
-import json
-import platform
 import sys
 import time
-from pathlib import Path
 
-import numpy as np
+from _common import ROOT, header, spread, write_results
 
-ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests" / "fdi"))
 
-from _effects_flight import effect_calibration, flight_with_effects  # noqa: E402
+from _effects_flight import effect_calibration, flight_with_effects
 
-from fdi.effects import Compensator  # noqa: E402
-from fdi.effects_monitor import CompensatedMonitor  # noqa: E402
-from fdi.monitor import Monitor  # noqa: E402
-from replay.effect_inputs import flight_effect_inputs  # noqa: E402
+from fdi.effects import Compensator
+from fdi.effects_monitor import CompensatedMonitor
+from fdi.monitor import Monitor
+from replay.effect_inputs import flight_effect_inputs
 
 
 def _times(fn, repeats: int) -> dict[str, float]:
@@ -40,7 +36,7 @@ def _times(fn, repeats: int) -> dict[str, float]:
         t0 = time.perf_counter()
         fn()
         ts.append(time.perf_counter() - t0)
-    return {"min": float(np.min(ts)), "median": float(np.median(ts)), "max": float(np.max(ts))}
+    return spread(ts)
 
 
 def main() -> None:
@@ -53,9 +49,8 @@ def main() -> None:
     fl = flight_with_effects(cal, 1, duration_s=a.duration)
     force, _, avail = flight_effect_inputs(fl)
     comp = Compensator(cal, available=avail)
-    res: dict = {"samples": int(fl.t.size), "sensors": int(fl.n),
-                 "terms_applied": len(comp.applied), "repeats": a.repeats,
-                 "python": platform.python_version(), "machine": platform.machine()}
+    res: dict = header("effects", samples=int(fl.t.size), sensors=int(fl.n),
+                       terms_applied=len(comp.applied), repeats=a.repeats)
     res["monitor_run_s"] = _times(lambda: Monitor(cal).run(fl.t, fl.raw, fl.valid), a.repeats)
     res["compensator_block_s"] = _times(lambda: comp.block(fl.raw, force), a.repeats)
     res["compensated_run_s"] = _times(
@@ -81,11 +76,9 @@ def main() -> None:
     res["ratio_step"] = (res["compensated_step_us"]["median"]
                          / res["monitor_step_us"]["median"])
     for key, v in res.items():
-        print(f"{key}: {v}")
-    out = ROOT / "benchmarks" / "results" / "effects.json"
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(res, indent=1) + "\n")
-    print(f"wrote {out}")
+        if key not in ("schema", "benchmark", "date_utc", "load_average", "machine"):
+            print(f"{key}: {v}")
+    write_results(res)
 
 
 if __name__ == "__main__":

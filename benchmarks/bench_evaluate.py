@@ -14,10 +14,9 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import platform
 import time
-from pathlib import Path
+
+from _common import RESULTS, header, spread, write_results
 
 from thresholds import synthetic_calibration
 from thresholds.evaluate import design, execute, simulation_task, summarise
@@ -38,7 +37,7 @@ def main() -> None:
     ap.add_argument("--runs", type=int, default=1000)
     ap.add_argument("--repeats", type=int, default=1)
     ap.add_argument("--duration", type=float, default=60.0)
-    ap.add_argument("--out", default=str(Path(__file__).parent / "results" / "evaluate.json"))
+    ap.add_argument("--out", default=str(RESULTS / "evaluate.json"))
     a = ap.parse_args()
     cal = synthetic_calibration("cone6")
     thr = select(cal, false_alarms_per_hour=10.0).thresholds
@@ -54,25 +53,19 @@ def main() -> None:
         times, results = _timed(lambda kw=kw: execute(task, specs, batch=10, **kw), a.repeats)
         ev = json.dumps(summarise(results, thr, n_sensors=6), sort_keys=True)
         ref = ref or ev
-        s = sorted(times)
-        res[name] = {"wall_s": {"min": s[0], "median": s[len(s) // 2], "max": s[-1]},
-                     "runs_per_s_median": a.runs / s[len(s) // 2],
+        w = spread(times)
+        res[name] = {"wall_s": w, "runs_per_s_median": a.runs / w["median"],
                      "identical_to_serial": ev == ref}
-        print(f"{name:22s} {s[0]:7.1f} / {s[len(s) // 2]:7.1f} / {s[-1]:7.1f} s "
-              f"(min/median/max)  {a.runs / s[len(s) // 2]:6.1f} runs/s  "
+        print(f"{name:22s} {w['min']:7.1f} / {w['median']:7.1f} / {w['max']:7.1f} s "
+              f"(min/median/max)  {a.runs / w['median']:6.1f} runs/s  "
               f"same numbers: {ev == ref}", flush=True)
     base = res["serial"]["wall_s"]["median"]
     for v in res.values():
         v["ratio_to_serial"] = v["wall_s"]["median"] / base
-    doc = {"benchmark": "evaluate", "runs": a.runs, "flight_s": a.duration,
-           "repeats": a.repeats, "configuration": "cone6, 100 Hz, every fault kind",
-           "machine": {"platform": platform.platform(), "cpus": os.cpu_count(),
-                       "load_avg_1m": os.getloadavg()[0]},
-           "date_utc": time.strftime("%Y-%m-%d %H:%M", time.gmtime()), "results": res}
-    Path(a.out).parent.mkdir(parents=True, exist_ok=True)
-    Path(a.out).write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
-    print(f"under 10 minutes: {max(v['wall_s']['max'] for v in res.values()) < 600}; "
-          f"wrote {a.out}")
+    doc = header("evaluate", runs=a.runs, flight_s=a.duration, repeats=a.repeats,
+                 configuration="cone6, 100 Hz, every fault kind", results=res)
+    print(f"under 10 minutes: {max(v['wall_s']['max'] for v in res.values()) < 600}")
+    write_results(doc, a.out)
 
 
 if __name__ == "__main__":

@@ -15,13 +15,12 @@ Run: ``python benchmarks/bench_inflight.py [--minutes 10] [--repeats 3]``
 from __future__ import annotations
 
 import argparse
-import json
-import platform
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
+from _common import RESULTS, header, spread, write_results
 
 from calibration.inflight.calfile import calibration_from_fit
 from calibration.inflight.diagnose import diagnose_flight
@@ -34,8 +33,7 @@ TARGET_S = 30.0
 
 
 def _stats(x: list[float]) -> dict[str, float]:
-    return {"min_s": float(np.min(x)), "median_s": float(np.median(x)),
-            "max_s": float(np.max(x))}
+    return spread(x, "_s")
 
 
 def _write_csv_log(flight, path: Path) -> None:
@@ -70,7 +68,7 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--minutes", type=float, default=10.0)
     ap.add_argument("--repeats", type=int, default=3)
-    ap.add_argument("--out", default=str(Path(__file__).parent / "results" / "inflight.json"))
+    ap.add_argument("--out", default=str(RESULTS / "inflight.json"))
     args = ap.parse_args()
     eff = ImuEffects(g_sensitivity=0.05 * DPS / G0, vibration_hz=73.0, vibration=0.1 * DPS,
                      imus=(2,))
@@ -108,9 +106,7 @@ def main() -> int:
     res = {k: _stats(v) for k, v in times.items()}
     ratio = res["calibrate"]["median_s"] / res["lstsq"]["median_s"]
     a2 = fit.alignments["imu2"]
-    out = {"schema": "rimu.benchmark/1", "benchmark": "inflight",
-           "machine": {"python": platform.python_version(), "numpy": np.__version__,
-                       "processor": platform.processor() or platform.machine()},
+    out = header("inflight") | {
            "flight": {"imus": 2, "sample_rate_hz": 50.0, "samples": N,
                       "minutes": args.minutes},
            "repeats": args.repeats, "stages": res, "target_s": TARGET_S,
@@ -128,10 +124,7 @@ def main() -> int:
           f"(target < {TARGET_S:g} s: {'yes' if out['within_target'] else 'NO'})")
     print(f"check: time offset {out['check']['time_offset_ms']:.3f} ± "
           f"{out['check']['time_offset_ms_sd']:.3f} ms; effects {out['check']['effects']}")
-    p = Path(args.out)
-    p.parent.mkdir(parents=True, exist_ok=True)
-    p.write_text(json.dumps(out, indent=1) + "\n", encoding="utf-8")
-    print(f"wrote {p}")
+    write_results(out, args.out)
     return 0
 
 

@@ -26,19 +26,16 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
-import statistics
 import sys
 import tempfile
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
+from _common import ROOT, header, spread, write_results
 
-from replay.flight_io import save_flight_dir  # noqa: E402
-from replay.ingest import align_streams  # noqa: E402
-from replay.ingest.ardupilot import read_ardupilot  # noqa: E402
+from replay.flight_io import save_flight_dir
+from replay.ingest import align_streams
+from replay.ingest.ardupilot import read_ardupilot
 
 DATA = Path(os.environ.get("RIMU_SHARED_DATA", ROOT / ".." / "shared" / "data"))
 LOG = DATA / "erle_pxf_dual_imu" / "pxf_copter_22-12-2014_41.BIN"
@@ -99,7 +96,7 @@ def written_log(minutes: float, repeat: int) -> dict:
 
 
 def _stats(xs: list[float]) -> dict[str, float]:
-    return {"min": min(xs), "median": statistics.median(xs), "max": max(xs)}
+    return spread(xs)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -128,11 +125,9 @@ def main(argv: list[str] | None = None) -> int:
                   f"({runs['bare']['wall'][-1]:.3f}), read {runs['read']['cpu'][-1]:.3f} "
                   f"({runs['read']['wall'][-1]:.3f}), ingest {runs['ingest']['cpu'][-1]:.3f} "
                   f"({runs['ingest']['wall'][-1]:.3f})")
-    res = {
-        "schema": "rimu.benchmark/1", "benchmark": "ingest", "log": str(args.log),
-        "log_bytes": args.log.stat().st_size, "imu_messages": counts["bare"],
+    res = header("ingest") | {
+        "log": str(args.log), "log_bytes": args.log.stat().st_size, "imu_messages": counts["bare"],
         "flight_samples": counts["ingest"], "repeat": args.repeat,
-        "python": platform.python_version(), "machine": platform.machine(),
         "seconds": {k: {"cpu": _stats(v["cpu"]), "wall": _stats(v["wall"])}
                     for k, v in runs.items()},
         "ratio_read_to_bare_cpu": min(runs["read"]["cpu"]) / min(runs["bare"]["cpu"]),
@@ -145,10 +140,7 @@ def main(argv: list[str] | None = None) -> int:
     print(f"{counts['bare']} IMU messages; read {res['ratio_read_to_bare_cpu']:.2f}x bare, "
           f"ingest {res['ratio_ingest_to_bare_cpu']:.2f}x bare (cpu, best of "
           f"{args.repeat}; wall {res['ratio_ingest_to_bare_wall']:.2f}x)")
-    out = ROOT / "benchmarks" / "results" / "ingest.json"
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(res, indent=1) + "\n", encoding="utf-8")
-    print(f"wrote {out}")
+    write_results(res)
     return 0
 
 

@@ -9,7 +9,10 @@ threadpoolctl, the machine being shared):
 - step: ``Monitor.step`` latency per sample (median over ``--steps`` samples per repeat), as a
   multiple of a bare ``V @ y`` on one sample — target ≤ 5×;
 - compile: a fresh Python process with an empty numba cache (first use compiles and caches
-  the kernel) and a later process that loads it (``NUMBA_CACHE_DIR`` in a temporary folder).
+  the kernel) and a later process that loads it (``NUMBA_CACHE_DIR`` in a temporary folder);
+- block breakdown (what bounds the block figure): the compiled kernel alone over the same rows
+  into an output already written once, and the first write of a fresh output array of the
+  same size (``np.empty`` + fill: page faults and memory bandwidth), per sample.
 
 Run: ``python benchmarks/bench_monitor.py [--steps 20000] [--block 1000000] [--repeat 5]``.
 Writes ``benchmarks/results/monitor.json``.
@@ -18,23 +21,19 @@ Writes ``benchmarks/results/monitor.json``.
 from __future__ import annotations
 
 import argparse
-import json
 import os
-import platform
 import subprocess
 import sys
 import tempfile
 import time
-from pathlib import Path
 
 import numpy as np
+from _common import RESULTS, ROOT, header, spread, write_results
 from threadpoolctl import threadpool_limits
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-
-from fdi.monitor import Monitor  # noqa: E402
-from thresholds import (  # noqa: E402
+from fdi import state as S
+from fdi.monitor import Monitor
+from thresholds import (
     compute_thresholds,
     draw_truth,
     raw_samples,
@@ -66,12 +65,6 @@ def flight(cal, N: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
     fr = rng.uniform(0.05, 0.5, 3)
     om = np.deg2rad(300.0) / np.sqrt(3) * np.sin(2 * np.pi * fr * t[:, None] + ph)
     return t, raw_samples(cal, om, seed=seed + 1, truth=draw_truth(cal, seed=seed + 2))
-
-
-def spread(x: list[float]) -> dict:
-    """min / median / max of a list of figures."""
-    a = np.asarray(x, float)
-    return {"min": float(a.min()), "median": float(np.median(a)), "max": float(a.max())}
 
 
 def bench_step(cal, th, steps: int, repeat: int) -> dict:
@@ -111,7 +104,7 @@ def bench_block(cal, th, N: int, repeat: int) -> dict:
     t, raw = flight(cal, N, seed=5)
     V = Monitor(cal, th).model.V
     Y = np.ascontiguousarray(raw.T)
-    run_s, mv_s, ratio, cpu_ratio = [], [], [], []
+    run_s, mv_s, ratio, cpu_ratio, kern, touch = [], [], [], [], [], []
     events = 0
     for _ in range(repeat):
         mon = Monitor(cal, th)
@@ -126,11 +119,37 @@ def bench_block(cal, th, N: int, repeat: int) -> dict:
         mv_cpu = time.process_time() - ca
         ratio.append(mv_s[-1] / run_s[-1])
         cpu_ratio.append(mv_cpu / run_cpu)
+        kern.append(_kernel_alone(cal, th, t, raw) / N * 1e9)
+        a = time.perf_counter()
+        fresh = np.empty((N, mon._layout.width(False)))
+        fresh.fill(0.0)
+        touch.append((time.perf_counter() - a) / N * 1e9)
+        del fresh
     return {"samples": N, "events": events,
             "run_samples_per_s": spread([N / s for s in run_s]),
             "matvec_samples_per_s": spread([N / s for s in mv_s]),
             "ratio_to_matvec": spread(ratio), "ratio_to_matvec_cpu_time": spread(cpu_ratio),
+            "breakdown_ns_per_sample": {
+                "run": spread([s / N * 1e9 for s in run_s]), "kernel_alone": spread(kern),
+                "first_write_of_output": spread(touch),
+                "output_bytes_per_sample": 8 * mon._layout.width(False),
+                "matvec": spread([s / N * 1e9 for s in mv_s])},
             "target_ratio_min": 0.2, "met": bool(np.median(ratio) >= 0.2)}
+
+
+def _kernel_alone(cal, th, t: np.ndarray, raw: np.ndarray) -> float:
+    """Seconds of the compiled kernel alone over the rows, into an output written once
+    before (no page faults), without the monitor's per-row bookkeeping (health, capability,
+    ω̂ sd columns) and result assembly."""
+    mon = Monitor(cal, th)
+    out = np.empty((t.shape[0], mon._layout.width(False)))
+    out.fill(0.0)                                            # written once: no page faults
+    c = mon._state.counters
+    c[S.HAS_VALID], c[S.HAS_PARITY], c[S.PHASE] = 0, 0, S.PHASE_HEALTH
+    a = time.perf_counter()
+    stop, _ = mon._kernel(t, raw, mon._no_correction, mon._all_valid, 0, t.shape[0], out)
+    s = time.perf_counter() - a
+    return s if stop == t.shape[0] else float("nan")        # an event would end it early
 
 
 def bench_compile() -> dict:
@@ -156,16 +175,10 @@ def main() -> int:
     ap.add_argument("--steps", type=int, default=20_000)
     ap.add_argument("--block", type=int, default=1_000_000)
     ap.add_argument("--repeat", type=int, default=5)
-    ap.add_argument("--out", default=str(Path(__file__).parent / "results" / "monitor.json"))
+    ap.add_argument("--out", default=str(RESULTS / "monitor.json"))
     args = ap.parse_args()
-    load = os.getloadavg()
-    results = {"schema": "rimu.benchmark/2", "benchmark": "monitor",
-               "date_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
-               "load_average": load,
-               "machine": {"python": platform.python_version(), "numpy": np.__version__,
-                           "processor": platform.processor() or platform.machine(),
-                           "cpus": os.cpu_count()},
-               "blas_threads": 1, "compile": bench_compile(), "cases": []}
+    results = header("monitor", blas_threads=1, steps=args.steps, block=args.block,
+                     repeat=args.repeat, compile=bench_compile(), cases=[])
     c = results["compile"]
     print(f"compile: fresh cache first step+run {c['fresh_cache']['first_step_and_run_s']:.2f} s "
           f"(process {c['fresh_cache']['process_wall_s']:.2f} s); cached "
@@ -189,10 +202,13 @@ def main() -> int:
                   f"{bq['max']:.3f} of V@Y ({bm['median'] / 1e6:.1f} M/s; on CPU time "
                   f"{b['ratio_to_matvec_cpu_time']['median']:.3f}) "
                   f"[target ≥0.2: {'met' if b['met'] else 'NOT met'}]")
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(results, indent=1) + "\n", encoding="utf-8")
-    print(f"load average {load[0]:.2f} {load[1]:.2f} {load[2]:.2f}; wrote {out}")
+            bd = b["breakdown_ns_per_sample"]
+            print(f"{'':16s} per sample (median): run {bd['run']['median']:.0f} ns; measured "
+                  f"apart: kernel alone {bd['kernel_alone']['median']:.0f} ns, first write of "
+                  f"a fresh {bd['output_bytes_per_sample']}-byte output row "
+                  f"{bd['first_write_of_output']['median']:.0f} ns; V@Y "
+                  f"{bd['matvec']['median']:.1f} ns")
+    write_results(results, args.out)
     return 0
 
 

@@ -24,27 +24,22 @@ Writes ``benchmarks/results/replay.json``.
 from __future__ import annotations
 
 import argparse
-import json
-import platform
-import sys
 import tempfile
 import time
 from pathlib import Path
 
 import can
 import numpy as np
+from _common import ROOT, header, machine, spread, write_results
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-
-from fdi.calfile import Calibration, SensorCal, SensorSet  # noqa: E402
-from fdi.geometry import load_configuration  # noqa: E402
-from fdi.monitor import Monitor  # noqa: E402
-from fdi.units import DPH, DPS  # noqa: E402
-from replay.faults import parse_fault  # noqa: E402
-from replay.flight import simulate_flight  # noqa: E402
-from replay.logio import read_frames, read_log, write_flight_log  # noqa: E402
-from replay.report import build_report  # noqa: E402
+from fdi.calfile import Calibration, SensorCal, SensorSet
+from fdi.geometry import load_configuration
+from fdi.monitor import Monitor
+from fdi.units import DPH, DPS
+from replay.faults import parse_fault
+from replay.flight import simulate_flight
+from replay.logio import read_frames, read_log, write_flight_log
+from replay.report import build_report
 
 COMMA = ROOT / ".." / "shared" / "data" / "comma2k19_can"
 
@@ -140,9 +135,9 @@ def main() -> int:
     ap.add_argument("--formats", default="blf,log")
     args = ap.parse_args()
     cal = make_cal()
-    results: dict = {"hours": args.hours, "sample_rate_hz": 100.0, "sensors": 6,
-                     "python": platform.python_version(), "can": can.__version__,
-                     "machine": platform.machine(), "formats": {}}
+    results: dict = header("replay", hours=args.hours, sample_rate_hz=100.0, sensors=6,
+                           formats={})
+    results["machine"] = machine(can=can.__version__)
     with tempfile.TemporaryDirectory() as tmp:
         d = Path(tmp)
         t0 = time.perf_counter()
@@ -181,7 +176,9 @@ def main() -> int:
                    "ratio_replay_cpu": rc / bc, "ratio_replay_rrd_cpu": qc / bc,
                    "ratio_replay_wall": rw / bw, "ratio_replay_rrd_wall": qw / bw,
                    "rerun_cpu_s": rerun_c, "rerun_wall_s": rerun_w,
-                   "rerun_faster_than_replay": rerun_w < rw, "runs": runs}
+                   "rerun_faster_than_replay": rerun_w < rw,
+                   "replay_cpu_s_spread": spread(x["replay"]["cpu_s"] for x in runs),
+                   "bare_cpu_s_spread": spread(x["bare_cpu_s"] for x in runs), "runs": runs}
             results["formats"][fmt] = res
             print(f"  {fmt}: {n} frames; replay {rc / bc:.2f}x bare (cpu; wall "
                   f"{rw / bw:.2f}x; target < 1.5), with --rrd {qc / bc:.2f}x (wall "
@@ -194,10 +191,7 @@ def main() -> int:
         print(f"comma2k19: {c['frames']} frames decoded at {c['decode_frames_per_s']:.0f} "
               f"frames/s (cpu; {c['ratio_cpu']:.2f}x the bare reader); accounting "
               f"{c['accounting']}")
-    out = ROOT / "benchmarks" / "results" / "replay.json"
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(results, indent=1) + "\n", encoding="utf-8")
-    print(f"wrote {out}")
+    write_results(results)
     return 0
 
 

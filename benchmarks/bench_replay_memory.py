@@ -22,22 +22,18 @@ Writes ``benchmarks/results/replay_memory.json``.
 from __future__ import annotations
 
 import argparse
-import json
 import os
-import platform
-import statistics
 import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
+from _common import ROOT, header, spread, write_results
 
-from replay.flight import simulate_flight  # noqa: E402
-from replay.logio import write_flight_log  # noqa: E402
-from thresholds.synthetic import synthetic_calibration  # noqa: E402
+from replay.flight import simulate_flight
+from replay.logio import write_flight_log
+from thresholds.synthetic import synthetic_calibration
 
 _HWM = ("hwm = [x for x in open('/proc/self/status') if x.startswith('VmHWM')][0]\n"
         "print('VmHWM', hwm.split()[1], file=sys.stderr)\n")
@@ -68,7 +64,7 @@ def run(code: str, argv: list[str]) -> tuple[float, float, int]:
 
 
 def stats(x: list[float]) -> dict[str, float]:
-    return {"min": min(x), "median": statistics.median(x), "max": max(x)}
+    return spread(x)
 
 
 def main() -> int:
@@ -80,8 +76,7 @@ def main() -> int:
     if not Path("/proc/self/status").is_file():
         raise SystemExit("needs Linux /proc to read the peak resident memory")
     cal = synthetic_calibration("cone6", seed=4, raw_unit="mV")
-    out: dict = {"machine": platform.platform(), "python": sys.version.split()[0],
-                 "repeat": args.repeat, "logs": {}}
+    out: dict = header("replay_memory", repeat=args.repeat, logs={})
     with tempfile.TemporaryDirectory() as tmp:
         d = Path(tmp)
         cp = d / "cal.json"
@@ -124,10 +119,7 @@ def main() -> int:
           f"{out['ratio_peak_long_over_short_whole']:.2f}; wall stream/whole on the long log "
           f"{out['ratio_wall_stream_over_whole_long']:.2f}; CPU stream/whole "
           + ", ".join(f"{k} {v:.2f}" for k, v in out["ratio_cpu_stream_over_whole"].items()))
-    res = ROOT / "benchmarks" / "results" / "replay_memory.json"
-    res.parent.mkdir(parents=True, exist_ok=True)
-    res.write_text(json.dumps(out, indent=1) + "\n", encoding="utf-8")
-    print(f"wrote {res}")
+    write_results(out)
     return 0 if ratio <= 1.3 else 1
 
 

@@ -22,7 +22,7 @@ from fdi.state import BETA, IN_SET, KAPPA, MIN_DOWN, MIN_UP, NU, S_DOWN, S_UP
 __all__ = ["cusum_update"]
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(error_model="numpy", inline="always", _nrt=False)
 def cusum_update(z, rho: float, df: int, sensors, mats,
                  fconst, cusum) -> float:
     """Advance every sensor's two CUSUMs by one sample; returns the bank's statistic.
@@ -32,7 +32,7 @@ def cusum_update(z, rho: float, df: int, sensors, mats,
     z : ndarray, shape (≥ df,)
     rho : float
     df : int
-    sensors : ndarray, shape (n, SENSOR_COLS)
+    sensors : ndarray, shape (SENSOR_COLS, n)
     mats : ndarray, shape (3·df + 3, n)
         Rows 2·df + 3 … hold the unit whitened parity columns.
     fconst : ndarray
@@ -42,8 +42,8 @@ def cusum_update(z, rho: float, df: int, sensors, mats,
     u0 = 2 * df + 3
     allowance = fconst[NU] + 3.0 * math.sqrt(fconst[KAPPA] * rho + fconst[BETA])
     g = 0.0
-    for i in range(sensors.shape[0]):
-        if sensors[i, IN_SET] == 0.0:
+    for i in range(sensors.shape[1]):
+        if sensors[IN_SET, i] == 0.0:
             continue
         r = 0.0
         for j in range(df):

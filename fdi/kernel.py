@@ -15,14 +15,19 @@ answers). Per sample, with the constants of the current healthy set (:mod:`fdi.s
 4. :func:`compensate`: y = SF·u − b − c (c: run-time correction of the effect terms),
    parity p = V·y, whitened parity z = A·p (Cov z = I),
    ω̂ = G·y and ρ = max_i ω̂ᵀC_iω̂/Σ_ii (seed 001 Eq. 21 for the zeroed rows of H̃).
+   These depend on the row and the set only, so :func:`compensate_ahead` computes them
+   (and the protection level, step 7) for up to ``BLOCK_ROWS`` rows before their health
+   checks; a row the kernel stops at or before is computed again by the next call.
 5. Windows (:func:`fdi.windows.window_update`) and the CUSUM bank
    (:func:`fdi.cusum.cusum_update`).
 6. Detection state machine (:func:`detection_machine`): a detection or an isolation stops
    the kernel after the sample (the monitor attributes it, names the events, isolates).
 7. Protection level PL(ρ) = a·sqrt(1 + bρ) + c·sqrt(d + eρ) (:mod:`fdi.integrity`).
 
-The kernel never raises on numbers: every bad value is caught by the health checks before
-it reaches the arithmetic.
+The kernel never raises on numbers: a bad raw value only makes non-finite numbers in the
+compensation ahead (``error_model="numpy"``, no floating-point traps), and the health
+checks stop the kernel before any of them enters the windows, the CUSUM bank or a kept
+output row.
 """
 
 from __future__ import annotations
@@ -39,6 +44,7 @@ from fdi.state import (
     ALARM_RUN,
     AXIS0,
     BIAS,
+    BLOCK_ROWS,
     CAPABILITY,
     CLEAR_RUN,
     CLEAR_SAMPLES,
@@ -47,6 +53,7 @@ from fdi.state import (
     DETECTED,
     DETECTED_ROWS,
     DF,
+    F_SLOTS,
     FIRED,
     GOOD_SINCE_T,
     H_P_H,
@@ -78,9 +85,17 @@ from fdi.state import (
     PL_E,
     PROTECTION,
     READMISSION,
+    READMIT_DWELL_S,
     READMIT_SENSOR,
+    RETURN_DETECTED,
     RHO_COEF0,
+    RING_LEN,
     SAME_RUN,
+    SCALE_COLS,
+    SENSOR_COLS,
+    SENSOR_STATE_COLS,
+    SET_ICONST0,
+    SET_SENSORS0,
     SF,
     SIGMA_II,
     STALE_TIMEOUT_S,
@@ -96,55 +111,76 @@ from fdi.state import (
     STOP_ROW,
     STUCK_COUNT,
     THRESHOLD,
+    set_layout,
+    state_layout,
 )
 from fdi.windows import window_update
 
 __all__ = ["advance", "compensate", "reconstruct_row"]
 
-
+# Every kernel function is compiled without numba's reference counting (``_nrt=False``): the
+# kernel allocates nothing (its scratch vectors live in the detector state), and with
+# counting on, the array arguments of the inlined helpers cost an atomic increment and
+# decrement each per sample, most of the kernel's time. Only the two entry points are cached
+# (see _entry_points): a cached inner function would be reloaded after an edit of a module
+# it inlines.
+_KERNEL = dict(error_model="numpy", _nrt=False)
+_INLINE = dict(_KERNEL, inline="always")
 
 _ISOLATE = 0                                # CAPABILITY_CODE["isolate"]
 _NONE = 3                                   # CAPABILITY_CODE["none"]
 
 
-@njit(cache=True, error_model="numpy", inline="always")
-def members(sensors):
-    """Indices of the sensors in the set, ascending, shape (m,)."""
-    m = 0
-    for i in range(sensors.shape[0]):
-        if sensors[i, IN_SET] != 0.0:
-            m += 1
-    idx = np.empty(m, np.int64)
-    m = 0
-    for i in range(sensors.shape[0]):
-        if sensors[i, IN_SET] != 0.0:
-            idx[m] = i
-            m += 1
-    return idx
-
-
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(**_INLINE)
 def _finite(x):
     """x when finite, else 0."""
     return x if math.isfinite(x) else 0.0
 
 
-@njit(cache=True, error_model="numpy", inline="always")
-def compensate(raw, r, corr, cr, idx, sensors, mats, df, has_omega, y, p, z, w) -> float:
-    """y = SF·u − b − c, p = V·y, z = A·p, ω̂ = G·y of the sensors ``idx`` of row r; returns ρ.
+@njit(**_INLINE)
+def set_views(kset, n):
+    """The packed constants of a set (:class:`fdi.state.KernelSet`) as (fconst, sensors,
+    scales, mats, df, nw)."""
+    df = int(kset[SET_ICONST0 + DF])
+    nw = int(kset[SET_ICONST0 + N_WINDOWS])
+    o_scales, o_mats, end = set_layout(n, df, nw)
+    return (kset[:F_SLOTS], kset[SET_SENSORS0:o_scales].reshape(SENSOR_COLS, n),
+            kset[o_scales:o_mats].reshape(nw, SCALE_COLS),
+            kset[o_mats:end].reshape(3 * df + 3, n), df, nw)
+
+
+@njit(**_INLINE)
+def scratch_views(values, n):
+    """The kernel's scratch vectors y, p, z (n each) and ω̂ (3) in the detector state, and
+    the block of (z, ρ) rows, shape (BLOCK_ROWS, n + 1)."""
+    o = state_layout(n, 0)[1]
+    return (values[o:o + n], values[o + n:o + 2 * n], values[o + 2 * n:o + 3 * n],
+            values[o + 3 * n:o + 3 * n + 3],
+            values[o + 3 * n + 3:o + 3 * n + 3 + BLOCK_ROWS * (n + 1)].reshape(BLOCK_ROWS,
+                                                                              n + 1))
+
+
+@njit(**_INLINE)
+def compensate(raw, r, corr, cr, sensors, mats, df, has_omega, y, p, z, w) -> float:
+    """y = SF·u − b − c, p = V·y, z = A·p, ω̂ = G·y of the sensors of the set, row r;
+    returns ρ. ``sensors`` is laid out (SENSOR_COLS, n): one row per quantity.
 
     ``c = corr[cr]`` is the run-time correction of the effect terms (rad/s; a non-finite entry
     counts as 0, so a bad input of an effect never reaches the parity). Sums run over the
     sensors of the set in ascending order (left to right). Without three independent
     sensors ω̂ is NaN and ρ is 0.
     """
-    for k_ in range(idx.shape[0]):
-        i = idx[k_]
-        y[i] = sensors[i, SF] * raw[r, i] - sensors[i, BIAS] - _finite(corr[cr, i])
+    n = sensors.shape[1]
+    # Dense loops over all n sensors: a sensor outside the set has y = −0.0 and zero columns
+    # in V and G and zero ρ coefficients (:func:`fdi.state.pack_set`), and x + (+0·−0) = x
+    # for every x (also −0, ±inf, NaN), so the sums equal those over the set's sensors alone,
+    # bit for bit, in the same order.
+    for i in range(n):
+        yi = sensors[SF, i] * raw[r, i] - sensors[BIAS, i] - _finite(corr[cr, i])
+        y[i] = yi if sensors[IN_SET, i] != 0.0 else -0.0
     for j in range(df):
         acc = 0.0
-        for k_ in range(idx.shape[0]):
-            i = idx[k_]
+        for i in range(n):
             acc = acc + mats[j, i] * y[i]
         p[j] = acc
     a0 = df + 3
@@ -158,39 +194,41 @@ def compensate(raw, r, corr, cr, idx, sensors, mats, df, has_omega, y, p, z, w) 
         w[1] = np.nan
         w[2] = np.nan
         return 0.0
-    for a in range(3):
-        acc = 0.0
-        for k_ in range(idx.shape[0]):
-            i = idx[k_]
-            acc = acc + mats[df + a, i] * y[i]
-        w[a] = acc
-    q0, q1, q2 = w[0] * w[0], w[1] * w[1], w[2] * w[2]
-    q3, q4, q5 = w[0] * w[1], w[0] * w[2], w[1] * w[2]
-    rho = 0.0
+    w0 = 0.0
+    w1 = 0.0
+    w2 = 0.0
+    for i in range(n):
+        w0 = w0 + mats[df, i] * y[i]
+        w1 = w1 + mats[df + 1, i] * y[i]
+        w2 = w2 + mats[df + 2, i] * y[i]
+    w[0] = w0
+    w[1] = w1
+    w[2] = w2
+    q0, q1, q2 = w0 * w0, w1 * w1, w2 * w2
+    q3, q4, q5 = w0 * w1, w0 * w2, w1 * w2
+    rho = 0.0                       # a sensor outside the set gives s = 0 (or NaN): no change
     c = RHO_COEF0
-    for k_ in range(idx.shape[0]):
-        i = idx[k_]
-        s = (sensors[i, c] * q0 + sensors[i, c + 1] * q1 + sensors[i, c + 2] * q2
-             + sensors[i, c + 3] * q3 + sensors[i, c + 4] * q4 + sensors[i, c + 5] * q5)
+    for i in range(n):
+        s = (sensors[c, i] * q0 + sensors[c + 1, i] * q1 + sensors[c + 2, i] * q2
+             + sensors[c + 3, i] * q3 + sensors[c + 4, i] * q4 + sensors[c + 5, i] * q5)
         if s > rho:
             rho = s
     return rho
 
 
-@njit(cache=True, error_model="numpy", inline="always")
-def health_checks(t, raw, r, valid, vr, sensors, fconst, iconst, sensor, counters) -> int:
+@njit(**_INLINE)
+def health_checks(t, raw, r, valid, vr, sensors, sensor, counters, stuck, stale_s) -> int:
     """Health verdict per sensor of the set (``counters[HEALTH0 + i]``); returns how many
     failed. Each sensor's check reads only its own history, so the order of isolation does
     not change the verdicts."""
     failed = 0
-    stuck = iconst[STUCK_COUNT]
-    for i in range(sensors.shape[0]):
+    for i in range(sensors.shape[1]):
         counters[HEALTH0 + i] = HEALTH_OK
-        if sensors[i, IN_SET] == 0.0:
+        if sensors[IN_SET, i] == 0.0:
             continue
         if valid[vr, i]:
             v = raw[r, i]
-            if not (sensors[i, LO] < v and v < sensors[i, HI]):
+            if not (sensors[LO, i] < v and v < sensors[HI, i]):
                 counters[HEALTH0 + i] = HEALTH_RANGE if math.isfinite(v) else HEALTH_NONFINITE
                 failed += 1
                 continue
@@ -207,38 +245,38 @@ def health_checks(t, raw, r, valid, vr, sensors, fconst, iconst, sensor, counter
             lvt = sensor[i, LAST_VALID_T]
             if t > lvt or lvt != lvt:
                 sensor[i, LAST_VALID_T] = t
-        elif t - sensor[i, LAST_VALID_T] > fconst[STALE_TIMEOUT_S]:
+        elif t - sensor[i, LAST_VALID_T] > stale_s:
             counters[HEALTH0 + i] = HEALTH_STALE
             failed += 1
     return failed
 
 
-@njit(cache=True, error_model="numpy")
-def readmission_check(t, raw, r, corr, cr, valid, vr, idx, sensors, mats, iconst, sensor,
+@njit(**_INLINE)
+def readmission_check(t, raw, r, corr, cr, valid, vr, sensors, mats, df, capability, sensor,
                       counters, dwell_s, y, p, z, w) -> int:
     """First isolated sensor that behaved for ``dwell_s`` (−1: none).
 
     Good behaviour: valid, within the raw bounds, not repeating, and |y_i − h_iᵀω̂|² below
     9·(Σ_ii + h_iᵀPh_i) with ω̂ from the healthy set.
     """
-    if iconst[CAPABILITY] == _NONE or counters[DETECTED] != 0:
+    if capability == _NONE or counters[DETECTED] != 0:
         return -1
-    n = sensors.shape[0]
+    n = sensors.shape[1]
     for i in range(n):
-        if sensors[i, IN_SET] != 0.0 and not valid[vr, i]:
+        if sensors[IN_SET, i] != 0.0 and not valid[vr, i]:
             return -1
-    compensate(raw, r, corr, cr, idx, sensors, mats, iconst[DF], True, y, p, z, w)
+    compensate(raw, r, corr, cr, sensors, mats, df, True, y, p, z, w)
     for i in range(n):
-        if sensors[i, IN_SET] != 0.0:
+        if sensors[IN_SET, i] != 0.0:
             continue
         v = raw[r, i]
-        good = (valid[vr, i] and sensors[i, LO] < v and v < sensors[i, HI]
+        good = (valid[vr, i] and sensors[LO, i] < v and v < sensors[HI, i]
                 and v != sensor[i, LAST_RAW])
         if good:
-            yi = sensors[i, SF] * v - sensors[i, BIAS] - _finite(corr[cr, i])
-            hw = (sensors[i, AXIS0] * w[0] + sensors[i, AXIS0 + 1] * w[1]
-                  + sensors[i, AXIS0 + 2] * w[2])
-            var = sensors[i, SIGMA_II] + sensors[i, H_P_H]
+            yi = sensors[SF, i] * v - sensors[BIAS, i] - _finite(corr[cr, i])
+            hw = (sensors[AXIS0, i] * w[0] + sensors[AXIS0 + 1, i] * w[1]
+                  + sensors[AXIS0 + 2, i] * w[2])
+            var = sensors[SIGMA_II, i] + sensors[H_P_H, i]
             good = (yi - hw) ** 2 < 9.0 * var
         sensor[i, LAST_RAW] = v
         since = sensor[i, GOOD_SINCE_T]
@@ -251,8 +289,9 @@ def readmission_check(t, raw, r, corr, cr, valid, vr, idx, sensors, mats, iconst
     return -1
 
 
-@njit(cache=True, error_model="numpy", inline="always")
-def detection_machine(alarm, clear, fired, iconst, counters) -> int:
+@njit(**_INLINE)
+def detection_machine(alarm, clear, fired, can_isolate, persistence, clear_samples,
+                      counters) -> int:
     """Detection state machine for one complete sample; returns the stop code.
 
     The first alarm detects; ``persistence`` consecutive alarms isolate (when the set can
@@ -273,25 +312,24 @@ def detection_machine(alarm, clear, fired, iconst, counters) -> int:
         counters[DETECTED_ROWS] += 1
         counters[ALARM_RUN] = counters[ALARM_RUN] + 1 if alarm else 0
         counters[CLEAR_RUN] = counters[CLEAR_RUN] + 1 if clear else 0
-    if iconst[CAPABILITY] == _ISOLATE and counters[ALARM_RUN] >= iconst[PERSISTENCE]:
+    if can_isolate and counters[ALARM_RUN] >= persistence:
         counters[FIRED] = fired
         code |= STOP_ISOLATE
-    elif counters[DETECTED] != 0 and counters[CLEAR_RUN] >= iconst[CLEAR_SAMPLES]:
+    elif counters[DETECTED] != 0 and counters[CLEAR_RUN] >= clear_samples:
         counters[DETECTED] = 0
     return code
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(**_INLINE)
 def protection_level(fconst, rho) -> float:
     """PL(ρ) = a·sqrt(1 + bρ) + c·sqrt(d + eρ) (rad/s), :mod:`fdi.integrity`."""
     return (fconst[PL_A] * math.sqrt(1.0 + fconst[PL_B] * rho)
             + fconst[PL_C] * math.sqrt(fconst[PL_D] + fconst[PL_E] * rho))
 
 
-@njit(cache=True, error_model="numpy", inline="always")
-def _untested_row(out, r, scales, fconst, iconst, K, parity0):
+@njit(**_INLINE)
+def _untested_row(out, r, scales, fconst, nw, K, parity0):
     """Statistics NaN, base thresholds, parity NaN: a sample without a parity test."""
-    nw = iconst[N_WINDOWS]
     for k in range(nw):
         out[r, STATS0 + k] = np.nan
         out[r, STATS0 + K + k] = scales[k, THRESHOLD]
@@ -302,14 +340,14 @@ def _untested_row(out, r, scales, fconst, iconst, K, parity0):
         out[r, j] = np.nan
 
 
-@njit(cache=True, error_model="numpy", inline="always")
-def parity_tests(z, rho, p, df, sensors, scales, mats, fconst, iconst, windows, cusum,
-                 counters, K, parity0, out, r) -> int:
-    """Windows, CUSUM bank, parity output and state machine of one complete sample;
-    returns the stop code (a detection or an isolation)."""
-    nw = iconst[N_WINDOWS]
+@njit(**_INLINE)
+def parity_tests(z, rho, df, sensors, scales, mats, fconst, has_cusum, windows, cusum,
+                 counters, K, out, r) -> tuple[bool, bool, int]:
+    """Windows and CUSUM bank of one complete sample; returns (alarm, clear, fired) for the
+    state machine."""
+    nw = scales.shape[0]
     alarm, clear, fired, best = window_update(z, rho, df, windows, counters, scales, K, out, r)
-    if iconst[HAS_CUSUM] != 0:
+    if has_cusum:
         g = cusum_update(z, rho, df, sensors, mats, fconst, cusum)
         h = fconst[CUSUM_H]
         out[r, STATS0 + nw] = g
@@ -320,17 +358,11 @@ def parity_tests(z, rho, p, df, sensors, scales, mats, fconst, iconst, windows, 
                 fired = nw
         if g >= fconst[CUSUM_CLEAR]:
             clear = False
-    if counters[HAS_PARITY] != 0:
-        for j in range(df):
-            out[r, parity0 + j] = p[j]
-        for j in range(parity0 + df, out.shape[1]):
-            out[r, j] = np.nan
-    return detection_machine(alarm, clear, fired, iconst, counters)
+    return alarm, clear, fired
 
 
-@njit(error_model="numpy")
-def _advance(t, raw, corr, valid, r0, r1, sensors, scales, mats, fconst, iconst, windows, cusum,
-            sensor, counters, out, dwell_s) -> None:
+@njit(**_KERNEL)
+def _advance(t, raw, corr, valid, r0, r1, kset, values, counters, out) -> int:
     """Run samples r0 … r1−1 until one needs the monitor; see the module docstring.
 
     Parameters
@@ -341,14 +373,20 @@ def _advance(t, raw, corr, valid, r0, r1, sensors, scales, mats, fconst, iconst,
         Run-time correction of the effect terms (rad/s), subtracted from y.
     valid : ndarray of bool, shape (N, n), or (1, n) when every sample is valid
     r0, r1 : int
-    sensors, scales, mats, fconst, iconst : ndarray
-        Constants of the healthy set (:class:`fdi.state.KernelSet`).
-    windows, cusum, sensor, counters : ndarray
-        Detector state (:class:`fdi.state.DetectorState`), updated in place.
+    kset : ndarray
+        Constants of the healthy set (:attr:`fdi.state.KernelSet.packed`).
+    values : ndarray
+        Float detector state (:attr:`fdi.state.DetectorState.values`), updated in place.
+    counters : ndarray of int64
+        Integer detector state (:attr:`fdi.state.DetectorState.counters`), updated in place.
     out : ndarray, shape (N, width)
         Output rows (:class:`fdi.state.OutLayout`).
-    dwell_s : float
-        Re-admission dwell (s).
+
+    Returns
+    -------
+    int
+        The stop code (``counters[STOP_CODE]``), plus :data:`fdi.state.RETURN_DETECTED`
+        while a detection is active.
 
     Notes
     -----
@@ -357,85 +395,144 @@ def _advance(t, raw, corr, valid, r0, r1, sensors, scales, mats, fconst, iconst,
     sample; health, re-admission and incomplete samples *during* it (``PHASE`` tells where
     the next call resumes).
     """
-    n = sensors.shape[0]
-    df = iconst[DF]
-    has_omega = iconst[HAS_OMEGA] != 0
-    K = iconst[N_WINDOWS] + (1 if iconst[HAS_CUSUM] != 0 else 0)
+    n = raw.shape[1]
+    fconst, sensors, scales, mats, df, nw = set_views(kset, n)
+    ic = SET_ICONST0
+    has_omega = kset[ic + HAS_OMEGA] != 0.0
+    has_cusum = kset[ic + HAS_CUSUM] != 0.0
+    can_isolate = int(kset[ic + CAPABILITY]) == _ISOLATE
+    capability = int(kset[ic + CAPABILITY])
+    readmission = kset[ic + READMISSION] != 0.0
+    stuck = kset[ic + STUCK_COUNT]
+    persistence = int(kset[ic + PERSISTENCE])
+    clear_samples = int(kset[ic + CLEAR_SAMPLES])
+    stale_s = fconst[STALE_TIMEOUT_S]
+    dwell_s = fconst[READMIT_DWELL_S]
+    R = counters[RING_LEN]
+    o_cusum, o_scratch, o_windows, _ = state_layout(n, R)
+    sensor = values[:o_cusum].reshape(n, SENSOR_STATE_COLS)
+    cusum = values[o_cusum:o_scratch].reshape(4, n)
+    windows = values[o_windows:o_windows + (R + 1) * (df + 1)].reshape(R + 1, df + 1)
+    y, p, z, w, block = scratch_views(values, n)
+    K = nw + (1 if has_cusum else 0)
     parity0 = STATS0 + 2 * K
     has_valid = counters[HAS_VALID] != 0
     per_row_corr = corr.shape[0] > 1
-    y = np.zeros(n)
-    p = np.zeros(max(df, 1))
-    z = np.zeros(max(df, 1))
-    w = np.zeros(3)
-    idx = members(sensors)
     phase = counters[PHASE]
     counters[PHASE] = PHASE_HEALTH
+    has_parity = counters[HAS_PARITY] != 0
+    b0 = r0                                 # rows b0 … b1−1 compensated ahead, in ``block``
+    b1 = r0
     for r in range(r0, r1):
+        if r >= b1:
+            b0 = r
+            b1 = min(r1, r + BLOCK_ROWS)
+            compensate_ahead(raw, corr, b0, b1, sensors, mats, fconst, df, has_omega,
+                             has_parity, parity0, y, p, z, w, block, out)
         tr = t[r]
         vr = r if has_valid else 0
         cr = r if per_row_corr else 0
         if phase == PHASE_HEALTH:
             if counters[STARTED] == 0:
-                counters[STARTED] = 1
-                for i in range(n):
-                    sensor[i, LAST_VALID_T] = tr
-            if health_checks(tr, raw, r, valid, vr, sensors, fconst, iconst, sensor, counters) > 0:
-                counters[STOP_ROW] = r
-                counters[STOP_CODE] = STOP_HEALTH
-                return
-        if phase <= PHASE_READMIT and iconst[READMISSION] != 0:
-            k = readmission_check(tr, raw, r, corr, cr, valid, vr, idx, sensors, mats, iconst,
-                                  sensor, counters, dwell_s, y, p, z, w)
+                _start(tr, sensor, counters)
+            if health_checks(tr, raw, r, valid, vr, sensors, sensor, counters, stuck,
+                             stale_s) > 0:
+                return _stop(counters, r, STOP_HEALTH)
+        if phase <= PHASE_READMIT and readmission:
+            k = readmission_check(tr, raw, r, corr, cr, valid, vr, sensors, mats, df,
+                                  capability, sensor, counters, dwell_s, y, p, z, w)
             if k >= 0:
                 counters[READMIT_SENSOR] = k
-                counters[STOP_ROW] = r
-                counters[STOP_CODE] = STOP_READMIT
-                return
+                return _stop(counters, r, STOP_READMIT)
         phase = PHASE_HEALTH
-        complete = True
-        for k_ in range(idx.shape[0]):
-            i = idx[k_]
-            if not valid[vr, i]:
-                complete = False
-        if not complete:
-            _untested_row(out, r, scales, fconst, iconst, K, parity0)
+        if has_valid and not _complete(sensors, valid, vr):
+            _untested_row(out, r, scales, fconst, nw, K, parity0)
             out[r, PROTECTION] = np.inf
-            counters[STOP_ROW] = r
-            counters[STOP_CODE] = STOP_INCOMPLETE
-            return
-        rho = compensate(raw, r, corr, cr, idx, sensors, mats, df, has_omega, y, p, z, w)
-        out[r, OMEGA0] = w[0]
-        out[r, OMEGA0 + 1] = w[1]
-        out[r, OMEGA0 + 2] = w[2]
+            return _stop(counters, r, STOP_INCOMPLETE)
+        code = STOP_NONE
         if df > 0:
-            code = parity_tests(z, rho, p, df, sensors, scales, mats, fconst, iconst, windows,
-                                cusum, counters, K, parity0, out, r)
+            zr = block[r - b0]              # z (first df entries) and ρ (entry n) of row r
+            alarm, clear, fired = parity_tests(zr, zr[n], df, sensors, scales, mats, fconst,
+                                               has_cusum, windows, cusum, counters, K, out, r)
+            code = detection_machine(alarm, clear, fired, can_isolate, persistence,
+                                     clear_samples, counters)
         else:
-            code = STOP_NONE
-            _untested_row(out, r, scales, fconst, iconst, K, parity0)
-        out[r, PROTECTION] = protection_level(fconst, rho)
+            _untested_row(out, r, scales, fconst, nw, K, parity0)
         if code != STOP_NONE:
-            counters[STOP_ROW] = r
-            counters[STOP_CODE] = code
-            return
-    counters[STOP_ROW] = r1
-    counters[STOP_CODE] = STOP_NONE
+            return _stop(counters, r, code)
+    return _stop(counters, r1, STOP_NONE)
 
 
-@njit(error_model="numpy")
-def _reconstruct_row(raw, corr, r, sensors, mats, iconst, fconst, row) -> None:
+@njit(**_INLINE)
+def compensate_ahead(raw, corr, b0, b1, sensors, mats, fconst, df, has_omega, has_parity,
+                     parity0, y, p, z, w, block, out) -> None:
+    """Compensate rows b0 … b1−1 (at most BLOCK_ROWS) with the current set, before their
+    health checks: ω̂, the protection level and the parity go straight into their output
+    rows, z and ρ into ``block`` for the windows and the CUSUM bank.
+
+    These quantities depend on the row and the set only, not on the detector state, so the
+    rows are independent and the processor overlaps them (the sequential part of the
+    recursion starts at the windows). A row the kernel stops at or before is compensated
+    again by the next call, with the set the monitor chose; rows it never tests (health
+    verdicts, incomplete samples) are overwritten, so the extra work changes no answer.
+    A bad raw value only gives non-finite numbers here (no exception: error_model numpy).
+    """
+    n = sensors.shape[1]
+    per_row_corr = corr.shape[0] > 1
+    for q in range(b0, b1):
+        rho = compensate(raw, q, corr, q if per_row_corr else 0, sensors, mats, df,
+                         has_omega, y, p, z, w)
+        out[q, OMEGA0] = w[0]
+        out[q, OMEGA0 + 1] = w[1]
+        out[q, OMEGA0 + 2] = w[2]
+        out[q, PROTECTION] = protection_level(fconst, rho)
+        k = q - b0
+        for j in range(df):
+            block[k, j] = z[j]
+        block[k, n] = rho
+        if has_parity and df > 0:
+            for j in range(df):
+                out[q, parity0 + j] = p[j]
+            for j in range(parity0 + df, out.shape[1]):
+                out[q, j] = np.nan
+
+
+@njit(**_INLINE)
+def _complete(sensors, valid, vr) -> bool:
+    """Every sensor of the set delivered row ``vr`` of ``valid``."""
+    for i in range(sensors.shape[1]):
+        if sensors[IN_SET, i] != 0.0 and not valid[vr, i]:
+            return False
+    return True
+
+
+@njit(**_INLINE)
+def _start(t, sensor, counters) -> None:
+    """The first sample: every sensor's stale clock starts at its time."""
+    counters[STARTED] = 1
+    for i in range(sensor.shape[0]):
+        sensor[i, LAST_VALID_T] = t
+
+
+@njit(**_INLINE)
+def _stop(counters, r, code) -> int:
+    """Record where and why the kernel stopped; the return value of :func:`advance`."""
+    counters[STOP_ROW] = r
+    counters[STOP_CODE] = code
+    return code + (RETURN_DETECTED if counters[DETECTED] != 0 else 0)
+
+
+@njit(**_KERNEL)
+def _reconstruct_row(raw, corr, r, kset, values, row) -> None:
     """ω̂ of one sample from the sensors of a set (row[OMEGA0 …]) and its protection level
-    (row[PROTECTION]); used for incomplete samples and right after an isolation."""
-    n = sensors.shape[0]
-    df = iconst[DF]
-    y = np.zeros(n)
-    p = np.zeros(max(df, 1))
-    z = np.zeros(max(df, 1))
-    w = np.zeros(3)
+    (row[PROTECTION]); used for incomplete samples and right after an isolation. The
+    scratch vectors of the detector state ``values`` are overwritten."""
+    n = raw.shape[1]
+    fconst, sensors, _, mats, df, _ = set_views(kset, n)
+    y, p, z, w, _ = scratch_views(values, n)
     cr = r if corr.shape[0] > 1 else 0
-    rho = compensate(raw, r, corr, cr, members(sensors), sensors, mats, df,
-                     iconst[HAS_OMEGA] != 0, y, p, z, w)
+    rho = compensate(raw, r, corr, cr, sensors, mats, df,
+                     kset[SET_ICONST0 + HAS_OMEGA] != 0.0, y, p, z, w)
     row[OMEGA0] = w[0]
     row[OMEGA0 + 1] = w[1]
     row[OMEGA0 + 2] = w[2]
@@ -457,17 +554,15 @@ def _entry_points(sources: str):
     cached function, not of what it calls; the digest of every source compiled in sits in
     their closure, which numba's cache key includes, so an edit anywhere recompiles."""
 
-    @njit(cache=True, error_model="numpy")
-    def advance(t, raw, corr, valid, r0, r1, sensors, scales, mats, fconst, iconst, windows,
-                cusum, sensor, counters, out, dwell_s):
+    @njit(cache=True, **_KERNEL)
+    def advance(t, raw, corr, valid, r0, r1, kset, values, counters, out):
         sources  # noqa: B018
-        _advance(t, raw, corr, valid, r0, r1, sensors, scales, mats, fconst, iconst, windows, cusum,
-                 sensor, counters, out, dwell_s)
+        return _advance(t, raw, corr, valid, r0, r1, kset, values, counters, out)
 
-    @njit(cache=True, error_model="numpy")
-    def reconstruct_row(raw, corr, r, sensors, mats, iconst, fconst, row):
+    @njit(cache=True, **_KERNEL)
+    def reconstruct_row(raw, corr, r, kset, values, row):
         sources  # noqa: B018
-        _reconstruct_row(raw, corr, r, sensors, mats, iconst, fconst, row)
+        _reconstruct_row(raw, corr, r, kset, values, row)
 
     advance.__doc__ = _advance.__doc__
     reconstruct_row.__doc__ = _reconstruct_row.__doc__

@@ -45,6 +45,9 @@ __all__ = ["Monitor"]
 
 _NAN = float("nan")
 _F64 = np.dtype(np.float64)
+_STOP_MASK = S.STOP_MASK
+_RETURN_DETECTED = S.RETURN_DETECTED
+_BOOL = np.dtype(bool)
 _INF = float("inf")
 _CHUNK = 1 << 16
 _CAP_CODE = {c: k for k, c in enumerate(CAPABILITIES)}
@@ -110,8 +113,9 @@ class Monitor:
         self._all_valid = np.ones((1, self.n), bool)
         self._no_correction = np.zeros((1, self.n))
         self._row = np.empty((1, self._layout.width(True)))
+        self._row0 = self._row[0]
+        self._shape1 = (self.n,)
         self._t1 = np.empty(1)
-        self._dwell_s = float(self.settings.readmit_dwell_s)
         self._columns = (S.OMEGA0, S.STATS0, self._layout.thresholds0, self._layout.parity0)
         self.reset()
 
@@ -137,6 +141,12 @@ class Monitor:
         self._model = self.cache.get(mask)
         self._kset = self._kernel_set(mask)
         self._state.new_set(self._model.df)
+        # what every answer of this set repeats (the status changes only with the set)
+        self._healthy_now = self._healthy_array(mask)
+        self._status_now = tuple(self._status)
+        self._status_detected = tuple("detected" if s == "ok" else s for s in self._status)
+        self._omega_sd = self._model.omega_sd
+        self._capability = self._model.capability
 
     def _healthy_array(self, mask: int) -> np.ndarray:
         a = self._healthy_arr.get(mask)
@@ -227,13 +237,80 @@ class Monitor:
         except Exception:
             tf = _NAN
         try:
-            return self._step(tf, raw, valid, self._correction(correction, 1))
+            u = ok = corr = events = None
+            if (type(raw) is np.ndarray and raw.dtype is _F64 and raw.shape == self._shape1
+                    and raw.flags.c_contiguous):                      # the common case,
+                corr = (self._no_correction if correction is None     # quickly
+                        else self._plain_array(correction, _F64))
+                ok = self._all_valid if valid is None else self._plain_array(valid, _BOOL)
+                u = raw[None]
+                self._length_bad = False
+            if corr is None or ok is None:
+                u, ok, corr, events = self._parse_sample(raw, valid, correction, tf)
+            # one sample through the kernel (the same entry point as run's)
+            self._t1[0] = tf
+            st = self._state
+            has_valid = ok is not self._all_valid
+            if has_valid:                                    # (HAS_VALID only picks the row
+                st.counters[S.HAS_VALID] = 1                 # of ``valid``: 0 here either way)
+            code = advance(self._t1, u, corr, ok, 0, 1, self._kset.packed, st.values,
+                           st.counters, self._row)
+            osd = None
+            if code & _STOP_MASK:                            # rare: the monitor's turn
+                events = [] if events is None else events
+                osd, detected = self._step_stop(code & _STOP_MASK, u, corr, ok, has_valid,
+                                                events)
+            else:
+                detected = code >= _RETURN_DETECTED
+            r = self._row0.copy()
+            o, s0, t0, p0 = self._columns
+            # an Answer without the frozen dataclass's per-field __setattr__ calls (a third
+            # of the step's Python time once); same fields, same object
+            a = object.__new__(Answer)
+            object.__setattr__(a, "__dict__", {
+                "t": tf, "omega": r[o:o + 3],
+                "omega_sd": self._omega_sd if osd is None else osd,
+                "healthy": self._healthy_now,
+                "status": self._status_detected if detected else self._status_now,
+                "parity": r[p0:], "statistics": r[s0:t0], "thresholds": r[t0:p0],
+                "events": tuple(events) if events else (), "capability": self._capability,
+                "protection_level": float(r[S.PROTECTION])})
+            return a
         except Exception as exc:
+            self._state.counters[S.PHASE] = S.PHASE_HEALTH
             ev = Event(tf, None, "health", f"internal error: {type(exc).__name__}: {exc}")
             return Answer(tf, np.full(3, _NAN), np.full(3, _NAN),
                           self._healthy_array(self._mask), tuple(self._status),
                           np.full(max(self.n - 3, 0), _NAN), np.full(self.K, _NAN),
                           np.full(self.K, _NAN), (ev,), self._model.capability, _INF)
+
+    def _parse_sample(self, raw: Any, valid: Any, correction: Any, t: float
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[Event]]:
+        """Any sample as (1, n) raw, valid and correction rows, and the events of reading
+        it (a wrong length); never raises."""
+        events: list[Event] = []
+        u, ok = self._parse(raw, valid, t, events)
+        return u, ok, self._correction(correction, 1), events
+
+    def _step_stop(self, code: int, u: np.ndarray, corr: np.ndarray, ok: np.ndarray,
+                   has_valid: bool, events: list[Event]) -> tuple[np.ndarray | None, bool]:
+        """The monitor's turn in a step (the kernel stopped at the sample): handle it, run
+        the rest of the sample; returns the sample's ω̂ sd when it is not the model's, and
+        whether a detection is active."""
+        c = self._state.counters
+        r, osd = self._handle(int(c[S.STOP_ROW]), code, self._t1, u, corr, ok, has_valid,
+                              self._row, events, None)
+        if r == 0:
+            osd = self._advance(self._t1, u, corr, ok, has_valid, self._row, events, None)
+        return osd, c[S.DETECTED] != 0
+
+    def _plain_array(self, a: Any, dtype: np.dtype) -> np.ndarray | None:
+        """A C-contiguous (n,) array of ``dtype`` as a (1, n) row; None for anything else
+        (the general path then reads it)."""
+        if (type(a) is np.ndarray and a.dtype is dtype and a.shape == self._shape1
+                and a.flags.c_contiguous):
+            return a[None]
+        return None
 
     def _correction(self, correction: Any, N: int) -> np.ndarray:
         """The correction as a C-contiguous float array of shape (N, n) or (1, n); zeros when
@@ -249,35 +326,6 @@ class Monitor:
         if c.ndim == 2 and c.shape[1] == self.n and c.shape[0] in (1, N):
             return np.ascontiguousarray(c)
         return self._no_correction
-
-    def _step(self, t: float, raw: Any, valid: Any, corr: np.ndarray) -> Answer:
-        events: list[Event] = []
-        u, ok = self._parse(raw, valid, t, events)
-        self._t1[0] = t
-        row = self._row
-        st, ks = self._state, self._kset
-        c = st.counters
-        has_valid = ok is not self._all_valid
-        c[S.HAS_VALID] = has_valid
-        c[S.PHASE] = S.PHASE_HEALTH                          # (HAS_PARITY stays 1 between runs)
-        advance(self._t1, u, corr, ok, 0, 1, ks.sensors, ks.scales, ks.mats, ks.fconst, ks.iconst,
-                st.windows, st.cusum, st.sensor, c, row, self._dwell_s)
-        osd = None
-        code = c[S.STOP_CODE]
-        if code != S.STOP_NONE:                              # rare: the monitor's turn
-            r, osd = self._handle(int(c[S.STOP_ROW]), int(code), self._t1, u, corr, ok,
-                                  has_valid, row, events, None)
-            if r == 0:
-                osd = self._advance(self._t1, u, corr, ok, has_valid, row, events, None)
-        r = row[0].copy()
-        o, s0, t0, p0 = self._columns
-        if c[S.DETECTED]:
-            status = tuple("detected" if s == "ok" else s for s in self._status)
-        else:
-            status = tuple(self._status)
-        return _answer(t, r[o:o + 3], self._model.omega_sd if osd is None else osd,
-                       self._healthy_array(self._mask), status, r[p0:], r[s0:t0], r[t0:p0],
-                       tuple(events), self._model.capability, float(r[S.PROTECTION]))
 
     # ------------------------------------------------------------------ the loop
     def _advance(self, t: np.ndarray, raw: np.ndarray, corr: np.ndarray, valid: np.ndarray,
@@ -303,11 +351,10 @@ class Monitor:
     def _kernel(self, t: np.ndarray, raw: np.ndarray, corr: np.ndarray, valid: np.ndarray,
                 r0: int, r1: int, out: np.ndarray) -> tuple[int, int]:
         """One call of the compiled kernel; returns where and why it stopped."""
-        ks, st = self._kset, self._state
-        c = st.counters
-        advance(t, raw, corr, valid, r0, r1, ks.sensors, ks.scales, ks.mats, ks.fconst, ks.iconst,
-                st.windows, st.cusum, st.sensor, c, out, self._dwell_s)
-        return int(c[S.STOP_ROW]), int(c[S.STOP_CODE])
+        st = self._state
+        code = advance(t, raw, corr, valid, r0, r1, self._kset.packed, st.values, st.counters,
+                       out)
+        return int(st.counters[S.STOP_ROW]), code & S.STOP_MASK
 
     def _handle(self, stop: int, code: int, t: np.ndarray, raw: np.ndarray, corr: np.ndarray,
                 valid: np.ndarray, has_valid: bool, out: np.ndarray, events: list[Event],
@@ -377,7 +424,7 @@ class Monitor:
             if ok[i]:
                 present |= 1 << i
         ks = self._kernel_set(present)
-        reconstruct_row(raw, corr, r, ks.sensors, ks.mats, ks.iconst, ks.fconst, row)
+        reconstruct_row(raw, corr, r, ks.packed, self._state.values, row)
         row[S.PROTECTION] = _INF
         return self.cache.get(present).omega_sd
 
@@ -397,7 +444,7 @@ class Monitor:
             events.append(Event(t, sensor, "isolated", reason, stat, thr, scale, mag))
             self._isolate(sensor - 1, "isolated")
             ks = self._kset
-            reconstruct_row(raw, corr, r, ks.sensors, ks.mats, ks.iconst, ks.fconst, row)
+            reconstruct_row(raw, corr, r, ks.packed, self._state.values, row)
 
     def _attribute(self, mdl: SetModel, fired: int) -> tuple[int, float | None, str,
                                                             int | None]:
@@ -473,6 +520,7 @@ class Monitor:
                               out, events, rows, max(1, int(chunk)))
             finally:
                 c[S.HAS_PARITY] = 1                          # step() always fills the parity
+                c[S.PHASE] = S.PHASE_HEALTH                  # and starts a sample afresh
         return rows.result(ta, out, self._layout, parity, events)
 
     def _run_rows(self, t: Any, raw: Any, valid: Any, parity: bool, correction: Any
@@ -499,20 +547,6 @@ class Monitor:
         return _from_answers(np.asarray(ts[:N], float), answers, self, parity)
 
 
-def _answer(t: float, omega: np.ndarray, omega_sd: np.ndarray, healthy: np.ndarray,
-            status: tuple[str, ...], parity: np.ndarray, statistics: np.ndarray,
-            thresholds: np.ndarray, events: tuple[Event, ...], capability: str,
-            protection_level: float) -> Answer:
-    """An :class:`Answer` without the frozen dataclass's per-field ``__setattr__`` calls
-    (a third of the step's Python time); same fields, same object."""
-    a = object.__new__(Answer)
-    object.__setattr__(a, "__dict__", {
-        "t": t, "omega": omega, "omega_sd": omega_sd, "healthy": healthy, "status": status,
-        "parity": parity, "statistics": statistics, "thresholds": thresholds,
-        "events": events, "capability": capability, "protection_level": protection_level})
-    return a
-
-
 def _to_float(x: Any) -> float:
     """A raw value as float; NaN for what is not a real number."""
     if isinstance(x, complex):
@@ -534,9 +568,9 @@ class _Rows:
     def fill(self, r0: int, r1: int, mon: Monitor, omega_sd: np.ndarray | None = None) -> None:
         if r1 <= r0:
             return
-        self.healthy[r0:r1] = mon._healthy_array(mon._mask)
+        _fill_rows(self.healthy, r0, r1, mon._healthy_array(mon._mask))
         self.cap[r0:r1] = _CAP_CODE[mon.model.capability]
-        self.omega_sd[r0:r1] = mon.model.omega_sd if omega_sd is None else omega_sd
+        _fill_rows(self.omega_sd, r0, r1, mon.model.omega_sd if omega_sd is None else omega_sd)
 
     def result(self, t: np.ndarray, out: np.ndarray, lay: S.OutLayout, parity: bool,
                events: list[Event]) -> BlockResult:
@@ -546,6 +580,17 @@ class _Rows:
                            protection_level=out[:, S.PROTECTION],
                            capability=_CAP_NAMES[self.cap], events=events,
                            parity=out[:, lay.parity0:] if parity else None)
+
+
+def _fill_rows(a: np.ndarray, r0: int, r1: int, row: np.ndarray) -> None:
+    """a[r0:r1] = row by doubling contiguous copies (a row-major array with a few columns:
+    ~6× faster than numpy's broadcast, which loops over the rows)."""
+    a[r0] = row
+    k = 1
+    while r0 + k < r1:
+        m = min(k, r1 - r0 - k)
+        a[r0 + k:r0 + k + m] = a[r0:r0 + m]
+        k += m
 
 
 def _from_answers(t: np.ndarray, answers: list[Answer], mon: Monitor,

@@ -6,9 +6,10 @@ monitor use the names, never bare numbers.
 
 Per healthy set (constants, :class:`KernelSet`, built once per set by :func:`pack_set`):
 
-- ``sensors`` (n, :data:`SENSOR_COLS`): per sensor the compensation y = sf·u − bias, the raw
-  health bounds lo < u < hi, whether it is in the set, Σ_ii, h_iᵀ P h_i (P = G Σ Gᵀ, for
-  re-admission), the calibrated axis h_i and the six coefficients of ρ_i = ω̂ᵀC_iω̂/Σ_ii.
+- ``sensors`` (:data:`SENSOR_COLS`, n; one row per quantity): per sensor the compensation
+  y = sf·u − bias, the raw health bounds lo < u < hi, whether it is in the set, Σ_ii,
+  h_iᵀ P h_i (P = G Σ Gᵀ, for re-admission), the calibrated axis h_i and the six
+  coefficients of ρ_i = ω̂ᵀC_iω̂/Σ_ii (zero outside the set).
 - ``scales`` (K_w, :data:`SCALE_COLS`): per dyadic window w the χ² threshold T_w,
   1/(w·f_w), κ/f_w, 1 + w·β/f_w and the clearing threshold (hysteresis).
 - ``mats`` (3·df + 3, n): the parity matrix V (rows 0 … df−1), the reconstruction matrix G
@@ -27,6 +28,11 @@ Detector state (:class:`DetectorState`):
   behaviour (re-admission), length of the run of identical values.
 - ``counters`` (int64): ring position, samples in the windows, detection flags and run
   lengths, where and why the kernel stopped, the health verdict per sensor.
+
+The kernel takes each group whole as one flat array (the set's constants: ``KernelSet.packed``;
+the float state: ``DetectorState.values``, which also holds the kernel's scratch vectors),
+because numba's dispatch costs about 45 ns per array argument and :meth:`Monitor.step` pays
+it on every sample; the named 2-D arrays above are views of them.
 """
 
 from __future__ import annotations
@@ -34,6 +40,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numba.extending import register_jitable
 
 __all__ = [
     "CAPABILITY_CODE",
@@ -41,9 +48,11 @@ __all__ = [
     "KernelSet",
     "OutLayout",
     "pack_set",
+    "set_layout",
+    "state_layout",
 ]
 
-# ---------------------------------------------------------------- sensors (n, SENSOR_COLS)
+# ---------------------------------------------------------------- sensors (SENSOR_COLS, n)
 SF, BIAS, LO, HI, IN_SET, SIGMA_II, H_P_H, AXIS0 = range(8)
 RHO_COEF0 = AXIS0 + 3                       # six coefficients of ρ_i
 SENSOR_COLS = RHO_COEF0 + 6
@@ -53,13 +62,14 @@ WINDOW, THRESHOLD, CHI2_SCALE, RHO_GAIN, OFFSET_GAIN, CLEAR_THRESHOLD = range(6)
 SCALE_COLS = 6
 
 # ---------------------------------------------------------------- fconst
-KAPPA, BETA, NU, CUSUM_H, CUSUM_CLEAR, PL_A, PL_B, PL_C, PL_D, PL_E, STALE_TIMEOUT_S = range(11)
-F_SLOTS = 11
+(KAPPA, BETA, NU, CUSUM_H, CUSUM_CLEAR, PL_A, PL_B, PL_C, PL_D, PL_E, STALE_TIMEOUT_S,
+ READMIT_DWELL_S) = range(12)
+F_SLOTS = 12
 
 # ---------------------------------------------------------------- iconst
 DF, N_WINDOWS, HAS_CUSUM, CAPABILITY, HAS_OMEGA, STUCK_COUNT, PERSISTENCE, CLEAR_SAMPLES, \
-    READMISSION = range(9)
-I_SLOTS = 9
+    READMISSION, N_SENSORS = range(10)
+I_SLOTS = 10
 CAPABILITY_CODE = {"isolate": 0, "detect": 1, "reconstruct": 2, "none": 3}
 
 # ---------------------------------------------------------------- cusum (4, n)
@@ -70,12 +80,15 @@ LAST_RAW, LAST_VALID_T, GOOD_SINCE_T, SAME_RUN = range(4)
 
 # ---------------------------------------------------------------- counters
 (STARTED, RING_POS, WINDOW_COUNT, DETECTED, DETECTED_ROWS, ALARM_RUN, CLEAR_RUN, STOP_ROW,
- STOP_CODE, FIRED, READMIT_SENSOR, PHASE, HAS_VALID, HAS_PARITY) = range(14)
-HEALTH0 = 14                                # + i: health verdict of sensor i this sample
+ STOP_CODE, FIRED, READMIT_SENSOR, PHASE, HAS_VALID, HAS_PARITY, RING_LEN) = range(15)
+HEALTH0 = 15                                # + i: health verdict of sensor i this sample
 
 # where the kernel stops (STOP_CODE) and hands a sample to the monitor
 STOP_NONE, STOP_HEALTH, STOP_READMIT, STOP_INCOMPLETE, STOP_DETECTED, STOP_ISOLATE = \
     0, 1, 2, 3, 4, 8
+# added to the stop code that fdi.kernel.advance returns while a detection is active
+RETURN_DETECTED = 16
+STOP_MASK = 15                              # the stop code in advance's return value
 # PHASE: where the kernel resumes a stopped sample
 PHASE_HEALTH, PHASE_READMIT, PHASE_PARITY = 0, 1, 2
 # health verdicts
@@ -113,13 +126,33 @@ class OutLayout:
 
 @dataclass(frozen=True, eq=False)
 class KernelSet:
-    """The constants of one healthy set in the kernel's layout (see the module docstring)."""
+    """The constants of one healthy set in the kernel's layout (see the module docstring).
 
+    ``packed`` is the one array the kernel reads (fewer arguments per call: numba's dispatch
+    costs ~45 ns per array); the other fields are views of it, in the order of
+    :func:`set_layout`: ``fconst`` | ``iconst`` (as float64) | ``sensors`` | ``scales`` |
+    ``mats``.
+    """
+
+    packed: np.ndarray
     sensors: np.ndarray
     scales: np.ndarray
     mats: np.ndarray
     fconst: np.ndarray
     iconst: np.ndarray
+
+
+SET_ICONST0 = F_SLOTS                       # iconst slots in the packed set (as float64)
+SET_SENSORS0 = F_SLOTS + I_SLOTS            # first entry of ``sensors`` in the packed set
+
+
+@register_jitable(inline="always")
+def set_layout(n: int, df: int, nw: int) -> tuple[int, int, int]:
+    """Offsets of ``scales``, ``mats`` and the end in the packed set of n sensors, parity
+    dimension df and nw window scales (``sensors`` starts at :data:`SET_SENSORS0`)."""
+    o_scales = SET_SENSORS0 + n * SENSOR_COLS
+    o_mats = o_scales + nw * SCALE_COLS
+    return o_scales, o_mats, o_mats + (3 * df + 3) * n
 
 
 def pack_set(model, H: np.ndarray, sigma_diag: np.ndarray, lo: tuple[float, ...],
@@ -151,6 +184,9 @@ def pack_set(model, H: np.ndarray, sigma_diag: np.ndarray, lo: tuple[float, ...]
     sensors[:, H_P_H] = np.einsum("ia,ab,ib->i", H, cov, H)
     sensors[:, AXIS0:AXIS0 + 3] = H
     sensors[:, RHO_COEF0:RHO_COEF0 + 6] = model.cal_coef
+    # the kernel's dense loops need zeros (+0.0) outside the set: ρ coefficients, V and G
+    out_of_set = [i for i in range(n) if i not in model.idx]
+    sensors[out_of_set, RHO_COEF0:RHO_COEF0 + 6] = 0.0
     nw = len(thresholds.scales)
     scales = np.zeros((nw, SCALE_COLS))
     scales[:, WINDOW] = thresholds.scales
@@ -167,6 +203,7 @@ def pack_set(model, H: np.ndarray, sigma_diag: np.ndarray, lo: tuple[float, ...]
         norms = np.linalg.norm(model.U, axis=0)
         unit = np.where(norms > 0, model.U / np.where(norms > 0, norms, 1.0), 0.0)
         mats[2 * df + 3:, list(model.idx)] = unit
+    mats[:df + 3, out_of_set] = 0.0
     fconst = np.zeros(F_SLOTS)
     fconst[KAPPA] = model.kappa
     fconst[BETA] = model.beta
@@ -186,11 +223,42 @@ def pack_set(model, H: np.ndarray, sigma_diag: np.ndarray, lo: tuple[float, ...]
     iconst[PERSISTENCE] = settings.persistence
     iconst[CLEAR_SAMPLES] = settings.clear_samples
     iconst[READMISSION] = bool(settings.readmission)
-    return KernelSet(sensors, scales, np.ascontiguousarray(mats), fconst, iconst)
+    iconst[N_SENSORS] = n
+    fconst[READMIT_DWELL_S] = settings.readmit_dwell_s
+    o_scales, o_mats, end = set_layout(n, df, nw)
+    packed = np.zeros(end)
+    packed[:F_SLOTS] = fconst
+    packed[SET_ICONST0:SET_SENSORS0] = iconst
+    packed[SET_SENSORS0:o_scales] = sensors.T.ravel()      # one row per quantity
+    packed[o_scales:o_mats] = scales.ravel()
+    packed[o_mats:end] = mats.ravel()
+    return KernelSet(packed, packed[SET_SENSORS0:o_scales].reshape(SENSOR_COLS, n),
+                     packed[o_scales:o_mats].reshape(nw, SCALE_COLS),
+                     packed[o_mats:end].reshape(3 * df + 3, n), packed[:F_SLOTS], iconst)
+
+
+SENSOR_STATE_COLS = 4
+# rows the kernel compensates ahead (independent of the detector state; see fdi.kernel)
+BLOCK_ROWS = 32
+
+
+@register_jitable(inline="always")
+def state_layout(n: int, ring: int) -> tuple[int, int, int, int]:
+    """Offsets in the detector's float state of the CUSUM bank, the kernel's scratch
+    (y, p, z: n each; ω̂: 3; then (z, ρ) of :data:`BLOCK_ROWS` rows, n + 1 each), the
+    windows and the end (``sensor`` starts at 0); the windows take (R + 1)·(n + 1) entries,
+    room for any parity dimension df ≤ n."""
+    o_cusum = n * SENSOR_STATE_COLS
+    o_scratch = o_cusum + 4 * n
+    o_windows = o_scratch + 3 * n + 3 + BLOCK_ROWS * (n + 1)
+    return o_cusum, o_scratch, o_windows, o_windows + (ring + 1) * (n + 1)
 
 
 class DetectorState:
     """Mutable state of the recursion (see the module docstring for the layout).
+
+    The float state is one array, ``values`` (the kernel takes it whole); ``sensor``,
+    ``cusum`` and ``windows`` are views of it, laid out by :func:`state_layout`.
 
     Parameters
     ----------
@@ -203,18 +271,24 @@ class DetectorState:
     def __init__(self, n: int, ring: int) -> None:
         self.n = n
         self.ring = ring
-        self.sensor = np.zeros((n, 4))
+        o_cusum, o_scratch, self._o_windows, end = state_layout(n, ring)
+        self.values = np.zeros(end)
+        self.sensor = self.values[:o_cusum].reshape(n, SENSOR_STATE_COLS)
         self.sensor[:, LAST_RAW] = np.nan
         self.sensor[:, LAST_VALID_T] = np.nan
         self.sensor[:, GOOD_SINCE_T] = np.nan
+        self.cusum = self.values[o_cusum:o_scratch].reshape(4, n)
         self.counters = np.zeros(HEALTH0 + n, np.int64)
-        self.windows = np.zeros((ring + 1, 1))
-        self.cusum = np.zeros((4, n))
+        self.counters[RING_LEN] = ring
+        self.new_set(0)
 
     def new_set(self, df: int) -> None:
         """Empty windows, CUSUM and detection for a new healthy set of parity dimension df."""
-        self.windows = np.zeros((self.ring + 1, df + 1))
-        self.cusum = np.zeros((4, self.n))
+        o = self._o_windows
+        self.values[o:] = 0.0
+        self.windows = self.values[o:o + (self.ring + 1) * (df + 1)].reshape(self.ring + 1,
+                                                                             df + 1)
+        self.cusum[:] = 0.0
         c = self.counters
         c[[RING_POS, WINDOW_COUNT, DETECTED, DETECTED_ROWS, ALARM_RUN, CLEAR_RUN]] = 0
 

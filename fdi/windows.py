@@ -31,7 +31,7 @@ from fdi.state import (
 __all__ = ["window_update"]
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(error_model="numpy", inline="always", _nrt=False)
 def window_update(z: np.ndarray, rho: float, df: int, windows: np.ndarray,
                   counters: np.ndarray, scales: np.ndarray, K: int, out: np.ndarray,
                   r: int) -> tuple[bool, bool, int, float]:
@@ -84,9 +84,7 @@ def window_update(z: np.ndarray, rho: float, df: int, windows: np.ndarray,
     for k in range(scales.shape[0]):
         w = int(scales[k, WINDOW])
         if count >= w:
-            o = pos - w
-            if o < 0:
-                o += R
+            o = pos - w + (R if pos < w else 0)     # a select, not a branch: pos < w
             d = windows[R, 0] - windows[o, 0]
             acc = d * d
             for j in range(1, df):
