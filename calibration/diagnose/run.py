@@ -111,16 +111,18 @@ threads do not speed up and which a loaded machine slows down several-fold with 
 
 def assess(session: Session, cal: Calibration, *, alpha: float = 0.01,
            effects: Iterable[str] | None = None,
-           datas: Mapping[str, KindData] | None = None) -> Selection:
+           datas: Mapping[str, KindData] | None = None, noise: str = "auto") -> Selection:
     """Selection and probes only (no refit): what :func:`diagnose` and the adequacy
-    check of ``rimu calibrate`` share. ``effects``: fit these without testing."""
+    check of ``rimu calibrate`` share. ``effects``: fit these without testing. ``noise``:
+    the null's noise (:func:`.selection.select`; ``"auto"`` adds a Gauss-Markov term per
+    kind where the calibration's noise-model selection finds one)."""
     with threadpool_limits(limits=BLAS_THREADS, user_api="blas"):
-        return _assess(session, cal, alpha=alpha, effects=effects, datas=datas)
+        return _assess(session, cal, alpha=alpha, effects=effects, datas=datas, noise=noise)
 
 
 def _assess(session: Session, cal: Calibration, *, alpha: float,
             effects: Iterable[str] | None,
-            datas: Mapping[str, KindData] | None) -> Selection:
+            datas: Mapping[str, KindData] | None, noise: str = "auto") -> Selection:
     datas = model_effects(kind_data(session, cal), cal.effects) if datas is None else datas
     forced = list(effects) if effects is not None else None
     if forced:
@@ -135,7 +137,7 @@ def _assess(session: Session, cal: Calibration, *, alpha: float,
                 raise ConfigError(f"{session.source}: effect {name!r} cannot be fitted "
                                   f"to the {kind}s: {reason}")
     return select(datas, candidates() if not forced else [get_candidate(n) for n in forced],
-                  alpha, forced=forced)
+                  alpha, forced=forced, noise=noise)
 
 
 def _effects_json(sel: Selection, new: Calibration) -> list[dict[str, Any]]:

@@ -23,6 +23,7 @@ from typing import Any
 
 import numpy as np
 
+from calibration.diagnose.coloured import GlsModel, NoiseSet, block_noise, needs_coloured
 from calibration.diagnose.context import KindData
 from calibration.diagnose.library import Candidate, testable
 from calibration.diagnose.linmodel import LinModel
@@ -73,7 +74,10 @@ class Selection:
     partial: list[Selected] = field(default_factory=list)
     unexplained: list[dict[str, Any]] = field(default_factory=list)
     not_testable: list[dict[str, Any]] = field(default_factory=list)
-    models: dict[tuple[str, int], LinModel] = field(default_factory=dict)
+    models: dict[tuple[str, int], LinModel | GlsModel] = field(default_factory=dict)
+    noise_null: dict[str, str] = field(default_factory=dict)
+    """Per kind, the noise of the null hypothesis: ``"white"`` or ``"white +
+    Gauss-Markov"`` (profile-likelihood tests, :mod:`.coloured`)."""
 
 
 def base_columns(d: KindData, i: int) -> np.ndarray:
@@ -98,7 +102,7 @@ def _evaluate(d: KindData, i: int, c: Candidate, model: LinModel
 
 
 def select(datas: Mapping[str, KindData], cands: Iterable[Candidate], alpha: float, *,
-           forced: Iterable[str] | None = None) -> Selection:
+           forced: Iterable[str] | None = None, noise: str = "auto") -> Selection:
     """Forward selection over every kind and sensor, then the adequacy probes.
 
     Parameters
@@ -110,11 +114,17 @@ def select(datas: Mapping[str, KindData], cands: Iterable[Candidate], alpha: flo
     forced : names, optional
         Fit these on every sensor they apply to, without testing (``--effects``); the
         selection then runs on top of them only for the probes.
+    noise : {"auto", "white", "coloured"}
+        The noise of the null hypothesis: ``"auto"`` takes white + Gauss-Markov for a kind
+        whose residual the calibration's noise-model selection reads as coloured
+        (:func:`.coloured.needs_coloured`), white otherwise.
     """
+    if noise not in ("auto", "white", "coloured"):
+        raise ValueError(f"noise must be auto, white or coloured, got {noise!r}")
     cands = list(cands)
     out = Selection()
     forced = list(forced or [])
-    family = _family(datas, cands, out)
+    family = _family(datas, cands, out, noise)
     if forced:
         for kind, i, c in family:
             if c.name in forced:
@@ -136,13 +146,19 @@ _Cached = tuple[float, float, dict[str, Any], np.ndarray, float]
 
 
 def _family(datas: Mapping[str, KindData], cands: list[Candidate],
-            out: Selection) -> list[tuple[str, int, Candidate]]:
+            out: Selection, noise: str = "auto") -> list[tuple[str, int, Candidate]]:
     """Base models per sensor, and every (kind, sensor, candidate) that can be tested;
     the others go to ``out.not_testable`` with the reason."""
     family: list[tuple[str, int, Candidate]] = []
     for kind, d in datas.items():
+        coloured = noise == "coloured" or (noise == "auto"
+                                           and needs_coloured(d.y, d.sample_rate_hz))
+        out.noise_null[kind] = "white + Gauss-Markov" if coloured else "white"
+        group = NoiseSet(block_noise(d.N, d.sample_rate_hz)) if coloured else None
         for i in range(d.n):
-            out.models[(kind, i)] = LinModel(d.y[:, i], base_columns(d, i))
+            out.models[(kind, i)] = (GlsModel(d.y[:, i], base_columns(d, i), group, i)
+                                     if group is not None
+                                     else LinModel(d.y[:, i], base_columns(d, i)))
         for c in cands:
             why = testable(c, d)
             if why is not None:
