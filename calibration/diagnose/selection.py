@@ -228,9 +228,11 @@ def _forward(datas: Mapping[str, KindData], by_name: dict[str, Candidate],
         out.claimed.append(Selected(by_name[name], kind, i, params, p, thr, tuple(aliases),
                                     logp))
         model.add(Z)
+        shared = isinstance(model, GlsModel)     # (ρ, τ) common to the set: all re-tested
         for k2 in list(cache):
-            if k2[:2] == (kind, i) and k2 not in accepted:
-                p2, lp2, par2, Z2, _, ss2 = _evaluate(datas[kind], i, by_name[k2[2]], model)
+            if k2 not in accepted and (k2[:2] == (kind, i) or (shared and k2[0] == kind)):
+                p2, lp2, par2, Z2, _, ss2 = _evaluate(datas[kind], k2[1], by_name[k2[2]],
+                                                      out.models[k2[:2]])
                 cache[k2] = (p2, lp2, par2, Z2, ss2)
 
 
