@@ -91,11 +91,13 @@ def adequacy_record(sel: Selection, alpha: float) -> dict[str, Any]:
               + (f", {u['band_hz'][0]:.3g}-{u['band_hz'][1]:.3g} Hz" if u.get("band_hz")
                  else "") + ")" for u in sel.unexplained]
     return {"verdict": "effects suspected" if where else "adequate", "alpha": alpha,
-            "where": where,
+            "where": where, "noise_null": dict(sel.noise_null),
             "method": "forward selection over the rimu.diagnose candidate library and "
                       "adequacy probes (per-step means, slow trend, change point, spectral "
-                      "line, input correlation), nested-model F-tests, Holm/Bonferroni at "
-                      "alpha over candidates x sensors"}
+                      "line, input correlation), nested-model F-tests (white noise) or "
+                      "profile-likelihood ratio tests against white + Gauss-Markov noise "
+                      "(where the noise-model selection keeps a Gauss-Markov term), "
+                      "Holm/Bonferroni at alpha over candidates x sensors"}
 
 
 def _candidates(names: Iterable[str] | None) -> list[Candidate]:
