@@ -58,6 +58,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.special
 import scipy.stats
+from threadpoolctl import threadpool_limits
 
 from calibration.diagnose.linmodel import FTest, LinModel
 from calibration.residuals import fit_gauss_markov
@@ -149,6 +150,11 @@ def block_corr(start_s: np.ndarray, length_s: np.ndarray, tau_c: float) -> np.nd
 
 @functools.lru_cache(maxsize=8)
 def _block_noise(N: int, B: int, fs: float) -> BlockNoise:
+    with threadpool_limits(limits=1, user_api="blas"):        # M×M, one thread is faster
+        return _make_block_noise(N, B, fs)
+
+
+def _make_block_noise(N: int, B: int, fs: float) -> BlockNoise:
     starts = np.arange(0, N, B)
     counts = np.diff(np.r_[starts, N]).astype(float)
     if counts.size > 1 and counts[-1] < B / 2:           # fold a short tail into the last

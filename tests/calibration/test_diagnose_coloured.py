@@ -26,6 +26,7 @@ import pytest
 import scipy.stats
 from _diagnose_sessions import calibrate_fast
 from scipy.signal import lfilter
+from threadpoolctl import threadpool_limits
 
 from calibration.compare import compare
 from calibration.diagnose import assess, calibrate_checked
@@ -66,17 +67,23 @@ def _null_lr(reps, seed):
     phi = np.exp(-1 / (fs * tc))
     bn = block_noise(N, fs)
     out = {k: [] for k in tests}
-    for _ in range(reps):
-        w = rng.standard_normal((N, n)) * sb * np.sqrt(1 - phi**2)
-        g = lfilter([1.0], [1.0, -phi], w, axis=0,
-                    zi=(phi * sb * rng.standard_normal(n))[None, :])[0]
-        y = sw * rng.standard_normal((N, n)) + g
-        grp = NoiseSet(bn)
-        models = [GlsModel(y[:, i], np.ones((N, 1)), grp, i) for i in range(n)]
-        for k, Z in tests.items():
-            ft = models[0].test(Z)
-            out[k].append((ft.ss / ft.rank, ft.p_value))
+    with threadpool_limits(limits=1, user_api="blas"):
+        for _ in range(reps):
+            _draw(rng, phi, sb, sw, N, n, bn, tests, out)
     return {k: np.array(v) for k, v in out.items()}
+
+
+def _draw(rng, phi, sb, sw, N, n, bn, tests, out):
+    """One set of n white + Gauss-Markov sensors; LR/r and p of each test on sensor 1."""
+    w = rng.standard_normal((N, n)) * sb * np.sqrt(1 - phi**2)
+    g = lfilter([1.0], [1.0, -phi], w, axis=0,
+                zi=(phi * sb * rng.standard_normal(n))[None, :])[0]
+    y = sw * rng.standard_normal((N, n)) + g
+    grp = NoiseSet(bn)
+    models = [GlsModel(y[:, i], np.ones((N, 1)), grp, i) for i in range(n)]
+    for k, Z in tests.items():
+        ft = models[0].test(Z)
+        out[k].append((ft.ss / ft.rank, ft.p_value))
 
 
 def test_profile_likelihood_ratio_null_is_chi2():
@@ -125,17 +132,17 @@ def _effect_case(case, seed):
     return a
 
 
-@pytest.mark.parametrize("case", CASES, ids=lambda c: c[0])
-def test_coloured_session_with_an_effect_is_never_adequate(case):
-    a = _effect_case(case, seed=11)
-    assert any(case[0] in w for w in a["where"]), a["where"]
+def test_coloured_session_with_an_effect_is_never_adequate():
+    a = _effect_case(CASES[0], seed=11)
+    assert any(CASES[0][0] in w for w in a["where"]), a["where"]
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("case", CASES, ids=lambda c: c[0])
 def test_coloured_session_with_an_effect_is_never_adequate_mc(case):
-    for seed in (12, 13, 14):
-        _effect_case(case, seed)
+    for seed in (11, 12, 13):
+        a = _effect_case(case, seed)
+        assert any(case[0] in w for w in a["where"]), (seed, a["where"])
 
 
 ALPHA = 0.05
