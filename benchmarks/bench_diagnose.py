@@ -3,9 +3,10 @@
 Three sessions: clean, with an undeclared warm-up on one gyro (selection, refit and
 before/after figures all run), and clean with a 1 °/h, τc 100 s bias instability (the
 tests run against white + Gauss-Markov noise, :mod:`calibration.diagnose.coloured`; the
-warm-up session takes that path too, its residual reads as coloured). Baseline measured in the same run on the same session:
-``calibrate()`` (the call ``rimu diagnose`` follows), and the adequacy check alone
-(``assess``: selection and probes, what ``rimu calibrate`` adds). Issue 7 requires
+warm-up session takes that path too, its residual reads as coloured). Baseline measured
+in the same run on the same session: ``calibrate()`` (the call ``rimu diagnose``
+follows), and the adequacy check alone (``assess``: selection and probes, what
+``rimu calibrate`` adds). Issue 7 requires
 diagnose < 5 s on a 16-step 100 Hz session. Prints min / median / max and writes
 ``benchmarks/results/diagnose.json``.
 

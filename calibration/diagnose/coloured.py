@@ -179,7 +179,7 @@ def _make_block_noise(N: int, B: int, fs: float) -> BlockNoise:
 
 def block_noise(N: int, fs: float) -> BlockNoise:
     """The (cached) block layout for N samples at ``fs`` Hz."""
-    B = max(int(round(BLOCK_S * fs)), -(-N // MAX_BLOCKS), 1)
+    B = max(round(BLOCK_S * fs), -(-N // MAX_BLOCKS), 1)
     return _block_noise(int(N), int(B), float(fs))
 
 
@@ -270,11 +270,13 @@ class GlsModel:
 
     # -- the LinModel interface --------------------------------------------------------
     @property
-    def Q(self) -> np.ndarray:  # noqa: N802 - the LinModel attribute
+    def Q(self) -> np.ndarray:
+        """Ordinary orthonormal basis (N, k) of the model."""
         return self.lm.Q
 
     @property
     def e(self) -> np.ndarray:
+        """Ordinary least-squares residual (N,)."""
         return self.lm.e
 
     @property

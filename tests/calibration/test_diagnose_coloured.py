@@ -106,7 +106,7 @@ def test_profile_likelihood_ratio_null_tail():
 
 
 def test_coloured_clean_session_is_adequate_and_widened():
-    s, truth = _coloured(seed=1)
+    s, _ = _coloured(seed=1)
     cal = calibrate_checked(s, allan=False, earth_rate=False)
     a = cal.adequacy
     assert a["noise_null"]["gyro"] == "white + Gauss-Markov"
