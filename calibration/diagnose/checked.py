@@ -10,6 +10,12 @@ So: calibrate with white noise, run the adequacy check of :mod:`calibration.diag
 - effects suspected → keep the white-noise uncertainties, withhold the Gauss-Markov
   widening, and say where the structure is (``adequacy`` in the calibration, a warning).
 
+The check's null is white noise, or white + Gauss-Markov noise with its parameters profiled
+out (:mod:`calibration.diagnose.coloured`) for a set whose residual the noise-model
+selection reads as coloured: a genuine bias instability is then noise, not an effect, and
+the widening applies; structure that a Gauss-Markov wander of the fitted size cannot
+explain as well still makes the session "effects suspected".
+
 With ``effects`` given (``rimu calibrate --effects``) those effects are fitted jointly with
 the calibration (:mod:`calibration.diagnose.refit`) and the adequacy is checked on the
 extended model.
@@ -97,6 +103,10 @@ def format_adequacy(cal: Calibration) -> list[str]:
     if a is not None:
         out.append(f"model adequacy (alpha {a.get('alpha')}): {a['verdict']}"
                    + (": " + "; ".join(a.get("where", [])) if a.get("where") else ""))
+        coloured = [k for k, v in (a.get("noise_null") or {}).items() if v != "white"]
+        if coloured:
+            out.append(f"  tested against white + Gauss-Markov noise ({', '.join(coloured)}: "
+                       "the residual reads as coloured)")
         if a.get("noise_model_requested") != a.get("noise_model_applied"):
             out.append(f"  noise model: {a.get('noise_model_applied')} (asked for "
                        f"{a.get('noise_model_requested')})")

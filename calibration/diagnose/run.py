@@ -57,6 +57,9 @@ class Diagnosis:
         The refit calibration (effects and adequacy filled).
     selection : Selection
         Internals (models per sensor), for reports.
+    noise_null : dict
+        Per kind, the noise the tests took as the null: ``"white"`` or ``"white +
+        Gauss-Markov"`` (:mod:`.coloured`).
     """
 
     effects: list[dict[str, Any]]
@@ -68,6 +71,7 @@ class Diagnosis:
     alpha: float
     calibration: Calibration
     selection: Selection = field(repr=False, compare=False, default_factory=Selection)
+    noise_null: dict[str, str] = field(default_factory=dict)
 
     @property
     def adequate(self) -> bool:
@@ -79,8 +83,8 @@ class Diagnosis:
         return {"schema": DIAGNOSIS_SCHEMA, "alpha": self.alpha, "effects": self.effects,
                 "unexplained": self.unexplained,
                 "unexplained_detail": self.unexplained_detail,
-                "not_testable": self.not_testable, "error_before": self.error_before,
-                "error_after": self.error_after}
+                "not_testable": self.not_testable, "noise_null": self.noise_null,
+                "error_before": self.error_before, "error_after": self.error_after}
 
 
 def adequacy_record(sel: Selection, alpha: float) -> dict[str, Any]:
@@ -209,4 +213,5 @@ def _diagnose(session: Session, cal: Calibration, alpha: float,
                      unexplained=bool(sel.unexplained),
                      unexplained_detail=sel.unexplained, not_testable=sel.not_testable,
                      error_before=before, error_after=after, alpha=alpha,
-                     calibration=fit.calibration, selection=sel)
+                     calibration=fit.calibration, selection=sel,
+                     noise_null=dict(sel.noise_null))
