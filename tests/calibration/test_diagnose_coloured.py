@@ -116,8 +116,8 @@ def test_coloured_clean_session_is_adequate_and_widened():
     assert cal.extra["noise_model"]["gyro"]["applied"] is True
 
 
-CASES = [("scale_asymmetry", 0.01, None), ("g_sensitivity", 100.0, [1]),
-         ("warmup", 30.0, [3])]
+CASES = [("scale_asymmetry", 0.01, None), ("g_sensitivity", 300.0, [1]),
+         ("warmup", 60.0, [3])]
 
 
 def _effect_case(case, seed):
