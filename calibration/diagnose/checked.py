@@ -32,6 +32,7 @@ from calibration.diagnose.context import kind_data
 from calibration.diagnose.library import model_effects
 from calibration.diagnose.refit import refit
 from calibration.diagnose.run import MONITOR_NOTE, adequacy_record, assess
+from calibration.diagnose.selection import noise_sets
 from calibration.session import Session
 from fdi.calfile import Calibration
 from fdi.errors import ConfigError
@@ -67,7 +68,7 @@ def calibrate_checked(session: Session, *, alpha: float = 0.01, noise_model: str
     datas = kind_data(session, white)
     if effects:
         forced = assess(session, white, alpha=alpha, effects=effects, datas=datas)
-        fitted = refit(datas, white, forced.claimed).calibration
+        fitted = refit(datas, white, forced.claimed, noise=noise_sets(forced)).calibration
         datas = model_effects(kind_data(session, fitted), fitted.effects)
         sel = assess(session, fitted, alpha=alpha, datas=datas)
         base = fitted

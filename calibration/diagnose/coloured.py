@@ -251,6 +251,21 @@ class NoiseSet:
         self.noise = noise
         self.grids: dict[int, np.ndarray] = {}
 
+    def fitted(self) -> tuple[float, float]:
+        """``(ρ, τ)`` at the grid minimum of the set's summed −2ℓ_R (ρ = 0: white)."""
+        tot = self.others(-1)
+        t, r = np.unravel_index(int(np.argmin(tot)), tot.shape)
+        return float(self.noise.rho[r]), float(self.noise.taus[t])
+
+    def gm_cov(self, X: np.ndarray) -> np.ndarray:
+        """``ρ·(D·X̄)ᵀ·S(τ)·(D·X̄)`` at the fitted ``(ρ, τ)``: the Gauss-Markov part of
+        ``Xᵀ·V·X/σ_w²`` for columns ``X`` (N, p) (the white part is ``XᵀX``)."""
+        tot = self.others(-1)
+        t, r = np.unravel_index(int(np.argmin(tot)), tot.shape)
+        nz = self.noise
+        A = nz.rotate(nz.means(np.asarray(X, float)))[t]
+        return nz.rho[r] * (A.T * nz.lam[t]) @ A
+
     def others(self, sensor: int) -> np.ndarray:
         """Sum of the grids of every sensor but ``sensor`` (T, R)."""
         tot = np.zeros_like(self.noise.logdet)

@@ -20,7 +20,7 @@ from calibration.diagnose.context import KindData, check_match, check_same_sessi
 from calibration.diagnose.library import Candidate, candidates, get_candidate, model_effects
 from calibration.diagnose.metrics import error_summary
 from calibration.diagnose.refit import refit
-from calibration.diagnose.selection import Selection, select
+from calibration.diagnose.selection import Selection, noise_sets, select
 from calibration.session import Session
 from fdi.calfile import Calibration
 from fdi.errors import ConfigError
@@ -205,7 +205,7 @@ def _diagnose(session: Session, cal: Calibration, alpha: float,
     if sel.claimed and not sel.unexplained:      # the refit model holds the effects found
         rec = {**rec, "verdict": "adequate", "effects_found": rec["where"], "where": [],
                "monitor": MONITOR_NOTE}
-    fit = refit(datas, cal, sel.claimed, adequacy=rec)
+    fit = refit(datas, cal, sel.claimed, adequacy=rec, noise=noise_sets(sel))
     before = error_summary(datas, {k: d.y for k, d in datas.items()},
                            {k: np.full(d.n, 4) for k, d in datas.items()}, cal, truth)
     after = error_summary(datas, fit.residual, fit.n_params, fit.calibration, truth)

@@ -29,7 +29,7 @@ from calibration.diagnose.library import Candidate, testable
 from calibration.diagnose.linmodel import LinModel
 from calibration.diagnose.probes import PROBES, run_probes, shared_regressors
 
-__all__ = ["ALIAS_CORRELATION", "Selected", "Selection", "base_columns", "select"]
+__all__ = ["ALIAS_CORRELATION", "Selected", "Selection", "base_columns", "noise_sets", "select"]
 
 ALIAS_CORRELATION = 0.95
 
@@ -78,6 +78,15 @@ class Selection:
     noise_null: dict[str, str] = field(default_factory=dict)
     """Per kind, the noise of the null hypothesis: ``"white"`` or ``"white +
     Gauss-Markov"`` (profile-likelihood tests, :mod:`.coloured`)."""
+
+
+def noise_sets(sel: Selection) -> dict[str, NoiseSet]:
+    """Per kind tested against white + Gauss-Markov noise, the set's fitted noise."""
+    out = {}
+    for (kind, _), m in sel.models.items():
+        if isinstance(m, GlsModel):
+            out[kind] = m.group
+    return out
 
 
 def base_columns(d: KindData, i: int) -> np.ndarray:
