@@ -80,6 +80,7 @@ def calibrate_checked(session: Session, *, alpha: float = 0.01, noise_model: str
     warnings = list(base.extra.get("warnings", []))
     if effects:
         rec["effects_fitted"] = effects
+        rec["refit_noise"] = dict(forced.noise_null)      # sandwich where Gauss-Markov
         rec["monitor"] = MONITOR_NOTE
     if rec["verdict"] == "adequate":
         if noise_model != "white" and not effects:
