@@ -372,10 +372,14 @@ class GlsModel:
             if k == 0:
                 return ee
             Gx, gx = Gv[..., :k, :k], Gv[..., :k, -1]
-            sol = np.linalg.solve(Gx, gx[..., None])[..., 0]
+            try:
+                sol = np.linalg.solve(Gx, gx[..., None])[..., 0]
+            except np.linalg.LinAlgError:       # numerically singular: least squares
+                sol = np.einsum("...ij,...j->...i", np.linalg.pinv(Gx), gx)
             return ee - np.einsum("...i,...i->...", gx, sol)
 
         ld = np.linalg.slogdet(Gv[..., :-1, :-1])[1] if p > 1 else 0.0
+        ld = np.where(np.isfinite(ld), ld, np.inf)  # a singular Gram: that (ρ, τ) is out
         base = nz.logdet + ld
         v1 = dof * np.log(np.maximum(rss(p - 1), 1e-300) / dof) + base
         v0 = None if k0 is None else \
