@@ -1,5 +1,10 @@
 """Forward selection of effects by nested-model tests, then the adequacy probes.
 
+Each sensor's model is a :class:`.linmodel.LinModel` (white-noise F-tests) or, for a kind
+whose residual the calibration's noise-model selection reads as coloured, a
+:class:`.coloured.GlsModel` (profile-likelihood tests against white + Gauss-Markov noise,
+``(ρ, τ)`` common to the set: accepting an effect on one sensor re-tests the whole set).
+
 Family: every testable (candidate, sensor) pair of every kind. At each round every pair not
 yet accepted is tested against its sensor's current model (:class:`.linmodel.LinModel`);
 the smallest p-value is accepted when ``p < (α/2) / m`` with ``m`` the pairs still in the
