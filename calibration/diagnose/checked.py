@@ -10,6 +10,12 @@ So: calibrate with white noise, run the adequacy check of :mod:`calibration.diag
 - effects suspected → keep the white-noise uncertainties, withhold the Gauss-Markov
   widening, and say where the structure is (``adequacy`` in the calibration, a warning).
 
+The check's null is white noise, or white + Gauss-Markov noise with its parameters profiled
+out (:mod:`calibration.diagnose.coloured`) for a set whose residual the noise-model
+selection reads as coloured: a genuine bias instability is then noise, not an effect, and
+the widening applies; structure that a Gauss-Markov wander of the fitted size cannot
+explain as well still makes the session "effects suspected".
+
 With ``effects`` given (``rimu calibrate --effects``) those effects are fitted jointly with
 the calibration (:mod:`calibration.diagnose.refit`) and the adequacy is checked on the
 extended model.
@@ -26,6 +32,7 @@ from calibration.diagnose.context import kind_data
 from calibration.diagnose.library import model_effects
 from calibration.diagnose.refit import refit
 from calibration.diagnose.run import MONITOR_NOTE, adequacy_record, assess
+from calibration.diagnose.selection import noise_sets
 from calibration.session import Session
 from fdi.calfile import Calibration
 from fdi.errors import ConfigError
@@ -61,7 +68,7 @@ def calibrate_checked(session: Session, *, alpha: float = 0.01, noise_model: str
     datas = kind_data(session, white)
     if effects:
         forced = assess(session, white, alpha=alpha, effects=effects, datas=datas)
-        fitted = refit(datas, white, forced.claimed).calibration
+        fitted = refit(datas, white, forced.claimed, noise=noise_sets(forced)).calibration
         datas = model_effects(kind_data(session, fitted), fitted.effects)
         sel = assess(session, fitted, alpha=alpha, datas=datas)
         base = fitted
@@ -73,6 +80,7 @@ def calibrate_checked(session: Session, *, alpha: float = 0.01, noise_model: str
     warnings = list(base.extra.get("warnings", []))
     if effects:
         rec["effects_fitted"] = effects
+        rec["refit_noise"] = dict(forced.noise_null)      # sandwich where Gauss-Markov
         rec["monitor"] = MONITOR_NOTE
     if rec["verdict"] == "adequate":
         if noise_model != "white" and not effects:
@@ -97,6 +105,10 @@ def format_adequacy(cal: Calibration) -> list[str]:
     if a is not None:
         out.append(f"model adequacy (alpha {a.get('alpha')}): {a['verdict']}"
                    + (": " + "; ".join(a.get("where", [])) if a.get("where") else ""))
+        coloured = [k for k, v in (a.get("noise_null") or {}).items() if v != "white"]
+        if coloured:
+            out.append(f"  tested against white + Gauss-Markov noise ({', '.join(coloured)}: "
+                       "the residual reads as coloured)")
         if a.get("noise_model_requested") != a.get("noise_model_applied"):
             out.append(f"  noise model: {a.get('noise_model_applied')} (asked for "
                        f"{a.get('noise_model_requested')})")

@@ -8,8 +8,9 @@ keep free (a bias and a scale correction along the calibrated axis: columns ``1`
     F = (ΔSS / r) / (RSS₁ / (N − k − r)),     r = rank of Z after projection on the model
 
 (ΔSS the sum of squares ``Z`` explains beyond the current model). Exact for Gaussian white
-noise; the diagnosis assumes the noise left after the deterministic model is white (it is
-what the adequacy probes check).
+noise. Where the calibration's noise-model selection reads a sensor set's residual as
+coloured, :class:`calibration.diagnose.coloured.GlsModel` (same interface) replaces it: tests
+against white + Gauss-Markov noise with the noise parameters profiled out.
 """
 
 from __future__ import annotations

@@ -7,9 +7,11 @@ session on the raw output (seed 000 Eq. 13 with the effect terms added)::
 
 ``g_k`` the effect regressors (SI output per unit of the effect,
 :mod:`calibration.diagnose.library`). The covariance ``σ²·(XᵀX)⁻¹`` (σ² from the residual,
-white noise) holds the correlations between the effects and the bias / gain they share
-columns with (a bias drift and the bias, a g-sensitivity and the bias), so the refit σ are
-those of the extended model. ``a`` is split into SF, axis and misalignment with the
+white noise; for a set tested against white + Gauss-Markov noise, the least-squares
+sandwich with the fitted Gauss-Markov term added, :meth:`.coloured.NoiseSet.gm_cov`) holds
+the correlations between the effects and the bias / gain they share columns with (a bias
+drift and the bias, a g-sensitivity and the bias), so the refit σ are those of the
+extended model. ``a`` is split into SF, axis and misalignment with the
 calibration's own first-order propagation (:func:`calibration.rate_test.split_gain`, seed 000
 Eq. 19). Sensors without effects keep the calibration's values.
 
@@ -25,6 +27,7 @@ from typing import Any
 
 import numpy as np
 
+from calibration.diagnose.coloured import NoiseSet
 from calibration.diagnose.context import KindData
 from calibration.diagnose.selection import Selected
 from calibration.rate_test import group_misalignment_matrices, split_gain
@@ -69,8 +72,14 @@ def _estimate(beta: np.ndarray, C: np.ndarray) -> tuple[float, float, dict[str, 
 
 
 def refit(datas: Mapping[str, KindData], cal: Calibration, chosen: Sequence[Selected], *,
-          adequacy: Mapping[str, Any] | None = None) -> Refit:
-    """The calibration with the chosen effects fitted jointly (see the module docstring)."""
+          adequacy: Mapping[str, Any] | None = None,
+          noise: Mapping[str, NoiseSet] | None = None) -> Refit:
+    """The calibration with the chosen effects fitted jointly (see the module docstring).
+
+    ``noise``: per kind whose tests ran against white + Gauss-Markov noise, the set's
+    fitted noise (:class:`.coloured.NoiseSet`); the refit covariance is then the sandwich
+    ``σ_w²·(XᵀX)⁻¹·(XᵀX + ρ·(DX̄)ᵀ·S(τ)·(DX̄))·(XᵀX)⁻¹`` at the fitted ``(ρ, τ)``."""
+    noise = dict(noise or {})
     by_sensor: dict[tuple[str, int], list[Selected]] = {}
     for s in chosen:
         by_sensor.setdefault((s.kind, s.sensor), []).append(s)
@@ -96,7 +105,10 @@ def refit(datas: Mapping[str, KindData], cal: Calibration, chosen: Sequence[Sele
             dof = max(d.N - X.shape[1], 1)
             s2 = float(e @ e) / dof
             Xs = X / scale
-            C = s2 * np.linalg.pinv(Xs.T @ Xs) / np.outer(scale, scale)
+            Pinv = np.linalg.pinv(Xs.T @ Xs)
+            if kind in noise:                   # white + Gauss-Markov: sandwich
+                Pinv = Pinv + Pinv @ noise[kind].gm_cov(Xs) @ Pinv
+            C = s2 * Pinv / np.outer(scale, scale)
             g = split_gain(coef[:3], C[:3, :3], old.sensors[i].axis_nominal)
             sf = g.scale_factor
             jb = np.concatenate([coef[3] * g.jac[0], [sf]])
@@ -130,8 +142,11 @@ def refit(datas: Mapping[str, KindData], cal: Calibration, chosen: Sequence[Sele
     extra = {k: v for k, v in dict(cal.extra).items() if k not in _STALE_EXTRA}
     if terms:
         extra["refit"] = ("sensors with effects refit jointly with them (ordinary least "
-                          "squares over every sample, white noise); their per-step statistics "
-                          "and coloured-noise record from the plain calibration were dropped")
+                          "squares over every sample; covariance for white noise"
+                          + (", plus the fitted Gauss-Markov term for the "
+                             + ", ".join(sorted(noise)) + " set" if noise else "")
+                          + "); their per-step statistics and coloured-noise record from the "
+                          "plain calibration were dropped")
     new = dataclasses.replace(cal, sets=sets, effects=tuple(terms), extra=extra,
                               adequacy=dict(adequacy) if adequacy is not None else cal.adequacy)
     return Refit(new, resid, npar)

@@ -20,7 +20,7 @@ from calibration.diagnose.context import KindData, check_match, check_same_sessi
 from calibration.diagnose.library import Candidate, candidates, get_candidate, model_effects
 from calibration.diagnose.metrics import error_summary
 from calibration.diagnose.refit import refit
-from calibration.diagnose.selection import Selection, select
+from calibration.diagnose.selection import Selection, noise_sets, select
 from calibration.session import Session
 from fdi.calfile import Calibration
 from fdi.errors import ConfigError
@@ -58,6 +58,9 @@ class Diagnosis:
         The refit calibration (effects and adequacy filled).
     selection : Selection
         Internals (models per sensor), for reports.
+    noise_null : dict
+        Per kind, the noise the tests took as the null: ``"white"`` or ``"white +
+        Gauss-Markov"`` (:mod:`.coloured`).
     """
 
     effects: list[dict[str, Any]]
@@ -69,6 +72,7 @@ class Diagnosis:
     alpha: float
     calibration: Calibration
     selection: Selection = field(repr=False, compare=False, default_factory=Selection)
+    noise_null: dict[str, str] = field(default_factory=dict)
 
     @property
     def adequate(self) -> bool:
@@ -80,8 +84,8 @@ class Diagnosis:
         return {"schema": DIAGNOSIS_SCHEMA, "alpha": self.alpha, "effects": self.effects,
                 "unexplained": self.unexplained,
                 "unexplained_detail": self.unexplained_detail,
-                "not_testable": self.not_testable, "error_before": self.error_before,
-                "error_after": self.error_after}
+                "not_testable": self.not_testable, "noise_null": self.noise_null,
+                "error_before": self.error_before, "error_after": self.error_after}
 
 
 def adequacy_record(sel: Selection, alpha: float) -> dict[str, Any]:
@@ -92,11 +96,13 @@ def adequacy_record(sel: Selection, alpha: float) -> dict[str, Any]:
               + (f", {u['band_hz'][0]:.3g}-{u['band_hz'][1]:.3g} Hz" if u.get("band_hz")
                  else "") + ")" for u in sel.unexplained]
     return {"verdict": "effects suspected" if where else "adequate", "alpha": alpha,
-            "where": where,
+            "where": where, "noise_null": dict(sel.noise_null),
             "method": "forward selection over the rimu.diagnose candidate library and "
                       "adequacy probes (per-step means, slow trend, change point, spectral "
-                      "line, input correlation), nested-model F-tests, Holm/Bonferroni at "
-                      "alpha over candidates x sensors"}
+                      "line, input correlation), nested-model F-tests (white noise) or "
+                      "profile-likelihood ratio tests against white + Gauss-Markov noise "
+                      "(where the noise-model selection keeps a Gauss-Markov term), "
+                      "Holm/Bonferroni at alpha over candidates x sensors"}
 
 
 def _candidates(names: Iterable[str] | None) -> list[Candidate]:
@@ -112,16 +118,18 @@ threads do not speed up and which a loaded machine slows down several-fold with 
 
 def assess(session: Session, cal: Calibration, *, alpha: float = 0.01,
            effects: Iterable[str] | None = None,
-           datas: Mapping[str, KindData] | None = None) -> Selection:
+           datas: Mapping[str, KindData] | None = None, noise: str = "auto") -> Selection:
     """Selection and probes only (no refit): what :func:`diagnose` and the adequacy
-    check of ``rimu calibrate`` share. ``effects``: fit these without testing."""
+    check of ``rimu calibrate`` share. ``effects``: fit these without testing. ``noise``:
+    the null's noise (:func:`.selection.select`; ``"auto"`` adds a Gauss-Markov term per
+    kind where the calibration's noise-model selection finds one)."""
     with threadpool_limits(limits=BLAS_THREADS, user_api="blas"):
-        return _assess(session, cal, alpha=alpha, effects=effects, datas=datas)
+        return _assess(session, cal, alpha=alpha, effects=effects, datas=datas, noise=noise)
 
 
 def _assess(session: Session, cal: Calibration, *, alpha: float,
             effects: Iterable[str] | None,
-            datas: Mapping[str, KindData] | None) -> Selection:
+            datas: Mapping[str, KindData] | None, noise: str = "auto") -> Selection:
     datas = model_effects(kind_data(session, cal), cal.effects) if datas is None else datas
     forced = list(effects) if effects is not None else None
     if forced:
@@ -136,7 +144,7 @@ def _assess(session: Session, cal: Calibration, *, alpha: float,
                 raise ConfigError(f"{session.source}: effect {name!r} cannot be fitted "
                                   f"to the {kind}s: {reason}")
     return select(datas, candidates() if not forced else [get_candidate(n) for n in forced],
-                  alpha, forced=forced)
+                  alpha, forced=forced, noise=noise)
 
 
 def _effects_json(sel: Selection, new: Calibration) -> list[dict[str, Any]]:
@@ -198,7 +206,7 @@ def _diagnose(session: Session, cal: Calibration, alpha: float,
     if sel.claimed and not sel.unexplained:      # the refit model holds the effects found
         rec = {**rec, "verdict": "adequate", "effects_found": rec["where"], "where": [],
                "monitor": MONITOR_NOTE}
-    fit = refit(datas, cal, sel.claimed, adequacy=rec)
+    fit = refit(datas, cal, sel.claimed, adequacy=rec, noise=noise_sets(sel))
     before = error_summary(datas, {k: d.y for k, d in datas.items()},
                            {k: np.full(d.n, 4) for k, d in datas.items()}, cal, truth)
     after = error_summary(datas, fit.residual, fit.n_params, fit.calibration, truth)
@@ -206,4 +214,5 @@ def _diagnose(session: Session, cal: Calibration, alpha: float,
                      unexplained=bool(sel.unexplained),
                      unexplained_detail=sel.unexplained, not_testable=sel.not_testable,
                      error_before=before, error_after=after, alpha=alpha,
-                     calibration=fit.calibration, selection=sel)
+                     calibration=fit.calibration, selection=sel,
+                     noise_null=dict(sel.noise_null))

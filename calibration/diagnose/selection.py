@@ -1,5 +1,10 @@
 """Forward selection of effects by nested-model tests, then the adequacy probes.
 
+Each sensor's model is a :class:`.linmodel.LinModel` (white-noise F-tests) or, for a kind
+whose residual the calibration's noise-model selection reads as coloured, a
+:class:`.coloured.GlsModel` (profile-likelihood tests against white + Gauss-Markov noise,
+``(ρ, τ)`` common to the set: accepting an effect on one sensor re-tests the whole set).
+
 Family: every testable (candidate, sensor) pair of every kind. At each round every pair not
 yet accepted is tested against its sensor's current model (:class:`.linmodel.LinModel`);
 the smallest p-value is accepted when ``p < (α/2) / m`` with ``m`` the pairs still in the
@@ -23,12 +28,13 @@ from typing import Any
 
 import numpy as np
 
+from calibration.diagnose.coloured import GlsModel, NoiseSet, block_noise, needs_coloured
 from calibration.diagnose.context import KindData
 from calibration.diagnose.library import Candidate, testable
 from calibration.diagnose.linmodel import LinModel
 from calibration.diagnose.probes import PROBES, run_probes, shared_regressors
 
-__all__ = ["ALIAS_CORRELATION", "Selected", "Selection", "base_columns", "select"]
+__all__ = ["ALIAS_CORRELATION", "Selected", "Selection", "base_columns", "noise_sets", "select"]
 
 ALIAS_CORRELATION = 0.95
 
@@ -73,7 +79,19 @@ class Selection:
     partial: list[Selected] = field(default_factory=list)
     unexplained: list[dict[str, Any]] = field(default_factory=list)
     not_testable: list[dict[str, Any]] = field(default_factory=list)
-    models: dict[tuple[str, int], LinModel] = field(default_factory=dict)
+    models: dict[tuple[str, int], LinModel | GlsModel] = field(default_factory=dict)
+    noise_null: dict[str, str] = field(default_factory=dict)
+    """Per kind, the noise of the null hypothesis: ``"white"`` or ``"white +
+    Gauss-Markov"`` (profile-likelihood tests, :mod:`.coloured`)."""
+
+
+def noise_sets(sel: Selection) -> dict[str, NoiseSet]:
+    """Per kind tested against white + Gauss-Markov noise, the set's fitted noise."""
+    out = {}
+    for (kind, _), m in sel.models.items():
+        if isinstance(m, GlsModel):
+            out[kind] = m.group
+    return out
 
 
 def base_columns(d: KindData, i: int) -> np.ndarray:
@@ -98,7 +116,7 @@ def _evaluate(d: KindData, i: int, c: Candidate, model: LinModel
 
 
 def select(datas: Mapping[str, KindData], cands: Iterable[Candidate], alpha: float, *,
-           forced: Iterable[str] | None = None) -> Selection:
+           forced: Iterable[str] | None = None, noise: str = "auto") -> Selection:
     """Forward selection over every kind and sensor, then the adequacy probes.
 
     Parameters
@@ -110,11 +128,17 @@ def select(datas: Mapping[str, KindData], cands: Iterable[Candidate], alpha: flo
     forced : names, optional
         Fit these on every sensor they apply to, without testing (``--effects``); the
         selection then runs on top of them only for the probes.
+    noise : {"auto", "white", "coloured"}
+        The noise of the null hypothesis: ``"auto"`` takes white + Gauss-Markov for a kind
+        whose residual the calibration's noise-model selection reads as coloured
+        (:func:`.coloured.needs_coloured`), white otherwise.
     """
+    if noise not in ("auto", "white", "coloured"):
+        raise ValueError(f"noise must be auto, white or coloured, got {noise!r}")
     cands = list(cands)
     out = Selection()
     forced = list(forced or [])
-    family = _family(datas, cands, out)
+    family = _family(datas, cands, out, noise)
     if forced:
         for kind, i, c in family:
             if c.name in forced:
@@ -136,13 +160,19 @@ _Cached = tuple[float, float, dict[str, Any], np.ndarray, float]
 
 
 def _family(datas: Mapping[str, KindData], cands: list[Candidate],
-            out: Selection) -> list[tuple[str, int, Candidate]]:
+            out: Selection, noise: str = "auto") -> list[tuple[str, int, Candidate]]:
     """Base models per sensor, and every (kind, sensor, candidate) that can be tested;
     the others go to ``out.not_testable`` with the reason."""
     family: list[tuple[str, int, Candidate]] = []
     for kind, d in datas.items():
+        coloured = noise == "coloured" or (noise == "auto"
+                                           and needs_coloured(d.y, d.sample_rate_hz))
+        out.noise_null[kind] = "white + Gauss-Markov" if coloured else "white"
+        group = NoiseSet(block_noise(d.N, d.sample_rate_hz)) if coloured else None
         for i in range(d.n):
-            out.models[(kind, i)] = LinModel(d.y[:, i], base_columns(d, i))
+            out.models[(kind, i)] = (GlsModel(d.y[:, i], base_columns(d, i), group, i)
+                                     if group is not None
+                                     else LinModel(d.y[:, i], base_columns(d, i)))
         for c in cands:
             why = testable(c, d)
             if why is not None:
@@ -212,9 +242,11 @@ def _forward(datas: Mapping[str, KindData], by_name: dict[str, Candidate],
         out.claimed.append(Selected(by_name[name], kind, i, params, p, thr, tuple(aliases),
                                     logp))
         model.add(Z)
+        shared = isinstance(model, GlsModel)     # (ρ, τ) common to the set: all re-tested
         for k2 in list(cache):
-            if k2[:2] == (kind, i) and k2 not in accepted:
-                p2, lp2, par2, Z2, _, ss2 = _evaluate(datas[kind], i, by_name[k2[2]], model)
+            if k2 not in accepted and (k2[:2] == (kind, i) or (shared and k2[0] == kind)):
+                p2, lp2, par2, Z2, _, ss2 = _evaluate(datas[kind], k2[1], by_name[k2[2]],
+                                                      out.models[k2[:2]])
                 cache[k2] = (p2, lp2, par2, Z2, ss2)
 
 

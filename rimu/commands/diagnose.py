@@ -46,6 +46,10 @@ def _fmt_list(xs: list, f: str = "{:.3g}") -> str:
 def text(d) -> str:
     """Readable summary of a :class:`calibration.diagnose.Diagnosis`."""
     lines = [f"diagnosis at alpha {d.alpha:g} (Holm/Bonferroni over candidates x sensors)"]
+    coloured = [k for k, v in getattr(d, "noise_null", {}).items() if v != "white"]
+    if coloured:
+        lines.append(f"tests against white + Gauss-Markov noise for the {', '.join(coloured)} "
+                     "set (its residual reads as coloured; parameters profiled out)")
     if d.effects:
         lines.append("effects found:")
         for e in d.effects:
