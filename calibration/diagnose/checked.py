@@ -24,15 +24,19 @@ extended model.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from typing import Any
 
+import scipy.stats
+
 from calibration.calibrate import calibrate
-from calibration.diagnose.context import kind_data
+from calibration.diagnose.context import KindData, kind_data
 from calibration.diagnose.library import model_effects
-from calibration.diagnose.refit import refit
+from calibration.diagnose.metrics import step_chi2_dof
+from calibration.diagnose.refit import Refit, refit
 from calibration.diagnose.run import MONITOR_NOTE, adequacy_record, assess
 from calibration.diagnose.selection import noise_sets
+from calibration.fit_residuals import WARN_ALPHA
 from calibration.session import Session
 from fdi.calfile import Calibration
 from fdi.errors import ConfigError
@@ -68,7 +72,9 @@ def calibrate_checked(session: Session, *, alpha: float = 0.01, noise_model: str
     datas = kind_data(session, white)
     if effects:
         forced = assess(session, white, alpha=alpha, effects=effects, datas=datas)
-        fitted = refit(datas, white, forced.claimed, noise=noise_sets(forced)).calibration
+        fit = refit(datas, white, forced.claimed, noise=noise_sets(forced))
+        fitted = dataclasses.replace(fit.calibration, extra=dict(
+            fit.calibration.extra, warnings=_refit_warnings(fit, datas)))
         datas = model_effects(kind_data(session, fitted), fitted.effects)
         sel = assess(session, fitted, alpha=alpha, datas=datas)
         base = fitted
@@ -96,6 +102,35 @@ def calibrate_checked(session: Session, *, alpha: float = 0.01, noise_model: str
     extra = dict(base.extra)
     extra["warnings"] = warnings
     return dataclasses.replace(base, adequacy=rec, extra=extra)
+
+
+def _refit_warnings(fit: Refit, datas: Mapping[str, KindData]) -> list[str]:
+    """The warnings of a calibration refit with effects.
+
+    The white-noise fit's whiteness warnings (:func:`calibration.fit_residuals.
+    whiteness_warnings`) describe the model without the effects; for the sensors the refit
+    changed they are stale and are replaced by the step-mean check on the refit residual
+    (:func:`calibration.diagnose.metrics.step_chi2_dof`, at the same 0.1 % level).
+    """
+    cal = fit.calibration
+    touched = {(t.kind, t.sensor) for t in cal.effects}
+    stale = {f"{kind} {s.name}: " for kind, i in touched
+             for s in (cal.sets[kind].sensors[i],)}
+    out = [w for w in cal.extra.get("warnings", [])
+           if not (any(w.startswith(p) for p in stale) and "white noise explains" in w)]
+    for kind, d in datas.items():
+        if kind not in fit.residual:
+            continue
+        chi = step_chi2_dof(d, fit.residual[kind], fit.n_params[kind])
+        for i in sorted(i for k, i in touched if k == kind):
+            dof = max(len(d.steps) - int(fit.n_params[kind][i]), 1)
+            lim = float(scipy.stats.chi2.isf(WARN_ALPHA, dof)) / dof
+            if chi[i] > lim:
+                out.append(f"{kind} {cal.sets[kind].sensors[i].name}: with the effect terms "
+                           "fitted, the step means of the residuals still scatter more than "
+                           f"white noise explains (chi2/dof {chi[i]:.2f}, 0.1 % limit "
+                           f"{lim:.2f}): run rimu diagnose")
+    return out
 
 
 def format_adequacy(cal: Calibration) -> list[str]:
