@@ -296,6 +296,61 @@ def load_channel_map(path: str | Path) -> ChannelMap:
     return cmap
 
 
+def _aux_signals(e: Fields, q: str) -> tuple[str, ...]:
+    """``signal`` or ``signals`` of an ``[[auxiliary]]`` table."""
+    if "signals" not in e:
+        return (e.string("signal"),)
+    if "signal" in e:
+        raise e.error("signal", "give 'signal' or 'signals', not both")
+    sig = e.get("signals")
+    most = 3 if q == "specific_force" else 1
+    if (not isinstance(sig, list) or not 1 <= len(sig) <= most
+            or not all(isinstance(x, str) and x.strip() for x in sig)):
+        raise e.error("signals", f"expected a list of 1 to {most} signal names, got "
+                      f"{sig!r}"[:200])
+    return tuple(sig)
+
+
+def _aux_axes(e: Fields, signals: tuple[str, ...]) -> np.ndarray:
+    """Unit body axes of a specific-force table's signals, shape (len(signals), 3)."""
+    if "signals" in e.doc:
+        axes = e.array("axes", (len(signals), 3), None)
+        if axes is None:
+            if len(signals) != 3:
+                raise e.error("axes", f"{len(signals)} signals: give their body axes "
+                              "(axes = [[x, y, z], ...], one row per signal)")
+            axes = np.eye(3)
+        key = "axes"
+    else:
+        a = e.array("axis_nominal", (3,), None)
+        if a is None:
+            raise e.error("axis_nominal", "missing; a specific-force signal needs the "
+                          "body axis it measures (axis_nominal = [x, y, z])")
+        axes, key = a[None, :], "axis_nominal"
+    norms = np.linalg.norm(axes, axis=1)
+    if np.any(norms == 0):
+        raise e.error(key, "expected axes of 3 finite numbers, not all zero")
+    return axes / norms[:, None]
+
+
+def _aux_sensors(e: Fields, sensor_names: list[str]) -> tuple[str, ...] | None:
+    """``sensors`` of an ``[[auxiliary]]`` table (None: all)."""
+    sensors_v = e.get("sensors", "all")
+    if sensors_v == "all":
+        return None
+    if (not isinstance(sensors_v, list) or not sensors_v
+            or not all(isinstance(x, str) for x in sensors_v)):
+        raise e.error("sensors", f"expected \"all\" or a non-empty list of sensor names, "
+                      f"got {sensors_v!r}"[:200])
+    for x in sensors_v:
+        if x not in sensor_names:
+            raise e.error("sensors", f"unknown sensor {x!r}; the map's sensors are "
+                          + ", ".join(sensor_names))
+    if len(set(sensors_v)) != len(sensors_v):
+        raise e.error("sensors", "a sensor is named twice")
+    return tuple(sensors_v)
+
+
 def _aux_channel(e: Fields, k: int, j1939: bool, sensor_names: list[str]) -> AuxChannel:
     """One ``[[auxiliary]]`` table."""
     q = e.choice("quantity", AUX_QUANTITIES)
@@ -305,53 +360,9 @@ def _aux_channel(e: Fields, k: int, j1939: bool, sensor_names: list[str]) -> Aux
         raise e.error("unit", f"unknown unit {unit!r} for a {q}; expected one of "
                       + ", ".join(repr(u) for u in units))
     message = e.string("message")
-    if "signals" in e:
-        if "signal" in e:
-            raise e.error("signal", "give 'signal' or 'signals', not both")
-        sig = e.get("signals")
-        most = 3 if q == "specific_force" else 1
-        if (not isinstance(sig, list) or not 1 <= len(sig) <= most
-                or not all(isinstance(x, str) and x.strip() for x in sig)):
-            raise e.error("signals", f"expected a list of 1 to {most} signal names, got "
-                          f"{sig!r}"[:200])
-        signals = tuple(sig)
-    else:
-        signals = (e.string("signal"),)
-    axes = None
-    if q == "specific_force":
-        if "signals" in e.doc:
-            axes = e.array("axes", (len(signals), 3), None)
-            if axes is None:
-                if len(signals) != 3:
-                    raise e.error("axes", f"{len(signals)} signals: give their body axes "
-                                  "(axes = [[x, y, z], ...], one row per signal)")
-                axes = np.eye(3)
-            key = "axes"
-        else:
-            a = e.array("axis_nominal", (3,), None)
-            if a is None:
-                raise e.error("axis_nominal", "missing; a specific-force signal needs the "
-                              "body axis it measures (axis_nominal = [x, y, z])")
-            axes, key = a[None, :], "axis_nominal"
-        norms = np.linalg.norm(axes, axis=1)
-        if np.any(norms == 0):
-            raise e.error(key, "expected axes of 3 finite numbers, not all zero")
-        axes = axes / norms[:, None]
-    sensors_v = e.get("sensors", "all")
-    if sensors_v == "all":
-        sensors = None
-    else:
-        if (not isinstance(sensors_v, list) or not sensors_v
-                or not all(isinstance(x, str) for x in sensors_v)):
-            raise e.error("sensors", f"expected \"all\" or a non-empty list of sensor names, "
-                          f"got {sensors_v!r}"[:200])
-        for x in sensors_v:
-            if x not in sensor_names:
-                raise e.error("sensors", f"unknown sensor {x!r}; the map's sensors are "
-                              + ", ".join(sensor_names))
-        if len(set(sensors_v)) != len(sensors_v):
-            raise e.error("sensors", "a sensor is named twice")
-        sensors = tuple(sensors_v)
+    signals = _aux_signals(e, q)
+    axes = _aux_axes(e, signals) if q == "specific_force" else None
+    sensors = _aux_sensors(e, sensor_names)
     sa = e.integer("source_address", None, lo=0, hi=0xFF)
     if j1939 and sa is None:
         raise e.error("source_address", "a J1939 map needs each auxiliary channel's source "

@@ -43,6 +43,21 @@ def _fmt_list(xs: list, f: str = "{:.3g}") -> str:
     return " ".join(f.format(x) for x in xs)
 
 
+def _unexplained_line(u: dict) -> str:
+    """One line of unexplained structure: sensor, test, p-value, where it sits."""
+    where = []
+    if u.get("steps"):
+        where.append("steps " + ", ".join(map(str, u["steps"])))
+    if u.get("band_hz"):
+        where.append(f"band {u['band_hz'][0]:.3g}-{u['band_hz'][1]:.3g} Hz")
+    if u.get("time_s") is not None:
+        where.append(f"near t = {u['time_s']:.1f} s")
+    part = f"; partial fits not claimed: {', '.join(u['partial_fits'])}" \
+        if u.get("partial_fits") else ""
+    return (f"  {u['kind']} {u['sensor']} ({u['sensor_name']}): {u['test']} "
+            f"p {u['p_value']:.2g}; " + ", ".join(where) + part)
+
+
 def text(d) -> str:
     """Readable summary of a :class:`calibration.diagnose.Diagnosis`."""
     lines = [f"diagnosis at alpha {d.alpha:g} (Holm/Bonferroni over candidates x sensors)"]
@@ -64,18 +79,7 @@ def text(d) -> str:
         lines.append("effects found: none")
     if d.unexplained:
         lines.append("unexplained structure (no candidate explains it):")
-        for u in d.unexplained_detail:
-            where = []
-            if u.get("steps"):
-                where.append("steps " + ", ".join(map(str, u["steps"])))
-            if u.get("band_hz"):
-                where.append(f"band {u['band_hz'][0]:.3g}-{u['band_hz'][1]:.3g} Hz")
-            if u.get("time_s") is not None:
-                where.append(f"near t = {u['time_s']:.1f} s")
-            part = f"; partial fits not claimed: {', '.join(u['partial_fits'])}" \
-                if u.get("partial_fits") else ""
-            lines.append(f"  {u['kind']} {u['sensor']} ({u['sensor_name']}): {u['test']} "
-                         f"p {u['p_value']:.2g}; " + ", ".join(where) + part)
+        lines.extend(_unexplained_line(u) for u in d.unexplained_detail)
     else:
         lines.append("unexplained structure: none")
     nt = sorted({(n["name"], n["kind"], n["reason"]) for n in d.not_testable})
