@@ -18,7 +18,8 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["RESULTS", "ROOT", "header", "load_average", "machine", "spread", "write_results"]
+__all__ = ["RESULTS", "ROOT", "header", "load_average", "machine", "spread", "timings",
+           "write_results"]
 
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "benchmarks" / "results"
@@ -45,6 +46,17 @@ def spread(x: Iterable[float], suffix: str = "") -> dict[str, float]:
     a = np.asarray(list(x), float)
     return {"min" + suffix: float(a.min()), "median" + suffix: float(np.median(a)),
             "max" + suffix: float(a.max())}
+
+
+def timings(fn: Any, repeats: int) -> list[float]:
+    """Wall times (s) of ``repeats`` calls of ``fn()`` after one warm-up call."""
+    fn()
+    ts = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn()
+        ts.append(time.perf_counter() - t0)
+    return ts
 
 
 def header(benchmark: str, **extra: Any) -> dict[str, Any]:

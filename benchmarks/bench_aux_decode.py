@@ -17,38 +17,29 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import json
-import platform
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 import numpy as np
+from _common import ROOT, header, spread, timings, write_results
 
-ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests" / "fdi"))
 
-from _effects_flight import effect_calibration, flight_with_effects  # noqa: E402
+from _effects_flight import effect_calibration, flight_with_effects
 
-from replay.accounting import FrameAccounting  # noqa: E402
-from replay.assemble import decode_frames  # noqa: E402
-from replay.channel_map import default_channel_map  # noqa: E402
-from replay.effect_inputs import map_effect_inputs  # noqa: E402
-from replay.flight_data import AuxChannels  # noqa: E402
-from replay.frames import load_dbc  # noqa: E402
-from replay.logio import read_frames, write_flight_log  # noqa: E402
+from replay.accounting import FrameAccounting
+from replay.assemble import decode_frames
+from replay.channel_map import default_channel_map
+from replay.effect_inputs import map_effect_inputs
+from replay.flight_data import AuxChannels
+from replay.frames import load_dbc
+from replay.logio import read_frames, write_flight_log
 
 
 def _times(fn, repeats: int) -> dict[str, float]:
     """min / median / max wall time (s) over ``repeats`` calls after one warm-up."""
-    fn()
-    ts = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        ts.append(time.perf_counter() - t0)
-    return {"min": float(np.min(ts)), "median": float(np.median(ts)), "max": float(np.max(ts))}
+    return spread(timings(fn, repeats))
 
 
 def main() -> None:
@@ -78,9 +69,8 @@ def main() -> None:
         return decode_frames(frames, db, cmap, FrameAccounting(), sample_rate_hz=fs)
 
     held = dec(with_aux).aux
-    res: dict = {"samples": int(fl.t.size), "sensors": int(fl.n), "frames": len(frames),
-                 "aux_channels": len(chans), "repeats": a.repeats,
-                 "python": platform.python_version(), "machine": platform.machine()}
+    res: dict = header("aux_decode", samples=int(fl.t.size), sensors=int(fl.n),
+                       frames=len(frames), aux_channels=len(chans), repeats=a.repeats)
     res["decode_plain_s"] = _times(lambda: dec(plain), a.repeats)
     res["decode_with_aux_s"] = _times(lambda: dec(with_aux), a.repeats)
     res["map_effect_inputs_s"] = _times(lambda: map_effect_inputs(with_aux, held), a.repeats)
@@ -88,11 +78,9 @@ def main() -> None:
     res["ratio_decode_with_aux_to_plain"] = res["decode_with_aux_s"]["median"] / base
     res["ratio_inputs_to_plain_decode"] = res["map_effect_inputs_s"]["median"] / base
     for key, v in res.items():
-        print(f"{key}: {v}")
-    out = ROOT / "benchmarks" / "results" / "aux_decode.json"
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(res, indent=1) + "\n")
-    print(f"wrote {out}")
+        if key not in ("schema", "benchmark", "date_utc", "load_average", "machine"):
+            print(f"{key}: {v}")
+    write_results(res)
 
 
 if __name__ == "__main__":

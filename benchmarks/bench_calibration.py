@@ -13,10 +13,9 @@ Run: ``python benchmarks/bench_calibration.py [--repeats 15]``
 from __future__ import annotations
 
 import argparse
-import time
 
 import numpy as np
-from _common import RESULTS, header, spread, write_results
+from _common import RESULTS, header, spread, timings, write_results
 
 from calibration.calibrate import calibrate
 from calibration.presets import preset
@@ -25,13 +24,7 @@ from calibration.simulate import simulate_session
 
 def _times(fn, repeats: int) -> dict[str, float]:
     """min / median / max wall time (s) over ``repeats`` calls after one warm-up."""
-    fn()
-    ts = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        ts.append(time.perf_counter() - t0)
-    return spread(ts)
+    return spread(timings(fn, repeats))
 
 
 def _median_time(fn, repeats: int) -> float:

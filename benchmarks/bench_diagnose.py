@@ -17,9 +17,8 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import time
 
-from _common import RESULTS, header, spread, write_results
+from _common import RESULTS, header, spread, timings, write_results
 
 from calibration.calibrate import calibrate
 from calibration.diagnose import assess, diagnose
@@ -30,14 +29,7 @@ from fdi.units import DPH
 LIMIT_S = 5.0
 
 
-def _times(fn, repeats: int) -> list[float]:
-    fn()                                               # warm up
-    ts = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        ts.append(time.perf_counter() - t0)
-    return ts
+_times = timings
 
 
 def _stats(ts: list[float]) -> dict[str, float]:

@@ -14,9 +14,8 @@ from __future__ import annotations
 
 import argparse
 import sys
-import time
 
-from _common import ROOT, header, spread, write_results
+from _common import ROOT, header, spread, timings, write_results
 
 sys.path.insert(0, str(ROOT / "tests" / "fdi"))
 
@@ -30,13 +29,7 @@ from replay.effect_inputs import flight_effect_inputs
 
 def _times(fn, repeats: int) -> dict[str, float]:
     """min / median / max wall time (s) over ``repeats`` calls after one warm-up."""
-    fn()
-    ts = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        ts.append(time.perf_counter() - t0)
-    return spread(ts)
+    return spread(timings(fn, repeats))
 
 
 def main() -> None:
