@@ -189,6 +189,22 @@ def _message_key(msg: cantools.database.can.Message, sa: int | None, j1939: bool
     return fid | (_EXT if msg.is_extended_frame else 0)
 
 
+def _checked_layout(msg: cantools.database.can.Message, crc_signal: str | None,
+                    source: object) -> MessageLayout:
+    """The message's layout, checked for the block decoder: a CRC signal is the last byte,
+    payloads are at most 8 bytes and not multiplexed."""
+    lay = message_layout(msg)
+    if crc_signal is not None:
+        cs = lay.signals[crc_signal]
+        if cs.length != 8 or cs.big_endian or cs.shift != 8 * (msg.length - 1):
+            raise ConfigError(f"channel map {source}: CRC signal {crc_signal} of "
+                              f"{msg.name} must be the last byte")
+    if not lay.vectorisable:
+        raise ConfigError(f"message {msg.name}: payloads over 8 bytes or multiplexed "
+                          "messages are not supported by the block decoder")
+    return lay
+
+
 def build_slots(db: cantools.database.can.Database, cmap: ChannelMap) -> list[Slot]:
     """Group the map's sensors into slots (one per message, source address and channel).
 
@@ -228,15 +244,7 @@ def build_slots(db: cantools.database.can.Database, cmap: ChannelMap) -> list[Sl
                                   f"{i + 1} share message {s.message} but name different "
                                   "counter/CRC/sample/status signals")
         msg = msgs[(key, ch)]
-        lay = message_layout(msg)
-        if first.crc_signal is not None:
-            cs = lay.signals[first.crc_signal]
-            if cs.length != 8 or cs.big_endian or cs.shift != 8 * (msg.length - 1):
-                raise ConfigError(f"channel map {cmap.source}: CRC signal "
-                                  f"{first.crc_signal} of {msg.name} must be the last byte")
-        if not lay.vectorisable:
-            raise ConfigError(f"message {msg.name}: payloads over 8 bytes or multiplexed "
-                              "messages are not supported by the block decoder")
+        lay = _checked_layout(msg, first.crc_signal, cmap.source)
         slots.append(Slot(key=key, channel=ch, layout=lay, sensors=tuple(idx),
                           signals=tuple(cmap.sensors[i].signal for i in idx),
                           counter=checks[0], crc=checks[1], sample_counter=checks[2],
@@ -292,15 +300,7 @@ def build_aux_slots(db: cantools.database.can.Database, cmap: ChannelMap,
                                   f"{entries[0].name} and {a.name} share message {a.message} "
                                   "but name different counter/CRC/status signals")
         msg = msgs[(key, ch)]
-        lay = message_layout(msg)
-        if checks[1] is not None:
-            cs = lay.signals[checks[1]]
-            if cs.length != 8 or cs.big_endian or cs.shift != 8 * (msg.length - 1):
-                raise ConfigError(f"channel map {cmap.source}: CRC signal {checks[1]} of "
-                                  f"{msg.name} must be the last byte")
-        if not lay.vectorisable:
-            raise ConfigError(f"message {msg.name}: payloads over 8 bytes or multiplexed "
-                              "messages are not supported by the block decoder")
+        lay = _checked_layout(msg, checks[1], cmap.source)
         slots.append(Slot(key=key, channel=ch, layout=lay, sensors=tuple(idx),
                           signals=tuple(cmap.auxiliary[cols[c][0]].signals[cols[c][1]]
                                         for c in idx),

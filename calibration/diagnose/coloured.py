@@ -81,7 +81,7 @@ import scipy.special
 import scipy.stats
 from threadpoolctl import threadpool_limits
 
-from calibration.diagnose.linmodel import FTest, LinModel
+from calibration.diagnose.linmodel import FTest, LinModel, projected_whitener
 from calibration.residuals import fit_gauss_markov
 
 __all__ = ["BLOCK_S", "MAX_BLOCKS", "BlockNoise", "GlsModel", "NoiseSet", "block_corr",
@@ -96,7 +96,6 @@ TAU_GRID = 12
 RHO_PER_DECADE = 8
 """Grid density of ρ·n_b (Gauss-Markov variance over the white variance of a block mean),
 from 1e-4 to 1e5, plus ρ = 0."""
-_RANK_TOL = 1e-6
 
 
 def needs_coloured(y: np.ndarray, fs: float) -> bool:
@@ -393,18 +392,10 @@ class GlsModel:
         from χ²_r.
         """
         Z = np.asarray(Z, float).reshape(self.y.size, -1)
-        G = Z.T @ Z if gram is None else gram
-        scale = np.sqrt(np.diag(G)).copy()
-        scale[scale == 0] = 1.0
-        Q = self.lm.Q
-        A = (Q.T @ Z) / scale
-        Gp = G / np.outer(scale, scale) - A.T @ A
-        lam, V = np.linalg.eigh(Gp)
-        keep = lam > _RANK_TOL**2
-        r = int(keep.sum())
+        Z, scale, A, W = projected_whitener(Z, self.lm.Q, gram)   # W: (p, r)
+        r = W.shape[1]
         if r == 0:
             return FTest(0, 0.0, 0.0, 1.0, 0.0, np.zeros((self.y.size, 0)))
-        W = V[:, keep] / np.sqrt(lam[keep])                       # (p, r)
         c = W.T @ ((Z.T @ self.lm.e) / scale)                     # Uᵀe
         Ubar = (self.noise.means(Z) / scale - self._Qbar @ A) @ W  # block means of U
         k = self.lm.k

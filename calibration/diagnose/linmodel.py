@@ -21,7 +21,7 @@ import numpy as np
 import scipy.special
 import scipy.stats
 
-__all__ = ["FTest", "LinModel"]
+__all__ = ["FTest", "LinModel", "projected_whitener"]
 
 _RANK_TOL = 1e-6
 
@@ -61,6 +61,32 @@ def _log_sf(F: float, r: int, d2: int) -> float:
         return v
     x = r * F
     return float(-x / 2 + (r / 2 - 1) * np.log(x / 2) - scipy.special.gammaln(r / 2))
+
+
+def projected_whitener(Z: np.ndarray, Q: np.ndarray, gram: np.ndarray | None = None
+                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """What a nested test of adding ``Z`` to the model spanned by ``Q`` needs, without
+    forming the projected regressors.
+
+    With ``s`` the column norms of ``Z`` and ``A = Qᵀ·Z/s``, the Gram matrix of the
+    projected, scaled regressors is ``G/(s·sᵀ) − AᵀA = V·diag(λ)·Vᵀ``; ``W = V_k/√λ_k`` over
+    the eigenvalues above the rank tolerance, so ``U = (I − QQᵀ)·(Z/s)·W`` is orthonormal
+    (N, r) and ``Uᵀe = Wᵀ·(Zᵀe/s)`` for any ``e`` orthogonal to ``Q``.
+
+    Returns
+    -------
+    Z : ndarray, shape (N, p)
+    scale : ndarray, shape (p,)
+    A : ndarray, shape (k, p)
+    W : ndarray, shape (p, r)
+    """
+    G = Z.T @ Z if gram is None else gram
+    scale = np.sqrt(np.diag(G)).copy()
+    scale[scale == 0] = 1.0
+    A = (Q.T @ Z) / scale
+    lam, V = np.linalg.eigh(G / np.outer(scale, scale) - A.T @ A)
+    keep = lam > _RANK_TOL**2
+    return Z, scale, A, V[:, keep] / np.sqrt(lam[keep])
 
 
 class LinModel:
@@ -116,17 +142,11 @@ class LinModel:
         share ``Z``) are formed: the projected regressors never are.
         """
         Z = np.asarray(Z, float).reshape(self.y.size, -1)
-        G = Z.T @ Z if gram is None else gram
-        scale = np.sqrt(np.diag(G)).copy()
-        scale[scale == 0] = 1.0
-        A = (self.Q.T @ Z) / scale
-        Gp = G / np.outer(scale, scale) - A.T @ A
-        lam, V = np.linalg.eigh(Gp)
-        keep = lam > _RANK_TOL**2
-        r = int(keep.sum())
+        Z, scale, _, W = projected_whitener(Z, self.Q, gram)
+        r = W.shape[1]
         if r == 0:
             return FTest(0, 0.0, 0.0, 1.0, 0.0, np.zeros((self.y.size, 0)))
-        c = V[:, keep].T @ ((Z.T @ self.e) / scale) / np.sqrt(lam[keep])
+        c = W.T @ ((Z.T @ self.e) / scale)
         ss = float(c @ c)
         dof = self.y.size - self.k - r
         rss1 = max(self.rss - ss, 1e-300)
