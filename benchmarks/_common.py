@@ -18,8 +18,8 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["RESULTS", "ROOT", "header", "load_average", "machine", "spread", "timings",
-           "write_results"]
+__all__ = ["RESULTS", "ROOT", "header", "load_average", "machine", "spread", "timed",
+           "timings", "write_results"]
 
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "benchmarks" / "results"
@@ -57,6 +57,11 @@ def timings(fn: Any, repeats: int) -> list[float]:
         fn()
         ts.append(time.perf_counter() - t0)
     return ts
+
+
+def timed(fn: Any, repeats: int) -> dict[str, float]:
+    """min / median / max wall time (s) of ``repeats`` calls after one warm-up."""
+    return spread(timings(fn, repeats))
 
 
 def header(benchmark: str, **extra: Any) -> dict[str, Any]:

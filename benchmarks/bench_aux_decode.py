@@ -22,7 +22,7 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
-from _common import ROOT, header, spread, timings, write_results
+from _common import ROOT, header, timed, write_results
 
 sys.path.insert(0, str(ROOT / "tests" / "fdi"))
 
@@ -35,11 +35,6 @@ from replay.effect_inputs import map_effect_inputs
 from replay.flight_data import AuxChannels
 from replay.frames import load_dbc
 from replay.logio import read_frames, write_flight_log
-
-
-def _times(fn, repeats: int) -> dict[str, float]:
-    """min / median / max wall time (s) over ``repeats`` calls after one warm-up."""
-    return spread(timings(fn, repeats))
 
 
 def main() -> None:
@@ -71,9 +66,9 @@ def main() -> None:
     held = dec(with_aux).aux
     res: dict = header("aux_decode", samples=int(fl.t.size), sensors=int(fl.n),
                        frames=len(frames), aux_channels=len(chans), repeats=a.repeats)
-    res["decode_plain_s"] = _times(lambda: dec(plain), a.repeats)
-    res["decode_with_aux_s"] = _times(lambda: dec(with_aux), a.repeats)
-    res["map_effect_inputs_s"] = _times(lambda: map_effect_inputs(with_aux, held), a.repeats)
+    res["decode_plain_s"] = timed(lambda: dec(plain), a.repeats)
+    res["decode_with_aux_s"] = timed(lambda: dec(with_aux), a.repeats)
+    res["map_effect_inputs_s"] = timed(lambda: map_effect_inputs(with_aux, held), a.repeats)
     base = res["decode_plain_s"]["median"]
     res["ratio_decode_with_aux_to_plain"] = res["decode_with_aux_s"]["median"] / base
     res["ratio_inputs_to_plain_decode"] = res["map_effect_inputs_s"]["median"] / base

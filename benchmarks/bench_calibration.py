@@ -15,20 +15,15 @@ from __future__ import annotations
 import argparse
 
 import numpy as np
-from _common import RESULTS, header, spread, timings, write_results
+from _common import RESULTS, header, timed, write_results
 
 from calibration.calibrate import calibrate
 from calibration.presets import preset
 from calibration.simulate import simulate_session
 
 
-def _times(fn, repeats: int) -> dict[str, float]:
-    """min / median / max wall time (s) over ``repeats`` calls after one warm-up."""
-    return spread(timings(fn, repeats))
-
-
 def _median_time(fn, repeats: int) -> float:
-    return _times(fn, repeats)["median"]
+    return timed(fn, repeats)["median"]
 
 
 def _stage_times(s, repeats: int) -> dict[str, dict[str, float]]:
@@ -50,11 +45,11 @@ def _stage_times(s, repeats: int) -> dict[str, dict[str, float]]:
                                res.raw, st, sl, p.sample_rate_hz, "auto", fit.theta_turns,
                                fit.op_turns)
 
-    return {"1 problem": _times(lambda: gyro_problem(s), repeats),
-            "2 rate test": _times(lambda: gyro_rate_test(p), repeats),
-            "3 offsets": _times(lambda: fit_offsets(p, rt), repeats),
-            "4 residuals": _times(lambda: fit_residuals(p, rt, fit), repeats),
-            "5 uncertainty (auto)": _times(unc, repeats)}
+    return {"1 problem": timed(lambda: gyro_problem(s), repeats),
+            "2 rate test": timed(lambda: gyro_rate_test(p), repeats),
+            "3 offsets": timed(lambda: fit_offsets(p, rt), repeats),
+            "4 residuals": timed(lambda: fit_residuals(p, rt, fit), repeats),
+            "5 uncertainty (auto)": timed(unc, repeats)}
 
 
 def _fmt(t: dict[str, float]) -> str:
@@ -82,10 +77,10 @@ def _run(args: argparse.Namespace) -> int:
     wt, we, _ = s.inputs()
     design = np.column_stack([wt + we, np.ones(raw.shape[0])])
     r = args.repeats
-    full = _times(lambda: calibrate(s), r)
+    full = timed(lambda: calibrate(s), r)
     stages = _stage_times(s, r)
     fs_ = simulate_ferraris(imucal_like_truth(0), seed=0)
-    ferraris = _times(lambda: ferraris_calibrate(fs_), r)
+    ferraris = timed(lambda: ferraris_calibrate(fs_), r)
     t_full = full["median"]
     t_noallan = _median_time(lambda: calibrate(s, allan=False), r)
     t_nodenoise = _median_time(lambda: calibrate(s, allan=False, denoise=False), r)

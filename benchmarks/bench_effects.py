@@ -15,7 +15,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from _common import ROOT, header, spread, timings, write_results
+from _common import ROOT, header, timed, write_results
 
 sys.path.insert(0, str(ROOT / "tests" / "fdi"))
 
@@ -25,11 +25,6 @@ from fdi.effects import Compensator
 from fdi.effects_monitor import CompensatedMonitor
 from fdi.monitor import Monitor
 from replay.effect_inputs import flight_effect_inputs
-
-
-def _times(fn, repeats: int) -> dict[str, float]:
-    """min / median / max wall time (s) over ``repeats`` calls after one warm-up."""
-    return spread(timings(fn, repeats))
 
 
 def main() -> None:
@@ -44,9 +39,9 @@ def main() -> None:
     comp = Compensator(cal, available=avail)
     res: dict = header("effects", samples=int(fl.t.size), sensors=int(fl.n),
                        terms_applied=len(comp.applied), repeats=a.repeats)
-    res["monitor_run_s"] = _times(lambda: Monitor(cal).run(fl.t, fl.raw, fl.valid), a.repeats)
-    res["compensator_block_s"] = _times(lambda: comp.block(fl.raw, force), a.repeats)
-    res["compensated_run_s"] = _times(
+    res["monitor_run_s"] = timed(lambda: Monitor(cal).run(fl.t, fl.raw, fl.valid), a.repeats)
+    res["compensator_block_s"] = timed(lambda: comp.block(fl.raw, force), a.repeats)
+    res["compensated_run_s"] = timed(
         lambda: CompensatedMonitor(Monitor(cal), comp).run(fl.t, fl.raw, fl.valid,
                                                              force=force), a.repeats)
     k = min(a.step_samples, fl.t.size)
@@ -67,9 +62,9 @@ def main() -> None:
         return run
 
     res["monitor_step_us"] = {q: v / k * 1e6 for q, v in
-                              _times(stepper(False), a.repeats).items()}
+                              timed(stepper(False), a.repeats).items()}
     res["compensated_step_us"] = {q: v / k * 1e6 for q, v in
-                                  _times(stepper(True), a.repeats).items()}
+                                  timed(stepper(True), a.repeats).items()}
     base = res["monitor_run_s"]["median"]
     res["ratio_block_to_monitor_run"] = res["compensator_block_s"]["median"] / base
     res["ratio_compensated_to_monitor_run"] = res["compensated_run_s"]["median"] / base
