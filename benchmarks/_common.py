@@ -18,8 +18,8 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["RESULTS", "ROOT", "header", "load_average", "machine", "spread", "timed",
-           "timings", "write_results"]
+__all__ = ["RESULTS", "ROOT", "header", "load_average", "machine", "print_results",
+           "spread", "timed", "timings", "write_results"]
 
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "benchmarks" / "results"
@@ -70,6 +70,16 @@ def header(benchmark: str, **extra: Any) -> dict[str, Any]:
     return {"schema": SCHEMA, "benchmark": benchmark,
             "date_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
             "load_average": load_average(), "machine": machine(), **extra}
+
+
+_HEADER_KEYS = ("schema", "benchmark", "date_utc", "load_average", "machine")
+
+
+def print_results(results: dict[str, Any]) -> None:
+    """Print every figure of ``results`` but the header's, one ``key: value`` a line."""
+    for key, v in results.items():
+        if key not in _HEADER_KEYS:
+            print(f"{key}: {v}")
 
 
 def write_results(results: dict[str, Any], path: str | Path | None = None) -> Path:

@@ -22,7 +22,7 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
-from _common import ROOT, header, timed, write_results
+from _common import ROOT, header, print_results, timed, write_results
 
 sys.path.insert(0, str(ROOT / "tests" / "fdi"))
 
@@ -72,9 +72,7 @@ def main() -> None:
     base = res["decode_plain_s"]["median"]
     res["ratio_decode_with_aux_to_plain"] = res["decode_with_aux_s"]["median"] / base
     res["ratio_inputs_to_plain_decode"] = res["map_effect_inputs_s"]["median"] / base
-    for key, v in res.items():
-        if key not in ("schema", "benchmark", "date_utc", "load_average", "machine"):
-            print(f"{key}: {v}")
+    print_results(res)
     write_results(res)
 
 

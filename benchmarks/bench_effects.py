@@ -15,7 +15,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from _common import ROOT, header, timed, write_results
+from _common import ROOT, header, print_results, timed, write_results
 
 sys.path.insert(0, str(ROOT / "tests" / "fdi"))
 
@@ -70,9 +70,7 @@ def main() -> None:
     res["ratio_compensated_to_monitor_run"] = res["compensated_run_s"]["median"] / base
     res["ratio_step"] = (res["compensated_step_us"]["median"]
                          / res["monitor_step_us"]["median"])
-    for key, v in res.items():
-        if key not in ("schema", "benchmark", "date_utc", "load_average", "machine"):
-            print(f"{key}: {v}")
+    print_results(res)
     write_results(res)
 
 
