@@ -60,7 +60,9 @@ session in five); τc 300 s (half the record): biases 5.0 → 1.7 and random wal
 On held-out seeds 1000-1099 (1 °/h, τc 100 s) the term is kept in 100 of 100 sessions and
 sd(z) is 1.03-1.17 for the biases, but 3-4 of 100 biases lie beyond 3σ: in about 7 sessions
 the fitted τc is 20-53 s and the bias sd factor 1.4-2.1 instead of ≈ 3.5
-(``tests/calibration/test_calibrate_coloured_holdout.py``).
+(``tests/calibration/test_calibrate_coloured_holdout.py``). These tails are not Student-t
+with degrees of freedom from the fit's information matrix
+(``tests/calibration/test_coloured_tails.py``).
 cone-paper accelerometers, 0.1 mg, τc 100 s (pooled over sensors): 2.6-3.5 → 1.09-1.15.
 The Earth-rate fit still uses the white per-sample covariance.
 

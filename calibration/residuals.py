@@ -201,12 +201,18 @@ class GaussMarkovFit:
         Its correlation time (s); inf when ``bias_var`` is 0.
     lr : float
         Likelihood-ratio statistic ``2·Δ(−log L)`` of the Gauss-Markov term over white noise.
+    cov_log : ndarray, shape (2, 2), or None
+        Covariance of ``(log σ_b², log τc)``: the inverse of the observed Fisher
+        information (Hessian of the Whittle ``−log L`` at the fit, central differences,
+        ``q_i`` held fixed). None when the term is not kept; ``inf`` entries when the
+        Hessian is not positive definite (the likelihood does not bound the pair).
     """
 
     white_var: np.ndarray
     bias_var: float
     tau_c: float
     lr: float
+    cov_log: np.ndarray | None = None
 
 
 def fit_gauss_markov(x: np.ndarray, fs: float) -> GaussMarkovFit:
@@ -251,18 +257,41 @@ def fit_gauss_markov(x: np.ndarray, fs: float) -> GaussMarkovFit:
     nll0 = float(np.sum(cnt[:, None] * (np.log(q)[None, :] + Pm / q[None, :])))
     best = (nll0, 0.0, np.inf)
     lo, up = np.log(q.min()) - 30.0, np.log(q.max()) + 10.0
-    for tc in np.geomspace(1.0, 4.0 * N / fs, GM_TAU_GRID):
+
+    def nll_tc(lv: float, tc: float) -> float:
+        """Binned Whittle −log L at log σ_b² and τc."""
         phi = np.exp(-1.0 / (fs * tc))
         g = (1 - phi**2) / np.abs(1 - phi * np.exp(-2j * np.pi * fm / fs)) ** 2
+        S = q[None, :] + np.exp(lv) * g[:, None]
+        return float(np.sum(cnt[:, None] * (np.log(S) + Pm / S)))
 
-        def nll(lv: float, g: np.ndarray = g) -> float:
-            S = q[None, :] + np.exp(lv) * g[:, None]
-            return float(np.sum(cnt[:, None] * (np.log(S) + Pm / S)))
-
-        r = scipy.optimize.minimize_scalar(nll, bounds=(lo, up), method="bounded")
+    for tc in np.geomspace(1.0, 4.0 * N / fs, GM_TAU_GRID):
+        r = scipy.optimize.minimize_scalar(lambda lv, tc=tc: nll_tc(lv, tc),
+                                           bounds=(lo, up), method="bounded")
         if r.fun < best[0]:
             best = (float(r.fun), float(np.exp(r.x)), float(tc))
     lr = 2.0 * (nll0 - best[0])
     if lr <= GM_LR_THRESHOLD or best[1] <= 0:
         return GaussMarkovFit(q, 0.0, np.inf, max(lr, 0.0))
-    return GaussMarkovFit(q, best[1], best[2], lr)
+    cov = _log_param_cov(lambda lv, lt: nll_tc(lv, float(np.exp(lt))), np.log(best[1]),
+                         np.log(best[2]))
+    return GaussMarkovFit(q, best[1], best[2], lr, cov)
+
+
+_HESS_STEP = 0.05
+"""Central-difference step (in log σ_b² and log τc) of the observed information."""
+
+
+def _log_param_cov(nll: Any, lv: float, lt: float) -> np.ndarray:
+    """Inverse Hessian of ``nll(lv, lt)`` at a point (central differences); ``inf`` when the
+    Hessian is not positive definite."""
+    h = _HESS_STEP
+    f0 = nll(lv, lt)
+    hvv = (nll(lv + h, lt) - 2 * f0 + nll(lv - h, lt)) / h**2
+    htt = (nll(lv, lt + h) - 2 * f0 + nll(lv, lt - h)) / h**2
+    hvt = (nll(lv + h, lt + h) - nll(lv + h, lt - h) - nll(lv - h, lt + h)
+           + nll(lv - h, lt - h)) / (4 * h**2)
+    H = np.array([[hvv, hvt], [hvt, htt]])
+    if not (np.all(np.isfinite(H)) and hvv > 0 and np.linalg.det(H) > 0):
+        return np.full((2, 2), np.inf)
+    return np.linalg.inv(H)

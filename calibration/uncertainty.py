@@ -122,6 +122,11 @@ class ColouredNoise:
     likelihood_ratio : float
     extra_cov : tuple of (ndarray, shape (n, k, k), or None)
         Per operator, the coloured part of each sensor's covariance (raw units).
+    cov_log : ndarray, shape (2, 2), or None
+        Observed-information covariance of the fitted ``(log σ_b², log τc)``
+        (:attr:`calibration.residuals.GaussMarkovFit.cov_log`); None when not applied.
+        Not used for the σ: on a 576 s session it understates the spread of the fit about
+        2× (see ``tests/calibration/test_coloured_tails.py``).
     """
 
     applied: bool
@@ -129,6 +134,7 @@ class ColouredNoise:
     correlation_s: float | None
     likelihood_ratio: float
     extra_cov: tuple[np.ndarray | None, ...]
+    cov_log: np.ndarray | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """``{"bias_instability", "correlation_s", "likelihood_ratio", "applied"}``."""
@@ -162,7 +168,7 @@ def coloured_noise(resid_si: np.ndarray, sf: np.ndarray, fs: float, seg_start: n
     return ColouredNoise(
         applied=bool(applied), bias_instability=float(np.sqrt(fit.bias_var)),
         correlation_s=float(fit.tau_c) if np.isfinite(fit.tau_c) else None,
-        likelihood_ratio=float(fit.lr), extra_cov=tuple(outs))
+        likelihood_ratio=float(fit.lr), extra_cov=tuple(outs), cov_log=fit.cov_log)
 
 
 def segment_times(t: np.ndarray, seg: np.ndarray, cnt_seg: np.ndarray,
