@@ -24,6 +24,8 @@ from fdi.calfile import (
     calibration_from_dict,
     load_calibration,
 )
+from fdi.effects import Compensator
+from fdi.effects_monitor import CompensatedMonitor
 from fdi.errors import CalibrationError, ConfigError, FileFormatError, ReplayError, RimuError
 from fdi.geometry import Configuration, cone6, load_configuration, tetrad, triad
 from fdi.monitor import Monitor
@@ -37,6 +39,8 @@ __all__ = [
     "BlockResult",
     "Calibration",
     "CalibrationError",
+    "CompensatedMonitor",
+    "Compensator",
     "ConfigError",
     "Configuration",
     "Event",
