@@ -105,7 +105,6 @@ def test_simulate_calibrate_simulate_replay_with_the_written_map(chain, tmp_path
     cal = load_calibration(d / "cal.json")
     z_on, comp = _z(cal, log, cmap)
     assert len(comp.applied) == 8
-    print("Z", len(comp.applied), z_on)
     assert np.all(np.abs(z_on) < 3), z_on
     # the premise: without the auxiliary tables, or with --no-effects, the bias shows
     from replay.channel_map import default_channel_map
@@ -116,7 +115,6 @@ def test_simulate_calibrate_simulate_replay_with_the_written_map(chain, tmp_path
     assert {a.term.name for a in comp0.applied} == set()
     assert np.max(np.abs(z_plain)) > 10, z_plain
     z_off, _ = _z(cal, log, cmap, effects=False)
-    print("Z", z_plain, z_off)
     assert np.max(np.abs(z_off)) > 10, z_off
 
 
