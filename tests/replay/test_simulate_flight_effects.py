@@ -206,3 +206,35 @@ def test_temperature_profile_parse():
         parse_temperature_profile("20:40:0", 9.0)
     with pytest.raises(ConfigError, match="expected START:END"):
         parse_temperature_profile("20", 9.0)
+
+
+def test_accelerometers_of_the_calibration_set_the_triad_noise():
+    """A calibration with accelerometers (cone-paper) needs no --accel-noise: the triad gets
+    their RMS per-sample sd; the raw outputs gain exactly c/SF on the terms' sensors."""
+    import dataclasses
+
+    from calibration.presets import preset
+    from fdi.calfile import EffectTerm
+    from replay.flight import simulate_flight
+    from replay.flight_effects import add_effects, plan_effects
+
+    cal = preset("cone-paper").truth
+    term = EffectTerm("g_sensitivity", "gyro", 1, 300.0, 10.0, "deg/h per g",
+                      ("specific_force",))
+    cal = dataclasses.replace(cal, effects=(term,))
+    plan = plan_effects(cal, "gyro", duration_s=5.0, sample_rate_hz=200.0)
+    sd = np.sqrt(np.diag(cal.kind("accel").noise_covariance).mean() * 200.0
+                 / cal.sample_rate_hz)
+    assert plan.accel_noise_mps2 == pytest.approx(sd, rel=1e-12) and plan.temperature is None
+    fl = simulate_flight(cal, 5.0, seed=4, sample_rate_hz=200.0)
+    fe = add_effects(fl, plan, seed=4)
+    d = fe.raw - fl.raw
+    assert np.all(d[:, [0, 2, 3, 4, 5]] == 0)
+    f_meas = fe.aux.values                                  # triad = true force + noise
+    h = np.asarray(fl.truth["true_parameters"]["axis"])[1]
+    sf = fl.truth["true_parameters"]["scale_factor"][1]
+    from fdi.units import DPH, G0
+
+    approx = 300.0 * DPH * (f_meas @ h) / G0 / sf           # from the noisy triad
+    assert np.abs(d[:, 1] - approx).max() < 300.0 * DPH * 5 * sd / G0 / sf   # 5 sd of the triad noise
+    assert fe.aux.names == ("imu.x", "imu.y", "imu.z")
