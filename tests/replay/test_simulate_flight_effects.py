@@ -236,5 +236,5 @@ def test_accelerometers_of_the_calibration_set_the_triad_noise():
     from fdi.units import DPH, G0
 
     approx = 300.0 * DPH * (f_meas @ h) / G0 / sf           # from the noisy triad
-    assert np.abs(d[:, 1] - approx).max() < 300.0 * DPH * 5 * sd / G0 / sf   # 5 sd of the triad noise
+    assert np.abs(d[:, 1] - approx).max() < 300.0 * DPH * 5 * sd / G0 / sf   # 5 sd (triad)
     assert fe.aux.names == ("imu.x", "imu.y", "imu.z")
