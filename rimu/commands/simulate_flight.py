@@ -157,6 +157,9 @@ def run(args: argparse.Namespace) -> int:
         print(plan.summary(flight.sensor_names))
     if is_log:
         _say_files(out, flight, args)
+    elif plan is not None:
+        print(f"  {out}: the flight folder, with the auxiliary channels in "
+              f"{out / 'aux.csv'}; monitor it with: rimu monitor-file {out} --cal {args.cal}")
     return 0
 
 

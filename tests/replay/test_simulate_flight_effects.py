@@ -144,6 +144,38 @@ def test_compensated_parity_bias_is_honest_over_flight_seeds(chain, tmp_path, ca
     assert np.sqrt(np.mean(z_off ** 2)) > 10 and np.sum(np.abs(z_off) > 3) >= 15, z_off
 
 
+def test_flight_folder_with_effects_through_monitor_file(chain, tmp_path, capsys):
+    """``--out DIR``: the inputs go to the folder's aux.csv; ``monitor-file`` applies every
+    gyro term from them, no sample lacks an input, and the residual z is within 3."""
+    from replay.effect_inputs import flight_effect_inputs
+    from replay.flight import load_flight_dir
+
+    d = chain
+    out = _run(capsys, "simulate", "flight", "--cal", d / "cal.json", "--duration", DUR,
+               "--seed", 5, "--out", tmp_path / "F", "--effects-from-cal", "--accel-noise",
+               0.05)
+    assert f"monitor it with: rimu monitor-file {tmp_path / 'F'}" in out
+    mout = _run(capsys, "monitor-file", tmp_path / "F", "--cal", d / "cal.json", "--report",
+                tmp_path / "r.json")
+    assert "not applied" not in mout.splitlines()[0]
+    eff = json.loads((tmp_path / "r.json").read_text())["effects"]
+    assert len(eff["applied"]) == 8
+    assert all(m["samples"] == 0 for m in eff["samples_without_input"])
+    cal = load_calibration(d / "cal.json")
+    fl = load_flight_dir(tmp_path / "F")
+    force, temp, avail = flight_effect_inputs(fl)
+    g = cal.gyro
+    y = fl.raw * g.scale_factors - g.biases - Compensator(cal, available=avail).block(
+        fl.raw, force, temp)
+    w = fl.omega_true.mean(axis=0)
+    var = np.array([c.bias_sd ** 2 + w @ c.input_error_cov @ w for c in g.sensors])
+    V = parity_matrix(g.H)
+    P = V.T @ V
+    sd = np.sqrt(np.diag(P @ (np.diag(var) + g.noise_covariance / len(fl.t)) @ P.T))
+    z = (y @ P.T).mean(axis=0) / sd
+    assert np.all(np.abs(z) < 3), z
+
+
 def test_impossible_requests_are_refused(chain, tmp_path, capsys):
     import dataclasses
 
