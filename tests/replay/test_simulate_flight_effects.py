@@ -100,8 +100,19 @@ def test_simulate_calibrate_simulate_replay_with_the_written_map(chain, tmp_path
     applied = {(a["name"], a["sensor"]) for a in rep["effects"]["applied"]}
     assert applied == {(n, i) for n in ("g_sensitivity", "temperature") for i in range(1, 5)}
     assert rep["frames"]["rejected"] == {} and rep["auxiliary"]["frames"]["lost_frames"] == 0
+    from scipy.stats import poisson
+
+    from fdi.monitor import Monitor
 
     cal = load_calibration(d / "cal.json")
+    allowed = int(poisson.isf(1e-3, Monitor(cal).thresholds.false_alarms_per_hour * DUR
+                              / 3600))
+    assert sum(e["type"] == "detected" for e in rep["events"]) <= allowed
+    nout = _run(capsys, "replay", log, "--cal", d / "cal.json", "--map", mp, "--no-progress",
+                "--no-effects")
+    assert nout.splitlines()[0].startswith("compensating: nothing (--no-effects: 8 effect "
+                                           "term(s) switched off")
+
     z_on, comp = _z(cal, log, cmap)
     assert len(comp.applied) == 8
     assert np.all(np.abs(z_on) < 3), z_on
