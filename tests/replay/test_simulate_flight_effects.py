@@ -22,7 +22,7 @@ from fdi.calfile import load_calibration
 from fdi.effects import Compensator
 from fdi.errors import ConfigError
 from fdi.parity import parity_matrix
-from replay.channel_map import load_channel_map
+from replay.channel_map import channel_map_toml, load_channel_map
 from replay.effect_inputs import map_available, map_effect_inputs
 from replay.logio import read_log, truth_path
 from rimu.cli import main
@@ -84,6 +84,7 @@ def test_simulate_calibrate_simulate_replay_with_the_written_map(chain, tmp_path
     assert len(truth["terms"]) == 8 and truth["accel_noise_mps2"] == 0.05
 
     cmap = load_channel_map(mp)                               # the written map round-trips
+    assert channel_map_toml(cmap) == mp.read_text()
     assert [(a.name, a.quantity, a.message) for a in cmap.auxiliary] == [
         ("accel:imu.x", "specific_force", "RIMU_ACCEL_01"),
         ("accel:imu.y", "specific_force", "RIMU_ACCEL_02"),
