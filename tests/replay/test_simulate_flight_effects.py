@@ -282,3 +282,12 @@ def test_accelerometers_of_the_calibration_set_the_triad_noise():
     approx = 300.0 * DPH * (f_meas @ h) / G0 / sf           # from the noisy triad
     assert np.abs(d[:, 1] - approx).max() < 300.0 * DPH * 5 * sd / G0 / sf   # 5 sd (triad)
     assert fe.aux.names == ("imu.x", "imu.y", "imu.z")
+    # a stuck sensor keeps its held value: the effect is not added on top
+    from replay.faults import parse_fault
+
+    stuck = simulate_flight(cal, 5.0, seed=4, sample_rate_hz=200.0,
+                            faults=[parse_fault("stuck:2::2:1", cal, kind="gyro")])
+    se = add_effects(stuck, plan, seed=4)
+    w = (stuck.t >= 2.0) & (stuck.t < 3.0)
+    assert np.all(se.raw[w, 1] == stuck.raw[w, 1]) and np.ptp(se.raw[w, 1]) == 0
+    assert np.all(se.raw[~w, 1] != stuck.raw[~w, 1])
