@@ -130,14 +130,18 @@ def run(args: argparse.Namespace) -> int:
                           f"{args.duration * fs:.3g} samples; at most {MAX_SAMPLES:.0e} are "
                           "simulated in memory at once")
     truth = _load_truth(args.truth) if args.truth else None
+    plan = _effect_plan(cal, args, fs) if args.effects_from_cal else None
+    if is_log:
+        _check_frame_budget(out, cal.kind(args.kind).n, plan, fs, args.kind)
     unit = DPH if args.kind == "gyro" else MG
     flight = simulate_flight(cal, args.duration, seed=args.seed, faults=faults, truth=truth,
                              sample_rate_hz=args.rate, max_rate_dps=args.max_rate, kind=args.kind,
                              bias_instability=args.bias_instability * unit,
                              bias_correlation_s=args.bias_corr)
-    plan = None
-    if args.effects_from_cal:
-        flight, plan = _with_effects(flight, cal, args)
+    if plan is not None:
+        from replay.flight_effects import add_effects
+
+        flight = add_effects(flight, plan, seed=args.seed)
     if is_log:
         try:
             from replay.logio import write_flight_log
@@ -163,17 +167,31 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _with_effects(flight, cal, args):
-    """The flight with the calibration's effect terms and their input channels."""
-    from replay.flight_effects import add_effects, parse_temperature_profile, plan_effects
+def _effect_plan(cal, args, fs: float):
+    """The calibration's effect terms the flight carries and their input channels."""
+    from replay.flight_effects import parse_temperature_profile, plan_effects
 
     prof = (parse_temperature_profile(args.temperature, args.duration)
             if args.temperature is not None else None)
-    plan = plan_effects(cal, args.kind, duration_s=args.duration,
-                        sample_rate_hz=flight.sample_rate_hz, temperature=prof,
-                        accel_noise_mps2=args.accel_noise,
+    return plan_effects(cal, args.kind, duration_s=args.duration, sample_rate_hz=fs,
+                        temperature=prof, accel_noise_mps2=args.accel_noise,
                         temperature_noise_degC=args.temperature_noise)
-    return add_effects(flight, plan, seed=args.seed), plan
+
+
+def _check_frame_budget(out: Path, n: int, plan, fs: float, kind: str) -> None:
+    """Refuse before simulating when one sample's frames do not fit in one period
+    (``write_flight_log``'s 130 µs per frame plus 60 µs jitter)."""
+    gap, jitter = 130e-6, 60e-6
+    m = 0
+    if plan is not None:
+        m += 3 if plan.accel_noise_mps2 is not None and kind == "gyro" else 0
+        m += 1 if plan.temperature is not None else 0
+    if (n + m) * gap + jitter >= 1.0 / fs:
+        most = int((1.0 / fs - jitter) / gap)
+        raise ConfigError(f"{out}: at {fs:g} Hz one sample period holds at most {most} CAN "
+                          f"frames of {gap * 1e6:.0f} us; this log needs {n} {kind} "
+                          + (f"+ {m} auxiliary " if m else "") + "frames per sample: lower "
+                          "--rate or write a flight folder")
 
 
 def _write_map(cal, kind: str, aux, path: Path) -> None:

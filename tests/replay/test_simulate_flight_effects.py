@@ -214,6 +214,11 @@ def test_impossible_requests_are_refused(chain, tmp_path, capsys):
     err = refused(*base, "--cal", d / "cal.json", "--effects-from-cal", "--truth",
                   d / "S" / "truth.json")
     assert "give one or the other" in err, err
+    err = refused(*base, "--cal", d / "cal.json", "--effects-from-cal", "--accel-noise", 0.05,
+                  "--rate", 1000)
+    assert err.endswith("f.blf: at 1000 Hz one sample period holds at most 7 CAN frames of "
+                        "130 us; this log needs 4 gyro + 4 auxiliary frames per sample: lower "
+                        "--rate or write a flight folder"), err
     out = _run(capsys, *base, "--cal", d / "cal.json", "--effects-from-cal",
                "--accel-noise", 0.05, "--temperature", "15:45:10")
     assert "RIMU_ACCEL_01..03" in out and (tmp_path / "f.map.toml").is_file()
