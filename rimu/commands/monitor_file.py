@@ -55,13 +55,18 @@ def run(args: argparse.Namespace) -> int:
     thr, how = choice.thresholds, choice.to_dict()
     extra: dict = {"thresholds": how}
     if not args.no_time_offsets:
-        from calibration.inflight.timing import apply_time_offsets
+        from calibration.inflight.timing import apply_time_offsets, moved_aux_channels
 
         flight, shifted = apply_time_offsets(flight, cal)
         if shifted:
             extra["time_offsets_applied_ms"] = shifted
+            moved = moved_aux_channels(flight, shifted)
+            if moved:
+                extra["time_offsets_aux_moved"] = moved
             print("moved onto the reference's timing: " + ", ".join(
-                f"{g} {ms:+.3f} ms" for g, ms in shifted.items()))
+                f"{g} {ms:+.3f} ms" for g, ms in shifted.items())
+                + (f" (with {len(moved)} auxiliary channel(s): {', '.join(moved)})"
+                   if moved else ""))
     mon, force, temp = _compensated(Monitor(cal, thr, kind=flight.kind), cal, flight,
                                     enabled=not args.no_effects)
     if cal.effects:
