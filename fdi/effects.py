@@ -204,7 +204,8 @@ def _why_not(term: EffectTerm, kind: str, n: int,
              lacking: Mapping[str, str] | None = None) -> str | None:
     """None when ``term`` can be applied, else the reason."""
     if term.kind != kind:
-        return f"a {term.kind} term; this stream monitors {kind} sensors"
+        return (f"{'an accelerometer' if term.kind == 'accel' else 'a gyro'} term; this "
+                f"stream monitors {kind} sensors")
     if not 0 <= term.sensor < n:
         return f"sensor {term.sensor + 1} is not in the calibration's {n} sensors"
     if term.name in NOT_COMPENSABLE:

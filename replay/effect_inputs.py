@@ -55,6 +55,49 @@ def _triads(flight: Flight) -> dict[str, np.ndarray]:
             for g, c in cols.items() if all(a in c for a in _AXES)}
 
 
+def _flight_force(flight: Flight, groups: list[str]) -> np.ndarray | None:
+    """Specific force (N, n, 3) of each sensor from its IMU's accelerometer triad (the mean
+    of the triads for a sensor of no IMU with one); None without triads."""
+    tri = _triads(flight)
+    if not tri:
+        return None
+    if len(tri) == 1:
+        fallback = next(iter(tri.values()))
+    else:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)            # all-NaN samples
+            fallback = np.nanmean(np.stack(list(tri.values())), axis=0)
+    N, n = flight.raw.shape
+    force = np.empty((N, n, 3))
+    for i in range(n):
+        force[:, i] = tri.get(groups[i], fallback)
+    return force
+
+
+def _flight_temperature(flight: Flight, groups: list[str]
+                        ) -> tuple[np.ndarray | None, list[int]]:
+    """Temperature (N, n) of each sensor (NaN where invalid) and the sensors that have a
+    channel: its IMU's (or its own) channel, else the one channel of the flight unless that
+    is another IMU's."""
+    aux = flight.aux
+    if aux is None or "temperature" not in aux.kinds:
+        return None, []
+    N, n = flight.raw.shape
+    chans = [j for j, k in enumerate(aux.kinds) if k == "temperature"]
+    temperature = np.full((N, n), np.nan)
+    have = []
+    for i in range(n):
+        pick = [j for j in chans if groups[i] and groups[i] in (aux.imu[j], aux.names[j])]
+        pick = pick or [j for j in chans if aux.names[j] == flight.sensor_names[i]]
+        if not pick and len(chans) == 1 and not (groups[i] and aux.imu[chans[0]]):
+            pick = chans                    # the one channel, unless it is another IMU's
+        if pick:
+            j = pick[0]
+            temperature[:, i] = np.where(aux.valid[:, j], aux.values[:, j], np.nan)
+            have.append(i)
+    return temperature, have
+
+
 def flight_effect_inputs(flight: Flight) -> tuple[np.ndarray | None, np.ndarray | None,
                                                   dict[str, list[int]]]:
     """Specific force and temperature per monitored sensor, and who has them.
@@ -69,35 +112,12 @@ def flight_effect_inputs(flight: Flight) -> tuple[np.ndarray | None, np.ndarray 
         ``{"specific_force": [sensors], "temperature": [sensors]}`` (0-based) that have a
         channel (:class:`fdi.effects.Compensator`'s ``available``).
     """
-    N, n = flight.raw.shape
+    n = flight.raw.shape[1]
     groups = list(flight.imu) if flight.imu else [""] * n
-    avail: dict[str, list[int]] = {"specific_force": [], "temperature": []}
-    force = temperature = None
-    tri = _triads(flight)
-    if tri:
-        if len(tri) == 1:
-            fallback = next(iter(tri.values()))
-        else:
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore", RuntimeWarning)        # all-NaN samples
-                fallback = np.nanmean(np.stack(list(tri.values())), axis=0)
-        force = np.empty((N, n, 3))
-        for i in range(n):
-            force[:, i] = tri.get(groups[i], fallback)
-            avail["specific_force"].append(i)
-    aux = flight.aux
-    if aux is not None and "temperature" in aux.kinds:
-        chans = [j for j, k in enumerate(aux.kinds) if k == "temperature"]
-        temperature = np.full((N, n), np.nan)
-        for i in range(n):
-            pick = [j for j in chans if groups[i] and groups[i] in (aux.imu[j], aux.names[j])]
-            pick = pick or [j for j in chans if aux.names[j] == flight.sensor_names[i]]
-            if not pick and len(chans) == 1 and not (groups[i] and aux.imu[chans[0]]):
-                pick = chans                # the one channel, unless it is another IMU's
-            if pick:
-                j = pick[0]
-                temperature[:, i] = np.where(aux.valid[:, j], aux.values[:, j], np.nan)
-                avail["temperature"].append(i)
+    force = _flight_force(flight, groups)
+    temperature, with_temperature = _flight_temperature(flight, groups)
+    avail = {"specific_force": list(range(n)) if force is not None else [],
+             "temperature": with_temperature}
     return force, temperature, avail
 
 

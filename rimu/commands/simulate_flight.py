@@ -119,16 +119,7 @@ def run(args: argparse.Namespace) -> int:
     if args.truth:
         input_path(args.truth, "--truth")
     cal = load_calibration(args.cal)
-    faults = [parse_fault(s, cal, kind=args.kind) for s in args.fault]
-    for f in faults:
-        if not f.onset < args.duration:
-            raise ConfigError(f"--fault {f.spec}: onset {f.onset:g} s is not within the "
-                              f"flight (0 to {args.duration:g} s)")
-    fs = args.rate if args.rate is not None else cal.sample_rate_hz
-    if args.duration * fs > MAX_SAMPLES:
-        raise ConfigError(f"--duration {args.duration:g} s at {fs:g} Hz is "
-                          f"{args.duration * fs:.3g} samples; at most {MAX_SAMPLES:.0e} are "
-                          "simulated in memory at once")
+    faults, fs = _checked_request(args, cal)
     truth = _load_truth(args.truth) if args.truth else None
     plan = _effect_plan(cal, args, fs) if args.effects_from_cal else None
     if is_log:
@@ -165,6 +156,21 @@ def run(args: argparse.Namespace) -> int:
         print(f"  {out}: the flight folder, with the auxiliary channels in "
               f"{out / 'aux.csv'}; monitor it with: rimu monitor-file {out} --cal {args.cal}")
     return 0
+
+
+def _checked_request(args: argparse.Namespace, cal) -> tuple[list, float]:
+    """The faults (within the flight) and the sample rate (Hz), the flight's size bounded."""
+    faults = [parse_fault(s, cal, kind=args.kind) for s in args.fault]
+    for f in faults:
+        if not f.onset < args.duration:
+            raise ConfigError(f"--fault {f.spec}: onset {f.onset:g} s is not within the "
+                              f"flight (0 to {args.duration:g} s)")
+    fs = args.rate if args.rate is not None else cal.sample_rate_hz
+    if args.duration * fs > MAX_SAMPLES:
+        raise ConfigError(f"--duration {args.duration:g} s at {fs:g} Hz is "
+                          f"{args.duration * fs:.3g} samples; at most {MAX_SAMPLES:.0e} are "
+                          "simulated in memory at once")
+    return faults, fs
 
 
 def _effect_plan(cal, args, fs: float):
