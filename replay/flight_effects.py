@@ -44,6 +44,7 @@ from fdi.calfile import Calibration, EffectTerm
 from fdi.effects import COMPENSABLE, Compensator, term_correction
 from fdi.errors import ConfigError
 from replay.flight_data import AuxChannels, Flight
+from replay.imu_set import attitude_gravity
 
 __all__ = [
     "EffectPlan",
@@ -234,12 +235,6 @@ def plan_effects(cal: Calibration, kind: str, *, duration_s: float, sample_rate_
                       float(temperature_noise_degC))
 
 
-def _gravity(t: np.ndarray, omega: np.ndarray) -> np.ndarray:
-    from replay.imu_set import _attitude_gravity
-
-    return _attitude_gravity(t, omega)
-
-
 def add_effects(flight: Flight, plan: EffectPlan, *, seed: int) -> Flight:
     """The flight with ``plan``'s terms on its true sensors and the input channels.
 
@@ -266,7 +261,7 @@ def add_effects(flight: Flight, plan: EffectPlan, *, seed: int) -> Flight:
     N = t.shape[0]
     x = omega @ axis.T
     needs = {COMPENSABLE[tm.name][0] for tm in plan.terms}
-    force = (_gravity(t, omega) if "specific_force" in needs
+    force = (attitude_gravity(t, omega) if "specific_force" in needs
              or plan.accel_noise_mps2 is not None else None)
     temp = plan.temperature(t - t[0]) if plan.temperature is not None and N else None
     add = np.zeros_like(flight.raw)

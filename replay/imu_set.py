@@ -52,7 +52,8 @@ from fdi.units import G0
 from replay.flight_data import FLIGHT_TRUTH_SCHEMA, AuxChannels, Flight
 from replay.motion import body_rates
 
-__all__ = ["IMU_SET_MODEL", "ImuEffects", "ImuSetSpec", "simulate_imu_set", "skew"]
+__all__ = ["IMU_SET_MODEL", "ImuEffects", "ImuSetSpec", "attitude_gravity", "simulate_imu_set",
+           "skew"]
 
 IMU_SET_MODEL = "replay.imu_set/1"
 """Name of the sensor model in the truth record."""
@@ -191,7 +192,7 @@ def skew(v: np.ndarray) -> np.ndarray:
     return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
 
 
-def _attitude_gravity(t: np.ndarray, omega: np.ndarray) -> np.ndarray:
+def attitude_gravity(t: np.ndarray, omega: np.ndarray) -> np.ndarray:
     """Gravity reaction ``Rᵀ·(0, 0, g)`` in the body frame along the flight, shape (N, 3)."""
     dt = np.diff(t, prepend=t[0])
     q = Rotation.from_rotvec(omega * dt[:, None]).as_quat()
@@ -288,7 +289,7 @@ def simulate_imu_set(spec: ImuSetSpec) -> Flight:
     up = 4
     tf = np.arange(-round(pad * fs) * up, (N + round(pad * fs)) * up) / (fs * up)
     wf = body_rates(np.maximum(tf, 0.0), seed=spec.seed, max_rate_dps=spec.max_rate_dps)
-    grav = _attitude_gravity(tf, wf)
+    grav = attitude_gravity(tf, wf)
     lin = _smooth_noise(np.random.default_rng([int(spec.seed), 13]), tf.shape[0], fs * up,
                         spec.linear_accel)
     ff = grav + lin

@@ -14,7 +14,7 @@ from fdi.calfile import EffectTerm
 from fdi.units import DPS
 from replay.flight import simulate_flight
 from replay.flight_data import AuxChannels
-from replay.imu_set import _attitude_gravity
+from replay.imu_set import attitude_gravity
 from thresholds.synthetic import synthetic_calibration
 
 __all__ = [
@@ -59,7 +59,7 @@ def flight_with_effects(cal, seed, *, truth=None, duration_s=FLIGHT_S, effects=N
     fl = simulate_flight(cal, duration_s, seed=seed, truth=truth, max_rate_dps=max_rate_dps)
     g = truth.gyro
     s = fl.omega_true @ g.H.T
-    f = _attitude_gravity(fl.t, fl.omega_true)
+    f = attitude_gravity(fl.t, fl.omega_true)
     ctx = EffectContext(t=fl.t, duration_s=duration_s, table_rate=table_rate_dps * DPS,
                         f_along=f @ g.H.T)
     s2 = s.copy()
