@@ -48,6 +48,8 @@ def run(args: argparse.Namespace) -> int:
     check_compatible(cal, flight.n, flight.raw_unit, str(args.flight), kind=flight.kind,
                      names=flight.sensor_names)
     from fdi.monitor import Monitor
+    from replay.effect_inputs import flight_effect_inputs
+    from rimu.commands.replay import compensated, effects_extra
     from thresholds.select import select
 
     choice = select(cal, kind=flight.kind, thresholds_file=args.thresholds,
@@ -67,31 +69,18 @@ def run(args: argparse.Namespace) -> int:
                 f"{g} {ms:+.3f} ms" for g, ms in shifted.items())
                 + (f" (with {len(moved)} auxiliary channel(s): {', '.join(moved)})"
                    if moved else ""))
-    mon, force, temp = _compensated(Monitor(cal, thr, kind=flight.kind), cal, flight,
-                                    enabled=not args.no_effects)
-    if cal.effects:
-        print(mon.compensator.summary(flight.sensor_names))
+    force = temp = None
+    avail: dict = {}
+    if not args.no_effects and cal.effects:
+        force, temp, avail = flight_effect_inputs(flight)
+    mon = compensated(Monitor(cal, thr, kind=flight.kind), cal, flight.kind,
+                      enabled=not args.no_effects, available=avail,
+                      names=flight.sensor_names)
     result = mon.run(flight.t, flight.raw, flight.valid, force=force, temperature=temp)
-    if cal.effects:
-        extra["effects"] = mon.compensator.to_dict()     # with the missing-input counts
+    extra.update(effects_extra(mon, cal))               # with the missing-input counts
     report = build_report(result, flight, cal, extra=extra)
     print(format_report(report, max_events=args.max_events))
     if args.report:
         atomic_write_text(args.report, json.dumps(report, indent=1, allow_nan=False) + "\n")
         print(f"wrote {args.report}")
     return 0
-
-
-def _compensated(mon, cal, flight, *, enabled: bool):
-    """The monitor wrapped with the effect compensation, and the flight's force and
-    temperature arrays (None when not needed)."""
-    from fdi.effects import Compensator
-    from fdi.effects_monitor import CompensatedMonitor
-    from replay.effect_inputs import flight_effect_inputs
-
-    force = temp = None
-    avail: dict = {}
-    if enabled and cal.effects:
-        force, temp, avail = flight_effect_inputs(flight)
-    comp = Compensator(cal, flight.kind, available=avail, enabled=enabled)
-    return CompensatedMonitor(mon, comp), force, temp

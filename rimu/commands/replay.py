@@ -68,28 +68,30 @@ def make_monitor(cal: Calibration, args: argparse.Namespace, kind: str,
     choice = select(cal, kind=kind, thresholds_file=args.thresholds,
                     false_alarms_per_hour=args.false_alarms_per_hour)
     thr, how = choice.thresholds, choice.to_dict()
-    return compensated(Monitor(cal, thr, kind=kind), cal, kind,
-                       enabled=not getattr(args, "no_effects", False), cmap=cmap), how
-
-
-def compensated(mon: Any, cal: Calibration, kind: str, *, enabled: bool,
-                cmap: Any = None) -> Any:
-    """The monitor wrapped with the compensation of the effect terms a CAN stream allows:
-    the sensors' own outputs, plus the specific force and temperature of the channel map's
-    auxiliary channels (``cmap``); prints what is and is not compensated."""
-    from fdi.effects import Compensator
-    from fdi.effects_monitor import CompensatedMonitor
-
-    avail: dict = {}
-    lacking = None
+    avail, lacking = {}, None
     if cmap is not None:
         from replay.effect_inputs import map_available, map_reasons
 
         avail, lacking = map_available(cmap), map_reasons(cmap)
-    out = CompensatedMonitor(mon, Compensator(cal, kind, available=avail, enabled=enabled,
-                                              lacking=lacking))
+    return compensated(Monitor(cal, thr, kind=kind), cal, kind,
+                       enabled=not getattr(args, "no_effects", False), available=avail,
+                       lacking=lacking), how
+
+
+def compensated(mon: Any, cal: Calibration, kind: str, *, enabled: bool,
+                available: Any = None, lacking: Any = None, names: Any = None) -> Any:
+    """The monitor wrapped with the compensation of the calibration's effect terms
+    (:class:`fdi.effects.Compensator`: ``available`` and ``lacking`` as there, from a
+    channel map's auxiliary channels or a flight's); prints what is and is not compensated
+    (sensors named ``names``, default the monitor's)."""
+    from fdi.effects import Compensator
+    from fdi.effects_monitor import CompensatedMonitor
+
+    out = CompensatedMonitor(mon, Compensator(cal, kind, available=available or {},
+                                              enabled=enabled, lacking=lacking))
     if cal.effects:
-        print(out.compensator.summary(mon.sensor_names), flush=True)
+        print(out.compensator.summary(mon.sensor_names if names is None else names),
+              flush=True)
     return out
 
 
