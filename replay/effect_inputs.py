@@ -26,13 +26,15 @@ dimensions (a stale or missing axis of a triad).
 from __future__ import annotations
 
 import warnings
+from typing import Any
 
 import numpy as np
 
 from replay.channel_map import ChannelMap, aux_assignment
 from replay.flight_data import Flight
 
-__all__ = ["flight_effect_inputs", "map_available", "map_effect_inputs", "map_reasons"]
+__all__ = ["flight_effect_inputs", "map_available", "map_effect_inputs", "map_reasons",
+           "row_inputs", "stream_inputs"]
 
 _AXES = ("x", "y", "z")
 
@@ -215,3 +217,26 @@ def map_effect_inputs(cmap: ChannelMap, aux: np.ndarray | None
             if ks:
                 temperature[:, i] = aux[:, cols[ks[0]][0]]
     return force, temperature
+
+
+def stream_inputs(monitor: Any, cmap: ChannelMap | None, aux: Any) -> dict[str, np.ndarray]:
+    """``force`` / ``temperature`` keyword arguments of a compensated monitor
+    (:class:`fdi.effects_monitor.CompensatedMonitor`) for the samples whose held auxiliary
+    columns are ``aux`` ((N, m) array, or :class:`~replay.flight_data.AuxChannels`); empty
+    when the monitor applies no term that reads them."""
+    comp = getattr(monitor, "compensator", None)
+    if comp is None or cmap is None or aux is None \
+            or not comp.needs & {"specific_force", "temperature"}:
+        return {}
+    force, temp = map_effect_inputs(cmap, getattr(aux, "values", aux))
+    kw = {}
+    if force is not None:
+        kw["force"] = force
+    if temp is not None:
+        kw["temperature"] = temp
+    return kw
+
+
+def row_inputs(inputs: dict[str, np.ndarray], k: int) -> dict[str, np.ndarray]:
+    """Row ``k`` of :func:`stream_inputs`' arrays (the keyword arguments of one ``step``)."""
+    return {name: v[k] for name, v in inputs.items()}

@@ -32,6 +32,7 @@ from fdi.answer import Answer, BlockResult, Event
 from replay.accounting import FrameAccounting
 from replay.assemble import BlockDecoder, RawFrames, Samples
 from replay.channel_map import ChannelMap
+from replay.effect_inputs import row_inputs, stream_inputs
 from replay.logio import _norm_channel
 
 __all__ = ["Pacer", "StreamDecoder", "block_from_answers", "format_event", "run_live"]
@@ -160,12 +161,10 @@ class Pacer:
         :class:`~fdi.effects_monitor.CompensatedMonitor`, passed row by row when given.
         """
         answers = []
+        inputs = {name: v for name, v in (("force", force), ("temperature", temperature))
+                  if v is not None}
         for k in range(len(t)):
-            kw = {}
-            if force is not None:
-                kw["force"] = force[k]
-            if temperature is not None:
-                kw["temperature"] = temperature[k]
+            kw = row_inputs(inputs, k)
             if self._start is None:
                 self._start, self._t0 = time.monotonic(), float(t[k])
             delay = (float(t[k]) - self._t0) - (time.monotonic() - self._start)
@@ -212,24 +211,12 @@ def run_live(bus: can.BusABC, decoder: StreamDecoder, monitor: Any, *,
     got = 0
     K = 0
 
-    comp = getattr(monitor, "compensator", None)
-    wants = bool(comp is not None and decoder.cmap.auxiliary
-                 and comp.needs & {"specific_force", "temperature"})
-
     def consume(smp: Samples) -> None:
         nonlocal K
         new = []
-        force = temp = None
-        if wants and smp.aux is not None and smp.t.size:
-            from replay.effect_inputs import map_effect_inputs
-
-            force, temp = map_effect_inputs(decoder.cmap, smp.aux)
+        inputs = stream_inputs(monitor, decoder.cmap, smp.aux) if smp.t.size else {}
         for k in range(smp.t.size):
-            kw = {}
-            if force is not None:
-                kw["force"] = force[k]
-            if temp is not None:
-                kw["temperature"] = temp[k]
+            kw = row_inputs(inputs, k)
             ans = monitor.step(float(smp.t[k]) - decoder.t_first + t_start, smp.raw[k],
                                smp.valid[k], **kw)
             new.append(ans)

@@ -95,25 +95,6 @@ def compensated(mon: Any, cal: Calibration, kind: str, *, enabled: bool,
     return out
 
 
-def stream_inputs(mon: Any, cmap: Any, aux: Any) -> dict[str, Any]:
-    """``force``/``temperature`` keyword arguments of the compensated monitor for samples
-    whose held auxiliary columns are ``aux`` ((N, m) array, or AuxChannels); empty when the
-    applied terms read neither."""
-    comp = getattr(mon, "compensator", None)
-    if comp is None or cmap is None or aux is None \
-            or not comp.needs & {"specific_force", "temperature"}:
-        return {}
-    from replay.effect_inputs import map_effect_inputs
-
-    force, temp = map_effect_inputs(cmap, getattr(aux, "values", aux))
-    kw = {}
-    if force is not None:
-        kw["force"] = force
-    if temp is not None:
-        kw["temperature"] = temp
-    return kw
-
-
 def effects_extra(mon: Any, cal: Calibration) -> dict[str, Any]:
     """``{"effects": record}`` for a report when the calibration has effect terms."""
     comp = getattr(mon, "compensator", None)
@@ -193,6 +174,7 @@ def warn_reader_errors(frames: dict, source: str) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from replay.effect_inputs import stream_inputs
     from replay.live import Pacer, format_event
     from replay.logio import LogStream, resolve_map
     from replay.report import RunningReport, format_report
