@@ -70,9 +70,12 @@ from replay.frames import encode_imu_frames, imu_message_name, load_dbc
 __all__ = [
     "CORRUPTION_REASONS",
     "DEFAULT_T0_EPOCH_S",
+    "FRAME_GAP_S",
+    "JITTER_S",
     "LOG_SUFFIXES",
     "LogStream",
     "aux_channels",
+    "frames_fit",
     "read_frames",
     "read_log",
     "resolve_map",
@@ -85,6 +88,11 @@ LOG_SUFFIXES = (".asc", ".blf", ".log", ".csv", ".trc")
 """CAN log suffixes rimu writes through python-can."""
 DEFAULT_T0_EPOCH_S = 1_767_225_600.0
 """2026-01-01T00:00:00Z: the epoch time of a simulated log's first sample."""
+FRAME_GAP_S = 130e-6
+"""Spacing (s) of a simulated log's frames within one sample (about one 8-byte frame at
+500 kbit/s)."""
+JITTER_S = 60e-6
+"""Most random delay (s) added to a simulated sample's frames."""
 CORRUPTION_REASONS = frozenset({"wrong_length", "crc", "counter_repeat", "counter_jump",
                                 "out_of_order", "duplicate", "garbage_line",
                                 "nonfinite_time"})
@@ -153,9 +161,16 @@ def _aux_to_write(flight: Any, temperature_every: int) -> list[tuple[int, str, i
     return out
 
 
+def frames_fit(n_frames: int, sample_rate_hz: float, frame_gap_s: float = FRAME_GAP_S,
+               jitter_s: float = JITTER_S) -> bool:
+    """Whether one sample's ``n_frames`` frames, ``frame_gap_s`` apart plus up to
+    ``jitter_s``, fit in one sample period (what :func:`write_flight_log` needs)."""
+    return n_frames * frame_gap_s + jitter_s < 1.0 / sample_rate_hz
+
+
 def write_flight_log(flight: Any, path: str | Path, *, dbc: str | Path | None = None,
-                     t0_epoch_s: float = DEFAULT_T0_EPOCH_S, frame_gap_s: float = 130e-6,
-                     jitter_s: float = 60e-6, seed: int = 0, channel: int = 0,
+                     t0_epoch_s: float = DEFAULT_T0_EPOCH_S, frame_gap_s: float = FRAME_GAP_S,
+                     jitter_s: float = JITTER_S, seed: int = 0, channel: int = 0,
                      auxiliary: bool = True, temperature_every: int = 10) -> tuple:
     """Write a flight as a CAN log (python-can writer picked by suffix) + truth sidecar.
 
@@ -202,7 +217,7 @@ def write_flight_log(flight: Any, path: str | Path, *, dbc: str | Path | None = 
     fs = float(flight.sample_rate_hz)
     extra = _aux_to_write(flight, int(temperature_every)) if auxiliary else []
     nf = n + len(extra)
-    if nf * frame_gap_s + jitter_s >= 1.0 / fs:
+    if not frames_fit(nf, fs, frame_gap_s, jitter_s):
         raise ConfigError(f"{nf} frames of {frame_gap_s * 1e6:.0f} µs do not fit in one "
                           f"{1e3 / fs:.2f} ms sample period")
     kind = getattr(flight, "kind", "gyro")

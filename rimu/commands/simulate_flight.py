@@ -186,14 +186,16 @@ def _effect_plan(cal, args, fs: float):
 
 def _check_frame_budget(out: Path, n: int, plan, fs: float, kind: str) -> None:
     """Refuse before simulating when one sample's frames do not fit in one period
-    (``write_flight_log``'s 130 µs per frame plus 60 µs jitter)."""
-    gap, jitter = 130e-6, 60e-6
+    (:func:`replay.logio.frames_fit`)."""
+    from replay.logio import FRAME_GAP_S as gap
+    from replay.logio import JITTER_S, frames_fit
+
     m = 0
     if plan is not None:
         m += 3 if plan.accel_noise_mps2 is not None and kind == "gyro" else 0
         m += 1 if plan.temperature is not None else 0
-    if (n + m) * gap + jitter >= 1.0 / fs:
-        most = int((1.0 / fs - jitter) / gap)
+    if not frames_fit(n + m, fs):
+        most = int((1.0 / fs - JITTER_S) / gap)
         raise ConfigError(f"{out}: at {fs:g} Hz one sample period holds at most {most} CAN "
                           f"frames of {gap * 1e6:.0f} us; this log needs {n} {kind} "
                           + (f"+ {m} auxiliary " if m else "") + "frames per sample: lower "
