@@ -23,10 +23,13 @@ import scipy.optimize
 from fdi.calfile import AllanTable
 
 __all__ = [
+    "GM_SIGMA_CAP_RECORDS",
+    "GM_SIGMA_DELTA_NLL",
     "GaussMarkovFit",
     "allan_table",
     "fit_gauss_markov",
     "gauss_markov_segment_corr",
+    "gauss_markov_sigma_candidates",
     "noise_covariance",
     "residual_step_stats",
     "segment_means",
@@ -148,6 +151,20 @@ noise alone to be kept (the χ²₁ 10 % point). With ``τc`` profiled over the 
 statistic is heavier-tailed than χ²₁: on 100 white tetrad-paper sessions it exceeded 2.71 in
 10 (the same 10 as 3.84, the statistic is either ≈ 0 or large); those sessions get slightly
 wider σ, the other 90 keep the white covariance exactly."""
+GM_SIGMA_DELTA_NLL = 1.35
+"""Half the χ²₁ 90 % point: ``{τc : −log L(τc) ≤ min −log L + 1.35}`` (σ_b² profiled) is
+the two-sided 90 % profile-likelihood interval of τc, so its upper end is a one-sided 95 %
+upper limit (Wilks). The σ of a coloured-noise calibration come from the largest bias
+variance over that interval (:func:`gauss_markov_sigma_candidates`)."""
+GM_SIGMA_CAP_RECORDS = 0.25
+"""The interval of :data:`GM_SIGMA_DELTA_NLL` is cut at this fraction of the record length
+(a quarter of the record). Beyond it the record does not tell the correlation time: the
+profile likelihood is flat while σ_b² grows with τc, a slow enough Gauss-Markov path is a
+bias of its own, and the bias variance at the grid's end is 5-6× too wide (tetrad-paper,
+τc 100 s, seeds 0-99: error/σ sd 0.16 in the 27 sessions whose τ̂c runs to 4 records).
+Chosen on tetrad-paper seeds 0-99 (τc 100 s ≈ T/6): T/6 and T/5 leave 2-7 biases of 400
+beyond 3σ, T/4 none. A process slower than T/4 gets σ too small (τc 300 s: error/σ sd
+≈ 1.7, as without the cut)."""
 _GM_BINS = 48
 
 
@@ -206,6 +223,12 @@ class GaussMarkovFit:
         information (Hessian of the Whittle ``−log L`` at the fit, central differences,
         ``q_i`` held fixed). None when the term is not kept; ``inf`` entries when the
         Hessian is not positive definite (the likelihood does not bound the pair).
+    profile_tau_s, profile_bias_var, profile_nll : ndarray, shape (GM_TAU_GRID,), or None
+        The profile likelihood over the τc grid: each grid τc (s), the σ_b² that maximises
+        the likelihood there (unit²) and the binned Whittle ``−log L`` at that pair. None
+        when the term is not kept.
+    record_s : float
+        Length of the record (N/fs, s).
     """
 
     white_var: np.ndarray
@@ -213,6 +236,10 @@ class GaussMarkovFit:
     tau_c: float
     lr: float
     cov_log: np.ndarray | None = None
+    profile_tau_s: np.ndarray | None = None
+    profile_bias_var: np.ndarray | None = None
+    profile_nll: np.ndarray | None = None
+    record_s: float = 0.0
 
 
 def fit_gauss_markov(x: np.ndarray, fs: float) -> GaussMarkovFit:
@@ -265,17 +292,57 @@ def fit_gauss_markov(x: np.ndarray, fs: float) -> GaussMarkovFit:
         S = q[None, :] + np.exp(lv) * g[:, None]
         return float(np.sum(cnt[:, None] * (np.log(S) + Pm / S)))
 
-    for tc in np.geomspace(1.0, 4.0 * N / fs, GM_TAU_GRID):
+    taus = np.geomspace(1.0, 4.0 * N / fs, GM_TAU_GRID)
+    prof_v, prof_nll = np.zeros(taus.size), np.zeros(taus.size)
+    for j, tc in enumerate(taus):
         r = scipy.optimize.minimize_scalar(lambda lv, tc=tc: nll_tc(lv, tc),
                                            bounds=(lo, up), method="bounded")
+        prof_v[j], prof_nll[j] = float(np.exp(r.x)), float(r.fun)
         if r.fun < best[0]:
             best = (float(r.fun), float(np.exp(r.x)), float(tc))
     lr = 2.0 * (nll0 - best[0])
     if lr <= GM_LR_THRESHOLD or best[1] <= 0:
-        return GaussMarkovFit(q, 0.0, np.inf, max(lr, 0.0))
+        return GaussMarkovFit(q, 0.0, np.inf, max(lr, 0.0), record_s=N / fs)
     cov = _log_param_cov(lambda lv, lt: nll_tc(lv, float(np.exp(lt))), np.log(best[1]),
                          np.log(best[2]))
-    return GaussMarkovFit(q, best[1], best[2], lr, cov)
+    return GaussMarkovFit(q, best[1], best[2], lr, cov, taus, prof_v, prof_nll, N / fs)
+
+
+def gauss_markov_sigma_candidates(fit: GaussMarkovFit) -> tuple[np.ndarray, np.ndarray]:
+    """The (τc, σ_b²) pairs over which a coloured-noise σ is taken as the largest.
+
+    The grid τc whose profile ``−log L`` lies within :data:`GM_SIGMA_DELTA_NLL` of the
+    minimum (the 90 % profile-likelihood interval of τc, Wilks), cut at
+    :data:`GM_SIGMA_CAP_RECORDS` of the record, each with its profiled σ_b². When the whole
+    interval lies beyond the cut, the best pair at or below it. Empty when the term is not
+    kept.
+
+    Why. On a record of a few correlation times (tetrad-paper: 576 s, τc 100 s) the fitted
+    τc is badly determined (profile ``−log L`` within 1-2 units from 40 s to the grid's
+    end in most sessions) and the bias variance grows with it (≈ ∝ σ_b²·τc, the spectrum
+    at zero frequency, which the residuals never see: the fit removes it). The σ at the
+    maximum-likelihood τc is then a scale mixture: 2× too small where τ̂c came out short
+    (< 60 s; all the biases beyond 3σ), 2-6× too large where it ran long. Taking the largest
+    variance over the τc the likelihood cannot exclude removes the short tail; the cut
+    keeps the flat long side from running to the grid's end.
+
+    Returns
+    -------
+    tau_s : ndarray, shape (k,)
+    bias_var : ndarray, shape (k,)
+    """
+    if fit.bias_var <= 0 or fit.profile_tau_s is None or fit.profile_nll is None \
+            or fit.profile_bias_var is None:
+        return np.zeros(0), np.zeros(0)
+    tau, nll, bv = fit.profile_tau_s, fit.profile_nll, fit.profile_bias_var
+    below = tau <= GM_SIGMA_CAP_RECORDS * fit.record_s
+    if not below.any():
+        below = tau <= tau.min()
+    keep = below & (nll <= nll.min() + GM_SIGMA_DELTA_NLL)
+    if not keep.any():
+        keep = np.zeros_like(below)
+        keep[np.flatnonzero(below)[np.argmin(nll[below])]] = True
+    return tau[keep], bv[keep]
 
 
 _HESS_STEP = 0.05

@@ -9,7 +9,12 @@ Coloured noise (``noise_model="auto"``): a white + first-order Gauss-Markov mode
 process common to the set, is fitted to the residual spectrum
 (:func:`calibration.residuals.fit_gauss_markov`, Whittle likelihood); when the
 likelihood-ratio test keeps it, its exact covariance over the segment means
-``(σ_b/SF_i)²·op·K(τc)·opᵀ`` is added to the white one (it only adds).
+``(σ_b/SF_i)²·op·K(τc)·opᵀ`` is added to the white one (it only adds). The pair (σ_b², τc)
+of that covariance is not the maximum-likelihood one but the one, among the correlation
+times the profile likelihood does not exclude (90 % interval, cut at a quarter of the
+record: :func:`calibration.residuals.gauss_markov_sigma_candidates`), that gives the
+largest model-bias variance (:func:`coloured_noise`). Why, and what it does to the tails of
+error/σ: ``tests/calibration/test_calibrate_coloured_holdout.py``.
 """
 
 from __future__ import annotations
@@ -22,8 +27,11 @@ import numpy as np
 from calibration.rate_test import GainSplit, split_gain
 from calibration.residuals import (
     GM_LR_THRESHOLD,
+    GM_SIGMA_CAP_RECORDS,
+    GM_SIGMA_DELTA_NLL,
     fit_gauss_markov,
     gauss_markov_segment_corr,
+    gauss_markov_sigma_candidates,
 )
 from fdi.parity import parity_matrix
 
@@ -37,7 +45,10 @@ NOISE_METHOD = {
     "auto": "auto: white + first-order Gauss-Markov bias common to the set, Whittle "
             "maximum-likelihood fit to the residual spectrum, kept when its likelihood-ratio "
             f"statistic exceeds {GM_LR_THRESHOLD}; its exact covariance over the segment "
-            "means is added",
+            "means is added, at the correlation time (sigma_correlation_s) with the largest "
+            "bias variance within the 90 % profile-likelihood interval of the correlation "
+            f"time (-log L within {GM_SIGMA_DELTA_NLL} of its minimum), cut at "
+            f"{GM_SIGMA_CAP_RECORDS:g} of the record",
 }
 """Text of ``extra["noise_model"]["method"]`` per noise model."""
 
@@ -127,6 +138,12 @@ class ColouredNoise:
         (:attr:`calibration.residuals.GaussMarkovFit.cov_log`); None when not applied.
         Not used for the σ: on a 576 s session it understates the spread of the fit about
         2× (see ``tests/calibration/test_coloured_tails.py``).
+    sigma_bias_instability : float or None
+        σ_b (SI) of the pair ``extra_cov`` is computed with (profiled at
+        ``sigma_correlation_s``); None when not applied.
+    sigma_correlation_s : float or None
+        The correlation time (s) ``extra_cov`` is computed with: the one with the largest
+        model-bias variance among :func:`calibration.residuals.gauss_markov_sigma_candidates`.
     """
 
     applied: bool
@@ -135,12 +152,18 @@ class ColouredNoise:
     likelihood_ratio: float
     extra_cov: tuple[np.ndarray | None, ...]
     cov_log: np.ndarray | None = None
+    sigma_bias_instability: float | None = None
+    sigma_correlation_s: float | None = None
 
     def to_dict(self) -> dict[str, Any]:
-        """``{"bias_instability", "correlation_s", "likelihood_ratio", "applied"}``."""
+        """``{"bias_instability", "correlation_s", "likelihood_ratio", "applied",
+        "sigma_bias_instability", "sigma_correlation_s"}`` (the last two: the pair the σ
+        are computed with; None when not applied)."""
         return {"bias_instability": self.bias_instability,
                 "correlation_s": self.correlation_s,
-                "likelihood_ratio": self.likelihood_ratio, "applied": self.applied}
+                "likelihood_ratio": self.likelihood_ratio, "applied": self.applied,
+                "sigma_bias_instability": self.sigma_bias_instability,
+                "sigma_correlation_s": self.sigma_correlation_s}
 
 
 def coloured_noise(resid_si: np.ndarray, sf: np.ndarray, fs: float, seg_start: np.ndarray,
@@ -157,18 +180,30 @@ def coloured_noise(resid_si: np.ndarray, sf: np.ndarray, fs: float, seg_start: n
     seg_start, seg_len : ndarray, shape (n_seg,)
         Start time and duration of each segment (s).
     ops : list of ndarray, each (k, n_seg)
+        The first one's row 3 (the offset c) chooses the pair: among the candidates of
+        :func:`calibration.residuals.gauss_markov_sigma_candidates`, the (σ_b², τc) with the
+        largest ``σ_b²·op₃·K(τc)·op₃ᵀ`` (the Gauss-Markov variance of every sensor's bias,
+        up to its SF²). The bias variance grows with τc along the profile, so this is in
+        effect the upper end of the interval.
     """
     fit = fit_gauss_markov(resid_si, fs)
     applied = fit.bias_var > 0
     outs: list[np.ndarray | None] = [None] * len(ops)
+    sig_v = sig_tc = None
     if applied:
-        K = gauss_markov_segment_corr(seg_start, seg_len, fit.tau_c)
-        var_raw = fit.bias_var / np.asarray(sf, float) ** 2
+        tc_c, bv_c = gauss_markov_sigma_candidates(fit)
+        Ks = [gauss_markov_segment_corr(seg_start, seg_len, tc) for tc in tc_c]
+        c_row = ops[0][3]
+        j = int(np.argmax([bv * (c_row @ K @ c_row) for bv, K in zip(bv_c, Ks, strict=True)]))
+        K, sig_v, sig_tc = Ks[j], float(bv_c[j]), float(tc_c[j])
+        var_raw = sig_v / np.asarray(sf, float) ** 2
         outs = [var_raw[:, None, None] * (op @ K @ op.T)[None, :, :] for op in ops]
     return ColouredNoise(
         applied=bool(applied), bias_instability=float(np.sqrt(fit.bias_var)),
         correlation_s=float(fit.tau_c) if np.isfinite(fit.tau_c) else None,
-        likelihood_ratio=float(fit.lr), extra_cov=tuple(outs), cov_log=fit.cov_log)
+        likelihood_ratio=float(fit.lr), extra_cov=tuple(outs), cov_log=fit.cov_log,
+        sigma_bias_instability=None if sig_v is None else float(np.sqrt(sig_v)),
+        sigma_correlation_s=sig_tc)
 
 
 def segment_times(t: np.ndarray, seg: np.ndarray, cnt_seg: np.ndarray,
