@@ -144,6 +144,9 @@ class ColouredNoise:
     sigma_correlation_s : float or None
         The correlation time (s) ``extra_cov`` is computed with: the one with the largest
         model-bias variance among :func:`calibration.residuals.gauss_markov_sigma_candidates`.
+    record_s : float
+        Length of the residual record the fit saw (s); ``sigma_correlation_s`` is at most
+        :data:`calibration.residuals.GM_SIGMA_CAP_RECORDS` of it.
     """
 
     applied: bool
@@ -154,16 +157,18 @@ class ColouredNoise:
     cov_log: np.ndarray | None = None
     sigma_bias_instability: float | None = None
     sigma_correlation_s: float | None = None
+    record_s: float = 0.0
 
     def to_dict(self) -> dict[str, Any]:
         """``{"bias_instability", "correlation_s", "likelihood_ratio", "applied",
-        "sigma_bias_instability", "sigma_correlation_s"}`` (the last two: the pair the σ
-        are computed with; None when not applied)."""
+        "sigma_bias_instability", "sigma_correlation_s", "record_s"}`` (the sigma_ pair:
+        the one the σ are computed with, None when not applied; record_s: the residual
+        record's length, s)."""
         return {"bias_instability": self.bias_instability,
                 "correlation_s": self.correlation_s,
                 "likelihood_ratio": self.likelihood_ratio, "applied": self.applied,
                 "sigma_bias_instability": self.sigma_bias_instability,
-                "sigma_correlation_s": self.sigma_correlation_s}
+                "sigma_correlation_s": self.sigma_correlation_s, "record_s": self.record_s}
 
 
 def coloured_noise(resid_si: np.ndarray, sf: np.ndarray, fs: float, seg_start: np.ndarray,
@@ -203,7 +208,7 @@ def coloured_noise(resid_si: np.ndarray, sf: np.ndarray, fs: float, seg_start: n
         correlation_s=float(fit.tau_c) if np.isfinite(fit.tau_c) else None,
         likelihood_ratio=float(fit.lr), extra_cov=tuple(outs), cov_log=fit.cov_log,
         sigma_bias_instability=None if sig_v is None else float(np.sqrt(sig_v)),
-        sigma_correlation_s=sig_tc)
+        sigma_correlation_s=sig_tc, record_s=float(fit.record_s))
 
 
 def segment_times(t: np.ndarray, seg: np.ndarray, cnt_seg: np.ndarray,

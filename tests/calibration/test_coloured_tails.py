@@ -106,7 +106,10 @@ def dof_from_log_var(var_log):
 
 
 def _bias_z_dof(session, truth):
-    """(z, ν, τ̂c) of each gyro bias, model and whole-turn methods; None when white kept."""
+    """(z, ν, τ̂c) of each gyro bias, model and whole-turn methods; None when white kept.
+
+    z uses the σ at the maximum-likelihood (σ̂_b², τ̂c), which is what ``calibrate``
+    reported before its σ moved to the upper end of the profile interval of τc."""
     g = gyro_stages(session, noise_model="auto", allan=False)
     unc, fit, p = g.uncertainty, g.fit, g.problem
     cn = unc.coloured
@@ -132,13 +135,12 @@ def _bias_z_dof(session, truth):
         def v(C_, a=a, c=c):
             return np.array([e.bias_sd**2 for e in split_with_cov(a, c, C_, H0)])
 
-        v0 = v(C)
-        np.testing.assert_allclose(np.sqrt(v0), [e.bias_sd for e in est], rtol=1e-9)
+        v0 = v(C)    # the σ at the maximum-likelihood (σ_b², τc), not the one calibrate reports
         G = np.stack([(v(C + eps * d) - v(C - eps * d)) / (2 * eps * v0) for d in (ex, dex)],
                      axis=1)
         var_log = np.einsum("ki,ij,kj->k", G, cn.cov_log, G)
         for i, e in enumerate(est):
-            z = (e.bias - truth.gyro.sensors[i].bias) / e.bias_sd
+            z = (e.bias - truth.gyro.sensors[i].bias) / np.sqrt(v0[i])
             out.append((z, dof_from_log_var(var_log[i]), tc))
     return np.array(out)
 
