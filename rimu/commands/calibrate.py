@@ -100,7 +100,12 @@ def _noise_lines(nm: object) -> list[str]:
         sdf = r.get("sd_factor", {})
         out.append(f"  {kind}: Gauss-Markov bias {r['bias_instability'] / f:.3g} {unit}, "
                    f"correlation {r['correlation_s']:.3g} s (likelihood ratio "
-                   f"{r['likelihood_ratio']:.1f}); sd factors over white noise:")
+                   f"{r['likelihood_ratio']:.1f})")
+        if r.get("sigma_correlation_s") is not None:
+            out.append(f"    sigma at correlation {r['sigma_correlation_s']:.3g} s, bias "
+                       f"{r['sigma_bias_instability'] / f:.3g} {unit} (largest bias variance "
+                       "in the profile interval of the correlation time)")
+        out.append("    sd factors over white noise:")
         for name in ("bias", "scale_factor", "misalignment"):
             out.append(f"    {name:<13s}" + " ".join(f"{x:.2f}" for x in sdf.get(name, [])))
     return out

@@ -95,8 +95,8 @@ def test_noise_model_option_and_summary(tmp_path, capsys):
         assert code == 0, err
         assert f"noise model: {mode}:" in text
         docs[mode] = json.loads(out.read_text())
-    assert "gyro: Gauss-Markov bias" in _run(capsys, "calibrate", d, "--out",
-                                             tmp_path / "x.json")[1]
+    txt = _run(capsys, "calibrate", d, "--out", tmp_path / "x.json")[1]
+    assert "gyro: Gauss-Markov bias" in txt and "sigma at correlation" in txt, txt
     assert docs["auto"]["extra"]["noise_model"]["gyro"]["applied"] is True
     sd_a = np.array([e["bias_sd"] for e in docs["auto"]["sensors"]["gyro"]])
     sd_w = np.array([e["bias_sd"] for e in docs["white"]["sensors"]["gyro"]])
