@@ -308,7 +308,8 @@ def fit_gauss_markov(x: np.ndarray, fs: float) -> GaussMarkovFit:
     return GaussMarkovFit(q, best[1], best[2], lr, cov, taus, prof_v, prof_nll, N / fs)
 
 
-def gauss_markov_sigma_candidates(fit: GaussMarkovFit) -> tuple[np.ndarray, np.ndarray]:
+def gauss_markov_sigma_candidates(fit: GaussMarkovFit
+                                  ) -> tuple[np.ndarray, np.ndarray, bool]:
     """The (τc, σ_b²) pairs over which a coloured-noise σ is taken as the largest.
 
     The grid τc whose profile ``−log L`` lies within :data:`GM_SIGMA_DELTA_NLL` of the
@@ -330,19 +331,23 @@ def gauss_markov_sigma_candidates(fit: GaussMarkovFit) -> tuple[np.ndarray, np.n
     -------
     tau_s : ndarray, shape (k,)
     bias_var : ndarray, shape (k,)
+    cut : bool
+        The interval reaches beyond the cut: the likelihood does not exclude a slower
+        process, whose bias σ would be larger than the ones these candidates give.
     """
     if fit.bias_var <= 0 or fit.profile_tau_s is None or fit.profile_nll is None \
             or fit.profile_bias_var is None:
-        return np.zeros(0), np.zeros(0)
+        return np.zeros(0), np.zeros(0), False
     tau, nll, bv = fit.profile_tau_s, fit.profile_nll, fit.profile_bias_var
     below = tau <= GM_SIGMA_CAP_RECORDS * fit.record_s
     if not below.any():
         below = tau <= tau.min()
-    keep = below & (nll <= nll.min() + GM_SIGMA_DELTA_NLL)
+    inside = nll <= nll.min() + GM_SIGMA_DELTA_NLL
+    keep = below & inside
     if not keep.any():
         keep = np.zeros_like(below)
         keep[np.flatnonzero(below)[np.argmin(nll[below])]] = True
-    return tau[keep], bv[keep]
+    return tau[keep], bv[keep], bool(np.any(inside & ~below))
 
 
 _HESS_STEP = 0.05

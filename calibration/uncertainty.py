@@ -147,6 +147,10 @@ class ColouredNoise:
     record_s : float
         Length of the residual record the fit saw (s); ``sigma_correlation_s`` is at most
         :data:`calibration.residuals.GM_SIGMA_CAP_RECORDS` of it.
+    sigma_cut : bool
+        The profile interval of τc reached beyond that cut: the data do not exclude a
+        slower process, for which these σ would be too small (a process slower than a
+        quarter of the record: τc 300 s in a 576 s record gives bias error/σ sd ≈ 1.7).
     """
 
     applied: bool
@@ -158,17 +162,20 @@ class ColouredNoise:
     sigma_bias_instability: float | None = None
     sigma_correlation_s: float | None = None
     record_s: float = 0.0
+    sigma_cut: bool = False
 
     def to_dict(self) -> dict[str, Any]:
         """``{"bias_instability", "correlation_s", "likelihood_ratio", "applied",
-        "sigma_bias_instability", "sigma_correlation_s", "record_s"}`` (the sigma_ pair:
-        the one the σ are computed with, None when not applied; record_s: the residual
-        record's length, s)."""
+        "sigma_bias_instability", "sigma_correlation_s", "sigma_cut", "record_s"}`` (the
+        sigma_ pair: the one the σ are computed with, None when not applied; sigma_cut: the
+        interval of τc was cut at a quarter of the record; record_s: the residual record's
+        length, s)."""
         return {"bias_instability": self.bias_instability,
                 "correlation_s": self.correlation_s,
                 "likelihood_ratio": self.likelihood_ratio, "applied": self.applied,
                 "sigma_bias_instability": self.sigma_bias_instability,
-                "sigma_correlation_s": self.sigma_correlation_s, "record_s": self.record_s}
+                "sigma_correlation_s": self.sigma_correlation_s, "sigma_cut": self.sigma_cut,
+                "record_s": self.record_s}
 
 
 def coloured_noise(resid_si: np.ndarray, sf: np.ndarray, fs: float, seg_start: np.ndarray,
@@ -195,8 +202,9 @@ def coloured_noise(resid_si: np.ndarray, sf: np.ndarray, fs: float, seg_start: n
     applied = fit.bias_var > 0
     outs: list[np.ndarray | None] = [None] * len(ops)
     sig_v = sig_tc = None
+    cut = False
     if applied:
-        tc_c, bv_c = gauss_markov_sigma_candidates(fit)
+        tc_c, bv_c, cut = gauss_markov_sigma_candidates(fit)
         Ks = [gauss_markov_segment_corr(seg_start, seg_len, tc) for tc in tc_c]
         c_row = ops[0][3]
         j = int(np.argmax([bv * (c_row @ K @ c_row) for bv, K in zip(bv_c, Ks, strict=True)]))
@@ -208,7 +216,7 @@ def coloured_noise(resid_si: np.ndarray, sf: np.ndarray, fs: float, seg_start: n
         correlation_s=float(fit.tau_c) if np.isfinite(fit.tau_c) else None,
         likelihood_ratio=float(fit.lr), extra_cov=tuple(outs), cov_log=fit.cov_log,
         sigma_bias_instability=None if sig_v is None else float(np.sqrt(sig_v)),
-        sigma_correlation_s=sig_tc, record_s=float(fit.record_s))
+        sigma_correlation_s=sig_tc, record_s=float(fit.record_s), sigma_cut=cut)
 
 
 def segment_times(t: np.ndarray, seg: np.ndarray, cnt_seg: np.ndarray,

@@ -104,7 +104,10 @@ def _noise_lines(nm: object) -> list[str]:
         if r.get("sigma_correlation_s") is not None:
             out.append(f"    sigma at correlation {r['sigma_correlation_s']:.3g} s, bias "
                        f"{r['sigma_bias_instability'] / f:.3g} {unit} (largest bias variance "
-                       "in the profile interval of the correlation time)")
+                       "in the profile interval of the correlation time"
+                       + (", cut at a quarter of the record: a slower process is not "
+                          "excluded and would need wider sigma)" if r.get("sigma_cut")
+                          else ")"))
         out.append("    sd factors over white noise:")
         for name in ("bias", "scale_factor", "misalignment"):
             out.append(f"    {name:<13s}" + " ".join(f"{x:.2f}" for x in sdf.get(name, [])))

@@ -14,8 +14,12 @@ from calibration.compare import compare
 from calibration.presets import preset
 from calibration.residuals import (
     GM_LR_THRESHOLD,
+    GM_SIGMA_CAP_RECORDS,
+    GM_SIGMA_DELTA_NLL,
+    GaussMarkovFit,
     fit_gauss_markov,
     gauss_markov_segment_corr,
+    gauss_markov_sigma_candidates,
 )
 from calibration.simulate import NoiseModel, simulate_session
 from fdi.errors import CalibrationError
@@ -63,6 +67,28 @@ def test_fit_finds_a_gauss_markov_bias_and_keeps_white_noise_white():
     assert f0.bias_var == 0.0 and np.isinf(f0.tau_c), f0
 
 
+def test_sigma_candidates_are_the_profile_interval_below_the_cut():
+    """The interval {−log L ≤ min + Δ} over the τc grid, cut at a quarter of the record; the
+    best point below the cut when the whole interval lies beyond it; nothing when white."""
+    tau = np.array([10.0, 50.0, 100.0, 200.0, 400.0])
+    bv = np.array([1.0, 2.0, 3.0, 4.0, 5.0])
+    d = GM_SIGMA_DELTA_NLL
+
+    def fit(nll, record_s=400.0):
+        return GaussMarkovFit(np.ones(4), 2.0, 50.0, 10.0, None, tau, bv,
+                              np.asarray(nll, float), record_s)
+
+    t, v, cut = gauss_markov_sigma_candidates(fit([d + 1, 0.0, d - 0.1, d + 0.1, d + 2]))
+    assert list(t) == [50.0, 100.0] and list(v) == [2.0, 3.0] and not cut
+    t, _, cut = gauss_markov_sigma_candidates(fit([d + 1, 0.0, 0.1, 0.2, 0.3], 400.0))
+    assert list(t) == [50.0, 100.0] and cut, "interval runs past record/4 = 100 s"
+    assert GM_SIGMA_CAP_RECORDS * 400.0 == 100.0
+    t, v, cut = gauss_markov_sigma_candidates(fit([9.0, 5.0, 6.0, 0.0, 0.1], 400.0))
+    assert list(t) == [50.0] and list(v) == [2.0] and cut, "best below the cut"
+    white = GaussMarkovFit(np.ones(4), 0.0, np.inf, 1.0, record_s=400.0)
+    assert [x.size for x in gauss_markov_sigma_candidates(white)[:2]] == [0, 0]
+
+
 def test_auto_equals_white_on_a_white_session(tetrad_session):
     cw = calibrate(tetrad_session, allan=False, noise_model="white")
     ca = calibrate(tetrad_session, allan=False, noise_model="auto")
@@ -77,6 +103,8 @@ def test_auto_widens_the_coloured_session_and_records_it():
     ca = calibrate(s, allan=False, earth_rate=False)
     rec = ca.extra["noise_model"]["gyro"]
     assert rec["applied"] is True and rec["likelihood_ratio"] > GM_LR_THRESHOLD
+    assert 0 < rec["sigma_correlation_s"] <= GM_SIGMA_CAP_RECORDS * rec["record_s"], rec
+    assert isinstance(rec["sigma_cut"], bool)
     assert "auto" in ca.extra["noise_model"]["method"]
     for i, (w, a) in enumerate(zip(cw.gyro.sensors, ca.gyro.sensors, strict=True)):
         assert a.bias == w.bias and a.scale_factor == w.scale_factor, "estimates unchanged"
