@@ -49,21 +49,26 @@ Gauss-Markov model, the bias process common to the set, is fitted to the residua
 (:func:`calibration.residuals.fit_gauss_markov`, Whittle likelihood); when the
 likelihood-ratio test keeps it, its exact covariance over the segment means
 ``(σ_b/SF_i)²·P·K(τc)·Pᵀ`` is added to the white one for a, SF, h̃, angles, both biases, v_c
-and ``input_error_cov`` (it only adds: never below the white covariance). The estimates do
-not change. ``extra["noise_model"]`` records the fit and the sd factor over white noise per
-sensor. Measured over 100 seeds (tetrad-paper, sd(z) per parameter): white noise: the
-test keeps white in 87-90 of 100 sessions, spreads unchanged within the MC tolerance;
-1 °/h, τc 100 s: biases 3.3-3.8 → 0.90-1.05, SF 1.10-1.25 → 0.92-1.04; τc 30 s: biases
-2.2 → 1.0; 0.5 °/h: biases ≈ 2.0 → 1.05-1.42 (the test misses the process in about one
-session in five); τc 300 s (half the record): biases 5.0 → 1.7 and random walk: 4.6 → 1.8
-(a session of a few correlation times cannot tell how much of the slow noise is bias).
-On held-out seeds 1000-1099 (1 °/h, τc 100 s) the term is kept in 100 of 100 sessions and
-sd(z) is 1.03-1.17 for the biases, but 3-4 of 100 biases lie beyond 3σ: in about 7 sessions
-the fitted τc is 20-53 s and the bias sd factor 1.4-2.1 instead of ≈ 3.5
-(``tests/calibration/test_calibrate_coloured_holdout.py``). These tails are not Student-t
-with degrees of freedom from the fit's information matrix
-(``tests/calibration/test_coloured_tails.py``).
-cone-paper accelerometers, 0.1 mg, τc 100 s (pooled over sensors): 2.6-3.5 → 1.09-1.15.
+and ``input_error_cov`` (it only adds: never below the white covariance). The pair
+(σ_b², τc) of that covariance is the one with the largest bias variance among the
+correlation times the profile likelihood does not exclude (90 % interval), cut at a quarter
+of the record (:func:`calibration.residuals.gauss_markov_sigma_candidates`): a record of a
+few correlation times hardly tells τc, and the σ at the maximum-likelihood τc were a scale
+mixture, 2× too small where τ̂c came out short and 5-6× too wide where it ran long. The
+estimates do not change. ``extra["noise_model"]`` records the fit, the pair the σ used and
+the sd factor over white noise per sensor. Measured (tetrad-paper, sd(z) per parameter):
+white noise: the test keeps white in 87-90 of 100 sessions, spreads unchanged within the
+MC tolerance; 1 °/h, τc 100 s, on fresh seeds 2000-2099 after the rule was frozen on seeds
+0-99: biases 3.3-3.8 → 0.75-0.89 with 0 of 800 beyond 3σ (the maximum-likelihood pair
+gave 0.87-1.17 with 15 of 800), SF and angles 0.93-1.13
+(``tests/calibration/test_calibrate_coloured_holdout.py``); τc 30 s: biases 2.2 → 0.61-0.80
+(wider than needed); 0.5 °/h: biases ≈ 2.0 → 1.09-1.47 (the test misses the process in
+about one session in five); τc 300 s (half the record, beyond the cut): biases 5.0 → 1.7,
+slightly worse than with the maximum-likelihood pair (``extra["noise_model"][kind]
+["sigma_cut"]`` says when the likelihood allows a process slower than the cut).
+cone-paper accelerometers, 0.1 mg, τc 100 s in a 200 s record (30 seeds, pooled over
+sensors): biases 1.32, 7 of 180 beyond 3σ, SF 1.14, angles 1.15 (maximum-likelihood pair:
+1.13, 4 of 180, 1.06, 1.08): the cut at 50 s is below the true τc.
 The Earth-rate fit still uses the white per-sample covariance.
 
 Two further checks test whiteness against the data and add a line to ``extra["warnings"]``
@@ -81,7 +86,9 @@ Keys of ``Calibration.extra`` written here::
     step_residual_chi2_dof     (n,)
     warnings                   [str, ...]
     noise_model                {"method": str, "gyro"/"accel": {"applied", "bias_instability"
-                                (SI), "correlation_s", "likelihood_ratio", "sd_factor":
+                                (SI), "correlation_s", "likelihood_ratio",
+                                "sigma_bias_instability" (SI), "sigma_correlation_s",
+                                "sigma_cut", "record_s", "sd_factor":
                                 {"bias", "scale_factor", "misalignment": (n,)}}}
                                (sd_factor: sd with the model / white sd; misalignment: the
                                larger of the two angles' factors)
