@@ -68,8 +68,9 @@ from calibration.diagnose.library import (
 from calibration.diagnose.linmodel import LinModel
 from fdi.calfile import Calibration, tangent_basis
 
-__all__ = ["LINE_CYCLES", "PARAMETERS", "POWER", "SHIFT_SIGMA", "STEP_TIMES", "limit_text",
-           "limits", "nuisance_grid", "parameter_shift", "power_at"]
+__all__ = ["LINE_CYCLES", "PARAMETERS", "POWER", "PROFILE_MARGIN", "SHIFT_SIGMA", "STEP_TIMES",
+           "asimov_lr", "limit_text", "limits", "nuisance_grid", "parameter_shift", "power_at",
+           "size_for_power"]
 
 POWER = 0.99
 """Power the test must have against an effect that moves a parameter by SHIFT_SIGMA σ for
@@ -170,7 +171,7 @@ def _worst_direction(S: np.ndarray, F: np.ndarray) -> tuple[float, np.ndarray, i
     return best
 
 
-def _asimov(g: DetectGrids, b: np.ndarray, a: float) -> float:
+def asimov_lr(g: DetectGrids, b: np.ndarray, a: float) -> float:
     """Profiled likelihood-ratio statistic on the Asimov session (module docstring) for
     the effect ``a·Z·b``."""
     s = np.einsum("i,...ij,j->...", b, g.gram, b)
@@ -178,7 +179,7 @@ def _asimov(g: DetectGrids, b: np.ndarray, a: float) -> float:
     return max(grid_min(g.v(extra), g.noise) - grid_min(g.v(), g.noise), 0.0)
 
 
-def _size_for_power(lam_of: Any, crit: float, r: int, a5: float) -> float:
+def size_for_power(lam_of: Any, crit: float, r: int, a5: float) -> float:
     """The smallest multiple of ``a5`` at which the power reaches POWER (bisection on a
     monotone noncentrality)."""
     lo, hi = 1.0, 2.0
@@ -242,7 +243,7 @@ def _pair(c: Candidate, d: KindData, i: int, model: LinModel | GlsModel,
 
             def lam_of(m: float, g: DetectGrids = g, b: np.ndarray = b,
                        a5: float = a5) -> float:
-                return _asimov(g, b, m * a5)
+                return asimov_lr(g, b, m * a5)
         else:
             def lam_of(m: float, lam_k: float = lam_k) -> float:
                 return m**2 * lam_k
@@ -261,7 +262,7 @@ def _pair(c: Candidate, d: KindData, i: int, model: LinModel | GlsModel,
                           "_rank": rank}
     out = []
     for rec in worst.values():
-        size = _size_for_power(rec.pop("_lam_of"), rec.pop("_crit"), rec.pop("_rank"),
+        size = size_for_power(rec.pop("_lam_of"), rec.pop("_crit"), rec.pop("_rank"),
                                rec["size"])
         rec["size_for_power"] = size
         rec["shift_sigma_for_power"] = SHIFT_SIGMA * size / rec["size"]

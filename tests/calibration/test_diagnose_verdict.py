@@ -35,7 +35,7 @@ from calibration.calibrate import calibrate
 from calibration.compare import compare
 from calibration.diagnose import calibrate_checked, format_adequacy
 from calibration.diagnose.coloured import GlsModel, NoiseSet, block_noise
-from calibration.diagnose.detect import POWER, _asimov, _size_for_power, power_at
+from calibration.diagnose.detect import POWER, asimov_lr, power_at, size_for_power
 from fdi.calfile import load_calibration
 from fdi.errors import FileFormatError
 from fdi.units import DPH
@@ -69,10 +69,10 @@ def _power_mc(reps, seed):
             for k, Z in EFFECTS.items():
                 gr = models[0].detect_grids(Z)           # on the clean draw, as the rule
                 gk, sw2 = models[0].known_noise(Z)
-                b = np.ones(1)
-                a99 = _size_for_power(lambda m, gr=gr: _asimov(gr, b, m * MID[k]), crit, 1,
-                                      MID[k])
-                row = [power_at(_asimov(gr, b, MID[k]), crit, 1),
+                b, a_mid = np.ones(1), MID[k]
+                a99 = size_for_power(lambda m, gr=gr, b=b, a=a_mid: asimov_lr(gr, b, m * a),
+                                     crit, 1, a_mid)
+                row = [power_at(asimov_lr(gr, b, MID[k]), crit, 1),
                        power_at(LOW[k] ** 2 * gk[0, 0] / sw2, crit, 1)]
                 for a in (MID[k], LOW[k], a99):
                     ft = GlsModel(y[:, 0] + a * Z[:, 0], ones, grp, 0).test(Z)
@@ -210,5 +210,5 @@ def test_not_ruled_out_file_round_trip_and_bad_verdict(tmp_path):
     assert load_calibration(p).adequacy["verdict"] == "adequate"
     doc["adequacy"]["verdict"] = "fine"
     p.write_text(json.dumps(doc))
-    with pytest.raises(FileFormatError, match="adequacy.*verdict"):
+    with pytest.raises(FileFormatError, match=r"adequacy.*verdict"):
         load_calibration(p)
