@@ -49,7 +49,7 @@ from calibration.session import Session
 from fdi.calfile import Calibration
 from fdi.errors import ConfigError
 
-__all__ = ["calibrate_checked", "format_adequacy", "not_ruled_out_warning"]
+__all__ = ["calibrate_checked", "format_adequacy", "limit_lines", "not_ruled_out_warning"]
 
 _MAX_LINES = 6
 """At most this many limits printed (the file holds them all)."""
@@ -181,6 +181,25 @@ def not_ruled_out_warning(rec: Mapping[str, Any]) -> str:
                        if applied == "auto" else "") + ". " + str(rec.get("advice", "")))
 
 
+def limit_lines(a: Mapping[str, Any]) -> list[str]:
+    """The detectability limits of an adequacy record (:func:`.run.with_limits`), least
+    detectable sensor of each effect, with the advice."""
+    out = []
+    nro = _worst_per_effect(a.get("not_ruled_out") or [])
+    if nro:
+        out.append("  not ruled out (this session's noise could hide them; least "
+                   "detectable sensor of each):")
+        out.extend("    " + _limit_line(r) for r in nro[:_MAX_LINES])
+        if a.get("advice"):
+            out.append(f"  what to do: {a['advice']}")
+    seq = _worst_per_effect(a.get("sequence_limits") or [])
+    if seq:
+        out.append("  limits of the sequence (hidden even under white noise of this "
+                   "level):")
+        out.extend("    " + _limit_line(r) for r in seq[:_MAX_LINES])
+    return out
+
+
 def format_adequacy(cal: Calibration) -> list[str]:
     """Lines ``rimu calibrate`` prints about the adequacy and the effect terms."""
     a = cal.adequacy
@@ -195,18 +214,7 @@ def format_adequacy(cal: Calibration) -> list[str]:
         if a.get("noise_model_requested") != a.get("noise_model_applied"):
             out.append(f"  noise model: {a.get('noise_model_applied')} (asked for "
                        f"{a.get('noise_model_requested')})")
-        nro = _worst_per_effect(a.get("not_ruled_out") or [])
-        if nro:
-            out.append("  not ruled out (this session's noise could hide them; least "
-                       "detectable sensor of each):")
-            out.extend("    " + _limit_line(r) for r in nro[:_MAX_LINES])
-            if a.get("advice"):
-                out.append(f"  what to do: {a['advice']}")
-        seq = _worst_per_effect(a.get("sequence_limits") or [])
-        if seq:
-            out.append("  limits of the sequence (hidden even under white noise of this "
-                       "level):")
-            out.extend("    " + _limit_line(r) for r in seq[:_MAX_LINES])
+        out.extend(limit_lines(a))
     for t in cal.effects:
         out.append(f"effect {t.name} on {t.kind} {t.sensor + 1}: {t.estimate:+.4g} ± "
                    f"{t.estimate_sd:.2g} {t.unit}")

@@ -47,6 +47,14 @@ def test_json_layout_and_before_after(drift_dir, capsys):
     assert b["step_chi2_dof"]["gyro"][1] > 10 > 3 > a["step_chi2_dof"]["gyro"][1]
     assert b["truth"]["max_abs_z"] > 5 and a["truth"]["max_abs_z"] < 4
     assert any(n["name"] == "temperature" for n in doc["not_testable"])
+    # the refit calibration's verdict and its detectability limits
+    assert doc["verdict"] in ("adequate", "effects not ruled out")
+    assert (doc["verdict"] == "effects not ruled out") == bool(doc["not_ruled_out"])
+    for r in doc["not_ruled_out"] + doc["sequence_limits"]:
+        assert r["power"] < 0.99 and r["size_for_power"] > r["size"] > 0, r
+        assert r["parameter"] in ("bias", "scale_factor", "misalignment_1", "misalignment_2")
+    assert not any(r["name"] == "bias_drift" and r["sensor"] == 2
+                   for r in doc["not_ruled_out"])                     # it is fitted
 
 
 def test_text_report_and_refit_file(drift_dir, tmp_path, capsys):

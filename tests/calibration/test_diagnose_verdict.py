@@ -98,13 +98,13 @@ def _check_power(res, reps):
 
 
 def test_profiled_power_is_not_optimistic():
-    """15 draws (seed 21); the slow version runs 40 more."""
+    """15 draws (seed 21); the slow version runs 30 more."""
     _check_power(_power_mc(15, seed=21), 15)
 
 
 @pytest.mark.slow
 def test_profiled_power_is_not_optimistic_mc():
-    _check_power(_power_mc(40, seed=22), 40)
+    _check_power(_power_mc(30, seed=22), 30)
 
 
 # -- the failing cases under coloured noise -------------------------------------------------
