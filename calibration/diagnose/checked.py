@@ -6,7 +6,11 @@ structure in the residual that the same fit would read as noise and hide behind 
 So: calibrate with white noise, run the adequacy check of :mod:`calibration.diagnose`
 (candidate effects and generic probes, at level α) on the residual, and
 
-- adequate → calibrate with the requested noise model (the estimates do not depend on it);
+- nothing suspected → calibrate with the requested noise model (the estimates do not
+  depend on it), then ask whether the session could have seen every library effect that
+  moves a parameter of *that* calibration by 5 σ (:mod:`calibration.diagnose.detect`):
+  yes → "adequate"; no → "effects not ruled out", the limits listed (``not_ruled_out``),
+  the widening still applied, a warning with what to do;
 - effects suspected → keep the white-noise uncertainties, withhold the Gauss-Markov
   widening, and say where the structure is (``adequacy`` in the calibration, a warning).
 
