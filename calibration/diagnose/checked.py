@@ -60,7 +60,8 @@ _MAX_LINES = 6
 
 
 def calibrate_checked(session: Session, *, alpha: float = 0.01, noise_model: str = "auto",
-                      effects: Iterable[str] | None = None, **kw: Any) -> Calibration:
+                      effects: Iterable[str] | None = None, detectability: bool = True,
+                      **kw: Any) -> Calibration:
     """:func:`calibration.calibrate.calibrate` with the adequacy check (module docstring).
 
     Parameters
@@ -72,6 +73,10 @@ def calibrate_checked(session: Session, *, alpha: float = 0.01, noise_model: str
         Wanted noise model; ``"auto"`` is applied only when the model is adequate.
     effects : names, optional
         Effects to fit jointly (no selection among them).
+    detectability : bool
+        Ask whether the session could have seen every library effect that moves a
+        parameter by 5 σ (:mod:`.detect`; default). False: the verdict is "adequate" or
+        "effects suspected" from the tests alone (Monte Carlo runs that only count flags).
     **kw
         Passed to :func:`calibration.calibrate.calibrate` (``bias_method``, ``denoise``, ...).
 
@@ -108,11 +113,12 @@ def calibrate_checked(session: Session, *, alpha: float = 0.01, noise_model: str
             base = calibrate(session, noise_model=noise_model, **kw)
             warnings = list(base.extra.get("warnings", []))
         rec["noise_model_applied"] = noise_model if not effects else "white"
-        with threadpool_limits(limits=BLAS_THREADS, user_api="blas"):
-            lim = limits(datas, sel.models, base, alpha, sel.family_size,
-                         skip={(s.kind, s.sensor, s.candidate.name) for s in sel.claimed}
-                         | {(t.kind, t.sensor, t.name) for t in base.effects})
-        rec = with_limits(rec, lim, POWER)
+        if detectability:
+            with threadpool_limits(limits=BLAS_THREADS, user_api="blas"):
+                lim = limits(datas, sel.models, base, alpha, sel.family_size,
+                             skip={(s.kind, s.sensor, s.candidate.name) for s in sel.claimed}
+                             | {(t.kind, t.sensor, t.name) for t in base.effects})
+            rec = with_limits(rec, lim, POWER)
         if rec["verdict"] == "effects not ruled out":
             warnings.append(not_ruled_out_warning(rec))
     else:

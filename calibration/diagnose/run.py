@@ -223,7 +223,8 @@ def _effects_json(sel: Selection, new: Calibration) -> list[dict[str, Any]]:
 def diagnose(session: Session, cal: Calibration, *, alpha: float = 0.01,
              truth: tuple[Any, ...] | None = None,
              cal_path: str = "<calibration>",
-             effects: Iterable[str] | None = None) -> Diagnosis:
+             effects: Iterable[str] | None = None,
+             detectability: bool = True) -> Diagnosis:
     """Diagnose a session under a calibration (see the module docstring).
 
     Parameters
@@ -239,6 +240,8 @@ def diagnose(session: Session, cal: Calibration, *, alpha: float = 0.01,
         For error messages.
     effects : names, optional
         Fit exactly these (no selection).
+    detectability : bool
+        Add the detectability limits and the three-way verdict (:mod:`.detect`; default).
 
     Raises
     ------
@@ -250,12 +253,13 @@ def diagnose(session: Session, cal: Calibration, *, alpha: float = 0.01,
         raise ConfigError(f"alpha must be between 0 and 1, got {alpha!r}")
     check_match(session, cal, cal_path)
     with threadpool_limits(limits=BLAS_THREADS, user_api="blas"):
-        return _diagnose(session, cal, alpha, truth, effects, cal_path)
+        return _diagnose(session, cal, alpha, truth, effects, cal_path, detectability)
 
 
 def _diagnose(session: Session, cal: Calibration, alpha: float,
               truth: tuple[Any, ...] | None,
-              effects: Iterable[str] | None, cal_path: str) -> Diagnosis:
+              effects: Iterable[str] | None, cal_path: str,
+              detectability: bool = True) -> Diagnosis:
     datas = model_effects(kind_data(session, cal), cal.effects)
     check_same_session(datas, cal, session.source, cal_path)
     sel = _assess(session, cal, alpha=alpha, effects=effects, datas=datas)
@@ -264,7 +268,7 @@ def _diagnose(session: Session, cal: Calibration, alpha: float,
         rec = {**rec, "verdict": "adequate", "effects_found": rec["where"], "where": [],
                "monitor": MONITOR_NOTE}
     fit = refit(datas, cal, sel.claimed, adequacy=rec, noise=noise_sets(sel))
-    if not sel.unexplained:                   # nothing unexplained: what could still hide
+    if detectability and not sel.unexplained:   # nothing unexplained: what could hide
         lim = limits(datas, sel.models, fit.calibration, alpha, sel.family_size,
                      skip={(s.kind, s.sensor, s.candidate.name) for s in sel.claimed}
                      | {(t.kind, t.sensor, t.name) for t in fit.calibration.effects})
