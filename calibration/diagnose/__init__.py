@@ -6,7 +6,9 @@ nested extensions of the calibration model, selects them forward at a stated α 
 Holm/Bonferroni correction over candidates × sensors, says "unexplained" (and where) when
 structure remains that no candidate explains, refits and reports the error before and
 after. ``calibrate_checked`` is the calibration with this check in front of the
-coloured-noise model. See ``docs/diagnose.md``.
+coloured-noise model. Its verdict is "adequate" only when the session could also have seen
+every library effect that moves a parameter by 5 σ (:mod:`.detect`); otherwise "effects
+not ruled out", with the sizes that could hide. See ``docs/diagnose.md``.
 """
 
 from calibration.diagnose.checked import calibrate_checked, format_adequacy

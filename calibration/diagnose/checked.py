@@ -6,7 +6,11 @@ structure in the residual that the same fit would read as noise and hide behind 
 So: calibrate with white noise, run the adequacy check of :mod:`calibration.diagnose`
 (candidate effects and generic probes, at level α) on the residual, and
 
-- adequate → calibrate with the requested noise model (the estimates do not depend on it);
+- nothing suspected → calibrate with the requested noise model (the estimates do not
+  depend on it), then ask whether the session could have seen every library effect that
+  moves a parameter of *that* calibration by 5 σ (:mod:`calibration.diagnose.detect`):
+  yes → "adequate"; no → "effects not ruled out", the limits listed (``not_ruled_out``),
+  the widening still applied, a warning with what to do;
 - effects suspected → keep the white-noise uncertainties, withhold the Gauss-Markov
   widening, and say where the structure is (``adequacy`` in the calibration, a warning).
 
@@ -28,24 +32,36 @@ from collections.abc import Iterable, Mapping
 from typing import Any
 
 import scipy.stats
+from threadpoolctl import threadpool_limits
 
 from calibration.calibrate import calibrate
 from calibration.diagnose.context import KindData, kind_data
+from calibration.diagnose.detect import POWER, limits
 from calibration.diagnose.library import model_effects
 from calibration.diagnose.metrics import step_chi2_dof
 from calibration.diagnose.refit import Refit, refit
-from calibration.diagnose.run import MONITOR_NOTE, adequacy_record, assess
+from calibration.diagnose.run import (
+    BLAS_THREADS,
+    MONITOR_NOTE,
+    adequacy_record,
+    assess,
+    with_limits,
+)
 from calibration.diagnose.selection import noise_sets
 from calibration.fit_residuals import WARN_ALPHA
 from calibration.session import Session
 from fdi.calfile import Calibration
 from fdi.errors import ConfigError
 
-__all__ = ["calibrate_checked", "format_adequacy"]
+__all__ = ["calibrate_checked", "format_adequacy", "limit_lines", "not_ruled_out_warning"]
+
+_MAX_LINES = 6
+"""At most this many limits printed (the file holds them all)."""
 
 
 def calibrate_checked(session: Session, *, alpha: float = 0.01, noise_model: str = "auto",
-                      effects: Iterable[str] | None = None, **kw: Any) -> Calibration:
+                      effects: Iterable[str] | None = None, detectability: bool = True,
+                      **kw: Any) -> Calibration:
     """:func:`calibration.calibrate.calibrate` with the adequacy check (module docstring).
 
     Parameters
@@ -57,6 +73,10 @@ def calibrate_checked(session: Session, *, alpha: float = 0.01, noise_model: str
         Wanted noise model; ``"auto"`` is applied only when the model is adequate.
     effects : names, optional
         Effects to fit jointly (no selection among them).
+    detectability : bool
+        Ask whether the session could have seen every library effect that moves a
+        parameter by 5 σ (:mod:`.detect`; default). False: the verdict is "adequate" or
+        "effects suspected" from the tests alone (Monte Carlo runs that only count flags).
     **kw
         Passed to :func:`calibration.calibrate.calibrate` (``bias_method``, ``denoise``, ...).
 
@@ -93,6 +113,14 @@ def calibrate_checked(session: Session, *, alpha: float = 0.01, noise_model: str
             base = calibrate(session, noise_model=noise_model, **kw)
             warnings = list(base.extra.get("warnings", []))
         rec["noise_model_applied"] = noise_model if not effects else "white"
+        if detectability:
+            with threadpool_limits(limits=BLAS_THREADS, user_api="blas"):
+                lim = limits(datas, sel.models, base, alpha, sel.family_size,
+                             skip={(s.kind, s.sensor, s.candidate.name) for s in sel.claimed}
+                             | {(t.kind, t.sensor, t.name) for t in base.effects})
+            rec = with_limits(rec, lim, POWER)
+        if rec["verdict"] == "effects not ruled out":
+            warnings.append(not_ruled_out_warning(rec))
     else:
         rec["noise_model_applied"] = "white"
         warnings.append("model adequacy: effects suspected (" + "; ".join(rec["where"])
@@ -133,6 +161,55 @@ def _refit_warnings(fit: Refit, datas: Mapping[str, KindData]) -> list[str]:
     return out
 
 
+def _limit_line(r: Mapping[str, Any]) -> str:
+    p = r.get("params") or {}
+    at = (f" at {p['time_s']:.0f} s" if "time_s" in p else
+          f" at {p['frequency_hz']:.3g} Hz" if "frequency_hz" in p else "")
+    return (f"{r['name']}{at} on {r['kind']} {r['sensor']}: {r['size']:.3g} {r['unit']} "
+            f"moves its {str(r['parameter']).replace('_', ' ')} by "
+            f"{r['shift_sigma']:.0f} sigma, found with probability {r['power']:.2f} "
+            f"(0.99 from {r['size_for_power']:.3g} {r['unit']}, "
+            f"{r['shift_sigma_for_power']:.1f} sigma)")
+
+
+def _worst_per_effect(recs: Iterable[Mapping[str, Any]]) -> list[Mapping[str, Any]]:
+    """The least detectable sensor of each effect, least detectable first."""
+    best: dict[str, Mapping[str, Any]] = {}
+    for r in recs:
+        if r["name"] not in best or r["power"] < best[r["name"]]["power"]:
+            best[r["name"]] = r
+    return sorted(best.values(), key=lambda r: r["power"])
+
+
+def not_ruled_out_warning(rec: Mapping[str, Any]) -> str:
+    """The calibration warning of an "effects not ruled out" verdict."""
+    names = ", ".join(r["name"] for r in _worst_per_effect(rec["not_ruled_out"]))
+    applied = rec.get("noise_model_applied")
+    return ("model adequacy: effects not ruled out (" + names + "): nothing was found, but "
+            "this session's noise could hide them at sizes that move a parameter by 5 "
+            "sigma" + ("; the Gauss-Markov widening is applied (no effect is suspected)"
+                       if applied == "auto" else "") + ". " + str(rec.get("advice", "")))
+
+
+def limit_lines(a: Mapping[str, Any]) -> list[str]:
+    """The detectability limits of an adequacy record (:func:`.run.with_limits`), least
+    detectable sensor of each effect, with the advice."""
+    out = []
+    nro = _worst_per_effect(a.get("not_ruled_out") or [])
+    if nro:
+        out.append("  not ruled out (this session's noise could hide them; least "
+                   "detectable sensor of each):")
+        out.extend("    " + _limit_line(r) for r in nro[:_MAX_LINES])
+        if a.get("advice"):
+            out.append(f"  what to do: {a['advice']}")
+    seq = _worst_per_effect(a.get("sequence_limits") or [])
+    if seq:
+        out.append("  limits of the sequence (hidden even under white noise of this "
+                   "level):")
+        out.extend("    " + _limit_line(r) for r in seq[:_MAX_LINES])
+    return out
+
+
 def format_adequacy(cal: Calibration) -> list[str]:
     """Lines ``rimu calibrate`` prints about the adequacy and the effect terms."""
     a = cal.adequacy
@@ -147,6 +224,7 @@ def format_adequacy(cal: Calibration) -> list[str]:
         if a.get("noise_model_requested") != a.get("noise_model_applied"):
             out.append(f"  noise model: {a.get('noise_model_applied')} (asked for "
                        f"{a.get('noise_model_requested')})")
+        out.extend(limit_lines(a))
     for t in cal.effects:
         out.append(f"effect {t.name} on {t.kind} {t.sensor + 1}: {t.estimate:+.4g} ± "
                    f"{t.estimate_sd:.2g} {t.unit}")

@@ -84,8 +84,8 @@ from threadpoolctl import threadpool_limits
 from calibration.diagnose.linmodel import FTest, LinModel, projected_whitener
 from calibration.residuals import fit_gauss_markov
 
-__all__ = ["BLOCK_S", "MAX_BLOCKS", "BlockNoise", "GlsModel", "NoiseSet", "block_corr",
-           "block_noise", "grid_min", "needs_coloured"]
+__all__ = ["BLOCK_S", "MAX_BLOCKS", "BlockNoise", "DetectGrids", "GlsModel", "NoiseSet",
+           "block_corr", "block_noise", "grid_min", "needs_coloured"]
 
 BLOCK_S = 1.0
 """Nominal block length (s) of the block-mean decomposition."""
@@ -230,6 +230,14 @@ def grid_min(v: np.ndarray, noise: BlockNoise) -> float:
                float(v.min()))
 
 
+def _solve(A: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """``A⁻¹·B`` for stacked symmetric ``A``; least squares where one is singular."""
+    try:
+        return np.linalg.solve(A, B)
+    except np.linalg.LinAlgError:
+        return np.linalg.pinv(A) @ B
+
+
 def _log_chi2_sf(x: float, r: int) -> float:
     v = float(scipy.stats.chi2.logsf(x, r))
     if np.isfinite(v):
@@ -272,6 +280,42 @@ class NoiseSet:
             if j != sensor:
                 tot = tot + v
         return tot
+
+
+@dataclass(frozen=True)
+class DetectGrids:
+    """What the detectability of an effect ``Z`` under the profiled null needs
+    (:mod:`calibration.diagnose.detect`), on the (τ, ρ) grid.
+
+    Attributes
+    ----------
+    rss1 : ndarray, shape (T, R)
+        Restricted residual sum of squares of the session under the design ``[X, Z]``.
+    base : ndarray, shape (T, R)
+        Its restricted terms ``Σ log(1 + ρλ) + log det G_[X,Z]``.
+    dof : int
+        ``N − k − p``.
+    gram : ndarray, shape (T, R, p, p)
+        ``⟨Z⊥, Z⊥⟩_V``: the V-metric Gram of ``Z`` made orthogonal (V-metric) to ``X``.
+    others : ndarray, shape (T, R)
+        The other sensors' −2ℓ_R grids.
+    fitted : tuple of int
+        Grid index (τ, ρ) of the set's fitted noise.
+    noise : BlockNoise
+    """
+
+    rss1: np.ndarray
+    base: np.ndarray
+    dof: int
+    gram: np.ndarray
+    others: np.ndarray
+    fitted: tuple[int, int]
+    noise: BlockNoise
+
+    def v(self, extra: np.ndarray | float = 0.0) -> np.ndarray:
+        """−2ℓ_R grid of the set (others included) with ``extra`` added to ``rss1``."""
+        rss = np.maximum(self.rss1 + extra, 1e-300)
+        return self.others + self.dof * np.log(rss / self.dof) + self.base
 
 
 class GlsModel:
@@ -384,6 +428,90 @@ class GlsModel:
         v0 = None if k0 is None else \
             dof * np.log(np.maximum(rss(k0), 1e-300) / dof) + base
         return v1, v0
+
+    def _vgram(self, Zrot: np.ndarray, Z: np.ndarray, sel: tuple[int, int] | None = None
+               ) -> np.ndarray:
+        """``⟨Z⊥, Z⊥⟩_V`` (Gram of ``Z`` (N, p) made V-orthogonal to the model) on the
+        (τ, ρ) grid, (T, R, p, p), or at one grid point ``sel`` (p, p). ``Zrot``: the
+        rotated block means of ``Z`` (T, M, p)."""
+        nz = self.noise
+        k, p = self.lm.k, Z.shape[1]
+        QZ = self.lm.Q.T @ Z
+        G = np.zeros((k + p, k + p))
+        G[:k, :k] = np.eye(k)
+        G[:k, k:] = QZ
+        G[k:, :k] = QZ.T
+        G[k:, k:] = Z.T @ Z
+        if sel is not None:
+            t, r = sel
+            At = np.concatenate([self._Qrot[t], Zrot], axis=1)
+            Gv = G - (At.T * nz.h[t, r]) @ At
+        else:
+            A = np.concatenate([self._Qrot, Zrot], axis=2)
+            T, M, q = A.shape
+            P = (A[:, :, :, None] * A[:, :, None, :]).reshape(T, M, q * q)
+            Gv = G[None, None] - np.matmul(nz.h, P).reshape(T, -1, q, q)
+        if not k:
+            return Gv
+        return Gv[..., k:, k:] - np.swapaxes(Gv[..., :k, k:], -1, -2) @ _solve(
+            Gv[..., :k, :k], Gv[..., :k, k:])
+
+    def fitted_index(self) -> tuple[int, int]:
+        """Grid index (τ, ρ) of the set's fitted noise (minimum of the summed −2ℓ_R)."""
+        tot = self.group.others(-1)
+        t, r = np.unravel_index(int(np.argmin(tot)), tot.shape)
+        return int(t), int(r)
+
+    def known_noise(self, Z: np.ndarray) -> tuple[np.ndarray, float]:
+        """``⟨Z⊥, Z⊥⟩_V`` (p, p) at the set's fitted (ρ, τ) and the white variance σ_w²
+        there: the Fisher information of ``Z``'s coefficients is their ratio."""
+        Z = np.asarray(Z, float).reshape(self.y.size, -1)
+        nz = self.noise
+        t, r = self.fitted_index()
+        Zrot = nz.Ut[t] @ (np.sqrt(nz.counts)[:, None] * nz.means(Z))
+        k = self.lm.k
+        # σ_w² at the fitted point from the current model's residual
+        Ae = np.concatenate([self._Qrot[t], self._erot[t]], axis=1)
+        Ge = np.zeros((k + 1, k + 1))
+        Ge[:k, :k] = np.eye(k)
+        Ge[k, k] = self.lm.rss
+        Gv = Ge - (Ae.T * nz.h[t, r]) @ Ae
+        rss = Gv[k, k] - Gv[k, :k] @ _solve(Gv[:k, :k], Gv[:k, k])
+        sw2 = float(rss) / max(self.y.size - k, 1)
+        gram = self._vgram(Zrot, Z, (t, r))
+        return gram, sw2
+
+    def detect_grids(self, Z: np.ndarray) -> DetectGrids:
+        """The grids :mod:`calibration.diagnose.detect` needs for adding ``Z`` (N, p)
+        (see :class:`DetectGrids`): the session's residual under ``[X, Z]`` and the
+        V-metric Gram of ``Z`` off ``X``, at every (τ, ρ) of the grid."""
+        Z = np.asarray(Z, float).reshape(self.y.size, -1)
+        nz = self.noise
+        k = self.lm.k
+        Zrot = nz.rotate(nz.means(Z))
+        gram = self._vgram(Zrot, Z)
+        # the session's residual under [Q, Z] (the test's own alternative grid)
+        Zs, scale, Aw, W = projected_whitener(Z, self.lm.Q)
+        r = W.shape[1]
+        c = W.T @ ((Zs.T @ self.lm.e) / scale)
+        Urot = (Zrot / scale - self._Qrot @ Aw) @ W          # rotation is linear
+        Gf = np.zeros((k + r + 1, k + r + 1))
+        Gf[:k + r, :k + r] = np.eye(k + r)
+        Gf[k:k + r, -1] = Gf[-1, k:k + r] = c
+        Gf[-1, -1] = self.lm.rss
+        Arot = np.concatenate([self._Qrot, Urot, self._erot], axis=2)
+        T, M, q = Arot.shape
+        Gv1 = Gf[None, None] - np.matmul(
+            nz.h, (Arot[..., :, None] * Arot[..., None, :]).reshape(T, M, q * q)
+        ).reshape(T, -1, q, q)
+        Gx, gx = Gv1[..., :-1, :-1], Gv1[..., :-1, -1:]
+        rss1 = Gv1[..., -1, -1] - (np.swapaxes(gx, -1, -2) @ _solve(Gx, gx))[..., 0, 0]
+        ld = np.linalg.slogdet(Gx)[1]
+        base = nz.logdet + np.where(np.isfinite(ld), ld, np.inf)
+        dof = self.y.size - (k + r)
+        return DetectGrids(rss1=np.maximum(rss1, 1e-300), base=base,
+                           dof=dof, gram=gram, others=self.group.others(self.sensor),
+                           fitted=self.fitted_index(), noise=nz)
 
     def test(self, Z: np.ndarray, gram: np.ndarray | None = None) -> FTest:
         """Profile-likelihood-ratio test of adding ``Z`` (N, p) to the model.

@@ -9,6 +9,7 @@ of ``rimu diagnose`` (:meth:`Diagnosis.to_json`).
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -17,6 +18,7 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from calibration.diagnose.context import KindData, check_match, check_same_session, kind_data
+from calibration.diagnose.detect import POWER, limits
 from calibration.diagnose.library import Candidate, candidates, get_candidate, model_effects
 from calibration.diagnose.metrics import error_summary
 from calibration.diagnose.refit import refit
@@ -25,9 +27,9 @@ from calibration.session import Session
 from fdi.calfile import Calibration
 from fdi.errors import ConfigError
 
-__all__ = ["BLAS_THREADS", "DIAGNOSIS_SCHEMA", "MONITOR_NOTE", "Diagnosis", "adequacy_record",
-           "assess",
-           "diagnose"]
+__all__ = ["ADVICE", "BLAS_THREADS", "DIAGNOSIS_SCHEMA", "MONITOR_NOTE", "VERDICTS",
+           "Diagnosis", "adequacy_record", "assess", "diagnose", "public_limit",
+           "with_limits"]
 
 DIAGNOSIS_SCHEMA = "rimu.diagnosis/1"
 MONITOR_NOTE = ("the runtime monitor compensates the effect terms whose inputs it has at "
@@ -61,6 +63,15 @@ class Diagnosis:
     noise_null : dict
         Per kind, the noise the tests took as the null: ``"white"`` or ``"white +
         Gauss-Markov"`` (:mod:`.coloured`).
+    not_ruled_out : list of dict
+        Library effects this session's noise could hide at a size that moves a parameter
+        of the refit calibration by 5 σ (:mod:`.detect`, ``limit == "session"``):
+        ``{"name", "kind", "sensor", "sensor_name", "size", "unit", "parameter",
+        "shift_sigma", "power", "power_white", "size_for_power",
+        "shift_sigma_for_power", "params"}``.
+    sequence_limits : list of dict
+        The same for effects the sequence itself cannot separate at that size (hidden
+        even under white noise of the session's level).
     """
 
     effects: list[dict[str, Any]]
@@ -73,11 +84,18 @@ class Diagnosis:
     calibration: Calibration
     selection: Selection = field(repr=False, compare=False, default_factory=Selection)
     noise_null: dict[str, str] = field(default_factory=dict)
+    not_ruled_out: list[dict[str, Any]] = field(default_factory=list)
+    sequence_limits: list[dict[str, Any]] = field(default_factory=list)
 
     @property
     def adequate(self) -> bool:
         """True when nothing was claimed and nothing is unexplained."""
         return not self.effects and not self.unexplained
+
+    @property
+    def verdict(self) -> str:
+        """The refit calibration's adequacy verdict (:data:`VERDICTS`)."""
+        return str((self.calibration.adequacy or {}).get("verdict", "adequate"))
 
     def to_json(self) -> dict[str, Any]:
         """The ``rimu diagnose --json`` document."""
@@ -85,11 +103,50 @@ class Diagnosis:
                 "unexplained": self.unexplained,
                 "unexplained_detail": self.unexplained_detail,
                 "not_testable": self.not_testable, "noise_null": self.noise_null,
+                "verdict": self.verdict, "not_ruled_out": self.not_ruled_out,
+                "sequence_limits": self.sequence_limits,
                 "error_before": self.error_before, "error_after": self.error_after}
 
 
+VERDICTS = ("adequate", "effects not ruled out", "effects suspected")
+"""The adequacy verdicts: nothing found and every library effect that would move a
+parameter by 5 σ would have been found (:mod:`.detect`); nothing found but this session's
+noise could hide such an effect; effects or unexplained structure found."""
+ADVICE = ("repeat the session and compare (a warm-up repeats at every switch-on, at the same "
+          "time after it; a Gauss-Markov wander does not), or record a longer session so "
+          "that the wander and a slow effect separate; the sizes listed could hide in this "
+          "one")
+
+
+def public_limit(rec: Mapping[str, Any]) -> dict[str, Any]:
+    """A limit of :func:`.detect.limits` for files and JSON (plain numbers)."""
+    keys = ("name", "kind", "sensor", "sensor_name", "size", "unit", "parameter",
+            "shift_sigma", "power", "power_white", "size_for_power", "shift_sigma_for_power",
+            "params")
+    return {k: rec[k] for k in keys if k in rec}
+
+
+def with_limits(rec: Mapping[str, Any], lim: Iterable[Mapping[str, Any]],
+                power: float) -> dict[str, Any]:
+    """``rec`` (:func:`adequacy_record`) with the detectability limits: the verdict becomes
+    "effects not ruled out" when nothing was found but this session's noise could hide a
+    library effect that moves a parameter by 5 σ (``not_ruled_out``); limits of the
+    sequence itself (hidden even under white noise of the session's level) are listed as
+    ``sequence_limits`` and do not change the verdict."""
+    lim = list(lim)
+    out = dict(rec)
+    out["not_ruled_out"] = [public_limit(r) for r in lim if r["limit"] == "session"]
+    out["sequence_limits"] = [public_limit(r) for r in lim if r["limit"] == "sequence"]
+    out["detection_power"] = power
+    if out["verdict"] == "adequate" and out["not_ruled_out"]:
+        out["verdict"] = "effects not ruled out"
+        out["advice"] = ADVICE
+    return out
+
+
 def adequacy_record(sel: Selection, alpha: float) -> dict[str, Any]:
-    """The ``adequacy`` entry of a calibration file from a selection."""
+    """The ``adequacy`` entry of a calibration file from a selection (verdict "adequate"
+    or "effects suspected"; :func:`with_limits` adds the detectability)."""
     where = [f"{s.kind} {s.sensor + 1}: {s.candidate.name}" for s in sel.claimed]
     where += [f"{u['kind']} {u['sensor']}: unexplained ({u['test']}"
               + (f", steps {', '.join(map(str, u['steps']))}" if u.get("steps") else "")
@@ -166,7 +223,8 @@ def _effects_json(sel: Selection, new: Calibration) -> list[dict[str, Any]]:
 def diagnose(session: Session, cal: Calibration, *, alpha: float = 0.01,
              truth: tuple[Any, ...] | None = None,
              cal_path: str = "<calibration>",
-             effects: Iterable[str] | None = None) -> Diagnosis:
+             effects: Iterable[str] | None = None,
+             detectability: bool = True) -> Diagnosis:
     """Diagnose a session under a calibration (see the module docstring).
 
     Parameters
@@ -182,6 +240,8 @@ def diagnose(session: Session, cal: Calibration, *, alpha: float = 0.01,
         For error messages.
     effects : names, optional
         Fit exactly these (no selection).
+    detectability : bool
+        Add the detectability limits and the three-way verdict (:mod:`.detect`; default).
 
     Raises
     ------
@@ -193,12 +253,13 @@ def diagnose(session: Session, cal: Calibration, *, alpha: float = 0.01,
         raise ConfigError(f"alpha must be between 0 and 1, got {alpha!r}")
     check_match(session, cal, cal_path)
     with threadpool_limits(limits=BLAS_THREADS, user_api="blas"):
-        return _diagnose(session, cal, alpha, truth, effects, cal_path)
+        return _diagnose(session, cal, alpha, truth, effects, cal_path, detectability)
 
 
 def _diagnose(session: Session, cal: Calibration, alpha: float,
               truth: tuple[Any, ...] | None,
-              effects: Iterable[str] | None, cal_path: str) -> Diagnosis:
+              effects: Iterable[str] | None, cal_path: str,
+              detectability: bool = True) -> Diagnosis:
     datas = model_effects(kind_data(session, cal), cal.effects)
     check_same_session(datas, cal, session.source, cal_path)
     sel = _assess(session, cal, alpha=alpha, effects=effects, datas=datas)
@@ -207,6 +268,13 @@ def _diagnose(session: Session, cal: Calibration, alpha: float,
         rec = {**rec, "verdict": "adequate", "effects_found": rec["where"], "where": [],
                "monitor": MONITOR_NOTE}
     fit = refit(datas, cal, sel.claimed, adequacy=rec, noise=noise_sets(sel))
+    if detectability and not sel.unexplained:   # nothing unexplained: what could hide
+        lim = limits(datas, sel.models, fit.calibration, alpha, sel.family_size,
+                     skip={(s.kind, s.sensor, s.candidate.name) for s in sel.claimed}
+                     | {(t.kind, t.sensor, t.name) for t in fit.calibration.effects})
+        rec = with_limits(rec, lim, POWER)
+        fit = dataclasses.replace(fit, calibration=dataclasses.replace(
+            fit.calibration, adequacy=rec))
     before = error_summary(datas, {k: d.y for k, d in datas.items()},
                            {k: np.full(d.n, 4) for k, d in datas.items()}, cal, truth)
     after = error_summary(datas, fit.residual, fit.n_params, fit.calibration, truth)
@@ -215,4 +283,6 @@ def _diagnose(session: Session, cal: Calibration, alpha: float,
                      unexplained_detail=sel.unexplained, not_testable=sel.not_testable,
                      error_before=before, error_after=after, alpha=alpha,
                      calibration=fit.calibration, selection=sel,
-                     noise_null=dict(sel.noise_null))
+                     noise_null=dict(sel.noise_null),
+                     not_ruled_out=list(rec.get("not_ruled_out") or []),
+                     sequence_limits=list(rec.get("sequence_limits") or []))

@@ -80,6 +80,8 @@ class Selection:
     unexplained: list[dict[str, Any]] = field(default_factory=list)
     not_testable: list[dict[str, Any]] = field(default_factory=list)
     models: dict[tuple[str, int], LinModel | GlsModel] = field(default_factory=dict)
+    family_size: int = 0
+    """The (candidate, sensor) pairs tested (the ``m`` of the first Holm threshold)."""
     noise_null: dict[str, str] = field(default_factory=dict)
     """Per kind, the noise of the null hypothesis: ``"white"`` or ``"white +
     Gauss-Markov"`` (profile-likelihood tests, :mod:`.coloured`)."""
@@ -150,6 +152,7 @@ def select(datas: Mapping[str, KindData], cands: Iterable[Candidate], alpha: flo
         _probe(datas, out, alpha, demote=False)
         return out
     cache = _first_pass(datas, family, out)
+    out.family_size = len(cache)
     _forward(datas, {c.name: c for c in cands}, cache, out, alpha)
     _probe(datas, out, alpha)
     return out

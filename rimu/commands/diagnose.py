@@ -82,6 +82,12 @@ def text(d) -> str:
         lines.extend(_unexplained_line(u) for u in d.unexplained_detail)
     else:
         lines.append("unexplained structure: none")
+    a = d.calibration.adequacy or {}
+    if a:
+        from calibration.diagnose.checked import limit_lines
+
+        lines.append(f"verdict of the refit calibration: {d.verdict}")
+        lines.extend(limit_lines(a))
     nt = sorted({(n["name"], n["kind"], n["reason"]) for n in d.not_testable})
     for name, kind, why in nt:
         lines.append(f"not testable: {name} ({kind}): {why}")

@@ -14,9 +14,12 @@ Checked here:
   regressors (a warm-up, a trend, Legendre polynomials, per-step means) over simulated white
   + Gauss-Markov sets (Monte Carlo, seeds fixed);
 - clean coloured sessions: flagged (any effect or "unexplained") no more often than the
-  99.9 % binomial quantile for α; calibrate's verdict "adequate" with the Gauss-Markov
-  widening applied, and the bias errors honest (sd of error/σ near 1, tails within the
-  binomial bound);
+  99.9 % binomial quantile for α; calibrate's verdict is not "effects suspected" and the
+  Gauss-Markov widening is applied, and the bias errors honest (sd of error/σ near 1, tails
+  within the binomial bound). Since the detectability check (:mod:`calibration.diagnose.
+  detect`) the verdict of such a session is "effects not ruled out" rather than "adequate":
+  against a profiled Gauss-Markov wander of this size a slow effect (warm-up, drift) that
+  moves a bias by 5 σ is found with probability well below 0.99, and the session says so;
 - coloured sessions with an effect that biases a parameter beyond 5 σ (scale asymmetry,
   g-sensitivity, warm-up): never "adequate", widening withheld.
 """
@@ -106,14 +109,25 @@ def test_profile_likelihood_ratio_null_tail():
         assert np.sum(v[:, 1] < 0.05) <= hi, (k, np.sum(v[:, 1] < 0.05))
 
 
-def test_coloured_clean_session_is_adequate_and_widened():
+def test_coloured_clean_session_is_not_ruled_out_and_widened():
+    """Nothing suspected, the widening applied; the verdict (was "adequate" before the
+    detectability check) is "effects not ruled out", naming the slow effects the wander
+    could hide at 5 σ, with the advice and a warning."""
     s, _ = _coloured(seed=1)
     cal = calibrate_checked(s, allan=False, earth_rate=False)
     a = cal.adequacy
     assert a["noise_null"]["gyro"] == "white + Gauss-Markov"
-    assert a["verdict"] == "adequate", a["where"]
+    assert a["where"] == []
+    assert a["verdict"] == "effects not ruled out"
     assert a["noise_model_applied"] == "auto"
     assert cal.extra["noise_model"]["gyro"]["applied"] is True
+    names = {r["name"] for r in a["not_ruled_out"]}
+    assert {"warmup", "bias_drift"} <= names, names
+    for r in a["not_ruled_out"]:
+        assert r["power"] < 0.99 <= r["power_white"] and r["shift_sigma"] == 5.0
+        assert r["size_for_power"] > r["size"] > 0
+    assert "repeat the session" in a["advice"]
+    assert any("effects not ruled out" in w for w in cal.extra["warnings"])
 
 
 CASES = [("scale_asymmetry", 0.01, None), ("g_sensitivity", 300.0, [1]),
@@ -161,15 +175,21 @@ CLEAN_SEEDS = range(300, 350)
 @pytest.mark.slow
 def test_coloured_clean_sessions_flag_rate_and_honest_biases():
     """50 clean coloured tetrad-paper sessions at α = 0.05 (seeds not used in development):
-    flagged ≤ the 99.9 % quantile of Binomial(50, 0.05); the adequate ones get the
-    Gauss-Markov widening, and their bias errors are honest: sd(error/σ) in 0.75-1.3 and
-    at most the 99.9 % binomial quantile beyond 3σ."""
+    flagged ≤ the 99.9 % quantile of Binomial(50, 0.05); the others (verdict "adequate" or,
+    since the detectability check, "effects not ruled out": nothing suspected either way)
+    get the Gauss-Markov widening, and their bias errors are honest: sd(error/σ) in
+    0.75-1.3 and at most the 99.9 % binomial quantile beyond 3σ. The detectability limits
+    change none of these (only "adequate" into "effects not ruled out") and are skipped
+    here to keep the run short; the verdict with them is tested on seeds 1 and 2 in the
+    default run (test_coloured_clean_session_is_not_ruled_out_and_widened,
+    test_diagnose_verdict.py)."""
     flagged, z = [], []
     for seed in CLEAN_SEEDS:
         s, truth = _coloured(seed)
-        cal = calibrate_checked(s, alpha=ALPHA, allan=False, earth_rate=False)
+        cal = calibrate_checked(s, alpha=ALPHA, allan=False, earth_rate=False,
+                                detectability=False)
         a = cal.adequacy
-        if a["verdict"] != "adequate":
+        if a["verdict"] == "effects suspected":
             flagged.append((seed, a["where"]))
             continue
         assert a["noise_null"]["gyro"] == "white + Gauss-Markov", seed
@@ -204,7 +224,8 @@ def test_refit_under_coloured_noise_is_honest():
     ze, zp = [], []
     for seed in range(520, 530):
         s, truth = _coloured(seed, {"warmup": 60.0}, [3])
-        d = diagnose(s, calibrate_fast(s), truth=(truth, {"warmup": 60.0}))
+        d = diagnose(s, calibrate_fast(s), truth=(truth, {"warmup": 60.0}),
+                     detectability=False)            # estimates only: limits not needed
         assert d.noise_null["gyro"] == "white + Gauss-Markov", seed
         mine = [e for e in d.effects if e["name"] == "warmup" and e["sensors"] == [3]]
         assert len(mine) == 1, (seed, d.effects, d.unexplained_detail)

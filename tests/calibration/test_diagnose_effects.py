@@ -35,11 +35,11 @@ KNOBS = [
 SLOW_SEEDS = range(1, 4)
 
 
-def _check(s, truth, name, value, expect, biases):
+def _check(s, truth, name, value, expect, biases, detectability=True):
     cal = calibrate_fast(s)
     d = diagnose(s, cal, truth=(truth, {name: value} if name in (
         "g_sensitivity", "scale_asymmetry", "scale_nonlinearity", "warmup", "time_skew",
-        "bias_drift", "no_earth_rate") else {}))
+        "bias_drift", "no_earth_rate") else {}), detectability=detectability)
     zb = {(p["kind"], p["sensor"], p["parameter"]): p["z"]
           for p in d.error_before["truth"]["parameters"]}
     za = {(p["kind"], p["sensor"], p["parameter"]): p["z"]
@@ -75,7 +75,8 @@ def test_knob_monte_carlo(case):
     zs = []
     for seed in SLOW_SEEDS:
         s, truth = session(pre, seed, effects={name: value}, effect_sensors=sens)
-        zs += _check(s, truth, name, value, expect, biases)
+        # estimates and errors only: the detectability limits (verdict) are not needed
+        zs += _check(s, truth, name, value, expect, biases, detectability=False)
     rms = float(np.sqrt(np.mean(np.square(zs))))
     assert 0.6 < rms < 1.5, rms
 
