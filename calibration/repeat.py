@@ -278,7 +278,7 @@ def repeatability(cals: Sequence[Calibration], *, alpha: float = 0.01) -> Repeat
                 rows.append((kind, i, c.name, p, unit, x / f, s / f))
     out = []
     stats = []
-    for kind, i, name, p, unit, x, s in rows:
+    for *_, x, s in rows:
         n = x.size
         Q = _q(x, s**2)
         pv = float(scipy.stats.chi2.sf(Q, n - 1))
