@@ -69,7 +69,7 @@ def test_turn_on_bias_repeatability_found_and_sized():
     rng = np.random.default_rng(123)
     cals = []
     for j in range(6):
-        s, truth = session("tetrad-paper", 2100 + j)
+        s, truth = clean_fast("tetrad-paper", 2100 + j)
         for i in range(4):
             s = add_signal(s, truth, i, np.full(s.t.shape, rng.normal(0, 1.0) * DPH))
         cals.append(_cal(s))
@@ -93,7 +93,7 @@ def test_stack_mismatch_names_session_and_field():
     c = dataclasses.replace(a, source="c", t=a.t * 1.001)
     assert stack_mismatch([a, c]).startswith("c: t at sample")
     assert stack_mismatch([a, dataclasses.replace(a, source="d")]) is None
-    with pytest.raises(ConfigError, match="b: outer angle.*identical sequences"):
+    with pytest.raises(ConfigError, match=r"b: outer angle.*identical sequences"):
         stack_sessions([a, b])
     with pytest.raises(ConfigError, match="b: outer angle"):
         repeat_sessions([a, b], stack=True, calibrations=[None, None])
@@ -109,7 +109,7 @@ def test_stack_is_the_mean_and_keeps_the_mean_parameters():
     biases (the model is linear in the raw output), within the stack's own σ."""
     runs = []
     for j, off in enumerate((-2.0, 0.0, 5.0)):
-        s, truth = session("tetrad-paper", 2200 + j)
+        s, truth = clean_fast("tetrad-paper", 2200 + j)
         runs.append(add_signal(s, truth, 1, np.full(s.t.shape, off * DPH)))
     st = stack_sessions(runs)
     np.testing.assert_allclose(st.raw_gyro, np.mean([r.raw_gyro for r in runs], axis=0))
@@ -153,7 +153,7 @@ def _projected_bias_sd(s, truth, bi, tc):
     wt, we, _ = s.inputs()
     X = np.c_[np.ones(len(wt)), wt + we]
     c = np.linalg.solve(X.T @ X, X.T)[0]
-    nb = int(round(s.sample_rate_hz))
+    nb = round(s.sample_rate_hz)
     C = c[:c.size // nb * nb].reshape(-1, nb).sum(1)
     tb = np.arange(C.size)
     K = np.exp(-np.abs(tb[:, None] - tb[None, :]) / tc)
