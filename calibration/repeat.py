@@ -268,7 +268,7 @@ def repeatability(cals: Sequence[Calibration], *, alpha: float = 0.01) -> Repeat
                 if p == "bias":
                     f, unit = input_unit_factor(c.bias_unit), c.bias_unit
                 elif p == "scale_factor":
-                    f, unit = abs(float(np.mean(x))) * 1e-6, "ppm"
+                    f, unit = abs(float(np.mean(x))) * 1e-6, "ppm of mean"
                 else:
                     f, unit = 1e-3, "mrad"
                 if not np.all(np.isfinite(s) & (s > 0)) or not np.all(np.isfinite(x)):

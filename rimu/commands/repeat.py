@@ -52,13 +52,13 @@ def repeat_text(res) -> str:
               f"{len(rep.parameters)} parameters; chi2 of the scatter about the weighted "
               f"mean against the reported sigma, {n - 1} dof; run-to-run sd beyond the "
               f"reported sigma with its {rep.ci_level:.0%} interval):",
-              f"  {'sensor':<10s}{'parameter':<16s}{'mean':>12s}{'± sd':>10s} {'unit':<7s}"
+              f"  {'sensor':<10s}{'parameter':<16s}{'mean':>12s}{'± sd':>10s} {'unit':<12s}"
               f"{'chi2':>8s}{'p':>10s}  {'run-to-run sd [CI]':<26s}verdict"]
     for p in rep.parameters:
         lo, hi = p.run_sd_ci
         mean = "-" if p.parameter == "scale_factor" else _fmt(p.mean)
         lines.append(f"  {p.kind + ' ' + p.sensor_name:<10s}{p.parameter:<16s}{mean:>12s}"
-                     f"{_fmt(p.mean_sd):>10s} {p.unit:<7s}{p.chi2:8.2f}{p.p_value:10.2g}  "
+                     f"{_fmt(p.mean_sd):>10s} {p.unit:<12s}{p.chi2:8.2f}{p.p_value:10.2g}  "
                      f"{_fmt(p.run_sd) + ' [' + _fmt(lo) + ', ' + _fmt(hi) + ']':<26s}"
                      f"{p.verdict}")
     fl = rep.flagged()
