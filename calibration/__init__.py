@@ -9,10 +9,12 @@ from calibration.earth_rate import fit_earth_rate
 from calibration.multiposition import multiposition
 from calibration.presets import preset
 from calibration.rate_test import rate_test
+from calibration.repeat import repeat_sessions, repeatability
 from calibration.sequence import Sequence, SequenceStep, load_sequence
 from calibration.session import Session, Step
 from calibration.session_io import load_session, save_session
 from calibration.simulate import NoiseModel, simulate_session
+from calibration.stack import stack_sessions
 from calibration.truth import load_truth, save_truth
 from calibration.turntable import MOUNTS, body_inputs, earth_rate_n, gravity_local, mat_nb
 from calibration.wavelet import denoise
@@ -39,7 +41,10 @@ __all__ = [
     "multiposition",
     "preset",
     "rate_test",
+    "repeat_sessions",
+    "repeatability",
     "save_session",
     "save_truth",
     "simulate_session",
+    "stack_sessions",
 ]

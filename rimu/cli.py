@@ -27,6 +27,7 @@ COMMANDS: dict[str, str] = {
     "monitor": "rimu.commands.monitor",
     "monitor-file": "rimu.commands.monitor_file",
     "parity": "rimu.commands.parity",
+    "repeat": "rimu.commands.repeat",
     "replay": "rimu.commands.replay",
     "tune": "rimu.commands.tune",
 }
