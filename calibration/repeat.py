@@ -307,7 +307,7 @@ def repeatability(cals: Sequence[Calibration], *, alpha: float = 0.01) -> Repeat
 def repeat_sessions(sessions: Sequence[Session], *, alpha: float = 0.01,
                     stack: bool | None = None, detectability: bool = True,
                     calibrations: Sequence[Calibration] | None = None,
-                    **kw: Any) -> RepeatResult:
+                    progress: bool = False, **kw: Any) -> RepeatResult:
     """Calibrate N sessions, compare their parameters, and check their stack.
 
     Parameters
@@ -324,6 +324,8 @@ def repeat_sessions(sessions: Sequence[Session], *, alpha: float = 0.01,
         ruled out" limits; faster).
     calibrations : sequence of Calibration, optional
         The sessions' calibrations when already made (otherwise ``calibrate_checked``).
+    progress : bool
+        A tqdm progress bar on stderr over the calibrations (each takes 1-3 s).
     **kw
         Passed to ``calibrate_checked`` (``noise_model``, ``allan``, ``earth_rate``, ...).
 
@@ -345,14 +347,24 @@ def repeat_sessions(sessions: Sequence[Session], *, alpha: float = 0.01,
     why = stack_mismatch(sessions) if stack is not False else "not asked for"
     if stack and why:
         raise ConfigError(f"{why}; stacking needs identical sequences")
-    if calibrations is None:
-        calibrations = [calibrate_checked(s, alpha=alpha, detectability=detectability, **kw)
-                        for s in sessions]
-    rep = repeatability(calibrations, alpha=alpha)
-    res = None
-    if why is None:
-        st = stack_sessions(sessions)
-        res = StackResult(len(sessions), st,
-                          calibrate_checked(st, alpha=alpha, detectability=detectability, **kw))
+    from tqdm import tqdm
+
+    total = (len(sessions) if calibrations is None else 0) + (why is None)
+    with tqdm(total=total, disable=not progress, unit="calibration", desc="repeat",
+              leave=False) as bar:
+        if calibrations is None:
+            calibrations = []
+            for s in sessions:
+                calibrations.append(calibrate_checked(s, alpha=alpha,
+                                                      detectability=detectability, **kw))
+                bar.update()
+        rep = repeatability(calibrations, alpha=alpha)
+        res = None
+        if why is None:
+            st = stack_sessions(sessions)
+            res = StackResult(len(sessions), st,
+                              calibrate_checked(st, alpha=alpha, detectability=detectability,
+                                                **kw))
+            bar.update()
     return RepeatResult(tuple(s.source for s in sessions), tuple(calibrations), rep, res,
                         None if why is None else why)

@@ -35,6 +35,7 @@ def configure(p: argparse.ArgumentParser) -> None:
                    help="require stacking (fail when the sequences differ)")
     g.add_argument("--no-stack", dest="stack", action="store_false",
                    help="compare parameters only")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
 def _fmt(v: float) -> str:
@@ -109,7 +110,8 @@ def run(args: argparse.Namespace) -> int:
         input_path(s, "SESSION", kind="dir")
     out = output_dir(args.out, "--out") if args.out else None
     sessions = [load_session(s) for s in args.sessions]
-    res = repeat_sessions(sessions, alpha=args.alpha, stack=args.stack)
+    res = repeat_sessions(sessions, alpha=args.alpha, stack=args.stack,
+                          progress=not args.no_progress)
     if out is not None:
         out.mkdir(parents=True, exist_ok=True)
         written = []
