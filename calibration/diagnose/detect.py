@@ -151,8 +151,19 @@ def _reference(c: Candidate, d: KindData, Z: np.ndarray, params: Mapping[str, An
 
 
 def power_at(lam: float, crit: float, r: int) -> float:
-    """P(χ²_r(λ) > crit)."""
-    return float(scipy.stats.ncx2.sf(crit, r, max(lam, 1e-12)))
+    """P(χ²_r(λ) > crit).
+
+    scipy's noncentral χ² returns NaN for a noncentrality beyond about 1e15 (a regressor
+    that barely touches a parameter needs an absurd size to move it by 5 σ and is then
+    trivially detectable); there the normal approximation of χ²_r(λ) (mean r + λ,
+    variance 2(r + 2λ)) is used, which is exact to far below the printed digits."""
+    lam = max(float(lam), 1e-12)
+    p = float(scipy.stats.ncx2.sf(crit, r, lam))
+    if np.isfinite(p):
+        return p
+    if not np.isfinite(lam):
+        return 1.0
+    return float(scipy.stats.norm.sf((crit - r - lam) / np.sqrt(2.0 * (r + 2.0 * lam))))
 
 
 def _worst_direction(S: np.ndarray, F: np.ndarray) -> tuple[float, np.ndarray, int]:

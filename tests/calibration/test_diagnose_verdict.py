@@ -196,6 +196,30 @@ def test_clean_white_session_stays_adequate_and_lists_the_sequence_limits():
     assert "limits of the sequence" in text and "not ruled out" not in text
 
 
+def test_power_beyond_scipys_range_is_one_not_nan():
+    """scipy's ncx2.sf gives NaN for a noncentrality near 1e22 (a time skew on the
+    cone-paper accelerometers, whose static positions it barely touches: it needs ~1e7 s to
+    move a misalignment by 5 σ and was listed as a sequence limit with power NaN). The
+    normal approximation takes over there; where both are defined they agree."""
+    assert power_at(4.0e22, 16.1, 1) == 1.0
+    assert power_at(1.0, 16.1, 1) == pytest.approx(scipy.stats.ncx2.sf(16.1, 1, 1.0))
+    for lam in (1e5, 1e7):
+        sd = np.sqrt(2 * (1 + 2 * lam))
+        for k in (-2.0, 0.0, 2.0):
+            crit = lam + 1 + k * sd
+            normal = scipy.stats.norm.sf((crit - 1 - lam) / sd)
+            assert abs(scipy.stats.ncx2.sf(crit, 1, lam) - normal) < 0.01, (lam, k)
+
+
+def test_cone_paper_limits_are_finite_and_physical():
+    """The regression behind the test above, on the session where it was seen."""
+    s, _ = clean_fast("cone-paper", 3)
+    cal = calibrate_checked(s, allan=False, earth_rate=False)
+    recs = cal.adequacy["sequence_limits"] + cal.adequacy["not_ruled_out"]
+    assert all(np.isfinite(r["power"]) and r["power"] < POWER for r in recs), recs
+    assert "time_skew" not in {r["name"] for r in recs}
+
+
 def test_not_ruled_out_file_round_trip_and_bad_verdict(tmp_path):
     s, _ = _coloured(seed=2)
     cal = calibrate_checked(s, allan=False, earth_rate=False)
