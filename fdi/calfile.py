@@ -31,8 +31,8 @@ effects and no adequacy record; it is migrated on the next save)::
      "effects": [{"name": "bias_drift", "kind": "gyro", "sensor": 2,      # 1-based in files
                   "estimate": 3.1, "estimate_sd": 0.4, "unit": "deg/h",
                   "inputs": ["time"], "params": {...}}, ...],
-     "adequacy": {"verdict": "adequate" | "effects not ruled out" | "effects suspected",
-                  ...details}
+     "adequacy": {"verdict": "adequate" | "adequate within sequence limits" |
+                             "effects not ruled out" | "effects suspected", ...details}
 
 Each effect term adds ``estimate · g(inputs; params)`` to the sensor's output in the
 model (see :mod:`calibration.diagnose.library` for the regressors ``g``).
@@ -299,8 +299,9 @@ class Calibration:
     effects : tuple of EffectTerm
         Terms of the extended model (empty: the plain model).
     adequacy : dict or None
-        The model-adequacy verdict (``{"verdict": "adequate" | "effects not ruled out" |
-        "effects suspected", ...}``), None when not assessed.
+        The model-adequacy verdict (``{"verdict": "adequate" | "adequate within sequence
+        limits" | "effects not ruled out" | "effects suspected", ...}``), None when not
+        assessed.
     """
 
     configuration: str
@@ -465,7 +466,8 @@ def _adequacy(r: Fields) -> dict[str, Any] | None:
     a = r.mapping("adequacy", None)
     if a is None:
         return None
-    a.choice("verdict", ("adequate", "effects not ruled out", "effects suspected"))
+    a.choice("verdict", ("adequate", "adequate within sequence limits",
+                         "effects not ruled out", "effects suspected"))
     doc = dict(a.doc)
     a.accept(*doc)
     a.finish()

@@ -7,8 +7,10 @@ Holm/Bonferroni correction over candidates × sensors, says "unexplained" (and w
 structure remains that no candidate explains, refits and reports the error before and
 after. ``calibrate_checked`` is the calibration with this check in front of the
 coloured-noise model. Its verdict is "adequate" only when the session could also have seen
-every library effect that moves a parameter by 5 σ (:mod:`.detect`); otherwise "effects
-not ruled out", with the sizes that could hide. See ``docs/diagnose.md``.
+every library effect that moves a parameter by 5 σ (:mod:`.detect`); "adequate within
+sequence limits" when only effects the sequence itself cannot separate from the parameters
+could hide; otherwise "effects not ruled out", with the sizes that could hide. See
+``docs/diagnose.md``.
 """
 
 from calibration.diagnose.checked import calibrate_checked, format_adequacy

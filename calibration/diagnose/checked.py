@@ -9,8 +9,11 @@ So: calibrate with white noise, run the adequacy check of :mod:`calibration.diag
 - nothing suspected → calibrate with the requested noise model (the estimates do not
   depend on it), then ask whether the session could have seen every library effect that
   moves a parameter of *that* calibration by 5 σ (:mod:`calibration.diagnose.detect`):
-  yes → "adequate"; no → "effects not ruled out", the limits listed (``not_ruled_out``),
-  the widening still applied, a warning with what to do;
+  yes → "adequate"; yes except for what the sequence itself cannot separate from the
+  parameters (hidden even under white noise of the session's level) → "adequate within
+  sequence limits", those listed (``sequence_limits``); no → "effects not ruled out", the
+  limits listed (``not_ruled_out``), the widening still applied, a warning with what to
+  do;
 - effects suspected → keep the white-noise uncertainties, withhold the Gauss-Markov
   widening, and say where the structure is (``adequacy`` in the calibration, a warning).
 
@@ -207,6 +210,8 @@ def limit_lines(a: Mapping[str, Any]) -> list[str]:
         out.append("  limits of the sequence (hidden even under white noise of this "
                    "level):")
         out.extend("    " + _limit_line(r) for r in seq[:_MAX_LINES])
+        if not nro and a.get("advice"):
+            out.append(f"  what to do: {a['advice']}")
     return out
 
 

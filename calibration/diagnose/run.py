@@ -108,14 +108,23 @@ class Diagnosis:
                 "error_before": self.error_before, "error_after": self.error_after}
 
 
-VERDICTS = ("adequate", "effects not ruled out", "effects suspected")
+VERDICTS = ("adequate", "adequate within sequence limits", "effects not ruled out",
+            "effects suspected")
 """The adequacy verdicts: nothing found and every library effect that would move a
-parameter by 5 σ would have been found (:mod:`.detect`); nothing found but this session's
-noise could hide such an effect; effects or unexplained structure found."""
+parameter by 5 σ would have been found (:mod:`.detect`); nothing found and every such
+effect would have been found except those the sequence itself cannot separate from the
+parameters (hidden even under white noise of the session's level: listed); nothing found
+but this session's noise could hide such an effect; effects or unexplained structure
+found."""
 ADVICE = ("repeat the session and compare (a warm-up repeats at every switch-on, at the same "
           "time after it; a Gauss-Markov wander does not), or record a longer session so "
           "that the wander and a slow effect separate; the sizes listed could hide in this "
           "one")
+SEQUENCE_ADVICE = ("no repetition of this sequence can see the effects listed (its noise and "
+                   "the sigma shrink together, so the power at 5 sigma stays); another "
+                   "sequence may: the limits depend on the sequence alone, so simulate a "
+                   "candidate (rimu simulate calibration) and calibrate it to read its "
+                   "limits before using it on the table")
 
 
 def public_limit(rec: Mapping[str, Any]) -> dict[str, Any]:
@@ -132,7 +141,8 @@ def with_limits(rec: Mapping[str, Any], lim: Iterable[Mapping[str, Any]],
     "effects not ruled out" when nothing was found but this session's noise could hide a
     library effect that moves a parameter by 5 σ (``not_ruled_out``); limits of the
     sequence itself (hidden even under white noise of the session's level) are listed as
-    ``sequence_limits`` and do not change the verdict."""
+    ``sequence_limits`` and make an "adequate" verdict "adequate within sequence limits"
+    (the session saw all it could, but what the sequence cannot separate could hide)."""
     lim = list(lim)
     out = dict(rec)
     out["not_ruled_out"] = [public_limit(r) for r in lim if r["limit"] == "session"]
@@ -141,6 +151,9 @@ def with_limits(rec: Mapping[str, Any], lim: Iterable[Mapping[str, Any]],
     if out["verdict"] == "adequate" and out["not_ruled_out"]:
         out["verdict"] = "effects not ruled out"
         out["advice"] = ADVICE
+    elif out["verdict"] == "adequate" and out["sequence_limits"]:
+        out["verdict"] = "adequate within sequence limits"
+        out["advice"] = SEQUENCE_ADVICE
     return out
 
 

@@ -24,7 +24,9 @@ def add_calibrate_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--alpha", type=probability(), default=0.01, metavar="A",
                    help="level of the model-adequacy check run before the noise model "
                         "(default 0.01); a suspected effect withholds the Gauss-Markov "
-                        "widening. Verdicts: adequate; effects not ruled out (nothing found, "
+                        "widening. Verdicts: adequate; adequate within sequence limits (nothing "
+                        "found; what the sequence itself cannot separate from the parameters "
+                        "at 5 sigma is listed); effects not ruled out (nothing found, "
                         "but this session's noise could hide an effect that moves a "
                         "parameter by 5 sigma: the sizes are listed); effects suspected")
 

@@ -48,7 +48,10 @@ def test_json_layout_and_before_after(drift_dir, capsys):
     assert b["truth"]["max_abs_z"] > 5 and a["truth"]["max_abs_z"] < 4
     assert any(n["name"] == "temperature" for n in doc["not_testable"])
     # the refit calibration's verdict and its detectability limits
-    assert doc["verdict"] in ("adequate", "effects not ruled out")
+    assert doc["verdict"] in ("adequate", "adequate within sequence limits",
+                              "effects not ruled out")
+    assert (doc["verdict"] == "adequate within sequence limits") == (
+        not doc["not_ruled_out"] and bool(doc["sequence_limits"]))
     assert (doc["verdict"] == "effects not ruled out") == bool(doc["not_ruled_out"])
     for r in doc["not_ruled_out"] + doc["sequence_limits"]:
         assert r["power"] < 0.99 and r["size_for_power"] > r["size"] > 0, r
@@ -84,11 +87,12 @@ def test_calibrate_prints_the_verdict_and_fits_asked_effects(drift_dir, tmp_path
     # nothing suspected once the drift is fitted; where the tests ran against white +
     # Gauss-Markov noise some slow effects cannot be ruled out at 5 sigma (the verdict
     # says so and lists them), under white noise the verdict is "adequate"
-    want = "adequate" if a["noise_null"]["gyro"] == "white" or not a["not_ruled_out"] \
-        else "effects not ruled out"
+    want = ("effects not ruled out" if a["not_ruled_out"] else
+            "adequate within sequence limits" if a["sequence_limits"] else "adequate")
+    assert a["noise_null"]["gyro"] != "white" or not a["not_ruled_out"]
     assert a["verdict"] == want
     assert f"model adequacy (alpha 0.01): {want}" in out and "effect bias_drift on gyro 2" in out
-    if want != "adequate":
+    if want == "effects not ruled out":
         assert "not ruled out (this session's noise could hide them" in out
         assert "what to do: repeat the session" in out
     assert "monitor compensates the effect terms whose inputs it has" in out + err

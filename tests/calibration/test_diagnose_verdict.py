@@ -157,7 +157,7 @@ def _never_adequate(make, seeds):
             continue
         checked += 1
         a = calibrate_checked(s, allan=False, earth_rate=False).adequacy
-        assert a["verdict"] != "adequate", (seed, z, a)
+        assert a["verdict"] in ("effects not ruled out", "effects suspected"), (seed, z, a)
         if a["verdict"] == "effects not ruled out":
             assert a["not_ruled_out"] and a["noise_model_applied"] == "auto", (seed, a)
     return checked
@@ -182,18 +182,21 @@ def test_failing_cases_are_never_adequate_mc(case):
 def test_clean_white_session_stays_adequate_and_lists_the_sequence_limits():
     """White noise: the session's power is the white-noise power, so no "session" limit
     can arise; what the sequence itself cannot separate at 5 σ (a warm-up or drift that
-    also moves the bias) is listed apart as ``sequence_limits`` and printed."""
+    also moves the bias) is listed apart as ``sequence_limits``, printed, and qualifies the
+    verdict: "adequate within sequence limits" (tetrad-paper has such limits in every
+    session), with what to do."""
     s, _ = clean_fast("tetrad-paper", 4)
     cal = calibrate_checked(s, allan=False, earth_rate=False)
     a = cal.adequacy
     assert a["noise_null"]["gyro"] == "white"
-    assert a["verdict"] == "adequate" and a["not_ruled_out"] == []
+    assert a["verdict"] == "adequate within sequence limits" and a["not_ruled_out"] == []
     names = {r["name"] for r in a["sequence_limits"]}
     assert "warmup" in names, names
     for r in a["sequence_limits"]:
         assert r["power"] < POWER and r["power_white"] == pytest.approx(r["power"], abs=1e-9)
     text = "\n".join(format_adequacy(cal))
     assert "limits of the sequence" in text and "not ruled out" not in text
+    assert "what to do: no repetition of this sequence" in text
 
 
 def test_power_beyond_scipys_range_is_one_not_nan():
