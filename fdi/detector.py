@@ -87,13 +87,14 @@ def variance_factors(allan: AllanTable | None, noise_cov: np.ndarray, sample_rat
     order = np.argsort(tau)
     tau, adev = tau[order], adev[order]
     # ratio of the Allan variance to the white-noise prediction σ²/(τ fs) at each tabulated τ
-    ratio = adev**2 * (tau[:, None] * sample_rate_hz) / var0[None, :]
     out = []
-    for w in scales:
-        lt = math.log(w / sample_rate_hz)
-        r = np.array([np.interp(lt, np.log(tau), np.log(ratio[:, i]))
-                      for i in range(ratio.shape[1])])
-        out.append(max(1.0, float(np.exp(r).max())))
+    with np.errstate(over="ignore", divide="ignore", invalid="ignore"):   # huge inputs: inf
+        ratio = adev**2 * (tau[:, None] * sample_rate_hz) / var0[None, :]
+        for w in scales:
+            lt = math.log(w / sample_rate_hz)
+            r = np.array([np.interp(lt, np.log(tau), np.log(ratio[:, i]))
+                          for i in range(ratio.shape[1])])
+            out.append(max(1.0, float(np.exp(r).max())))
     return tuple(out)
 
 

@@ -208,7 +208,8 @@ def build_set_model(H: np.ndarray, sf: np.ndarray, bias: np.ndarray, noise_cov: 
     G, cov, osd = _reconstruction(H, healthy, Sig, idx, full)
     cap = _capability(V, Sig, idx, full, df)
     # calibration uncertainty: ρ_i = ω̂ᵀ C_i ω̂ / Σ_ii on (ω0², ω1², ω2², ω0ω1, ω0ω2, ω1ω2)
-    C = np.asarray(input_error_cov, float) / np.diag(Sig)[:, None, None]
+    with np.errstate(over="ignore", divide="ignore", invalid="ignore"):   # huge/0: inf, nan
+        C = np.asarray(input_error_cov, float) / np.diag(Sig)[:, None, None]
     coef = np.stack([C[:, 0, 0], C[:, 1, 1], C[:, 2, 2], 2 * C[:, 0, 1], 2 * C[:, 0, 2],
                      2 * C[:, 1, 2]], axis=1)
     scales = thresholds.scales
