@@ -239,3 +239,23 @@ def test_clean_stacks_claim_no_effect_beyond_alpha():
                               earth_rate=False).adequacy
         suspected.append(a["verdict"] == "effects suspected")
     assert sum(suspected) <= _binom_max(5, 0.05), suspected
+
+
+@pytest.mark.slow
+def test_cone_paper_accelerometers_are_compared_and_stacked():
+    """cone-paper carries accelerometers: every accelerometer parameter is compared next to
+    the gyros' (6 sensors × 4 parameters each), the stack is the sample-by-sample mean of
+    both kinds, and three clean runs flag nothing (Holm at α = 0.01 over the 48 parameters:
+    a family-wise false flag has probability ≤ 0.01)."""
+    runs = [session("cone-paper", 7300 + k)[0] for k in range(3)]
+    res = repeat_sessions(runs, alpha=0.01, detectability=False, allan=False,
+                          earth_rate=False)
+    kinds = [p.kind for p in res.repeatability.parameters]
+    assert kinds.count("accel") == 24 and kinds.count("gyro") == 24, kinds
+    assert res.repeatability.flagged() == [], [p.to_dict() for p in res.repeatability.flagged()]
+    assert res.stack is not None, res.stack_skipped
+    for kind in ("raw_gyro", "raw_accel"):
+        mean = np.mean([getattr(s, kind) for s in runs], axis=0)
+        np.testing.assert_allclose(getattr(res.stack.session, kind), mean, rtol=0,
+                                   atol=1e-12 * np.abs(mean).max(), err_msg=kind)
+    assert set(res.stack.calibration.sets) == {"gyro", "accel"}
