@@ -69,7 +69,7 @@ from calibration.diagnose.linmodel import LinModel
 from fdi.calfile import Calibration, tangent_basis
 
 __all__ = ["LINE_CYCLES", "PARAMETERS", "POWER", "PROFILE_MARGIN", "SHIFT_SIGMA", "STEP_TIMES",
-           "asimov_lr", "limit_text", "limits", "nuisance_grid", "parameter_shift", "power_at",
+           "asimov_lr", "limits", "nuisance_grid", "parameter_shift", "power_at",
            "size_for_power"]
 
 POWER = 0.99
@@ -328,18 +328,3 @@ def limits(datas: Mapping[str, KindData], models: Mapping[tuple[str, int], Any],
                     continue
                 out += _pair(c, d, i, models[(kind, i)], cal, thr, proj)
     return sorted(out, key=lambda r: r["power"])
-
-
-def limit_text(rec: Mapping[str, Any]) -> str:
-    """One line for a limit."""
-    where = ""
-    if "time_s" in rec["params"]:
-        where = f" at {rec['params']['time_s']:.0f} s"
-    elif "frequency_hz" in rec["params"]:
-        where = f" at {rec['params']['frequency_hz']:.3g} Hz"
-    return (f"{rec['name']}{where} on {rec['kind']} {rec['sensor']}: {rec['size']:.3g} "
-            f"{rec['unit']} would move its {rec['parameter'].replace('_', ' ')} by "
-            f"{rec['shift_sigma']:.0f} sigma and is found with probability "
-            f"{rec['power']:.2f}; found with probability {POWER:g} from "
-            f"{rec['size_for_power']:.3g} {rec['unit']} "
-            f"({rec['shift_sigma_for_power']:.1f} sigma)")

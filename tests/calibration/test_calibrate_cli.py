@@ -6,11 +6,11 @@ import re
 import numpy as np
 import pytest
 import scipy.stats
+from _cli import run as _run
 from _sessions import session, with_changes
 
 from calibration.session_io import load_session, save_session
 from calibration.truth import save_truth
-from rimu.cli import main
 
 
 @pytest.fixture(scope="module")
@@ -20,12 +20,6 @@ def tetrad_dir(tmp_path_factory):
     save_session(s, d)
     save_truth(truth, {}, {}, d / "truth.json")
     return d
-
-
-def _run(capsys, *argv):
-    code = main([str(a) for a in argv])
-    out = capsys.readouterr()
-    return code, out.out, out.err
 
 
 def test_writes_file_summary_and_comparison(tetrad_dir, tmp_path, capsys):

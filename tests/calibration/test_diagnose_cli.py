@@ -5,17 +5,12 @@ import json
 
 import numpy as np
 import pytest
+from _cli import run as _run
 from _diagnose_sessions import session, with_temperature
 
 from calibration.session_io import load_session, save_session
 from calibration.simulate import save_simulation
 from rimu.cli import main
-
-
-def _run(capsys, *argv):
-    code = main([str(a) for a in argv])
-    out = capsys.readouterr()
-    return code, out.out, out.err
 
 
 @pytest.fixture(scope="module")

@@ -3,16 +3,10 @@
 import json
 
 import pytest
+from _cli import run as _run
 from _diagnose_sessions import session
 
 from calibration.session_io import save_session
-from rimu.cli import main
-
-
-def _run(capsys, *argv):
-    code = main([str(a) for a in argv])
-    out = capsys.readouterr()
-    return code, out.out, out.err
 
 
 @pytest.fixture(scope="module")
