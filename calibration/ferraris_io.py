@@ -14,13 +14,14 @@ The sample rate is not in either file: give it.
 from __future__ import annotations
 
 import csv
+import io
 from pathlib import Path
 
 import numpy as np
 
 from calibration.ferraris import SECTIONS, FerrarisSession
 from fdi.errors import FileFormatError
-from fdi.fileio import Fields
+from fdi.fileio import Fields, read_text
 
 __all__ = ["COLUMNS", "load_ferraris"]
 
@@ -30,19 +31,18 @@ COLUMNS = ("gyr_x", "gyr_y", "gyr_z", "acc_x", "acc_y", "acc_z")
 
 def _read_csv(path: str) -> tuple[np.ndarray, list[str] | None]:
     """Samples (N, 6) in :data:`COLUMNS` order and the ``part`` labels (or None)."""
+    text = read_text(path)          # one line for a binary or unreadable file
+    rows = csv.reader(io.StringIO(text, newline=""))
+    data, labels = [], []
     try:
-        f = open(path, newline="", encoding="utf-8")
-    except OSError as e:
-        raise FileFormatError(path, f"cannot read: {e.strerror or e}") from None
-    with f:
-        rows = csv.reader(f)
         cols, part = _columns(path, [h.strip() for h in next(rows, [])])
-        data, labels = [], []
         for ln, row in enumerate(rows, start=2):
             if row:
                 data.append(_numbers(path, ln, row, cols))
                 if part is not None:
                     labels.append(row[part].strip() if part < len(row) else "")
+    except csv.Error as e:
+        raise FileFormatError(path, f"not a CSV file ({e})", line=rows.line_num) from None
     if not data:
         raise FileFormatError(path, "no samples; expected rows after the header", line=2)
     return np.array(data), (labels if part is not None else None)

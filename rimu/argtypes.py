@@ -20,13 +20,18 @@ from collections.abc import Callable
 __all__ = [
     "DAY_S",
     "MAX_COUNT",
+    "MAX_RUNS",
+    "MAX_SAMPLES",
     "SEED_MAX",
     "bounded_float",
+    "choice_or_url",
+    "float_list",
     "nonnegative_float",
     "nonnegative_int",
     "positive_float",
     "positive_int",
     "probability",
+    "refuse_together",
 ]
 
 DAY_S = 86_400.0
@@ -35,6 +40,10 @@ MAX_COUNT = 1 << 40
 """Default upper limit of counts (frames, events)."""
 SEED_MAX = 2**63 - 1
 """Largest random seed (numpy takes any non-negative integer; this keeps it one int64)."""
+MAX_SAMPLES = 10_000_000
+"""Most samples one simulated flight may hold in memory (about 28 h at 100 Hz)."""
+MAX_RUNS = 100_000
+"""Most Monte Carlo runs of one evaluation (each run's plan is held in memory)."""
 
 
 def _show(v: float) -> str:
@@ -120,3 +129,60 @@ def positive_int(max_value: int = MAX_COUNT) -> Callable[[str], int]:
 def nonnegative_int(max_value: int = MAX_COUNT) -> Callable[[str], int]:
     """A whole number ≥ 0 (and ≤ ``max_value``)."""
     return _int(0, max_value, "non-negative whole number")
+
+
+def float_list(min_value: float | None = None, max_value: float | None = None, *,
+               count: int | None = None, sep: str = ",",
+               name: str = "numbers") -> Callable[[str], tuple[float, ...]]:
+    """A ``sep``-separated list of finite floats, each in ``[min_value, max_value]``.
+
+    ``count`` fixes the number of values (None: any number, the empty text included).
+    """
+    one = bounded_float(min_value, max_value)
+
+    def parse(text: str) -> tuple[float, ...]:
+        parts = [x for x in text.split(sep) if x.strip()]
+        if count is not None and len(parts) != count:
+            raise argparse.ArgumentTypeError(f"expected {count} {name} separated by "
+                                             f"{sep!r}, got {text!r}")
+        try:
+            return tuple(one(x.strip()) for x in parts)
+        except argparse.ArgumentTypeError as exc:
+            raise argparse.ArgumentTypeError(f"{exc} (in {text!r})") from None
+
+    parse.__name__ = name
+    return parse
+
+
+def choice_or_url(choices: tuple[str, ...], scheme: str = "tcp") -> Callable[[str], str]:
+    """One of ``choices`` or an address ``SCHEME://HOST:PORT``."""
+    def parse(text: str) -> str:
+        if text in choices:
+            return text
+        head, sep, rest = text.partition("://")
+        host, colon, port = rest.rpartition(":")
+        if head == scheme and sep and host and colon and port.isdigit() \
+                and 0 < int(port) < 65536:
+            return text
+        raise argparse.ArgumentTypeError(f"expected one of {', '.join(choices)} or "
+                                         f"{scheme}://HOST:PORT, got {text!r}")
+
+    parse.__name__ = "scheduler"
+    return parse
+
+
+def refuse_together(command: str, given: dict[str, object], option: str,
+                    others: tuple[str, ...]) -> None:
+    """Refuse ``option`` given with any of ``others`` in one line (``ConfigError``).
+
+    ``given`` maps option names to their values; None (or False, or empty) means absent.
+    Conflicting options are refused rather than one silently ignored.
+    """
+    from fdi.errors import ConfigError
+
+    if given.get(option) in (None, False, "", [], ()):
+        return
+    clash = [o for o in others if given.get(o) not in (None, False, "", [], ())]
+    if clash:
+        raise ConfigError(f"{command}: {option} cannot be combined with {', '.join(clash)} "
+                          f"(give one or the other)")

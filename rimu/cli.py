@@ -11,6 +11,7 @@ import argparse
 import importlib
 import logging
 import sys
+import warnings
 from collections.abc import Sequence
 
 from fdi.errors import RimuError
@@ -74,10 +75,19 @@ def _log_to_stderr() -> None:
         root.addHandler(h)
     root.setLevel(logging.INFO)
     root.propagate = False
-    logging.captureWarnings(True)
-    pw = logging.getLogger("py.warnings")
-    if not pw.handlers:
-        pw.addHandler(root.handlers[0])
+    warnings.showwarning = _show_warning
+
+
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    """A Python warning as one ``rimu: warning:`` line: its message, without the source
+    path, line number and code line Python would print (they mean nothing to a user)."""
+    text = " ".join(str(message).split())
+    if issubclass(category, RuntimeWarning) and text.startswith(("overflow", "invalid value",
+                                                                 "divide by zero")):
+        text = f"numerical {text} (a value out of range in the input?)"
+    elif category not in (UserWarning, RuntimeWarning):
+        text += f" ({category.__name__})"
+    logging.getLogger("rimu").warning(text)
 
 
 def _add(sub: argparse._SubParsersAction, name: str, module: str) -> None:

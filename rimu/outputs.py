@@ -12,6 +12,7 @@ failure part-way leaves neither a half-written file nor a temporary one behind.
 from __future__ import annotations
 
 import contextlib
+import json
 import os
 import shutil
 import tempfile
@@ -20,8 +21,26 @@ from pathlib import Path
 
 from fdi.errors import ConfigError
 
-__all__ = ["atomic_dir", "atomic_file", "atomic_write_text", "input_path", "output_dir",
-           "output_file"]
+__all__ = ["atomic_dir", "atomic_file", "atomic_write_text", "distinct_inputs", "input_path",
+           "output_dir", "output_file"]
+
+
+def _same(a: Path, b: Path) -> bool:
+    try:
+        return a.resolve() == b.resolve() or (a.exists() and b.exists() and os.path.samefile(a, b))
+    except OSError:
+        return False
+
+
+def _not_an_input(p: Path, option: str, inputs) -> None:
+    """Refuse an output that is one of the command's inputs."""
+    for q in inputs or ():
+        if q is None or str(q) == "":
+            continue
+        q = Path(q)
+        if _same(p, q):
+            raise ConfigError(f"{option} {p}: is an input of this command ({q}); writing it "
+                              "would replace what is being read: give another path")
 
 
 def _nearest_existing(p: Path) -> Path:
@@ -31,13 +50,17 @@ def _nearest_existing(p: Path) -> Path:
     return q
 
 
-def output_file(path: str | os.PathLike, option: str) -> Path:
+def output_file(path: str | os.PathLike, option: str, *, inputs=()) -> Path:
     """Check that ``path`` can be written as a file (it may exist and is then replaced).
+
+    ``inputs`` are the command's input paths (None entries skipped): the output may be
+    none of them.
 
     Raises
     ------
     ConfigError
-        ``path`` is a directory, its directory does not exist or is not writable.
+        ``path`` is a directory, its directory does not exist or is not writable, or it is
+        one of ``inputs``.
     """
     p = Path(path)
     if str(path) == "" or p.name in ("", ".", ".."):
@@ -52,26 +75,43 @@ def output_file(path: str | os.PathLike, option: str) -> Path:
         raise ConfigError(f"{option} {p}: directory {parent} is not writable")
     if p.exists() and not os.access(p, os.W_OK):
         raise ConfigError(f"{option} {p}: file exists and is not writable")
+    _not_an_input(p, option, inputs)
     return p
 
 
-def output_dir(path: str | os.PathLike, option: str) -> Path:
+def output_dir(path: str | os.PathLike, option: str, *, inputs=(),
+               schema: str | None = None) -> Path:
     """Check that ``path`` can be used as an output directory (created when missing).
+
+    ``inputs``: the command's input paths; the folder may be none of them. ``schema``: the
+    ``rimu.xxx/`` family the command writes into ``manifest.json``; an existing folder
+    whose manifest is of another kind (a session where a flight is written) is refused
+    instead of mixed.
 
     Raises
     ------
     ConfigError
-        ``path`` is an existing file, or its nearest existing ancestor is not a writable
-        directory.
+        ``path`` is an existing file, its nearest existing ancestor is not a writable
+        directory, it is an input, or it holds another kind of folder.
     """
     p = Path(path)
     if str(path) == "":
         raise ConfigError(f"{option}: expected a directory name")
+    _not_an_input(p, option, inputs)
     if p.exists():
         if not p.is_dir():
             raise ConfigError(f"{option} {p}: is a file, expected a directory")
         if not os.access(p, os.W_OK | os.X_OK):
             raise ConfigError(f"{option} {p}: directory is not writable")
+        if schema is not None and (p / "manifest.json").is_file():
+            try:
+                got = str(json.loads((p / "manifest.json").read_text(encoding="utf-8"))
+                          .get("schema", ""))
+            except (OSError, ValueError, AttributeError):
+                got = "?"
+            if not got.startswith(schema.split("/")[0] + "/"):
+                raise ConfigError(f"{option} {p}: holds a {got} folder, not a "
+                                  f"{schema.split('/')[0]} one: give a new or empty folder")
         return p
     q = _nearest_existing(p.absolute().parent)
     if not q.is_dir():
@@ -93,11 +133,30 @@ def input_path(path: str | os.PathLike, option: str, *, kind: str = "file") -> P
     return p
 
 
+def distinct_inputs(paths, option: str) -> None:
+    """Refuse the same input given twice (``rimu repeat S S``), one line naming it."""
+    seen: list[Path] = []
+    for x in paths:
+        q = Path(x)
+        for r in seen:
+            if _same(q, r):
+                raise ConfigError(f"{option} {q}: given twice ({r}); give different inputs")
+        seen.append(q)
+
+
+def _umask() -> int:
+    m = os.umask(0)
+    os.umask(m)
+    return m
+
+
 def _temp_name(p: Path) -> Path:
     # keep the suffix: writers pick their format by it (python-can, rerun)
     fd, name = tempfile.mkstemp(prefix=f".{p.stem}.", suffix=f".part{''.join(p.suffixes)}",
                                 dir=p.parent if str(p.parent) else ".")
     os.close(fd)
+    # mkstemp makes 0600 files; a written file gets the mode open() would give it
+    os.chmod(name, 0o666 & ~_umask())
     return Path(name)
 
 
@@ -113,6 +172,9 @@ def atomic_file(path: str | os.PathLike) -> Iterator[Path]:
         yield tmp
         if not tmp.exists():
             raise ConfigError(f"{p}: nothing was written")
+        if p.exists():          # replacing a file keeps its mode
+            with contextlib.suppress(OSError):
+                os.chmod(tmp, p.stat().st_mode & 0o7777)
         os.replace(tmp, p)
     except BaseException:
         with contextlib.suppress(OSError):

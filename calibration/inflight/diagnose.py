@@ -54,8 +54,8 @@ from fdi.errors import ConfigError
 from fdi.units import DPS, G0
 from replay.flight_data import Flight
 
-__all__ = ["DIAGNOSE_SCHEMA", "GENERIC", "LINE_FACTOR", "MAX_LINES", "WARM_UP_S", "diagnose_flight",
-           "flight_residual"]
+__all__ = ["DIAGNOSE_SCHEMA", "GENERIC", "LINE_FACTOR", "MAX_LINES", "RATE_LIMIT", "WARM_UP_S",
+           "diagnose_flight", "flight_residual"]
 
 DIAGNOSE_SCHEMA = "rimu.diagnose-flight/1"
 LINE_FACTOR = 10.0
@@ -67,6 +67,9 @@ GENERIC = ("warm_up", "bias_drift")
 """Effects that are functions of time only; they enter after the measured regressors."""
 WARM_UP_S = 60.0
 """Time constant of the warm-up regressor (s)."""
+RATE_LIMIT = 1e5 * DPS
+"""A rate beyond this (rad/s; 100 000 deg/s, far beyond any gyro's range) is not a
+measurement: such samples are left out like non-finite ones."""
 
 
 @dataclass(frozen=True)
@@ -360,12 +363,13 @@ def diagnose_flight(flight: Flight, cal: Calibration, *, alpha: float = 0.01,
     ref, res, groups, omega, H = flight_residual(flight, cal, reference)
     t = flight.t
     segs = find_segments(flight)
-    keep = keep_mask(t, segs) & np.all(np.isfinite(omega), axis=1)
+    # a rate beyond any gyro's range (1e308 in a damaged file) is left out like a NaN
+    fin = np.all(np.abs(omega) < RATE_LIMIT, axis=1)
+    keep = keep_mask(t, segs) & fin
     for r in res.values():
         keep &= np.all(np.isfinite(r), axis=1)
     if keep.sum() < 100:
         raise ConfigError(f"{flight.source}: only {int(keep.sum())} usable samples")
-    fin = np.all(np.isfinite(omega), axis=1)
     omega_dot = CubicSpline(t[fin], omega[fin], axis=0)(t, 1)     # angular acceleration
     per_imu = {}
     not_testable: list[dict[str, str]] = []

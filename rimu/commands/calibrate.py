@@ -155,7 +155,49 @@ def summary_text(cal: Calibration) -> str:
     return "\n".join(lines)
 
 
+def _check_modes(args: argparse.Namespace) -> None:
+    """One kind of session per call: the options of another kind are refused, not ignored."""
+    from rimu.argtypes import refuse_together
+
+    given = {"SESSION": args.session, "--ferraris": args.ferraris,
+             "--in-flight": getattr(args, "in_flight", None), "--compare": args.compare,
+             "--plot": args.plot, "--sections": args.sections,
+             "--sample-rate-hz": args.sample_rate_hz,
+             "--reference": getattr(args, "reference", None),
+             "--no-time-offset": getattr(args, "no_time_offset", False) or None,
+             "--model": None if getattr(args, "model", "auto") == "auto" else args.model}
+    refuse_together("rimu calibrate", given, "--in-flight",
+                    ("SESSION", "--ferraris", "--compare", "--plot", "--sections",
+                     "--sample-rate-hz"))
+    refuse_together("rimu calibrate", given, "--ferraris", ("SESSION", "--compare", "--plot"))
+    for opt in ("--reference", "--no-time-offset", "--model"):
+        if given[opt] is not None and not given["--in-flight"]:
+            raise ConfigError(f"rimu calibrate: {opt} applies to --in-flight only")
+    for opt in ("--sections", "--sample-rate-hz"):
+        if given[opt] is not None and not given["--ferraris"]:
+            raise ConfigError(f"rimu calibrate: {opt} applies to --ferraris only")
+
+
+def _flight_hint(path: str) -> None:
+    """A flight folder given as a turntable session: say which option reads it."""
+    from pathlib import Path
+
+    from fdi.errors import FileFormatError
+    from fdi.fileio import read_json_object
+
+    m = Path(path) / "manifest.json"
+    try:
+        schema = str(read_json_object(m).get("schema", ""))
+    except FileFormatError:         # the session loader reports a bad manifest itself
+        return
+    if schema.startswith("rimu.flight/"):
+        raise ConfigError(f"{path}: is a flight folder ({schema}), not a turntable session; "
+                          f"to calibrate its IMUs against each other use: rimu calibrate "
+                          f"--in-flight {path} --out FILE")
+
+
 def run(args: argparse.Namespace) -> int:
+    _check_modes(args)
     if getattr(args, "in_flight", None):
         from rimu.commands import calibrate_inflight
 
@@ -170,11 +212,13 @@ def run(args: argparse.Namespace) -> int:
     if args.session is None:
         raise ConfigError("rimu calibrate: give a session directory (or --ferraris CSV, "
                           "or --in-flight DIR)")
-    out = output_file(args.out, "--out")
+    input_path(args.session, "SESSION", kind="dir")
+    _flight_hint(args.session)
+    out = output_file(args.out, "--out", inputs=(args.compare,))
     if args.compare:
         input_path(args.compare, "--compare")
     if args.plot:
-        output_dir(args.plot, "--plot")
+        output_dir(args.plot, "--plot", inputs=(args.session,))
     session = load_session(args.session)
     truth = None
     if args.compare:

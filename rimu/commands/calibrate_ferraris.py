@@ -7,12 +7,12 @@ Kept beside :mod:`rimu.commands.calibrate`, which only adds the options
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
 import numpy as np
 
 from fdi.errors import ConfigError
 from fdi.units import G0
+from rimu.argtypes import bounded_float, nonnegative_float, positive_float
 
 __all__ = ["add_arguments", "ferraris_command", "summary_lines"]
 
@@ -27,18 +27,21 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--sections", metavar="JSON",
                    help="section list {\"x_p\": {\"start\": i, \"end\": j}, ...} (0-based rows, "
                         "end exclusive) for a CSV without a 'part' column")
-    g.add_argument("--sample-rate-hz", type=float, metavar="HZ",
+    g.add_argument("--sample-rate-hz", type=positive_float(1e6), metavar="HZ",
                    help="sample rate of the Ferraris CSV (required with --ferraris)")
-    g.add_argument("--rotation-deg", type=float, default=-360.0,
+    g.add_argument("--rotation-deg", type=bounded_float(-3600.0, 3600.0, name="angle in deg"),
+                   default=-360.0,
                    help="nominal rotation angle about each axis (default -360: clockwise "
                         "seen from above, imucal's convention)")
-    g.add_argument("--gravity", type=float, default=G0,
+    g.add_argument("--gravity", type=bounded_float(0.1, 100.0, name="gravity in m/s^2"),
+                   default=G0,
                    help=f"local gravity in m/s^2 (default {G0})")
-    g.add_argument("--position-sd-deg", type=float, default=1.0,
+    g.add_argument("--position-sd-deg", type=nonnegative_float(90.0), default=1.0,
                    help="sd of each tilt component of a position or rotation axis (default 1)")
-    g.add_argument("--angle-sd-deg", type=float, default=1.0,
+    g.add_argument("--angle-sd-deg", type=nonnegative_float(360.0), default=1.0,
                    help="sd of each rotation angle (default 1)")
-    g.add_argument("--latitude-deg", type=float, default=None,
+    g.add_argument("--latitude-deg", type=bounded_float(-90.0, 90.0, name="latitude in deg"),
+                   default=None,
                    help="latitude: removes the vertical Earth rate from the static gyro "
                         "means (default: counted as an uncertainty)")
     g.add_argument("--raw-unit", default="count",
@@ -84,22 +87,25 @@ def ferraris_command(args: argparse.Namespace) -> int:
     """Run ``rimu calibrate --ferraris``: load, calibrate, write, print."""
     from calibration.ferraris import FerrarisOptions, ferraris_calibrate
     from calibration.ferraris_io import load_ferraris
+    from rimu.outputs import atomic_file, input_path, output_file
 
     if args.sample_rate_hz is None:
         raise ConfigError("--ferraris needs --sample-rate-hz (the CSV does not hold it)")
     if args.session is not None or args.compare or args.plot:
         raise ConfigError("--ferraris takes no session directory, --compare or --plot "
                           "(those are for turntable sessions)")
+    input_path(args.ferraris, "--ferraris")
+    if args.sections:
+        input_path(args.sections, "--sections")
+    out = output_file(args.out, "--out", inputs=(args.ferraris, args.sections))
     s = load_ferraris(args.ferraris, args.sample_rate_hz, sections=args.sections,
                       gyro_raw_unit=args.raw_unit, accel_raw_unit=args.raw_unit)
     opt = FerrarisOptions(rotation_deg=args.rotation_deg, gravity=args.gravity,
                           position_sd_deg=args.position_sd_deg,
                           angle_sd_deg=args.angle_sd_deg, latitude_deg=args.latitude_deg)
     cal = ferraris_calibrate(s, opt)
-    out = Path(args.out)
-    if out.parent and not out.parent.exists():
-        raise ConfigError(f"{args.out}: directory {out.parent} does not exist")
-    cal.save(out)
+    with atomic_file(out) as tmp:
+        cal.save(tmp)
     print("\n".join(summary_lines(cal)))
     print(f"wrote {out}")
     return 0

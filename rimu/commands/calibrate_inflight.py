@@ -2,7 +2,7 @@
 
 Reached through ``rimu calibrate`` (its ``--in-flight`` option); fits every IMU of the flight
 folder to the reference IMU (:mod:`calibration.inflight.fit`), writes the
-``rimu.calibration/1`` file (:mod:`calibration.inflight.calfile`) and prints a summary.
+``rimu.calibration/2`` file (:mod:`calibration.inflight.calfile`) and prints a summary.
 """
 
 from __future__ import annotations

@@ -114,7 +114,26 @@ def _is_flight(path: str) -> bool:
     return isinstance(doc, dict) and str(doc.get("schema", "")).startswith("rimu.flight/")
 
 
+def _check_paths(args: argparse.Namespace):
+    """Inputs exist, outputs writable and none of them an input: before any work."""
+    from rimu.outputs import input_path, output_dir, output_file
+
+    input_path(args.session, "DIR", kind="dir")
+    input_path(args.cal, "--cal")
+    if args.truth:
+        input_path(args.truth, "--truth")
+    ins = (args.session, args.cal, args.truth)
+    out = output_file(args.out, "--out", inputs=ins) if args.out else None
+    rep = output_dir(args.report, "--report", inputs=ins) if args.report else None
+    if out is not None and rep is not None and (out.resolve() == rep.resolve()):
+        from fdi.errors import ConfigError
+
+        raise ConfigError(f"--out {out} and --report {rep}: the same path")
+    return out, rep
+
+
 def run(args: argparse.Namespace) -> int:
+    out, rep = _check_paths(args)
     if _is_flight(args.session):
         from rimu.commands.diagnose_flight import run_flight
 
@@ -128,6 +147,7 @@ def run(args: argparse.Namespace) -> int:
     from calibration.diagnose import diagnose
     from calibration.session_io import load_session
     from fdi.calfile import load_calibration
+    from rimu.outputs import atomic_dir, atomic_file
 
     session = load_session(args.session)
     cal = load_calibration(args.cal)
@@ -137,8 +157,15 @@ def run(args: argparse.Namespace) -> int:
 
         truth = load_truth(args.truth)
     d = diagnose(session, cal, alpha=args.alpha, truth=truth, cal_path=str(args.cal))
-    if args.out:
-        d.calibration.save(Path(args.out))
+    page = None
+    if rep is not None:             # the page and its plots: all or none
+        from calibration.diagnose.report import write_report
+
+        with atomic_dir(rep) as tmp:
+            page = rep / write_report(session, cal, d, tmp).relative_to(tmp)
+    if out is not None:
+        with atomic_file(out) as tmp:
+            d.calibration.save(tmp)
     if args.json:
         from fdi.fileio import to_jsonable
 
@@ -147,10 +174,6 @@ def run(args: argparse.Namespace) -> int:
         print(text(d))
         if args.out:
             print(f"wrote {args.out}")
-    if args.report:
-        from calibration.diagnose.report import write_report
-
-        page = write_report(session, cal, d, args.report)
-        if not args.json:
-            print(f"wrote {page}")
+    if page is not None and not args.json:
+        print(f"wrote {page}")
     return 0

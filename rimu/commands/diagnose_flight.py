@@ -48,7 +48,7 @@ def run_flight(path: str, cal_path: str, *, alpha: float = 0.01, as_json: bool =
                report_dir: str | None = None) -> int:
     """``rimu diagnose`` on a flight folder: print the report (or the JSON with ``as_json``);
     with ``report_dir`` also write ``report.md`` and ``diagnosis.json`` there."""
-    from rimu.outputs import atomic_write_text, input_path, output_dir
+    from rimu.outputs import atomic_dir, input_path, output_dir
 
     input_path(cal_path, "--cal")
     out = output_dir(report_dir, "--report") if report_dir else None
@@ -59,9 +59,9 @@ def run_flight(path: str, cal_path: str, *, alpha: float = 0.01, as_json: bool =
     js = json.dumps(doc, indent=1, allow_nan=False) + "\n"
     print(js if as_json else text, end="\n" if not as_json else "")
     if out is not None:
-        out.mkdir(parents=True, exist_ok=True)
-        atomic_write_text(out / "report.md", "```\n" + text + "\n```\n")
-        atomic_write_text(out / "diagnosis.json", js)
+        with atomic_dir(out) as tmp:        # both files or neither
+            (tmp / "report.md").write_text("```\n" + text + "\n```\n", encoding="utf-8")
+            (tmp / "diagnosis.json").write_text(js, encoding="utf-8")
         if not as_json:
             print(f"wrote {out / 'report.md'} and {out / 'diagnosis.json'}")
     return 0

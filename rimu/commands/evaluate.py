@@ -7,8 +7,19 @@ import json
 import time
 from pathlib import Path
 
-from fdi.calfile import load_calibration
 from fdi.errors import ConfigError
+from rimu.argtypes import (
+    DAY_S,
+    MAX_RUNS,
+    SEED_MAX,
+    choice_or_url,
+    nonnegative_int,
+    positive_float,
+    positive_int,
+)
+
+MAX_WORKERS = 256
+"""Most LocalCluster workers."""
 
 HELP = ("evaluate the monitor on simulated flights (every fault kind, a sweep of sizes) or a "
         "corpus of flight folders: detection, delay, isolation, false alarms, ROC")
@@ -19,28 +30,31 @@ def configure(p: argparse.ArgumentParser) -> None:
     p.add_argument("--thresholds", metavar="FILE",
                    help="rimu.thresholds/1 or rimu.tuning/1 file (default: computed from "
                         "the calibration for --false-alarms-per-hour)")
-    p.add_argument("--false-alarms-per-hour", type=float, metavar="X",
+    p.add_argument("--false-alarms-per-hour", type=positive_float(3.6e6), metavar="X",
                    help="budget for computed thresholds (default 1e-3)")
-    p.add_argument("--runs", type=int, default=200, metavar="N",
+    p.add_argument("--runs", type=nonnegative_int(MAX_RUNS), default=200, metavar="N",
                    help="simulated flights (default 200)")
-    p.add_argument("--sweep-runs", type=int, default=220, metavar="N",
+    p.add_argument("--sweep-runs", type=nonnegative_int(MAX_RUNS), default=220, metavar="N",
                    help="extra short runs measuring the detectable step per scale, compared "
                         "with rimu tune's prediction (default 220; 0: none)")
-    p.add_argument("--seed", type=int, default=0, help="campaign seed (default 0)")
+    p.add_argument("--seed", type=nonnegative_int(SEED_MAX), default=0,
+                   help="campaign seed (default 0)")
     p.add_argument("--faults", metavar="KINDS",
                    help="comma-separated fault kinds (default: all of step, ramp, stuck, "
                         "noise, scale, spike, dropout)")
-    p.add_argument("--duration", type=float, default=60.0, metavar="S",
+    p.add_argument("--duration", type=positive_float(DAY_S), default=60.0, metavar="S",
                    help="flight length (default 60 s; faults start half-way)")
-    p.add_argument("--max-rate", type=float, default=300.0, metavar="DPS",
+    p.add_argument("--max-rate", type=positive_float(1e5), default=300.0, metavar="DPS",
                    help="largest body rate of the manoeuvres (default 300 deg/s)")
     p.add_argument("--kind", default="gyro", choices=("gyro", "accel"))
     p.add_argument("--corpus", metavar="DIR",
                    help="evaluate the flight folders (rimu.flight/1) under DIR instead")
     p.add_argument("--scheduler", default="serial", metavar="WHERE",
+                   type=choice_or_url(("serial", "local")),
                    help="serial (default), local (a Dask LocalCluster on this machine) or "
                         "tcp://HOST:PORT (an existing Dask scheduler)")
-    p.add_argument("--workers", type=int, default=2, help="LocalCluster workers (default 2)")
+    p.add_argument("--workers", type=positive_int(MAX_WORKERS), default=2,
+                   help="LocalCluster workers (default 2)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--out", required=True, metavar="DIR", help="output directory")
 
@@ -59,13 +73,26 @@ def _kinds(text: str | None) -> tuple[str, ...]:
 
 
 def _corpus_items(d: str) -> list[tuple[int, str]]:
+    from fdi.errors import FileFormatError
+    from fdi.fileio import read_json_object
+
     root = Path(d)
     if not root.is_dir():
         raise ConfigError(f"--corpus {d}: not a directory")
-    dirs = sorted(p.parent for p in root.rglob("manifest.json"))
+    dirs, other = [], []
+    for m in sorted(root.rglob("manifest.json")):
+        try:
+            schema = str(read_json_object(m).get("schema", ""))
+        except FileFormatError:
+            schema = "?"
+        (dirs if schema.startswith("rimu.flight/") else other).append((m.parent, schema))
+    if other:
+        where, schema = other[0]
+        raise ConfigError(f"--corpus {d}: {where} is a {schema} folder, not a flight folder "
+                          "(rimu.flight/1); a corpus holds flight folders only")
     if not dirs:
         raise ConfigError(f"--corpus {d}: no flight folder (manifest.json) under it")
-    return [(k, str(p)) for k, p in enumerate(dirs)]
+    return [(k, str(p)) for k, (p, _) in enumerate(dirs)]
 
 
 def markdown(ev: dict, how: dict) -> str:
@@ -102,7 +129,9 @@ def markdown(ev: dict, how: dict) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
+    from fdi.calfile import load_calibration
     from fdi.fileio import to_jsonable
+    from rimu.outputs import atomic_dir, input_path, output_dir
     from thresholds.evaluate import (
         corpus_task,
         design,
@@ -114,12 +143,11 @@ def run(args: argparse.Namespace) -> int:
     from thresholds.select import select
     from thresholds.tune import detectable_sizes
 
-    if args.runs < 0 or args.sweep_runs < 0:
-        raise ConfigError("--runs and --sweep-runs must be >= 0")
-    if not (args.scheduler in ("serial", "local") or "://" in args.scheduler):
-        raise ConfigError(f"unknown scheduler {args.scheduler!r}; expected serial, local or "
-                          f"tcp://HOST:PORT")
     kinds = _kinds(args.faults)
+    input_path(args.cal, "--cal")
+    if args.thresholds:
+        input_path(args.thresholds, "--thresholds")
+    out = output_dir(args.out, "--out", inputs=(args.corpus, args.cal, args.thresholds))
     cal = load_calibration(args.cal)
     choice = select(cal, kind=args.kind, thresholds_file=args.thresholds,
                     false_alarms_per_hour=args.false_alarms_per_hour)
@@ -133,8 +161,6 @@ def run(args: argparse.Namespace) -> int:
                        sweep_runs=n_sweep, kind=args.kind, duration_s=args.duration,
                        onset_s=args.duration / 2, max_rate_dps=args.max_rate)
         task = simulation_task(cal, thr, args.kind)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     results = execute(task, items, scheduler=args.scheduler, progress=not args.no_progress,
                       workers=args.workers)
@@ -147,12 +173,16 @@ def run(args: argparse.Namespace) -> int:
     ev["campaign"] = {"seed": args.seed, "faults": list(kinds), "duration_s": args.duration,
                       "max_rate_dps": args.max_rate, "corpus": args.corpus}
     ev["timing"] = {"wall_s": wall, "scheduler": args.scheduler}
-    (out / "evaluation.json").write_text(json.dumps(to_jsonable(ev), indent=1) + "\n",
-                                         encoding="utf-8")
-    plot_all(ev, out)
-    (out / "summary.md").write_text(markdown(ev, choice.to_dict()), encoding="utf-8")
+    with atomic_dir(out) as tmp:        # all files or none
+        (tmp / "evaluation.json").write_text(json.dumps(to_jsonable(ev), indent=1) + "\n",
+                                             encoding="utf-8")
+        plot_all(ev, tmp)
+        (tmp / "summary.md").write_text(markdown(ev, choice.to_dict()), encoding="utf-8")
     fa = ev["false_alarms"]
-    print(f"{len(results)} runs in {wall:.1f} s ({args.scheduler}); false alarms "
+    n_flights = sum(getattr(x, "fault", "") != "sweep" for x in items)
+    what = (f" ({n_flights} flights + {len(items) - n_flights} sweep runs of the detectable "
+            "step, --sweep-runs)" if len(items) > n_flights else "")
+    print(f"{len(results)} runs{what} in {wall:.1f} s ({args.scheduler}); false alarms "
           f"{fa['count']} in {fa['exposure_h']:.2f} h = {fa['per_hour']:.3g}/h")
     for f in ev["faults"]:
         print(f"  {f['fault']:8s} {f['size']:8.3g} {f['unit']:8s} Pd {f['pd']:.2f} "

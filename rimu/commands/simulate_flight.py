@@ -10,12 +10,17 @@ from fdi.errors import ConfigError
 from fdi.units import DPH, MG
 from replay.faults import parse_fault
 from replay.flight import save_flight_dir, simulate_flight
-from rimu.argtypes import DAY_S, SEED_MAX, nonnegative_float, nonnegative_int, positive_float
+from rimu.argtypes import (
+    DAY_S,
+    MAX_SAMPLES,
+    SEED_MAX,
+    nonnegative_float,
+    nonnegative_int,
+    positive_float,
+)
 
 HELP = "simulate a flight (manoeuvres, true sensor model, faults) with a truth sidecar"
 
-MAX_SAMPLES = 10_000_000
-"""Most samples one simulated flight may hold (about 28 h at 100 Hz)."""
 CAN_SUFFIXES = (".asc", ".blf", ".log")
 """``--out`` suffixes written as CAN logs (through ``replay.logio.write_flight_log``)."""
 MAP_SUFFIX = ".map.toml"
@@ -100,6 +105,9 @@ def _load_truth(path: str):
 
 
 def run(args: argparse.Namespace) -> int:
+    from rimu.commands.simulate_imu_set import check_imu_options
+
+    check_imu_options(args)
     _check_effect_options(args)
     if getattr(args, "imus", None):
         from rimu.commands import simulate_imu_set
@@ -112,9 +120,9 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out)
     is_log = out.suffix.lower() in CAN_SUFFIXES
     if is_log:
-        output_file(out, "--out")
+        output_file(out, "--out", inputs=(args.cal, args.truth))
     else:
-        output_dir(out, "--out")
+        output_dir(out, "--out", inputs=(args.cal, args.truth), schema="rimu.flight/1")
     input_path(args.cal, "--cal")
     if args.truth:
         input_path(args.truth, "--truth")

@@ -12,12 +12,22 @@ from fdi.errors import ConfigError
 from fdi.units import DPH, DPS, G0
 from replay.flight_io import save_flight_dir
 from replay.imu_set import ImuEffects, ImuSetSpec, simulate_imu_set
-from rimu.argtypes import nonnegative_float, positive_float, positive_int
+from rimu.argtypes import (
+    MAX_SAMPLES,
+    float_list,
+    nonnegative_float,
+    positive_float,
+    positive_int,
+)
 
 MAX_IMUS = 16
 """At most this many IMUs in one simulated set."""
+MAX_TIME_OFFSET_MS = 1000.0
+"""Largest time offset of one IMU (ms)."""
+IMU_ONLY = ("--time-offset-ms", "--vibration", "--effect-imus")
+"""Options of ``--imus`` refused without it (their defaults are empty)."""
 
-__all__ = ["configure_options", "run"]
+__all__ = ["check_imu_options", "configure_options", "run"]
 
 
 def configure_options(p: argparse.ArgumentParser) -> None:
@@ -26,7 +36,9 @@ def configure_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--imus", type=positive_int(MAX_IMUS), metavar="K",
                    help="simulate K three-axis IMUs (gyros monitored, accelerometers and "
                         "temperatures kept beside them)")
-    g.add_argument("--time-offset-ms", default="", metavar="T1,T2,...",
+    g.add_argument("--time-offset-ms", default=(), metavar="T1,T2,...",
+                   type=float_list(-MAX_TIME_OFFSET_MS, MAX_TIME_OFFSET_MS,
+                                   name="time offsets in ms"),
                    help="time offset of each IMU in ms (K values; default all 0)")
     g.add_argument("--misalignment-mrad", type=nonnegative_float(1e3), default=10.0, metavar="X",
                    help="sd of each IMU's misalignment angles (mrad, default 10)")
@@ -43,28 +55,50 @@ def configure_options(p: argparse.ArgumentParser) -> None:
                    metavar="DPS_PER_C",
                    help="sd of the bias temperature coefficient ((deg/s)/degC; temperatures "
                         "are then logged)")
-    g.add_argument("--vibration", default="", metavar="HZ:DPS",
+    g.add_argument("--vibration", default=(), metavar="HZ:DPS",
+                   type=float_list(0.0, 1e6, count=2, sep=":", name="non-negative numbers"),
                    help="a vibration line: frequency (aliased above Nyquist) and sd of its "
                         "amplitude per axis")
     g.add_argument("--drift", type=nonnegative_float(1e6), default=0.0, metavar="DPH_PER_RTS",
                    help="bias random walk ((deg/h)/sqrt(s); default 0)")
-    g.add_argument("--effect-imus", default="", metavar="J,...",
+    g.add_argument("--effect-imus", default=(), metavar="J,...",
+                   type=float_list(1, MAX_IMUS, name="IMU numbers"),
                    help="IMUs (1-based) that carry the effects (default all)")
 
 
-def _floats(text: str, name: str) -> tuple[float, ...]:
-    try:
-        return tuple(float(x) for x in text.split(",") if x.strip())
-    except ValueError:
-        raise ConfigError(f"{name}: expected comma-separated numbers, got {text!r}") from None
+def check_imu_options(args: argparse.Namespace) -> None:
+    """Refuse what ``--imus`` cannot honour, and its options without it (one line each)."""
+    from rimu.argtypes import refuse_together
+
+    if not getattr(args, "imus", None):
+        for opt in IMU_ONLY:
+            if getattr(args, opt[2:].replace("-", "_")):
+                raise ConfigError(f"rimu simulate flight: {opt} applies to --imus only")
+        return
+    given = {"--imus": args.imus, "--cal": args.cal, "--fault": args.fault,
+             "--truth": args.truth, "--effects-from-cal": args.effects_from_cal,
+             "--kind accel": args.kind == "accel" or None}
+    refuse_together("rimu simulate flight", given, "--imus",
+                    ("--cal", "--fault", "--truth", "--effects-from-cal", "--kind accel"))
+    from replay.logio import LOG_SUFFIXES
+
+    if str(args.out).lower().endswith(LOG_SUFFIXES):
+        raise ConfigError(f"--out {args.out}: --imus writes a flight folder, not a CAN log; "
+                          "give a folder name")
+    if args.time_offset_ms and len(args.time_offset_ms) != args.imus:
+        raise ConfigError(f"--time-offset-ms: expected {args.imus} values (one per IMU), got "
+                          f"{len(args.time_offset_ms)}")
+    bad = [x for x in args.effect_imus if x != int(x) or x > args.imus]
+    if bad:
+        raise ConfigError(f"--effect-imus: {bad[0]:g} is not an IMU number (1 to {args.imus})")
 
 
 def run(args: argparse.Namespace) -> int:
     """Run ``rimu simulate flight --imus K``."""
-    from rimu.commands.simulate_flight import MAX_SAMPLES
     from rimu.outputs import atomic_dir, output_dir
 
-    out = output_dir(args.out, "--out")
+    check_imu_options(args)
+    out = output_dir(args.out, "--out", schema="rimu.flight/1")
     fs = args.rate or 50.0
     if args.duration * fs * args.imus > MAX_SAMPLES:
         raise ConfigError(f"--duration {args.duration:g} s at {fs:g} Hz for {args.imus} IMUs is "
@@ -72,18 +106,14 @@ def run(args: argparse.Namespace) -> int:
                           f"{MAX_SAMPLES:.0e} are simulated in memory at once")
     vib_hz, vib = 0.0, 0.0
     if args.vibration:
-        v = _floats(args.vibration.replace(":", ","), "--vibration")
-        if len(v) != 2:
-            raise ConfigError(f"--vibration: expected HZ:DPS, got {args.vibration!r}")
-        vib_hz, vib = v[0], v[1] * DPS
+        vib_hz, vib = args.vibration[0], args.vibration[1] * DPS
     eff = ImuEffects(g_sensitivity=args.g_sensitivity * DPS / G0, warm_up=args.warm_up * DPS,
                      warm_up_s=args.warm_up_s, temperature_coeff=args.temperature_coeff * DPS,
                      vibration_hz=vib_hz, vibration=vib, random_walk=args.drift * DPH,
-                     imus=tuple(int(x) for x in _floats(args.effect_imus, "--effect-imus")))
+                     imus=tuple(int(x) for x in args.effect_imus))
     spec = ImuSetSpec(imus=args.imus, duration_s=args.duration,
                       sample_rate_hz=fs, seed=args.seed,
-                      time_offset_s=tuple(1e-3 * x for x in _floats(args.time_offset_ms,
-                                                                    "--time-offset-ms")),
+                      time_offset_s=tuple(1e-3 * x for x in args.time_offset_ms),
                       misalignment_sd=1e-3 * args.misalignment_mrad,
                       scale_sd=1e-6 * args.scale_ppm, noise_sd=args.gyro_noise_dps * DPS,
                       max_rate_dps=args.max_rate if args.max_rate != 300.0 else 200.0,

@@ -4,8 +4,15 @@ from __future__ import annotations
 
 import argparse
 
-from fdi.calfile import load_calibration
 from fdi.errors import ConfigError
+from rimu.argtypes import SEED_MAX, nonnegative_float, nonnegative_int, positive_float
+
+MAX_FALSE_ALARMS_PER_HOUR = 3.6e6
+"""Largest false-alarm budget (one per millisecond): beyond it thresholds mean nothing."""
+MAX_SCALE = 1 << 20
+"""Longest window, in samples."""
+MAX_SIMULATE_HOURS = 1e4
+"""Most healthy flight hours simulated per correction pass."""
 
 HELP = ("tune thresholds for a false-alarm rate; print them and the detectable fault size "
         "per window scale")
@@ -19,38 +26,40 @@ def _scales(text: str) -> tuple[int, ...]:
         except ValueError:
             raise ConfigError(f"unknown scale {part!r}: expected window lengths in samples, "
                               f"e.g. --scales 1,2,4,8") from None
-        if not (v == int(v) and v >= 1):
-            raise ConfigError(f"unknown scale {part!r}: expected a positive integer window "
-                              f"length in samples")
+        if not (1 <= v <= MAX_SCALE and v == int(v)):      # NaN and inf fail the first test
+            raise ConfigError(f"unknown scale {part!r}: expected a whole window length in "
+                              f"samples, 1 to {MAX_SCALE}")
         out.append(int(v))
     return tuple(out)
 
 
 def configure(p: argparse.ArgumentParser) -> None:
     p.add_argument("--cal", required=True, metavar="FILE", help="calibration file")
-    p.add_argument("--false-alarms-per-hour", required=True, type=float, metavar="X",
+    p.add_argument("--false-alarms-per-hour", required=True, metavar="X",
+                   type=positive_float(MAX_FALSE_ALARMS_PER_HOUR),
                    help="target rate of false alarms per hour of healthy operation")
     p.add_argument("--scales", metavar="LIST",
                    help="window lengths in samples, e.g. 1,2,4,...,128 (default 1 ... 128)")
     p.add_argument("--kind", default="gyro", choices=("gyro", "accel"))
-    p.add_argument("--simulate-hours", type=float, default=4.0, metavar="H",
+    p.add_argument("--simulate-hours", type=nonnegative_float(MAX_SIMULATE_HOURS), default=4.0,
+                   metavar="H",
                    help="healthy flight hours simulated per correction pass (default 4; "
                         "0: analytic only)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the correction flights")
+    p.add_argument("--seed", type=nonnegative_int(SEED_MAX), default=0,
+                   help="seed of the correction flights")
     p.add_argument("--out", required=True, metavar="FILE",
                    help="write the rimu.tuning/1 file here (for --thresholds)")
 
 
 def run(args: argparse.Namespace) -> int:
+    from fdi.calfile import load_calibration
+    from rimu.outputs import atomic_file, input_path, output_file
     from thresholds.tune import tune
 
-    if not args.false_alarms_per_hour > 0:
-        raise ConfigError(f"--false-alarms-per-hour must be positive, got "
-                          f"{args.false_alarms_per_hour:g}")
-    if args.simulate_hours < 0:
-        raise ConfigError("--simulate-hours must be >= 0")
-    cal = load_calibration(args.cal)
+    input_path(args.cal, "--cal")
+    out = output_file(args.out, "--out", inputs=(args.cal,))
     scales = _scales(args.scales) if args.scales else 7
+    cal = load_calibration(args.cal)
     tu = tune(cal, false_alarms_per_hour=args.false_alarms_per_hour, kind=args.kind,
               scales=scales, simulate_hours=args.simulate_hours, seed=args.seed)
     th = tu.thresholds
@@ -66,6 +75,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"{w:6d} {w / th.sample_rate_hz:9.3f} {a:10.3e} {t:9.2f} {f:6.2f} "
               f"{d.size_unit_value:12.4g} {d.unit:5s} {d.size_sigma:7.2f}")
     print(f"detectable sizes: one full window, at rest, worst sensor {d0.sensor}")
-    tu.save(args.out)
-    print(f"wrote {args.out}")
+    with atomic_file(out) as tmp:
+        tu.save(tmp)
+    print(f"wrote {out}")
     return 0
