@@ -84,8 +84,9 @@ __all__ = [
 ]
 
 CALIBRATION_SCHEMA = "rimu.calibration/2"
-CALIBRATION_SCHEMAS = ("rimu.calibration/1", CALIBRATION_SCHEMA)
-"""Versions the loader reads (``/1``: no effects, no adequacy record)."""
+CALIBRATION_SCHEMAS = (CALIBRATION_SCHEMA, "rimu.calibration/1")
+"""Versions the loader reads, the one written first (what an error message asks for);
+``/1``: no effects, no adequacy record."""
 KINDS = ("gyro", "accel")
 _INPUT_SI = {"gyro": "rad/s", "accel": "m/s^2"}
 
@@ -432,8 +433,8 @@ def calibration_from_dict(doc: Mapping[str, Any], path: str = "<calibration>") -
         earth_rate_dph=r.number("earth_rate_dph", None),
         earth_rate_dph_sd=r.number("earth_rate_dph_sd", None),
         latitude_deg=r.number("latitude_deg", None), extra=r.free("extra", {}),
-        effects=_effects(r, sets) if version != CALIBRATION_SCHEMAS[0] else (),
-        adequacy=_adequacy(r) if version != CALIBRATION_SCHEMAS[0] else None)
+        effects=_effects(r, sets) if version != "rimu.calibration/1" else (),
+        adequacy=_adequacy(r) if version != "rimu.calibration/1" else None)
     r.finish(accept=_WRITTEN_ONLY)
     return cal
 

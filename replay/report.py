@@ -15,7 +15,8 @@ Layout (keys other tools read; keep them stable)::
                  "isolation_correct", "rate_error_rms_dps", "rate_error_rms_axis_dps",
                  "rate_available_fraction", "protection_level_median_dps",
                  "integrity_breaches"},
-     "frames": {...}}                                           # replay only
+     "frames": {...},                                           # replay only
+     "units": {"t": "s", "statistic": ..., "threshold": ..., "magnitude": "rad/s", ...}}
 
 Definitions:
 
@@ -47,14 +48,31 @@ from fdi.calfile import Calibration
 from fdi.units import DPS
 from replay.flight_data import Flight
 
-__all__ = ["ALARM_TYPES", "REPORT_SCHEMA", "RunningReport", "build_report", "format_report",
-           "format_summary"]
+__all__ = ["ALARM_TYPES", "REPORT_SCHEMA", "RunningReport", "build_report", "event_units",
+           "format_report", "format_summary"]
 
 REPORT_SCHEMA = "rimu.report/1"
 ALARM_TYPES = ("detected", "isolated", "health")
 """Event types that raise an alarm (``readmitted`` does not)."""
 _ISOLATING = ("isolated", "health")
 _EPS = 1e-9
+
+
+def event_units(kind: str) -> dict[str, str]:
+    """Units of the events' numeric fields (the report's ``"units"`` block)."""
+    return {"t": "s", "scale": "samples (window length)",
+            "statistic": "1 (chi-square of the noise-normalised parity; a health check's "
+                         "own measure otherwise)",
+            "threshold": "1 (same measure as statistic)",
+            "magnitude": "rad/s" if kind == "gyro" else "m/s^2"}
+
+
+def _sensor(e: Mapping[str, Any], names: Sequence[str]) -> str:
+    """``3 (x2)``: the 1-based number with the sensor's name."""
+    k = e.get("sensor")
+    if k is None:
+        return "-"
+    return f"{k} ({names[k - 1]})" if isinstance(k, int) and 1 <= k <= len(names) else str(k)
 
 
 def _num(x: Any) -> float | None:
@@ -252,6 +270,7 @@ class RunningReport:
             "duration_s": self.samples / fs if fs > 0 else 0.0,
             "sample_rate_hz": fs, "sensor_names": list(flight.sensor_names), "truth": truth,
             "events": events, "faults": outcomes, "summary": summary,
+            "units": event_units(kind),
         }
         if frames is not None:
             report["frames"] = dict(frames)
@@ -307,13 +326,14 @@ def format_report(report: Mapping[str, Any], *, max_events: int = 50) -> str:
              f"{len(report['sensor_names'])} {report.get('kind', 'gyro')} sensors"]
     ev = report["events"]
     lines.append(f"events: {len(ev)}")
+    names = list(report.get("sensor_names", []))
     for e in ev[:max_events]:
-        s = "-" if e.get("sensor") is None else str(e["sensor"])
+        s = _sensor(e, names)
         stat = ""
         if e.get("statistic") is not None:
             stat = f"  {_fmt(e['statistic'])} > {_fmt(e.get('threshold'))}"
         fa = "  FALSE ALARM" if e.get("false_alarm") else ""
-        lines.append(f"  t={e['t']:.3f} s  sensor {s:>2}  {e['type']:<10} {e['reason']}{stat}"
+        lines.append(f"  t={e['t']:.3f} s  sensor {s:>6}  {e['type']:<10} {e['reason']}{stat}"
                      f"{fa}")
     if len(ev) > max_events:
         lines.append(f"  ... {len(ev) - max_events} more")

@@ -21,8 +21,13 @@ from pathlib import Path
 
 from fdi.errors import ConfigError
 
-__all__ = ["atomic_dir", "atomic_file", "atomic_write_text", "distinct_inputs", "input_path",
-           "output_dir", "output_file"]
+__all__ = ["FLIGHT_LOG_SUFFIXES", "atomic_dir", "atomic_file", "atomic_write_text",
+           "distinct_inputs", "flight_folder_hint", "input_path", "output_dir", "output_file"]
+
+FLIGHT_LOG_SUFFIXES = (".bin", ".ulg", ".mat", ".rda", ".rdata", ".csv")
+"""Log files ``rimu ingest`` turns into flight folders (a hint when one is given instead)."""
+CAN_LOG_SUFFIXES = (".asc", ".blf", ".log", ".trc")
+"""CAN logs (read by ``rimu replay``)."""
 
 
 def _same(a: Path, b: Path) -> bool:
@@ -148,6 +153,20 @@ def _umask() -> int:
     m = os.umask(0)
     os.umask(m)
     return m
+
+
+def flight_folder_hint(path: str | os.PathLike, option: str, command: str) -> None:
+    """A log file given where a flight folder is read: name the command that reads it."""
+    p = Path(path)
+    if p.is_dir():
+        return
+    sfx = p.suffix.lower()
+    if sfx in CAN_LOG_SUFFIXES:
+        raise ConfigError(f"{option} {p}: is a CAN log, not a flight folder; {command} reads "
+                          f"folders: use rimu replay {p} --cal CAL")
+    if sfx in FLIGHT_LOG_SUFFIXES:
+        raise ConfigError(f"{option} {p}: is a log file, not a flight folder; make one "
+                          f"first: rimu ingest {p} --out FOLDER")
 
 
 def _temp_name(p: Path) -> Path:

@@ -96,7 +96,7 @@ def test_calibrate_compare_bad_truth_refused_before_writing(files, capsys):
 @pytest.mark.parametrize("cmd", [
     ["simulate", "calibration", "--preset", "cone-paper"],
     ["simulate", "flight", "--cal", "{cal6}", "--duration", "1"],
-    ["demo", "--duration", "1", "--no-rrd"],
+    ["demo", "--duration", "40", "--no-rrd"],
 ])
 def test_directory_output_that_is_a_file(files, capsys, cmd):
     argv = [c.format(**files) for c in cmd] + ["--out", files["d"] / "existing.txt"]

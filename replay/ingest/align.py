@@ -15,6 +15,11 @@ Before that, each stream loses the samples whose time is not finite or does not 
 (duplicate or backwards stamps): dropped, with the reason. Per IMU,
 ``samples_in = kept + used_for_resampling + sum(dropped)``.
 
+Implausible logs are refused, not ingested: rates beyond any gyro's range
+(:data:`MAX_RATE_DPS`; with ``salvage`` those samples are dropped and counted instead) and
+a time base faster than any IMU (:data:`MAX_SAMPLE_RATE_HZ`: seconds read as milliseconds,
+a wrong time unit in the map).
+
 No time offset is applied: the IMUs are taken at their stamps (finding a lag between
 them is the job of the in-flight calibration).
 """
@@ -26,18 +31,31 @@ from typing import Any
 import numpy as np
 
 from fdi.errors import ConfigError
+from fdi.units import DPS
 from replay.flight_data import AuxChannels, Flight
 from replay.ingest.stream import ImuStream, LogRead
 
-__all__ = ["INGEST_REPORT_SCHEMA", "align_streams"]
+__all__ = ["INGEST_REPORT_SCHEMA", "MAX_RATE_DPS", "MAX_SAMPLE_RATE_HZ", "align_streams"]
 
 INGEST_REPORT_SCHEMA = "rimu.ingest-report/1"
+MAX_RATE_DPS = 1e5
+"""No gyro measures beyond this (deg/s; the widest MEMS ranges are about 4000 deg/s): a
+larger or non-finite-overflowing value is damage, not motion."""
+MAX_SAMPLE_RATE_HZ = 2e4
+"""No IMU log is sampled faster than this (Hz): a faster time base has a wrong time unit."""
+_BEYOND = "rate beyond any gyro's range"
 _AXES = ("x", "y", "z")
 
 
 def _clean(s: ImuStream) -> tuple[ImuStream, dict[str, int]]:
-    """Drop samples with non-finite or non-increasing time; count them by reason."""
+    """Drop samples with non-finite or non-increasing time, or with a rate beyond any gyro's
+    range (non-finite rates stay: the monitor sees them as invalid); count them by reason."""
     dropped: dict[str, int] = {}
+    with np.errstate(invalid="ignore"):
+        beyond = np.any(np.abs(s.gyro) > MAX_RATE_DPS * DPS, axis=1)
+    if beyond.any():
+        dropped[_BEYOND] = int(beyond.sum())
+        s = s.take(~beyond)
     fin = np.isfinite(s.t)
     if not fin.all():
         dropped["non-finite time stamp"] = int((~fin).sum())
@@ -153,7 +171,8 @@ def _aux_columns(s: Any, i0: np.ndarray, i1: np.ndarray, w: np.ndarray,
 
 
 def align_streams(read: LogRead, *, reference: str | None = None, gap_factor: float = 2.5,
-                  tol_fraction: float = 0.01) -> tuple[Flight, dict[str, Any]]:
+                  tol_fraction: float = 0.01, salvage: bool = False
+                  ) -> tuple[Flight, dict[str, Any]]:
     """Put the streams of ``read`` on one time base.
 
     Parameters
@@ -168,6 +187,8 @@ def align_streams(read: LogRead, *, reference: str | None = None, gap_factor: fl
     tol_fraction : float
         A sample within ``tol_fraction`` × the base's median interval of a base time is
         taken as on it (kept, not resampled).
+    salvage : bool
+        Drop (and count) samples with rates beyond any gyro's range instead of refusing.
 
     Returns
     -------
@@ -180,9 +201,16 @@ def align_streams(read: LogRead, *, reference: str | None = None, gap_factor: fl
     Raises
     ------
     ConfigError
-        No stream has samples, or ``reference`` names no IMU.
+        No stream has samples, ``reference`` names no IMU, rates beyond any gyro's range
+        (without ``salvage``), or a time base faster than any IMU.
     """
     cleaned = [_clean(s) for s in read.streams]
+    for s, (_, dropped) in zip(read.streams, cleaned, strict=True):
+        if dropped.get(_BEYOND) and not salvage:
+            raise ConfigError(f"{read.path}: {s.name} ({s.source}): {dropped[_BEYOND]} of "
+                              f"{s.size} samples hold rates beyond any gyro's range (over "
+                              f"{MAX_RATE_DPS:g} deg/s): a damaged log or a wrong unit; "
+                              "--salvage drops and counts them")
     streams = [c[0] for c in cleaned]
     if not streams or all(s.size == 0 for s in streams):
         raise ConfigError(f"{read.path}: no IMU samples to ingest")
@@ -192,6 +220,12 @@ def align_streams(read: LogRead, *, reference: str | None = None, gap_factor: fl
     if not np.isfinite(dt_b) or dt_b <= 0:
         raise ConfigError(f"{read.path}: reference {streams[r].name} has "
                           f"{tb.shape[0]} time stamp(s); cannot form a time base")
+    if 1.0 / dt_b > MAX_SAMPLE_RATE_HZ:
+        raise ConfigError(f"{read.path}: {streams[r].name} is sampled every {dt_b:.3g} s "
+                          f"({1.0 / dt_b:.3g} Hz), faster than any IMU (at most "
+                          f"{MAX_SAMPLE_RATE_HZ:g} Hz): the time stamps are in another unit "
+                          "than read (seconds taken as milliseconds?); set the time unit in "
+                          "the --map")
     tol = tol_fraction * dt_b
     m = tb.shape[0]
     gyro_cols, valid_cols, names, imu_groups = [], [], [], []

@@ -346,6 +346,9 @@ def read_tabular(path: str | Path, fmt: str, *, map_path: str | Path | None = No
     if mp is not None and mp.format is not None and mp.format != fmt:
         raise ConfigError(f"{map_path}: the map is for {mp.format} files, the log is {fmt}")
     p = str(path)
+    if fmt == "rda" and mp is None:         # before parsing what may be a gigabyte
+        raise FileFormatError(p, "R data files carry no units; give --map with gyro_unit "
+                                 "(and accel_unit, [time] rate_hz)")
     if fmt == "csv":
         table = read_csv_table(path)
     elif fmt == "mat":

@@ -15,10 +15,14 @@ import json
 import time
 from pathlib import Path
 
-from rimu.argtypes import SEED_MAX, nonnegative_int, positive_float
+from rimu.argtypes import SEED_MAX, bounded_float, nonnegative_int
 
 MAX_DURATION_S = 3600.0
 """Longest demo flight (s): one hour is already a 130 MB BLF log."""
+FAULTS = ("step:3:8sigma:20", "ramp:5:0.5sigma/s:35")
+"""The demo's two faults (onsets 20 s and 35 s)."""
+MIN_DURATION_S = 40.0
+"""Shortest demo flight (s): both faults start within it, 5 s before its end at least."""
 
 HELP = "run the whole chain on a simulated cone of six MEMS sensors (no downloads)"
 
@@ -27,8 +31,10 @@ def configure(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", default="rimu-demo", help="output directory (default: rimu-demo)")
     p.add_argument("--seed", type=nonnegative_int(SEED_MAX), default=7,
                    help="random seed (default 7)")
-    p.add_argument("--duration", type=positive_float(MAX_DURATION_S), default=60.0,
-                   help=f"flight duration in seconds (default 60, at most {MAX_DURATION_S:g})")
+    p.add_argument("--duration", default=60.0,
+                   type=bounded_float(MIN_DURATION_S, MAX_DURATION_S, name="duration in s"),
+                   help=f"flight duration in seconds (default 60, {MIN_DURATION_S:g} to "
+                        f"{MAX_DURATION_S:g}: the faults start at 20 s and 35 s)")
     p.add_argument("--no-rrd", action="store_true", help="skip the rerun recording")
 
 
@@ -86,7 +92,7 @@ def _demo(args: argparse.Namespace, out: Path, final: Path) -> None:
     print(f"  {len(thr.scales)} dyadic scales -> {final / 'thresholds.json'}")
 
     _say(4, "simulating a flight with two successive faults, written as a CAN log")
-    specs = ["step:3:8sigma:20", "ramp:5:0.5sigma/s:35"]
+    specs = list(FAULTS)
     faults = [parse_fault(s, cal) for s in specs]
     flight = simulate_flight(cal, args.duration, seed=args.seed, faults=faults)
     log_path = out / "flight.blf"
@@ -99,8 +105,11 @@ def _demo(args: argparse.Namespace, out: Path, final: Path) -> None:
     result = mon.run(replayed.t, replayed.raw, replayed.valid)
     report = build_report(result, replayed, cal, frames=frames)
     report["source"] = str(final / "flight.blf")
+    names = [c.name for c in cal.gyro.sensors]
     for e in report["events"]:
-        print(f"  t={e['t']:8.2f} s  sensor {e['sensor']}  {e['type']:9s} {e['reason']}")
+        k = e["sensor"]
+        who = f"{k} ({names[k - 1]})" if isinstance(k, int) and 1 <= k <= len(names) else k
+        print(f"  t={e['t']:8.2f} s  sensor {who}  {e['type']:9s} {e['reason']}")
     print(format_summary(report))
     rep_path = out / "report.json"
     rep_path.write_text(json.dumps(report, indent=1, allow_nan=False) + "\n", encoding="utf-8")

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import json
-from pathlib import Path
 
 from fdi.fileio import to_jsonable
 
@@ -42,15 +41,23 @@ def run(args: argparse.Namespace) -> int:
     from replay.flight_io import save_flight_dir
     from replay.ingest import align_streams, read_any
     from replay.ingest.readers import merge_reads
+    from rimu.outputs import atomic_dir, distinct_inputs, input_path, output_dir
 
+    for log in args.logs:
+        input_path(log, "LOG")
+    distinct_inputs(args.logs, "LOG")
+    if args.map_path:
+        input_path(args.map_path, "--map")
+    out = output_dir(args.out, "--out", inputs=(*args.logs, args.map_path),
+                     schema="rimu.flight/1")
     reads = [read_any(log, args.format, map_path=args.map_path, salvage=args.salvage,
                       px4_topic=args.px4_topic) for log in args.logs]
     read = merge_reads(reads)
-    flight, report = align_streams(read, reference=args.reference)
-    out = Path(args.out)
-    save_flight_dir(flight, out)
-    (out / REPORT_FILE).write_text(json.dumps(to_jsonable(report), indent=1) + "\n",
-                                   encoding="utf-8")
+    flight, report = align_streams(read, reference=args.reference, salvage=args.salvage)
+    with atomic_dir(out) as tmp:        # the flight and its report: all or nothing
+        save_flight_dir(flight, tmp)
+        (tmp / REPORT_FILE).write_text(json.dumps(to_jsonable(report), indent=1) + "\n",
+                                       encoding="utf-8")
     tb = report["time_base"]
     print(f"wrote {out}: {flight.t.shape[0]} samples of {len(report['imus'])} IMU(s) "
           f"({flight.n} gyro axes) at {tb['sample_rate_hz']:.4g} Hz, "

@@ -35,8 +35,9 @@ def configure(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from fdi.calfile import check_compatible
-    from rimu.outputs import atomic_write_text, input_path, output_file
+    from rimu.outputs import atomic_write_text, flight_folder_hint, input_path, output_file
 
+    flight_folder_hint(args.flight, "DIR", "rimu monitor-file")
     input_path(args.flight, "DIR", kind="dir")
     input_path(args.cal, "--cal")
     if args.thresholds:

@@ -101,14 +101,15 @@ def run(args: argparse.Namespace) -> int:
     from calibration.repeat import repeat_sessions
     from calibration.session_io import load_session, save_session
     from fdi.errors import ConfigError
-    from rimu.outputs import atomic_file, input_path, output_dir
+    from rimu.outputs import atomic_file, distinct_inputs, input_path, output_dir
 
     if len(args.sessions) < 2:
         raise ConfigError(f"rimu repeat: give at least two sessions to compare, got one "
                           f"({args.sessions[0]})")
     for s in args.sessions:
         input_path(s, "SESSION", kind="dir")
-    out = output_dir(args.out, "--out") if args.out else None
+    distinct_inputs(args.sessions, "SESSION")     # a session with itself repeats trivially
+    out = output_dir(args.out, "--out", inputs=args.sessions) if args.out else None
     sessions = [load_session(s) for s in args.sessions]
     res = repeat_sessions(sessions, alpha=args.alpha, stack=args.stack,
                           progress=not args.no_progress)

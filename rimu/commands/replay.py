@@ -166,11 +166,17 @@ def has_display() -> bool:
 
 
 def warn_reader_errors(frames: dict, source: str) -> None:
-    """Reader errors of a log as warnings on stderr (garbage lines are in the counts)."""
+    """Reader errors of a log as warnings on stderr; unreadable lines of a text log as one
+    line with their count and the first of them."""
     log = logging.getLogger("rimu")
     for e in frames["errors"]:
         if e.get("kind") != "garbage_line":
             log.warning(f"{source}: {e['where']}: {e['why']}")
+    n = frames.get("rejected", {}).get("garbage_line", 0)
+    first = next((e for e in frames["errors"] if e.get("kind") == "garbage_line"), None)
+    if n and first is not None:
+        log.warning(f"{source}: {n} unreadable line(s) skipped, the first at {first['where']} "
+                    f"({first['why']}); --strict refuses a damaged log")
 
 
 def run(args: argparse.Namespace) -> int:
