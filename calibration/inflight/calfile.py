@@ -148,5 +148,6 @@ def fit_summary(fit: InflightFit) -> dict[str, object]:
     return {"reference": fit.reference, "units": {
         "rotation": "rad", "scale": "fraction", "nonorthogonality": "rad"},
         "imus": imus, "left_out": [s.to_dict() for s in fit.left_out],
-        "samples_used": int(fit.used.sum()), "samples": int(fit.used.shape[0])}
+        "samples_used": int(fit.used.sum()), "samples": int(fit.used.shape[0]),
+        "samples_nonfinite": int(getattr(fit, "nonfinite", 0))}
 

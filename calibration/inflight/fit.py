@@ -156,6 +156,8 @@ class InflightFit:
         One per IMU other than the reference.
     used : ndarray of bool, shape (N,)
         Samples the fit used.
+    nonfinite : int
+        Samples outside the left-out segments left out for a non-finite rate in some IMU.
     left_out : tuple of Segment
     sample_rate_hz : float
     source : str
@@ -169,6 +171,7 @@ class InflightFit:
     sample_rate_hz: float
     source: str = ""
     extra: dict[str, object] = field(default_factory=dict)
+    nonfinite: int = 0
 
 
 def _decomposition_matrix() -> np.ndarray:
@@ -441,14 +444,17 @@ def fit_inflight(flight: Flight, *, reference: str | None = None, model: str = "
         raise ConfigError(f"reference {ref!r} is not an IMU of {flight.source} "
                           f"(IMUs: {', '.join(rates)})")
     segs = find_segments(flight)
-    used = keep_mask(flight.t, segs)
+    kept = keep_mask(flight.t, segs)
+    # a sample with a non-finite rate in any IMU is left out of every pair, and counted
+    finite = np.all([np.all(np.isfinite(r), axis=1) for r in rates.values()], axis=0)
+    used = kept & finite
     try:
         out = _fit_all(flight, rates, ref, used, model, time_offset)
     except CalibrationError as exc:
         raise CalibrationError(f"{flight.source}: {exc}") from None
     return InflightFit(reference=ref, imus=tuple(rates), alignments=out, used=used,
                        left_out=tuple(segs), sample_rate_hz=flight.sample_rate_hz,
-                       source=flight.source)
+                       source=flight.source, nonfinite=int((kept & ~finite).sum()))
 
 
 def _fit_all(flight: Flight, rates: dict[str, np.ndarray], ref: str, used: np.ndarray,

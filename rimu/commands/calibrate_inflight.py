@@ -39,6 +39,9 @@ def summary_text(doc: dict) -> str:
     for s in doc["left_out"]:
         lines.append(f"  left out {s['t0_s']:.2f}-{s['t1_s']:.2f} s: {s['reason']} "
                      f"({s['detail']})")
+    if doc.get("samples_nonfinite"):
+        lines.append(f"  left out {doc['samples_nonfinite']} samples with a non-finite rate "
+                     "in some IMU")
     for g, r in doc["imus"].items():
         th, ths = 1e3 * np.asarray(r["rotation"]), 1e3 * np.asarray(r["rotation_sd"])
         lines.append(f"  {g} ({r['model']}): rotation [" + ", ".join(
