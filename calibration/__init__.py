@@ -3,22 +3,38 @@
 Conventions are those of :mod:`fdi` (SI inside, MB frame, sensors numbered from 1 outside).
 """
 
-from calibration.calibrate import calibrate
-from calibration.compare import compare, format_comparison
-from calibration.earth_rate import fit_earth_rate
-from calibration.multiposition import multiposition
-from calibration.presets import preset
-from calibration.rate_test import rate_test
-from calibration.repeat import repeat_sessions, repeatability
-from calibration.sequence import Sequence, SequenceStep, load_sequence
-from calibration.session import Session, Step
-from calibration.session_io import load_session, save_session
-from calibration.simulate import NoiseModel, simulate_session
-from calibration.stack import stack_sessions
-from calibration.truth import load_truth, save_truth
-from calibration.turntable import MOUNTS, body_inputs, earth_rate_n, gravity_local, mat_nb
-from calibration.wavelet import denoise
+from fdi.lazy import attach
 
+_EXPORTS = {
+    "MOUNTS": "calibration.turntable",
+    "NoiseModel": "calibration.simulate",
+    "Sequence": "calibration.sequence",
+    "SequenceStep": "calibration.sequence",
+    "Session": "calibration.session",
+    "Step": "calibration.session",
+    "body_inputs": "calibration.turntable",
+    "calibrate": "calibration.calibrate",
+    "compare": "calibration.compare",
+    "denoise": "calibration.wavelet",
+    "earth_rate_n": "calibration.turntable",
+    "fit_earth_rate": "calibration.earth_rate",
+    "format_comparison": "calibration.compare",
+    "gravity_local": "calibration.turntable",
+    "load_sequence": "calibration.sequence",
+    "load_session": "calibration.session_io",
+    "load_truth": "calibration.truth",
+    "mat_nb": "calibration.turntable",
+    "multiposition": "calibration.multiposition",
+    "preset": "calibration.presets",
+    "rate_test": "calibration.rate_test",
+    "repeat_sessions": "calibration.repeat",
+    "repeatability": "calibration.repeat",
+    "save_session": "calibration.session_io",
+    "save_truth": "calibration.truth",
+    "simulate_session": "calibration.simulate",
+    "stack_sessions": "calibration.stack",
+}
+"""Public name → module defining it (imported on first use, PEP 562)."""
 __all__ = [
     "MOUNTS",
     "NoiseModel",
@@ -48,3 +64,5 @@ __all__ = [
     "simulate_session",
     "stack_sessions",
 ]
+
+__getattr__, __dir__ = attach(__name__, _EXPORTS)

@@ -31,10 +31,12 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
-
-import numpy as np
+from typing import TYPE_CHECKING
 
 from fdi.errors import ConfigError
+
+if TYPE_CHECKING:
+    import numpy as np
 
 __all__ = [
     "EFFECTS",
@@ -67,6 +69,8 @@ def temperature_profile(t_s: np.ndarray) -> np.ndarray:
     ``T(t) = T₀ + ΔT·(1 − exp(−t/τ))`` with :data:`TEMP_START_DEGC`,
     :data:`TEMP_RISE_DEGC` and :data:`TEMP_TAU_S`.
     """
+    import numpy as np  # here: the help of rimu simulate calibration lists the effects
+
     t = np.asarray(t_s, float)
     return TEMP_START_DEGC + TEMP_RISE_DEGC * -np.expm1(-t / TEMP_TAU_S)
 

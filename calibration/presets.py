@@ -31,6 +31,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from calibration.preset_names import PRESETS
 from calibration.sequence import Sequence, load_sequence
 from calibration.simulate import NoiseModel, configuration_of
 from fdi.calfile import Calibration, SensorCal, SensorSet, tangent_basis
@@ -42,12 +43,7 @@ from fdi.units import DPS, MG, input_unit_factor, scale_factor_to_si
 __all__ = ["PRESETS", "Preset", "default_sequence_name", "make_sensor_set", "preset",
            "random_truth"]
 
-PRESETS: dict[str, str] = {
-    "cone-paper": "seed 001: MEMS orthogonal cone, Table 3 values, 30 deg/s, latitude 37.5",
-    "tetrad-paper": "seed 000: FOG tetrad, Table 2 and Eq. 26 values, 10 deg/s, "
-                    "latitude -23.2",
-}
-"""Preset names and one-line descriptions."""
+
 
 
 

@@ -14,24 +14,41 @@ Conventions (hold for every rimu package)
 ``fdi`` imports none of the other rimu packages.
 """
 
-from fdi.answer import Answer, BlockResult, Event
-from fdi.calfile import (
-    CALIBRATION_SCHEMA,
-    AllanTable,
-    Calibration,
-    SensorCal,
-    SensorSet,
-    calibration_from_dict,
-    load_calibration,
-)
-from fdi.effects import Compensator
-from fdi.effects_monitor import CompensatedMonitor
-from fdi.errors import CalibrationError, ConfigError, FileFormatError, ReplayError, RimuError
-from fdi.geometry import Configuration, cone6, load_configuration, tetrad, triad
-from fdi.monitor import Monitor
-from fdi.parity import calibrated_axes, isolability, parity_matrix, reconstruction_matrix
-from fdi.settings import MonitorSettings, Thresholds, load_thresholds
+from fdi.lazy import attach
 
+_EXPORTS = {
+    "AllanTable": "fdi.calfile",
+    "Answer": "fdi.answer",
+    "BlockResult": "fdi.answer",
+    "CALIBRATION_SCHEMA": "fdi.calfile",
+    "Calibration": "fdi.calfile",
+    "CalibrationError": "fdi.errors",
+    "CompensatedMonitor": "fdi.effects_monitor",
+    "Compensator": "fdi.effects",
+    "ConfigError": "fdi.errors",
+    "Configuration": "fdi.geometry",
+    "Event": "fdi.answer",
+    "FileFormatError": "fdi.errors",
+    "Monitor": "fdi.monitor",
+    "MonitorSettings": "fdi.settings",
+    "ReplayError": "fdi.errors",
+    "RimuError": "fdi.errors",
+    "SensorCal": "fdi.calfile",
+    "SensorSet": "fdi.calfile",
+    "Thresholds": "fdi.settings",
+    "calibrated_axes": "fdi.parity",
+    "calibration_from_dict": "fdi.calfile",
+    "cone6": "fdi.geometry",
+    "isolability": "fdi.parity",
+    "load_calibration": "fdi.calfile",
+    "load_configuration": "fdi.geometry",
+    "load_thresholds": "fdi.settings",
+    "parity_matrix": "fdi.parity",
+    "reconstruction_matrix": "fdi.parity",
+    "tetrad": "fdi.geometry",
+    "triad": "fdi.geometry",
+}
+"""Public name → module defining it (imported on first use, PEP 562)."""
 __all__ = [
     "CALIBRATION_SCHEMA",
     "AllanTable",
@@ -64,3 +81,5 @@ __all__ = [
     "tetrad",
     "triad",
 ]
+
+__getattr__, __dir__ = attach(__name__, _EXPORTS)

@@ -1,16 +1,34 @@
 """rimu.replay: flights (simulated or recorded), fault injection, CAN replay and reports."""
 
-from replay.accounting import FrameAccounting
-from replay.channel_map import ChannelMap, default_channel_map, load_channel_map
-from replay.faults import FAULT_KINDS, Fault, parse_fault
-from replay.flight_data import AuxChannels, Flight
-from replay.flight_io import load_flight_dir, save_flight_dir
-from replay.flight_sim import iter_flight, simulate_flight
-from replay.live import StreamDecoder, run_live
-from replay.logio import read_frames, read_log, write_flight_log
-from replay.report import REPORT_SCHEMA, build_report, format_report
-from replay.scenario import apply_faults, inject, load_scenario
+from fdi.lazy import attach
 
+_EXPORTS = {
+    "AuxChannels": "replay.flight_data",
+    "ChannelMap": "replay.channel_map",
+    "FAULT_KINDS": "replay.faults",
+    "Fault": "replay.faults",
+    "Flight": "replay.flight_data",
+    "FrameAccounting": "replay.accounting",
+    "REPORT_SCHEMA": "replay.report",
+    "StreamDecoder": "replay.live",
+    "apply_faults": "replay.scenario",
+    "build_report": "replay.report",
+    "default_channel_map": "replay.channel_map",
+    "format_report": "replay.report",
+    "inject": "replay.scenario",
+    "iter_flight": "replay.flight_sim",
+    "load_channel_map": "replay.channel_map",
+    "load_flight_dir": "replay.flight_io",
+    "load_scenario": "replay.scenario",
+    "parse_fault": "replay.faults",
+    "read_frames": "replay.logio",
+    "read_log": "replay.logio",
+    "run_live": "replay.live",
+    "save_flight_dir": "replay.flight_io",
+    "simulate_flight": "replay.flight_sim",
+    "write_flight_log": "replay.logio",
+}
+"""Public name → module defining it (imported on first use, PEP 562)."""
 __all__ = [
     "FAULT_KINDS",
     "REPORT_SCHEMA",
@@ -37,3 +55,5 @@ __all__ = [
     "simulate_flight",
     "write_flight_log",
 ]
+
+__getattr__, __dir__ = attach(__name__, _EXPORTS)

@@ -154,7 +154,8 @@ def float_list(min_value: float | None = None, max_value: float | None = None, *
     return parse
 
 
-def choice_or_url(choices: tuple[str, ...], scheme: str = "tcp") -> Callable[[str], str]:
+def choice_or_url(choices: tuple[str, ...], scheme: str = "tcp",
+                  name: str = "scheduler") -> Callable[[str], str]:
     """One of ``choices`` or an address ``SCHEME://HOST:PORT``."""
     def parse(text: str) -> str:
         if text in choices:
@@ -164,10 +165,10 @@ def choice_or_url(choices: tuple[str, ...], scheme: str = "tcp") -> Callable[[st
         if head == scheme and sep and host and colon and port.isdigit() \
                 and 0 < int(port) < 65536:
             return text
-        raise argparse.ArgumentTypeError(f"expected one of {', '.join(choices)} or "
-                                         f"{scheme}://HOST:PORT, got {text!r}")
+        raise argparse.ArgumentTypeError(f"unknown {name} {text!r}; expected "
+                                         f"{', '.join(choices)} or {scheme}://HOST:PORT")
 
-    parse.__name__ = "scheduler"
+    parse.__name__ = name
     return parse
 
 

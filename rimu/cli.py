@@ -14,7 +14,7 @@ import sys
 import warnings
 from collections.abc import Sequence
 
-from fdi.errors import RimuError
+from fdi.errors import RimuError  # light: fdi's package imports lazily (fdi.lazy)
 from rimu import __version__
 
 __all__ = ["COMMANDS", "build_parser", "main"]
@@ -102,28 +102,56 @@ def _add(sub: argparse._SubParsersAction, name: str, module: str) -> None:
     p.set_defaults(_run=mod.run)
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The full argument parser."""
+def _wanted(argv: Sequence[str] | None) -> tuple[str, ...] | None:
+    """The sub-command ``argv`` names (``("tune",)``, ``("simulate", "flight")``), ``()``
+    for none (``rimu --version``), or None when every parser is needed (``rimu --help``,
+    an unknown command: argparse lists them all)."""
+    if argv is None:
+        return None
+    words = [a for a in argv if not a.startswith("-")]
+    if not words:
+        return () if any(a == "--version" for a in argv) else None
+    if words[0] in COMMANDS:
+        return (words[0],)
+    if words[0] == "simulate" and len(words) > 1 and words[1] in SIMULATE:
+        return ("simulate", words[1])
+    return None
+
+
+def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
+    """The argument parser: every sub-command, or with ``argv`` only the one it names.
+
+    Each sub-command's module is imported to build its parser; building only the one asked
+    for keeps ``rimu --version`` and ``rimu COMMAND --help`` from importing the others.
+    """
+    want = _wanted(argv)
     parser = _Parser(
         prog="rimu", description="Fault detection and isolation for redundant IMUs.")
     parser.add_argument("--version", action="version", version=f"rimu {__version__}")
     parser.add_argument("--debug", action="store_true",
                         help="show a traceback on errors (for bug reports)")
+    if want == ():
+        return parser
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name, module in COMMANDS.items():
-        _add(sub, name, module)
+        if want is None or want == (name,):
+            _add(sub, name, module)
+    if want is not None and want[0] != "simulate":
+        return parser
     sim = sub.add_parser("simulate", help="simulate a calibration session or a flight",
                          description="Simulate a calibration session or a flight, with a "
                                      "truth sidecar.")
     simsub = sim.add_subparsers(dest="what", metavar="WHAT")
     for name, module in SIMULATE.items():
-        _add(simsub, name, module)
+        if want is None or want == ("simulate", name):
+            _add(simsub, name, module)
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the CLI; returns the exit code."""
-    parser = build_parser()
+    argv = list(sys.argv[1:] if argv is None else argv)
+    parser = build_parser(argv)
     try:
         args = parser.parse_args(argv)
     except SystemExit as exc:       # --help, --version, or a usage error (one line, exit 2)

@@ -7,12 +7,26 @@ static noise checks (:mod:`thresholds.realnoise`) are imported from their module
 use the flight simulation of :mod:`replay`.
 """
 
-from thresholds.compute import allan_from_residuals, compute_thresholds
-from thresholds.oracle import OracleResult, oracle_detect
-from thresholds.select import ThresholdChoice, load_any_thresholds, select
-from thresholds.synthetic import SyntheticTruth, draw_truth, raw_samples, synthetic_calibration
-from thresholds.tune import DetectableSize, Tuning, detectable_sizes, tune
+from fdi.lazy import attach
 
+_EXPORTS = {
+    "DetectableSize": "thresholds.tune",
+    "OracleResult": "thresholds.oracle",
+    "SyntheticTruth": "thresholds.synthetic",
+    "ThresholdChoice": "thresholds.select",
+    "Tuning": "thresholds.tune",
+    "allan_from_residuals": "thresholds.compute",
+    "compute_thresholds": "thresholds.compute",
+    "detectable_sizes": "thresholds.tune",
+    "draw_truth": "thresholds.synthetic",
+    "load_any_thresholds": "thresholds.select",
+    "oracle_detect": "thresholds.oracle",
+    "raw_samples": "thresholds.synthetic",
+    "select": "thresholds.select",
+    "synthetic_calibration": "thresholds.synthetic",
+    "tune": "thresholds.tune",
+}
+"""Public name → module defining it (imported on first use, PEP 562)."""
 __all__ = [
     "DetectableSize",
     "OracleResult",
@@ -30,3 +44,5 @@ __all__ = [
     "synthetic_calibration",
     "tune",
 ]
+
+__getattr__, __dir__ = attach(__name__, _EXPORTS)

@@ -9,17 +9,21 @@ from __future__ import annotations
 
 import argparse
 import logging
+from typing import TYPE_CHECKING
 
-import numpy as np
-
-from calibration.calibrate import BIAS_METHODS, NOISE_MODELS
-from calibration.residuals import GM_LR_THRESHOLD
-from fdi.calfile import Calibration, SensorSet
 from fdi.errors import ConfigError
-from fdi.parity import parity_matrix
 from fdi.units import input_unit_factor, scale_factor_from_si, scale_factor_sd_from_si
 from rimu.commands.calibrate_ferraris import add_arguments as add_ferraris_arguments
 from rimu.commands.calibrate_ferraris import ferraris_command
+
+if TYPE_CHECKING:
+    from fdi.calfile import Calibration, SensorSet
+
+BIAS_METHODS = ("model", "turns")
+"""``--bias-method`` (:data:`calibration.calibrate.BIAS_METHODS`; kept here so that
+``rimu calibrate --help`` does not import the calibration; a test checks they agree)."""
+NOISE_MODELS = ("auto", "white")
+"""``--noise-model`` (:data:`calibration.calibrate.NOISE_MODELS`, likewise)."""
 
 HELP = "calibrate redundant gyros/accelerometers from a turntable session"
 
@@ -44,14 +48,17 @@ def configure(p: argparse.ArgumentParser) -> None:
                    help="write PNG plots (per-step residuals, Earth-rate fit) into DIR")
     add_ferraris_arguments(p)
     from rimu.commands.calibrate_effects import add_calibrate_options
-
-    add_calibrate_options(p)
     from rimu.commands.calibrate_inflight import configure_options
 
+    add_calibrate_options(p)
     configure_options(p)
 
 
 def _set_summary(s: SensorSet, V_sd: object) -> list[str]:
+    import numpy as np
+
+    from fdi.parity import parity_matrix
+
     rms_unit = "deg/s" if s.kind == "gyro" else "mg"
     rf = input_unit_factor(rms_unit)
     out = [f"{s.kind}: {s.n} sensors"]
@@ -83,6 +90,8 @@ def _set_summary(s: SensorSet, V_sd: object) -> list[str]:
 
 def _noise_lines(nm: object) -> list[str]:
     """What the noise model did, per sensor set (``extra["noise_model"]``)."""
+    from calibration.residuals import GM_LR_THRESHOLD
+
     if not isinstance(nm, dict):
         return []
     out = [f"noise model: {nm.get('method', '?')}"]
@@ -116,6 +125,8 @@ def _noise_lines(nm: object) -> list[str]:
 
 def summary_text(cal: Calibration) -> str:
     """The readable summary ``rimu calibrate`` prints."""
+    import numpy as np
+
     ex = cal.extra
     lines = [f"calibration of {ex.get('source', '?')} ({cal.configuration}, "
              f"{cal.sample_rate_hz:g} Hz, latitude {cal.latitude_deg} deg)"]

@@ -4,15 +4,22 @@ a thin shell): ``--effects NAME,...`` and ``--alpha A``."""
 from __future__ import annotations
 
 import argparse
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from calibration.diagnose.checked import calibrate_checked
-from calibration.diagnose.library import candidates
-from calibration.session import Session
-from fdi.calfile import Calibration
 from rimu.argtypes import probability
 
-__all__ = ["add_calibrate_options", "calibrate_with_check"]
+if TYPE_CHECKING:
+    from calibration.session import Session
+    from fdi.calfile import Calibration
+
+__all__ = ["EFFECT_NAMES", "add_calibrate_options", "calibrate_with_check"]
+
+EFFECT_NAMES = ("g_sensitivity", "scale_asymmetry", "scale_nonlinearity", "warmup", "time_skew",
+                "bias_drift", "no_earth_rate", "temperature", "bias_step", "periodic_line",
+                "misalignment")
+"""The candidate effects (:func:`calibration.diagnose.library.candidates`, in its order;
+kept here so that ``rimu calibrate --help`` does not import the library; a test checks
+they agree)."""
 
 
 def add_calibrate_options(p: argparse.ArgumentParser) -> None:
@@ -20,7 +27,7 @@ def add_calibrate_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--effects", metavar="NAME,...",
                    help="fit these effects jointly with the calibration, on every sensor "
                         "they apply to (rimu.calibration/2 'effects'): "
-                        + ", ".join(c.name for c in candidates()))
+                        + ", ".join(EFFECT_NAMES))
     p.add_argument("--alpha", type=probability(), default=0.01, metavar="A",
                    help="level of the model-adequacy check run before the noise model "
                         "(default 0.01); a suspected effect withholds the Gauss-Markov "
@@ -34,5 +41,7 @@ def add_calibrate_options(p: argparse.ArgumentParser) -> None:
 def calibrate_with_check(session: Session, args: argparse.Namespace,
                          **kw: Any) -> Calibration:
     """``calibrate_checked`` with the command's ``--effects`` and ``--alpha``."""
+    from calibration.diagnose.checked import calibrate_checked
+
     names = [x.strip() for x in (getattr(args, "effects", None) or "").split(",") if x.strip()]
     return calibrate_checked(session, alpha=getattr(args, "alpha", 0.01), effects=names, **kw)

@@ -8,8 +8,6 @@ from __future__ import annotations
 
 import argparse
 
-import numpy as np
-
 from fdi.errors import ConfigError
 from fdi.units import G0
 from rimu.argtypes import bounded_float, nonnegative_float, positive_float
@@ -50,6 +48,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def summary_lines(cal) -> list[str]:
     """Readable result: per sensor SF, bias, axis with sds, imucal's matrices."""
+    import numpy as np
+
     from fdi.units import input_unit_factor
 
     fe = cal.extra["ferraris"]

@@ -9,13 +9,11 @@ from __future__ import annotations
 
 import argparse
 
-import numpy as np
+__all__ = ["MODELS", "configure_options", "run", "summary_text"]
 
-from calibration.inflight.calfile import calibration_from_fit
-from calibration.inflight.fit import MODELS, fit_inflight
-from replay.flight_io import load_flight_dir
-
-__all__ = ["configure_options", "run", "summary_text"]
+MODELS = ("auto", "full", "rotation")
+"""``--model`` (:data:`calibration.inflight.fit.MODELS`; kept here so that ``--help`` does
+not import the fit; a test checks they agree)."""
 
 
 def configure_options(p: argparse.ArgumentParser) -> None:
@@ -34,6 +32,8 @@ def configure_options(p: argparse.ArgumentParser) -> None:
 
 def summary_text(doc: dict) -> str:
     """Readable summary of the ``extra.inflight`` block."""
+    import numpy as np
+
     lines = [f"in-flight calibration against {doc['reference']} "
              f"({doc['samples_used']} of {doc['samples']} samples used)"]
     for s in doc["left_out"]:
@@ -63,6 +63,9 @@ def summary_text(doc: dict) -> str:
 
 def run(args: argparse.Namespace) -> int:
     """Run ``rimu calibrate --in-flight``."""
+    from calibration.inflight.calfile import calibration_from_fit
+    from calibration.inflight.fit import fit_inflight
+    from replay.flight_io import load_flight_dir
     from rimu.outputs import atomic_file, input_path, output_file
 
     out = output_file(args.out, "--out")

@@ -5,18 +5,17 @@ from __future__ import annotations
 import argparse
 import json
 
-from fdi.fileio import to_jsonable
-
 HELP = ("read a flight log or bench recording (ArduPilot .BIN, PX4 .ulg, .mat, CSV, R .rda) "
         "into a flight folder")
 
+FORMATS = ("auto", "ardupilot", "px4", "mat", "csv", "rda")
+"""``--format`` (:data:`replay.ingest.readers.FORMATS`; kept here so that ``--help`` does
+not import the readers; a test checks they agree)."""
 REPORT_FILE = "ingest_report.json"
 """The accounting file written beside the flight (``rimu.ingest-report/1``)."""
 
 
 def configure(p: argparse.ArgumentParser) -> None:
-    from replay.ingest import FORMATS
-
     p.add_argument("logs", nargs="+", metavar="LOG",
                    help="the log; several files recorded together (one IMU each, e.g. "
                         "imu1.mat imu2.mat) are joined as imu1, imu2, ...")
@@ -38,6 +37,7 @@ def configure(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from fdi.fileio import to_jsonable
     from replay.flight_io import save_flight_dir
     from replay.ingest import align_streams, read_any
     from replay.ingest.readers import merge_reads

@@ -5,7 +5,6 @@ from __future__ import annotations
 import argparse
 import logging
 
-from fdi.calfile import load_calibration
 from fdi.errors import ConfigError, ReplayError
 from rimu.argtypes import positive_float, positive_int
 from rimu.commands.replay import (
@@ -52,6 +51,8 @@ def run(args: argparse.Namespace) -> int:
     from replay.report import RunningReport, format_report
 
     check_monitor_paths(args)
+    from fdi.calfile import load_calibration
+
     cal = load_calibration(args.cal)
     db, cmap = resolve_map(cal, dbc=args.dbc, channel_map=args.channel_map)
     mon, how = make_monitor(cal, args, cmap.kind, cmap)

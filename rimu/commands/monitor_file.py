@@ -5,9 +5,6 @@ from __future__ import annotations
 import argparse
 import json
 
-from fdi.calfile import load_calibration
-from replay.flight import load_flight_dir
-from replay.report import build_report, format_report
 from rimu.argtypes import nonnegative_int, positive_float
 
 HELP = "run the monitor over a flight sample directory; print events and a summary"
@@ -34,7 +31,9 @@ def configure(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from fdi.calfile import check_compatible
+    from fdi.calfile import check_compatible, load_calibration
+    from replay.flight import load_flight_dir
+    from replay.report import build_report, format_report
     from rimu.outputs import atomic_write_text, flight_folder_hint, input_path, output_file
 
     flight_folder_hint(args.flight, "DIR", "rimu monitor-file")

@@ -4,12 +4,10 @@ from __future__ import annotations
 
 import argparse
 import json
+from typing import TYPE_CHECKING
 
-import numpy as np
-
-from fdi.calfile import load_calibration
-from fdi.geometry import load_configuration
-from fdi.parity import isolability, parity_matrix
+if TYPE_CHECKING:
+    import numpy as np
 
 HELP = "print H, the parity matrix V and the isolability of each sensor pair"
 
@@ -23,10 +21,17 @@ def configure(p: argparse.ArgumentParser) -> None:
 
 def _clean(a: np.ndarray, decimals: int = 12) -> np.ndarray:
     """``a`` rounded, with negative zeros made positive (no ``-0.`` in the output)."""
+    import numpy as np
+
     return np.round(np.asarray(a, float), decimals) + 0.0
 
 
 def run(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from fdi.calfile import load_calibration
+    from fdi.geometry import load_configuration
+    from fdi.parity import isolability, parity_matrix
     from rimu.outputs import input_path
 
     if args.misalignment:

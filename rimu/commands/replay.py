@@ -7,11 +7,13 @@ import contextlib
 import json
 import logging
 import time
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from fdi.calfile import Calibration, load_calibration
 from fdi.errors import ConfigError
 from rimu.argtypes import nonnegative_int, positive_float
+
+if TYPE_CHECKING:                   # numerical imports in the functions: --help stays light
+    from fdi.calfile import Calibration
 
 HELP = "replay a CAN log through the monitor; print events, a summary and frame accounting"
 
@@ -201,6 +203,8 @@ def run(args: argparse.Namespace) -> int:
         logging.getLogger("rimu").warning("--spawn: no display; writing the recording to "
                                           f"{args.rrd} only")
         spawn = False
+    from fdi.calfile import load_calibration
+
     cal = load_calibration(args.cal)
     db, cmap = resolve_map(cal, dbc=args.dbc, channel_map=args.channel_map)
     stream = LogStream(args.log, cal, db, cmap, strict=args.strict,

@@ -13,11 +13,8 @@ import dataclasses
 from typing import Any
 
 from calibration.effects import effects_help, parse_effect_sensors, parse_effects
-from calibration.presets import PRESETS, default_sequence_name, preset, random_truth
-from calibration.sequence import load_sequence
-from calibration.simulate import NoiseModel, save_simulation, simulate_session
+from calibration.preset_names import PRESETS
 from fdi.errors import ConfigError
-from fdi.geometry import load_configuration
 from fdi.units import DPH
 from rimu.argtypes import (
     SEED_MAX,
@@ -83,6 +80,10 @@ def _check_size(seq: object, fs: float) -> None:
 
 def _setup(args: argparse.Namespace) -> tuple[Any, Any, Any, Any, str]:
     """Configuration, sequence, truth, noise model and where the parameters came from."""
+    from calibration.presets import default_sequence_name, preset, random_truth
+    from calibration.sequence import load_sequence
+    from fdi.geometry import load_configuration
+
     if args.preset:
         seq, truth, noise = preset(args.preset)
         if args.config:
@@ -113,6 +114,8 @@ def _setup(args: argparse.Namespace) -> tuple[Any, Any, Any, Any, str]:
 
 def _noise(args: argparse.Namespace, noise: Any) -> Any:
     """The preset's noise model with the gyro bias instability / random walk options."""
+    from calibration.simulate import NoiseModel
+
     if args.bias_instability_dph < 0 or args.rate_random_walk_dph_rth < 0 \
             or args.bias_correlation_s <= 0:
         raise ConfigError("--bias-instability-dph and --rate-random-walk-dph-rth must be >= 0, "
@@ -153,6 +156,7 @@ def _summary(args: argparse.Namespace, out: Any, cfg: Any, seq: Any, session: An
 
 
 def run(args: argparse.Namespace) -> int:
+    from calibration.simulate import save_simulation, simulate_session
     from rimu.outputs import atomic_dir, output_dir
 
     final = output_dir(args.out, "--out")

@@ -5,11 +5,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from fdi.calfile import load_calibration
 from fdi.errors import ConfigError
 from fdi.units import DPH, MG
-from replay.faults import parse_fault
-from replay.flight import save_flight_dir, simulate_flight
 from rimu.argtypes import (
     DAY_S,
     MAX_SAMPLES,
@@ -115,6 +112,8 @@ def run(args: argparse.Namespace) -> int:
         return simulate_imu_set.run(args)
     if not args.cal:
         raise ConfigError("rimu simulate flight: --cal is required (or --imus K)")
+    from fdi.calfile import load_calibration
+    from replay.flight import save_flight_dir, simulate_flight
     from rimu.outputs import atomic_dir, input_path, output_dir, output_file
 
     out = Path(args.out)
@@ -168,6 +167,8 @@ def run(args: argparse.Namespace) -> int:
 
 def _checked_request(args: argparse.Namespace, cal) -> tuple[list, float]:
     """The faults (within the flight) and the sample rate (Hz), the flight's size bounded."""
+    from replay.faults import parse_fault
+
     faults = [parse_fault(s, cal, kind=args.kind) for s in args.fault]
     for f in faults:
         if not f.onset < args.duration:

@@ -10,8 +10,6 @@ import argparse
 
 from fdi.errors import ConfigError
 from fdi.units import DPH, DPS, G0
-from replay.flight_io import save_flight_dir
-from replay.imu_set import ImuEffects, ImuSetSpec, simulate_imu_set
 from rimu.argtypes import (
     MAX_SAMPLES,
     float_list,
@@ -95,6 +93,8 @@ def check_imu_options(args: argparse.Namespace) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run ``rimu simulate flight --imus K``."""
+    from replay.flight_io import save_flight_dir
+    from replay.imu_set import ImuEffects, ImuSetSpec, simulate_imu_set
     from rimu.outputs import atomic_dir, output_dir
 
     check_imu_options(args)
