@@ -76,6 +76,9 @@ def _log_to_stderr() -> None:
     root.setLevel(logging.INFO)
     root.propagate = False
     warnings.showwarning = _show_warning
+    from rimu.kernel_notice import install
+
+    install()                       # "compiling the monitor kernel, once, about 8 s"
 
 
 def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:

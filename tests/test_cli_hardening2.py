@@ -493,3 +493,64 @@ def test_logging_handler_is_installed_once():
     _log_to_stderr()
     _log_to_stderr()
     assert sum(getattr(h, "_rimu", False) for h in logging.getLogger("rimu").handlers) == 1
+
+
+# ------------------------------------------------------------------ (g) start-up --------
+def test_help_and_version_import_no_numerical_library():
+    """``rimu --version`` and every ``rimu COMMAND --help`` build their parser without
+    numpy, scipy or numba (the measured cost is in benchmarks/bench_startup.py)."""
+    import subprocess
+    import sys
+
+    code = ("import sys\nfrom rimu.cli import COMMANDS, SIMULATE, main\n"
+            "cmds = [[c] for c in COMMANDS] + [['simulate', c] for c in SIMULATE]\n"
+            "main(['--version'])\n"
+            "for c in cmds:\n    main([*c, '--help'])\n"
+            "print(sorted(m for m in ('numpy', 'scipy', 'numba', 'fdi.monitor') "
+            "if m in sys.modules))\n")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                       env={**os.environ, "PYTHONPATH": str(ROOT)}, check=True)
+    assert r.stdout.strip().splitlines()[-1] == "[]", r.stdout[-500:]
+
+
+def test_choice_lists_kept_beside_the_parsers_agree_with_the_library():
+    from calibration.calibrate import BIAS_METHODS, NOISE_MODELS
+    from calibration.diagnose.library import candidates
+    from calibration.inflight.fit import MODELS
+    from replay.ingest.readers import FORMATS
+    from rimu.commands import calibrate, calibrate_effects, calibrate_inflight, ingest
+
+    assert calibrate.BIAS_METHODS == BIAS_METHODS and calibrate.NOISE_MODELS == NOISE_MODELS
+    assert calibrate_inflight.MODELS == MODELS and ingest.FORMATS == FORMATS
+    assert calibrate_effects.EFFECT_NAMES == tuple(c.name for c in candidates())
+
+
+def test_lazy_packages_export_what_they_list():
+    import importlib
+
+    import thresholds
+
+    for pkg in ("fdi", "calibration", "replay", "thresholds"):
+        m = importlib.import_module(pkg)
+        assert set(m.__all__) == set(m._EXPORTS)      # order: ruff RUF022 checks it
+        for name in m.__all__:
+            assert getattr(m, name) is getattr(importlib.import_module(m._EXPORTS[name]), name)
+    importlib.import_module("thresholds.tune")
+    assert callable(thresholds.tune) and thresholds.tune.__name__ == "tune"   # not the module
+
+
+def test_first_kernel_compile_is_announced(tmp_path, monkeypatch, capsys):
+    from rimu import kernel_notice
+    from rimu.cli import _log_to_stderr
+
+    _log_to_stderr()
+    monkeypatch.setattr(kernel_notice, "_cache_dirs", lambda src: [tmp_path])
+    assert not kernel_notice.kernel_cached()
+    capsys.readouterr()
+    kernel_notice._FINDER.find_spec("fdi.kernel")
+    assert capsys.readouterr().err == f"rimu: info: {kernel_notice.MESSAGE}\n"
+    (tmp_path / "fdi_x").mkdir()
+    (tmp_path / "fdi_x" / "kernel._entry_points.locals.advance-557.py311.nbi").write_bytes(b"")
+    assert kernel_notice.kernel_cached()
+    kernel_notice._FINDER.find_spec("fdi.kernel")
+    assert capsys.readouterr().err == ""
