@@ -62,8 +62,12 @@ from fdi.errors import CalibrationError
 from fdi.geometry import Configuration
 from fdi.units import DEG, EARTH_RATE, G0
 
-__all__ = ["POSITIONS", "ROTATIONS", "SECTIONS", "FerrarisOptions", "FerrarisSession",
-           "ferraris_calibrate", "position_inputs"]
+__all__ = ["POSITIONS", "RAW_LIMIT", "ROTATIONS", "SECTIONS", "FerrarisOptions",
+           "FerrarisSession", "ferraris_calibrate", "position_inputs"]
+
+RAW_LIMIT = 1e12
+"""No raw output (counts of a 32-bit converter, or SI values) is beyond this: a larger value
+is damage, refused before the fit would overflow."""
 
 POSITIONS = ("x_p", "x_a", "y_p", "y_a", "z_p", "z_a")
 """Static positions: axis up (``_p``) or down (``_a``)."""
@@ -167,6 +171,11 @@ def _check_session(s: FerrarisSession) -> None:
         if bad.any():
             raise CalibrationError(f"{s.source}: non-finite {kind} sample (row "
                                    f"{int(used[bad][0]) + 1}); expected finite numbers")
+        big = np.any(np.abs(raw[used]) > RAW_LIMIT, axis=1)
+        if big.any():       # 1e308 in a damaged file: the fit would overflow
+            raise CalibrationError(f"{s.source}: {kind} sample beyond any sensor's output "
+                                   f"(row {int(used[big][0]) + 1}, magnitude over "
+                                   f"{RAW_LIMIT:g}); a damaged file?")
 
 
 def _means(s: FerrarisSession) -> _Means:
