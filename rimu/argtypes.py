@@ -61,7 +61,7 @@ def _parse_float(text: str) -> float:
 
 
 def bounded_float(min_value: float | None = None, max_value: float | None = None, *,
-                  min_open: bool = False, max_open: bool = False,
+                  min_open: bool = False, max_open: bool = False, min_abs: float = 0.0,
                   name: str = "number") -> Callable[[str], float]:
     """A finite float in ``[min_value, max_value]`` (open ends with ``min_open``/``max_open``).
 
@@ -71,6 +71,8 @@ def bounded_float(min_value: float | None = None, max_value: float | None = None
         Limits (None: unbounded on that side, but always finite).
     min_open, max_open : bool
         Exclude the limit itself.
+    min_abs : float
+        Smallest magnitude (a rotation angle of either sign but not near 0).
     name : str
         How the error message calls the value.
     """
@@ -85,6 +87,9 @@ def bounded_float(min_value: float | None = None, max_value: float | None = None
                or (max_value is not None and (x > max_value or (max_open and x == max_value))))
         if bad:
             raise argparse.ArgumentTypeError(f"expected a {name} in {rng}, got {text}")
+        if abs(x) < min_abs:
+            raise argparse.ArgumentTypeError(f"expected a {name} of magnitude at least "
+                                             f"{min_abs:g}, got {text}")
         return x
 
     parse.__name__ = name

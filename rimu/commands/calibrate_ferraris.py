@@ -10,9 +10,13 @@ import argparse
 
 from fdi.errors import ConfigError
 from fdi.units import G0
-from rimu.argtypes import bounded_float, nonnegative_float, positive_float
+from rimu.argtypes import bounded_float, nonnegative_float
 
 __all__ = ["add_arguments", "ferraris_command", "summary_lines"]
+
+
+MIN_ROTATION_DEG = 10.0
+"""Smallest rotation angle (deg) the gyro scale factors can be fitted from."""
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -25,10 +29,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--sections", metavar="JSON",
                    help="section list {\"x_p\": {\"start\": i, \"end\": j}, ...} (0-based rows, "
                         "end exclusive) for a CSV without a 'part' column")
-    g.add_argument("--sample-rate-hz", type=positive_float(1e6), metavar="HZ",
+    g.add_argument("--sample-rate-hz", metavar="HZ",
+                   type=bounded_float(1.0, 1e6, name="sample rate in Hz"),
                    help="sample rate of the Ferraris CSV (required with --ferraris)")
-    g.add_argument("--rotation-deg", type=bounded_float(-3600.0, 3600.0, name="angle in deg"),
-                   default=-360.0,
+    g.add_argument("--rotation-deg", default=-360.0,
+                   type=bounded_float(-3600.0, 3600.0, min_abs=MIN_ROTATION_DEG,
+                                      name="rotation in deg"),
                    help="nominal rotation angle about each axis (default -360: clockwise "
                         "seen from above, imucal's convention)")
     g.add_argument("--gravity", type=bounded_float(0.1, 100.0, name="gravity in m/s^2"),
