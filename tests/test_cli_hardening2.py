@@ -189,6 +189,11 @@ def test_imus_to_a_can_log_name_refused(files, capsys, name):
                                  "--out", files["d"] / name], "flight folder")
 
 
+def test_flight_to_a_log_kind_rimu_cannot_write_refused(files, capsys):
+    refused(capsys, files["d"], ["simulate", "flight", "--cal", files["cal6"], "--duration",
+                                 "1", "--out", files["d"] / "x.trc"], "not .trc")
+
+
 # ------------------------------------------ (b) output replacing input, wrong inputs ----
 def test_output_replacing_input(files, tmp_path, capsys):
     fer = tmp_path / "fer.csv"

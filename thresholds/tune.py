@@ -271,12 +271,14 @@ def _share_thresholds(base: dict[str, Any], per_scale_rate: float, df: int) -> T
 
 
 def simulated_rate(cal: Calibration, thr: Thresholds, *, hours: float, seed: int,
-                   kind: str = "gyro", flight_s: float | None = None) -> tuple[int, float]:
+                   kind: str = "gyro", flight_s: float | None = None,
+                   bar: Any = None) -> tuple[int, float]:
     """False alarms and exposure (h) of the full set over simulated healthy flights.
 
     Flights last ``flight_s`` (default: about one expected false alarm each at the
     thresholds' budget, between 60 and 600 s): the rate varies from flight to flight with
-    the drawn calibration error, so many flights are needed.
+    the drawn calibration error, so many flights are needed. ``bar``: a tqdm bar advanced
+    by the simulated hours.
     """
     from thresholds.campaign import RunSpec, run_one
 
@@ -291,6 +293,8 @@ def simulated_rate(cal: Calibration, thr: Thresholds, *, hours: float, seed: int
                                       0, math.inf, flight_s), kind=kind)
         count += int(r.false_alarm)
         expo += r.exposure_s
+        if bar is not None:
+            bar.update(flight_s / 3600.0)
     return count, expo / 3600.0
 
 
@@ -337,7 +341,7 @@ def _assumptions(cal: Calibration, thr: Thresholds, kind: str, df: int, beta: fl
 
 def tune(cal: Calibration, *, false_alarms_per_hour: float, kind: str = "gyro",
          scales: int | tuple[int, ...] = 7, simulate_hours: float = 4.0,
-         seed: int = 0) -> Tuning:
+         seed: int = 0, progress: bool = False) -> Tuning:
     """Thresholds whose full-set false-alarm rate is ``false_alarms_per_hour``.
 
     Parameters
@@ -354,6 +358,8 @@ def tune(cal: Calibration, *, false_alarms_per_hour: float, kind: str = "gyro",
         about 150 false alarms are expected (0: analytic shares only).
     seed : int
         Seed of the correction flights.
+    progress : bool
+        A tqdm bar on stderr over the simulated flight hours.
 
     Raises
     ------
@@ -385,15 +391,21 @@ def tune(cal: Calibration, *, false_alarms_per_hour: float, kind: str = "gyro",
     gamma = 1.0
     passes = []
     Rc = max(R, MIN_SIMULATED_RATE)
-    for p in range(2 if simulate_hours > 0 else 0):
+    n_pass = 2 if simulate_hours > 0 else 0
+    from tqdm import tqdm
+
+    bar = tqdm(total=round(n_pass * min(simulate_hours, 150.0 / Rc), 3), unit=" h",
+               desc="tune: simulated flight", disable=not progress or not n_pass, leave=False)
+    for p in range(n_pass):
         thr_c = _share_thresholds({**base, "false_alarms_per_hour": Rc},
                                   Rc / (3600.0 * fs) / len(sc) / gamma, df)
         cnt, hrs = simulated_rate(cal, thr_c, hours=min(simulate_hours, 150.0 / Rc),
-                                  seed=seed + 1000 * p, kind=kind)
+                                  seed=seed + 1000 * p, kind=kind, bar=bar)
         meas = max(cnt, 0.5) / hrs
         passes.append({"target_per_hour": Rc, "false_alarms": cnt, "exposure_h": hrs,
                        "rate_per_hour": cnt / hrs, "correction_before": gamma})
         gamma = gamma * meas / Rc
+    bar.close()
     thr = _share_thresholds(base, per_sample / len(sc) / gamma, df)
     notes = (f"tuned for {R:g} false alarms/h: exact white-noise upcrossing rate per scale, "
              f"equal shares, simulated correction {gamma:.3f} (rimu tune)")

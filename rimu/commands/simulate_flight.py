@@ -118,6 +118,9 @@ def run(args: argparse.Namespace) -> int:
 
     out = Path(args.out)
     is_log = out.suffix.lower() in CAN_SUFFIXES
+    if not is_log and out.suffix.lower() in (".trc", ".csv"):     # logs rimu reads, not writes
+        raise ConfigError(f"--out {out}: rimu writes CAN logs as {', '.join(CAN_SUFFIXES)}, "
+                          f"not {out.suffix}; give one of those or a folder name")
     if is_log:
         output_file(out, "--out", inputs=(args.cal, args.truth))
     else:

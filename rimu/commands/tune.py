@@ -49,6 +49,7 @@ def configure(p: argparse.ArgumentParser) -> None:
                    help="seed of the correction flights")
     p.add_argument("--out", required=True, metavar="FILE",
                    help="write the rimu.tuning/1 file here (for --thresholds)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -61,7 +62,8 @@ def run(args: argparse.Namespace) -> int:
     scales = _scales(args.scales) if args.scales else 7
     cal = load_calibration(args.cal)
     tu = tune(cal, false_alarms_per_hour=args.false_alarms_per_hour, kind=args.kind,
-              scales=scales, simulate_hours=args.simulate_hours, seed=args.seed)
+              scales=scales, simulate_hours=args.simulate_hours, seed=args.seed,
+              progress=not args.no_progress)
     th = tu.thresholds
     corr = tu.assumptions["simulation_correction"]
     print(f"thresholds for {th.false_alarms_per_hour:g} false alarms/h, {th.n} {th.kind} "
