@@ -573,3 +573,42 @@ def test_first_kernel_compile_is_announced(tmp_path, monkeypatch, capsys):
     assert kernel_notice.kernel_cached()
     kernel_notice._FINDER.find_spec("fdi.kernel")
     assert capsys.readouterr().err == ""
+
+
+def test_roc_detection_counts_a_passage_after_an_earlier_false_alarm():
+    """A run whose statistic passed before the onset and again after it is a false alarm
+    and a detection: lowering the thresholds never lowers the ROC's P(detect)."""
+    import math
+
+    from thresholds.campaign import ROC_MULTIPLIERS, RunResult, RunSpec
+    from thresholds.evaluate import _roc_point
+
+    k = len(ROC_MULTIPLIERS)
+    spec = RunSpec(0, 1, "step", 1.0, 5.0, 1, 30.0, 60.0, 300.0)
+    early = RunResult(spec, 10.0, True, True, 0.1, 1, tuple([10.0] * k),
+                      roc_detect=tuple([30.1] * k))
+    clean = RunResult(spec, 30.0, False, True, 0.1, 1, tuple([30.1] * k),
+                      roc_detect=tuple([30.1] * k))
+    miss = RunResult(spec, 30.0, False, False, math.nan, 0, tuple([math.inf] * k),
+                     roc_detect=tuple([math.inf] * k))
+    pts = [_roc_point([early, clean, miss], j) for j in range(k)]
+    assert all(p["pd_step_ramp"] == 2 / 3 for p in pts)
+    assert all(p["false_alarms"] == 1 for p in pts)
+
+
+def test_detectable_size_of_separated_runs_is_a_bracket_not_a_point():
+    """Every miss below every hit: no probit maximum; the runs' bracket is reported, not a
+    degenerate '3.06 [3.06, 3.06]'."""
+    import math
+
+    from thresholds.evaluate import _probit_b99
+
+    sizes = np.repeat([2.0, 2.5, 3.0, 3.5, 4.0], 4)
+    hits = (sizes >= 3.0).astype(float)
+    b, lo, hi = _probit_b99(sizes, hits)
+    assert math.isnan(b) and (lo, hi) == (2.5, 3.0)
+    rng = np.random.default_rng(1)
+    sizes = np.repeat(np.linspace(1.0, 5.0, 9), 20)
+    hits = (rng.normal(sizes, 0.6) > 3.0).astype(float)
+    b, lo, hi = _probit_b99(sizes, hits)
+    assert lo < b < hi and hi - lo > 0.05

@@ -101,6 +101,9 @@ class RunResult:
     window_hit : tuple of float
         Sweep runs: per scale, 1.0 if the first wholly-faulty window exceeded its
         threshold, 0.0 if not, NaN if it was not evaluated.
+    roc_detect : tuple of float
+        Per ROC multiplier, the time of the first passage at or after the onset (inf:
+        none), whatever passed before it: the ROC's detection.
     """
 
     spec: RunSpec
@@ -111,6 +114,7 @@ class RunResult:
     isolated: int
     roc_first: tuple[float, ...]
     window_hit: tuple[float, ...] = ()
+    roc_detect: tuple[float, ...] = ()
 
 
 def _fault(spec: RunSpec) -> tuple[Fault, ...]:
@@ -145,7 +149,7 @@ def run_one(cal: Calibration, thresholds: Thresholds, spec: RunSpec, *,
                 h.append(float(res.statistics[row, k] > res.thresholds[row, k]))
         hits = tuple(h)
     return RunResult(spec, base.exposure_s, base.false_alarm, base.detected, base.delay_s,
-                     base.isolated, base.roc_first, hits)
+                     base.isolated, base.roc_first, hits, base.roc_detect)
 
 
 def _summary(spec: RunSpec, res: Any, duration_s: float) -> RunResult:
@@ -167,12 +171,15 @@ def _summary(spec: RunSpec, res: Any, duration_s: float) -> RunResult:
         ratio = res.statistics / res.thresholds
     ratio = np.where(np.isnan(ratio), -np.inf, ratio)
     r = ratio.max(axis=1) if ratio.shape[1] else np.full(t.shape, -np.inf)
-    roc = []
+    roc, roc_det = [], []
+    later = t >= onset - 1e-12
     for c in ROC_MULTIPLIERS:
         idx = np.flatnonzero(r > c)
         roc.append(float(t[idx[0]]) if idx.size else math.inf)
+        idx = np.flatnonzero((r > c) & later)
+        roc_det.append(float(t[idx[0]]) if idx.size else math.inf)
     return RunResult(spec, float(exposure), bool(false_alarm), detected, float(delay),
-                     isolated, tuple(roc))
+                     isolated, tuple(roc), roc_detect=tuple(roc_det))
 
 
 def corpus_one(cal: Calibration, thresholds: Thresholds, index: int, path: str, *,

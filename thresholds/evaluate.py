@@ -253,12 +253,20 @@ def _probit_b99(sizes: np.ndarray, hits: np.ndarray, p: float = 0.99
 
     ``P(hit) = Φ((b − μ)/s)``: for a non-central χ² well above its threshold
     ``sqrt(D) ≈ N(sqrt(λ), 1)`` with ``sqrt(λ) ∝ b``, so the probit is linear in b.
-    Maximum likelihood; the interval by the delta method on the numerical Hessian.
+    Maximum likelihood; the interval by the delta method on the numerical Hessian. When
+    every miss lies below every hit the fit has no maximum: ``(nan, largest miss, smallest
+    hit)``, the bracket the runs give.
     """
     ok = np.isfinite(hits)
     x, y = sizes[ok], hits[ok]
     if y.size < 4 or y.all() or not y.any():
         return (math.nan, math.nan, math.nan)
+    lo_hit, hi_miss = float(x[y > 0].min()), float(x[y == 0].max())
+    if hi_miss < lo_hit:
+        # complete separation: every miss below every hit; the probit has no maximum (its
+        # slope runs to infinity and the interval collapses to a point), so report only
+        # the bracket the runs give: no size estimate
+        return (math.nan, hi_miss, lo_hit)
 
     def nll(th: np.ndarray) -> float:
         q = stats.norm.cdf((x - th[0]) / math.exp(th[1]))
@@ -332,7 +340,11 @@ def _confusion(main: list[RunResult], n_sensors: int) -> dict[str, Any]:
 
 
 def _roc_point(main: list[RunResult], k: int) -> dict[str, Any]:
-    """False alarms per hour and detection of step/ramp faults at ROC multiplier k."""
+    """False alarms per hour and detection of step/ramp faults at ROC multiplier k.
+
+    False alarms: a passage before the onset, per hour of healthy exposure up to the first
+    passage. Detection: a passage at or after the onset, whatever passed before it (so
+    that lower thresholds never detect less: the curve rises as they fall)."""
     fa, ex = 0, 0.0
     for r in main:
         first = r.roc_first[k]
@@ -341,7 +353,10 @@ def _roc_point(main: list[RunResult], k: int) -> dict[str, Any]:
         fa += first < end
         ex += min(first, end)
     det = [r for r in main if r.spec.fault in ("step", "ramp")]
-    kd = sum(r.spec.onset_s <= r.roc_first[k] < math.inf for r in det)
+    # runs made before roc_detect existed: only a first passage after the onset counts
+    kd = sum((r.roc_detect[k] if r.roc_detect else
+              (r.roc_first[k] if r.roc_first[k] >= r.spec.onset_s else math.inf)) < math.inf
+             for r in det)
     return {"multiplier": ROC_MULTIPLIERS[k],
             "false_alarms_per_hour": fa / (ex / 3600.0) if ex else math.nan,
             "false_alarms": fa, "pd_step_ramp": kd / len(det) if det else math.nan}

@@ -118,9 +118,12 @@ def markdown(ev: dict, how: dict) -> str:
         lines += ["Detectable step (99 %, one full window, at rest), in σ:", "",
                   "| scale | measured [95 %] | rimu tune | ratio |", "|---|---|---|---|"]
         for r in ev["detectable_sizes"]["per_scale"]:
-            m = r["measured_sigma"]
-            lines.append(f"| {r['scale']} | {m:.3g} [{r['ci95_sigma'][0]:.3g}, "
-                         f"{r['ci95_sigma'][1]:.3g}] | {r.get('predicted_sigma', float('nan')):.3g}"
+            m, lo, hi = (float("nan") if x is None else x
+                         for x in (r["measured_sigma"], *r["ci95_sigma"]))
+            meas = (f"{m:.3g} [{lo:.3g}, {hi:.3g}]" if m == m else
+                    f"between {lo:.3g} and {hi:.3g} (no overlap of misses and hits: no fit)"
+                    if lo == lo else "-")
+            lines.append(f"| {r['scale']} | {meas} | {r.get('predicted_sigma', float('nan')):.3g}"
                          f" | {r.get('ratio') or float('nan'):.3f} |")
         lines.append("")
     lines += ["Plots: roc.png, delay_vs_size.png, isolation_confusion.png"
