@@ -612,3 +612,25 @@ def test_detectable_size_of_separated_runs_is_a_bracket_not_a_point():
     hits = (rng.normal(sizes, 0.6) > 3.0).astype(float)
     b, lo, hi = _probit_b99(sizes, hits)
     assert lo < b < hi and hi - lo > 0.05
+
+
+def test_tune_names_the_worst_sensor_and_writes_a_normal_file(files, tmp_path, capsys):
+    import re
+
+    capsys.readouterr()
+    out = tmp_path / "t.json"
+    assert main(["tune", "--cal", str(files["cal6"]), "--false-alarms-per-hour", "1",
+                 "--simulate-hours", "0", "--no-progress", "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    from fdi.calfile import load_calibration
+
+    names = [c.name for c in load_calibration(files["cal6"]).gyro.sensors]
+    m = re.search(r"worst sensor (\d+) \((\S+)\)", text)
+    assert m and names[int(m.group(1)) - 1] == m.group(2), text
+    assert stat.S_IMODE(out.stat().st_mode) == 0o666 & ~_umask()
+
+
+def _umask() -> int:
+    m = os.umask(0)
+    os.umask(m)
+    return m

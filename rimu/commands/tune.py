@@ -76,7 +76,9 @@ def run(args: argparse.Namespace) -> int:
                              tu.detectable, strict=True):
         print(f"{w:6d} {w / th.sample_rate_hz:9.3f} {a:10.3e} {t:9.2f} {f:6.2f} "
               f"{d.size_unit_value:12.4g} {d.unit:5s} {d.size_sigma:7.2f}")
-    print(f"detectable sizes: one full window, at rest, worst sensor {d0.sensor}")
+    names = [c.name for c in cal.kind(args.kind).sensors]
+    who = f"{d0.sensor} ({names[d0.sensor - 1]})" if 1 <= d0.sensor <= len(names) else d0.sensor
+    print(f"detectable sizes: one full window, at rest, worst sensor {who}")
     with atomic_file(out) as tmp:
         tu.save(tmp)
     print(f"wrote {out}")
