@@ -634,3 +634,13 @@ def _umask() -> int:
     m = os.umask(0)
     os.umask(m)
     return m
+
+
+def test_evaluate_states_the_sweep_runs(files, tmp_path, capsys):
+    """--runs 2 with the default sweep runs more than 2: the output says how many and why."""
+    capsys.readouterr()
+    assert main(["evaluate", "--cal", str(files["cal6"]), "--runs", "2", "--sweep-runs", "4",
+                 "--duration", "2", "--no-progress", "--out", str(tmp_path / "ev")]) == 0
+    out = capsys.readouterr().out
+    assert "6 runs (2 flights + 4 sweep runs" in out, out
+    assert "(2 flights + 4 sweep runs" in (tmp_path / "ev" / "summary.md").read_text()

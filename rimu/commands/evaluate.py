@@ -102,7 +102,10 @@ def markdown(ev: dict, how: dict) -> str:
     lines = ["# rimu evaluation", "",
              f"- thresholds: {how.get('source')} ({ev['thresholds']['false_alarms_per_hour']:g} "
              f"false alarms/h target), scales {ev['thresholds']['scales']}",
-             f"- runs: {ev['runs']}",
+             f"- runs: {ev['runs']}" + (
+                 f" ({ev['runs'] - ev['detectable_sizes']['runs']} flights + "
+                 f"{ev['detectable_sizes']['runs']} sweep runs of the detectable step, "
+                 "--sweep-runs)" if "detectable_sizes" in ev else ""),
              f"- false alarms: {fa['count']} in {fa['exposure_h']:.2f} h = "
              f"{fa['per_hour']:.3g}/h (95 % {lo:.3g} to {hi:.3g})", ""]
     if ev["faults"]:
