@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import argparse
 import json
-from pathlib import Path
 
 from rimu.argtypes import probability
 
@@ -101,7 +100,7 @@ def run(args: argparse.Namespace) -> int:
     from calibration.repeat import repeat_sessions
     from calibration.session_io import load_session, save_session
     from fdi.errors import ConfigError
-    from rimu.outputs import atomic_file, distinct_inputs, input_path, output_dir
+    from rimu.outputs import atomic_dir, distinct_inputs, input_path, output_dir
 
     if len(args.sessions) < 2:
         raise ConfigError(f"rimu repeat: give at least two sessions to compare, got one "
@@ -114,21 +113,20 @@ def run(args: argparse.Namespace) -> int:
     res = repeat_sessions(sessions, alpha=args.alpha, stack=args.stack,
                           progress=not args.no_progress)
     if out is not None:
-        out.mkdir(parents=True, exist_ok=True)
         written = []
-        for k, c in enumerate(res.calibrations, 1):
-            with atomic_file(out / f"calibration_{k}.json") as tmp:
-                c.save(tmp)
-            written.append(out / f"calibration_{k}.json")
-        if res.stack is not None:
-            written.append(save_session(res.stack.session, Path(out) / "stacked"))
-            with atomic_file(out / "stacked_calibration.json") as tmp:
-                res.stack.calibration.save(tmp)
-            written.append(out / "stacked_calibration.json")
-        with atomic_file(out / "repeat.json") as tmp:
-            tmp.write_text(json.dumps(res.to_dict(), indent=1, allow_nan=False,
-                                      default=float), encoding="utf-8")
-        written.append(out / "repeat.json")
+        with atomic_dir(out) as tmp:        # every file or none
+            for k, c in enumerate(res.calibrations, 1):
+                c.save(tmp / f"calibration_{k}.json")
+                written.append(out / f"calibration_{k}.json")
+            if res.stack is not None:
+                save_session(res.stack.session, tmp / "stacked")
+                written.append(out / "stacked")
+                res.stack.calibration.save(tmp / "stacked_calibration.json")
+                written.append(out / "stacked_calibration.json")
+            (tmp / "repeat.json").write_text(json.dumps(res.to_dict(), indent=1,
+                                                        allow_nan=False, default=float),
+                                             encoding="utf-8")
+            written.append(out / "repeat.json")
     if args.json:
         print(json.dumps(res.to_dict(), indent=1, allow_nan=False, default=float))
     else:
