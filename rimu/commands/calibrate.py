@@ -176,11 +176,16 @@ def _check_modes(args: argparse.Namespace) -> None:
              "--sample-rate-hz": args.sample_rate_hz,
              "--reference": getattr(args, "reference", None),
              "--no-time-offset": getattr(args, "no_time_offset", False) or None,
-             "--model": None if getattr(args, "model", "auto") == "auto" else args.model}
+             "--model": None if getattr(args, "model", "auto") == "auto" else args.model,
+             "--effects": getattr(args, "effects", None),
+             "--no-denoise": args.no_denoise or None,
+             "--bias-method": None if args.bias_method == "model" else args.bias_method,
+             "--noise-model": None if args.noise_model == "auto" else args.noise_model}
+    session_only = ("--compare", "--plot", "--effects", "--no-denoise", "--bias-method",
+                    "--noise-model")
     refuse_together("rimu calibrate", given, "--in-flight",
-                    ("SESSION", "--ferraris", "--compare", "--plot", "--sections",
-                     "--sample-rate-hz"))
-    refuse_together("rimu calibrate", given, "--ferraris", ("SESSION", "--compare", "--plot"))
+                    ("SESSION", "--ferraris", "--sections", "--sample-rate-hz", *session_only))
+    refuse_together("rimu calibrate", given, "--ferraris", ("SESSION", *session_only))
     for opt in ("--reference", "--no-time-offset", "--model"):
         if given[opt] is not None and not given["--in-flight"]:
             raise ConfigError(f"rimu calibrate: {opt} applies to --in-flight only")
