@@ -101,6 +101,7 @@ from fdi.state import (
     STALE_TIMEOUT_S,
     STARTED,
     STATS0,
+    STOP_CLEARED,
     STOP_CODE,
     STOP_DETECTED,
     STOP_HEALTH,
@@ -294,9 +295,11 @@ def detection_machine(alarm, clear, fired, can_isolate, persistence, clear_sampl
                       counters) -> int:
     """Detection state machine for one complete sample; returns the stop code.
 
-    The first alarm detects; ``persistence`` consecutive alarms isolate (when the set can
-    isolate); a detection clears after ``clear_samples`` samples below the clearing
-    thresholds (hysteresis: one event per onset).
+    The first alarm detects; ``persistence`` consecutive alarms ask the monitor to isolate
+    (when the set can isolate; the monitor decides, :func:`fdi.isolation.decide`, and is
+    asked again at every further alarm until it excludes); a detection clears after
+    ``clear_samples`` samples below the clearing thresholds (hysteresis: one event per
+    onset) and stops the kernel after that sample (the monitor forgets its suspects).
     """
     code = STOP_NONE
     if counters[DETECTED] == 0:
@@ -317,6 +320,7 @@ def detection_machine(alarm, clear, fired, can_isolate, persistence, clear_sampl
         code |= STOP_ISOLATE
     elif counters[DETECTED] != 0 and counters[CLEAR_RUN] >= clear_samples:
         counters[DETECTED] = 0
+        code = STOP_CLEARED
     return code
 
 

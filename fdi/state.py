@@ -86,9 +86,10 @@ HEALTH0 = 15                                # + i: health verdict of sensor i th
 # where the kernel stops (STOP_CODE) and hands a sample to the monitor
 STOP_NONE, STOP_HEALTH, STOP_READMIT, STOP_INCOMPLETE, STOP_DETECTED, STOP_ISOLATE = \
     0, 1, 2, 3, 4, 8
+STOP_CLEARED = 16                           # a detection cleared (after its sample)
 # added to the stop code that fdi.kernel.advance returns while a detection is active
-RETURN_DETECTED = 16
-STOP_MASK = 15                              # the stop code in advance's return value
+RETURN_DETECTED = 32
+STOP_MASK = 31                              # the stop code in advance's return value
 # PHASE: where the kernel resumes a stopped sample
 PHASE_HEALTH, PHASE_READMIT, PHASE_PARITY = 0, 1, 2
 # health verdicts
