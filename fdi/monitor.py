@@ -715,15 +715,19 @@ class Monitor:
         return _from_answers(np.asarray(ts[:N], float), answers, self, parity)
 
 
+_ENV_LIMIT = 1 << 16
+"""Envelope codes are bit sets below 2^16; anything else counts as 0 (inside)."""
+
+
 def _env_code(x: Any) -> int:
-    """An envelope code as a non-negative int; 0 for anything else (never raises)."""
+    """An envelope code as an int in [0, 2^16); 0 for anything else (never raises)."""
     if type(x) is int:
-        return x if x > 0 else 0
+        return x if 0 < x < _ENV_LIMIT else 0
     try:
         v = int(x)
     except Exception:
         return 0
-    return v if v > 0 and v == x else 0
+    return v if 0 < v < _ENV_LIMIT and v == x else 0
 
 
 def _env_reason(code: int) -> str:
@@ -755,7 +759,8 @@ def _envelope_runs(envelope: Any, N: int, current: int) -> list[tuple[int, int, 
         e = np.asarray(envelope)
         if e.shape != (N,) or e.dtype.kind not in "iub":
             return [(0, N, current)]
-        e = np.maximum(e.astype(np.int64), 0)
+        e = e.astype(np.int64)
+        e = np.where((e > 0) & (e < _ENV_LIMIT), e, 0)
     except (TypeError, ValueError):
         return [(0, N, current)]
     cut = np.flatnonzero(np.diff(e)) + 1

@@ -27,7 +27,6 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-
 from scipy import stats as sstats
 
 from fdi.detector import chi2_threshold, cusum_threshold
