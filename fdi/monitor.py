@@ -498,9 +498,9 @@ class Monitor:
             return
         self._iso_due = self._next_attempt(rows)
         dec, w = self._decide(mdl, row, fired)
-        if dec is None or dec.exclude is None:
-            self._suspect(t, mdl, dec, w, events)
-            return
+        if dec is None or dec.exclude is None or mdl.capability != "isolate":
+            self._suspect(t, mdl, dec, w, events)         # a set that only detects narrows
+            return                                        # its suspects, never excludes
         k = dec.exclude
         wm = self._episode_window()
         mag = magnitude(mdl.U, self._state.window_sum(wm), wm, k) if wm else None

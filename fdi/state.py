@@ -68,8 +68,8 @@ F_SLOTS = 12
 
 # ---------------------------------------------------------------- iconst
 DF, N_WINDOWS, HAS_CUSUM, CAPABILITY, HAS_OMEGA, STUCK_COUNT, PERSISTENCE, CLEAR_SAMPLES, \
-    READMISSION, N_SENSORS = range(10)
-I_SLOTS = 10
+    READMISSION, N_SENSORS, ASK_ISOLATE = range(11)
+I_SLOTS = 11
 CAPABILITY_CODE = {"isolate": 0, "detect": 1, "reconstruct": 2, "none": 3}
 
 # ---------------------------------------------------------------- cusum (4, n)
@@ -225,6 +225,10 @@ def pack_set(model, H: np.ndarray, sigma_diag: np.ndarray, lo: tuple[float, ...]
     iconst[CLEAR_SAMPLES] = settings.clear_samples
     iconst[READMISSION] = bool(settings.readmission)
     iconst[N_SENSORS] = n
+    # persistent alarms go to the monitor's isolation test wherever it can tell hypotheses
+    # apart at all (df ≥ 2): a set that isolates may exclude, one that only detects narrows
+    # its suspects (fdi.monitor)
+    iconst[ASK_ISOLATE] = df >= 2 and model.capability in ("isolate", "detect")
     fconst[READMIT_DWELL_S] = settings.readmit_dwell_s
     o_scales, o_mats, end = set_layout(n, df, nw)
     packed = np.zeros(end)

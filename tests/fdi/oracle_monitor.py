@@ -233,13 +233,15 @@ class OracleMonitor:
             self.det_rows += 1
             self.alarm_run = self.alarm_run + 1 if alarm else 0
             self.clear_run = self.clear_run + 1 if clear else 0
-        if mdl.capability == "isolate" and self.alarm_run >= self.settings.persistence:
+        ask = mdl.df >= 2 and mdl.capability in ("isolate", "detect")
+        if ask and self.alarm_run >= self.settings.persistence:
             if self.det_rows >= self.due:
                 nxt = [w for w in self.scales if w > self.det_rows]
                 self.due = nxt[0] if nxt else self.det_rows + max(self.scales)
                 cons, res, wd = self._hypotheses(fired)
                 sub = chi2_threshold(self.th.alpha[self.scales.index(wd)], mdl.df - 1)
-                if cons is not None and len(cons) == 1 and res[cons[0]] <= sub:
+                if (mdl.capability == "isolate" and cons is not None and len(cons) == 1
+                        and res[cons[0]] <= sub):
                     k = cons[0]
                     wm = max([w for w in self.scales if w <= self.det_rows
                               and w <= len(self.hist_z)], default=0)
