@@ -164,6 +164,7 @@ class Monitor:
         self._suspects: tuple[int, ...] = ()
         self._unverified = _NO_AXES
         self._iso_due = 0
+        self._no_fit = False                # no single-sensor fault explains this detection
 
     def _healthy_array(self, mask: int) -> np.ndarray:
         a = self._healthy_arr.get(mask)
@@ -549,11 +550,23 @@ class Monitor:
     def _suspect(self, t: float, mdl: SetModel, dec: IsolationDecision | None, w: int,
                  events: list[Event]) -> None:
         """Record the suspected sensors of an active detection and the body axes a fault on
-        them would move; a ``"disagree"`` event when they are not a single sensor or change."""
-        if dec is None:
-            cols = tuple(range(mdl.m))
-        else:
-            cols = dec.consistent or tuple(range(mdl.m))
+        them would move; a ``"disagree"`` event when they are not a single sensor or change.
+
+        Within one detection the suspects only narrow: a hypothesis rejected once stays
+        rejected (each rejection is a decision at the stated risk), so the set is the
+        intersection of the consistent hypotheses of every decision; when that is empty no
+        single-sensor fault explains the episode and every healthy sensor is suspected.
+        """
+        every = tuple(range(mdl.m))
+        if self._no_fit:
+            return
+        cols = every if dec is None else dec.consistent
+        if self._suspects and cols:
+            before = {i - 1 for i in self._suspects}
+            cols = tuple(j for j in cols if mdl.idx[j] in before)
+        none_fits = dec is not None and not cols
+        self._no_fit = none_fits
+        cols = cols or every
         sus = tuple(sorted(mdl.idx[j] + 1 for j in cols))
         G = mdl.G
         axes = np.zeros(3, bool)
@@ -572,7 +585,7 @@ class Monitor:
         self._unverified = axes
         if changed and (len(sus) > 1 or mdl.capability != "isolate"):
             names = [self.sensor_names[i - 1] for i in sus]
-            if dec is not None and not dec.consistent:
+            if none_fits:
                 why = ("no single-sensor fault explains the parity: "
                        + _join(names) + " unverified")
             else:

@@ -91,6 +91,7 @@ class OracleMonitor:
         self.detected = False
         self.det_rows = self.alarm_run = self.clear_run = 0
         self.suspects: tuple[int, ...] = ()
+        self.no_fit = False
         self.due = 0
 
     def _base_thresholds(self) -> np.ndarray:
@@ -257,6 +258,7 @@ class OracleMonitor:
         elif self.detected and self.clear_run >= self.settings.clear_samples:
             self.detected = False
             self.suspects = ()
+            self.no_fit = False
         return events
 
     def _hypotheses(self, fired: int):
@@ -289,15 +291,23 @@ class OracleMonitor:
         return cons, res, w
 
     def _suspect(self, cons) -> list:
+        """Suspects narrow within a detection: the intersection of the consistent sets."""
         mdl = self.model
-        cols = cons if cons else list(range(mdl.m))
+        if self.no_fit:
+            return []
+        cand = set(range(mdl.m)) if cons is None else set(cons)
+        if self.suspects and cand:
+            cand &= {mdl.idx.index(i - 1) for i in self.suspects}
+        none_fits = cons is not None and not cand
+        self.no_fit = none_fits
+        cols = sorted(cand) if cand else list(range(mdl.m))
         sus = tuple(sorted(mdl.idx[j] + 1 for j in cols))
         changed = sus != self.suspects
         self.suspects = sus
         if changed and (len(sus) > 1 or mdl.capability != "isolate"):
             names = [self.names[i - 1] for i in sus]
             joined = names[0] if len(names) == 1 else ", ".join(names[:-1]) + " and " + names[-1]
-            if cons is not None and not cons:
+            if none_fits:
                 why = "no single-sensor fault explains the parity: " + joined + " unverified"
             else:
                 why = joined + (" disagree: cannot tell which" if len(sus) > 1 else
