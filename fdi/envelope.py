@@ -18,8 +18,10 @@ Codes (a bitmask, 0 = inside the envelope)
   (|value| ≥ ``repeat_min_fraction`` of the range: clipping at a range lower than stated);
   the same for accelerometer axes with ``accel_range_g``. A saturated gyro counts only
   when another independent rate estimate also sees a rate of at least
-  ``saturation_confirm_fraction`` of the range, or a shock is under way; a saturated
+  ``saturation_confirm_fraction`` of the saturated value, or a shock is under way; a saturated
   accelerometer only when the other accelerometers confirm a shock (``shock_confirm_g``).
+  (The confirming rate is a fraction of the clipped value, capped at the range, so that
+  clipping at a range lower than stated is confirmed too.)
   A set with a single estimate (one IMU) has nothing to confirm with and takes its
   sensor's word.
 - :data:`TUMBLE` (4): the vehicle spins beyond controlled flight. Either every independent
@@ -147,7 +149,8 @@ class EnvelopeSettings:
     repeat_min_fraction: float = 0.25
     """... when their magnitude is at least this fraction of the range."""
     saturation_confirm_fraction: float = 0.5
-    """A saturated gyro counts when another estimate sees this fraction of the range."""
+    """A saturated gyro counts when another estimate sees this fraction of its value
+    (capped at the range)."""
     tumble_rate_dps: float = 400.0
     """Rate (°/s) beyond which, seen by every estimate, the vehicle tumbles."""
     disagree_spike_dps: float = 100.0
@@ -379,12 +382,13 @@ class EnvelopeTracker:
         else:
             # confirmed by an estimate that does not use the saturated sensor
             wmag_ok = np.zeros(B, bool)
+            level = np.where(sat_sensor, np.minimum(a, rng), 0.0)            # (B, n)
             for e, g in enumerate(self.estimates):
                 others = [i for i in range(self.n) if i not in g]
                 if not others:
                     continue
-                hit = sat_sensor[:, others].any(axis=1)
-                wmag_ok |= hit & (wm[e] >= s.saturation_confirm_fraction * rng)
+                top = level[:, others].max(axis=1)
+                wmag_ok |= (top > 0) & (wm[e] >= s.saturation_confirm_fraction * top)
             gyro = wmag_ok | (sat_sensor.any(axis=1) & shock_now)
         acc_sat = np.zeros(B, bool)
         if accel is not None:
