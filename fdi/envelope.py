@@ -265,23 +265,14 @@ class EnvelopeTracker:
                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Per column: True where the value has repeated ``repeat_samples`` times in a row
         (counting across blocks) and is large; returns (mask (B, m), run value, run length)."""
-        B, m = x.shape
-        out = np.zeros((B, m), bool)
-        k = int(self.settings.repeat_samples)
-        val = val.copy()
-        ln = ln.copy()
-        for j in range(m):
-            v, c = val[j], ln[j]
-            col = x[:, j]
-            for i in range(B):
-                xi = col[i]
-                if xi == v and np.isfinite(xi):
-                    c += 1
-                else:
-                    v, c = xi, 1
-                out[i, j] = c >= k and big[i, j]
-            val[j], ln[j] = v, c
-        return out, val, ln
+        B = x.shape[0]
+        prev = np.vstack([val[None, :], x[:-1]])
+        brk = ~((x == prev) & np.isfinite(x))                     # a new run starts here
+        idx = np.arange(B)[:, None]
+        last = np.maximum.accumulate(np.where(brk, idx, -1), axis=0)
+        length = np.where(last >= 0, idx - last + 1, ln[None, :] + idx + 1)
+        out = (length >= int(self.settings.repeat_samples)) & big
+        return out, x[-1].copy(), length[-1].astype(np.int64)
 
     def _held(self, t: np.ndarray, cond: np.ndarray, bit: int, extra_s: float = 0.0
               ) -> np.ndarray:
@@ -416,25 +407,32 @@ class EnvelopeTracker:
         pairs = list(combinations(range(E), 2))
         d = np.stack([w[i] - w[j] for i, j in pairs], axis=1)              # (B, P, 3)
         d = np.where(np.isfinite(d), d, np.nan)
+        P = len(pairs)
         if self._base is None:
-            self._base = np.full((len(pairs), 3), np.nan)
-        base = self._base
-        spike = np.zeros(B, bool)
+            self._base = np.full(P * 3, np.nan)
+        flat = d.reshape(B, P * 3)
+        before = np.empty_like(flat)             # baseline before each sample's update
+        base = [float(v) for v in self._base]
         tprev = self._t_prev_base
         tau = s.disagree_baseline_s
-        lim = s.disagree_spike_dps * DPS
+        alphas = (1.0 - np.exp(-np.maximum(np.diff(np.concatenate([[tprev], t])), 0.0) / tau)
+                  ).tolist()
+        rows = flat.tolist()
         for i in range(B):
-            di = d[i]
-            bi = np.where(np.isnan(base), di, base)
-            dev = np.linalg.norm(di - bi, axis=1)
-            spike[i] = bool(np.any(dev > lim))
-            dt = t[i] - tprev if np.isfinite(tprev) else 0.0
-            alpha = 1.0 - math.exp(-max(dt, 0.0) / tau)
-            ok = np.isfinite(di)
-            base = np.where(ok, bi + alpha * (di - bi), base)
-            tprev = t[i]
-        self._base = base
-        self._t_prev_base = tprev
+            row = rows[i]
+            a = alphas[i] if alphas[i] == alphas[i] else 0.0       # NaN (first ever): 0
+            for k in range(P * 3):
+                x = row[k]
+                b = base[k]
+                if b != b:
+                    b = x
+                before[i, k] = b
+                if x == x:
+                    base[k] = b + a * (x - b)
+        self._base = np.asarray(base, float)
+        self._t_prev_base = float(t[-1])
+        dev = np.linalg.norm((flat - before).reshape(B, P, 3), axis=2)
+        spike = np.any(dev > s.disagree_spike_dps * DPS, axis=1)
         context = wmin >= s.disagree_context_rate_dps * DPS
         return fast | (spike & context)
 
