@@ -3,6 +3,7 @@ alone, holds for ``hold_s``, and gives the same codes whole or in blocks of any 
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
@@ -64,7 +65,7 @@ def test_settings_refuse_bad_values(kw):
 
 
 def test_calm_flight_is_inside():
-    t, r, a = _calm()
+    _t, r, a = _calm()
     assert not _run(r, a).any()
 
 
@@ -81,29 +82,29 @@ def test_shock_confirmed_by_every_accelerometer_and_held():
 
 
 def test_one_accelerometer_alone_marks_nothing():
-    t, r, a = _calm()
+    _t, r, a = _calm()
     a[100:300, 0, :] = 10 * G0         # a broken accelerometer on IMU1
     assert not _run(r, a).any()
 
 
 def test_tumble_needs_every_imu():
-    t, r, a = _calm()
+    _t, r, a = _calm()
     r[200:230, 2] = r[200:230, 5] = 600 * DPS          # both IMUs: vehicle spins
     c = _run(r, a)
     assert (c[200:230] & TUMBLE).all()
-    t, r, a = _calm()
+    _t, r, a = _calm()
     r[200:230, 2] = 600 * DPS                          # one gyro alone reads 600 deg/s
     assert not _run(r, a).any()
 
 
 def test_disagreement_spike_counts_only_in_a_fast_turn():
-    t, r, a = _calm()
+    _t, r, a = _calm()
     r[200:260, 2] += 250 * DPS                         # both turn at 250 deg/s ...
     r[200:260, 5] += 250 * DPS
     r[230:233, 5] += 150 * DPS                         # ... and IMU2 jumps by 150
     c = _run(r, a)
     assert (c[230:233] & TUMBLE).all()
-    t, r, a = _calm()
+    _t, r, a = _calm()
     r[230:233, 5] += 150 * DPS                         # the same jump in calm flight
     assert not _run(r, a).any()
 
@@ -120,7 +121,7 @@ def test_ramp_or_step_fault_in_a_fast_turn_is_not_a_tumble():
 
 def test_saturation_needs_a_second_estimate_or_a_shock():
     s = EnvelopeSettings(gyro_range_dps=500.0)
-    t, r, a = _calm()
+    _t, r, a = _calm()
     r[200:220, 2] = 500 * DPS                          # IMU1 z at full scale, IMU2 calm
     assert not _run(r, a, s=s).any()
     r[200:220, 5] = 300 * DPS                          # IMU2 confirms a fast turn
@@ -133,7 +134,7 @@ def test_saturation_needs_a_second_estimate_or_a_shock():
 
 def test_repeated_large_value_is_clipping():
     s = EnvelopeSettings(gyro_range_dps=2000.0, tumble_rate_dps=2000.0)
-    t, r, a = _calm()
+    _t, r, a = _calm()
     r[200:205, 0] = 900 * DPS                          # clipped at an unknown lower range
     r[200:205, 3] = 899.5 * DPS                        # IMU2 sees the same fast rotation
     c = _run(r, a, s=s)
@@ -188,6 +189,5 @@ def test_blocks_of_any_size_give_identical_codes(cuts):
     assert (whole & SHOCK).any() and (whole & TUMBLE).any() and (whole & SATURATION).any()
     tr = EnvelopeTracker(H=H2, groups=GROUPS, declared=dec)
     edges = [0, *sorted(cuts), 600]
-    parts = [tr.update(t[i:j], r[i:j], a[i:j]) for i, j in zip(edges[:-1], edges[1:],
-                                                                 strict=True)]
+    parts = [tr.update(t[i:j], r[i:j], a[i:j]) for i, j in itertools.pairwise(edges)]
     assert np.array_equal(np.concatenate(parts), whole)

@@ -43,7 +43,7 @@ def case(request):
 
 
 def test_marked_fraction_of_flying_time_at_most_ten_percent(case):
-    name, flight, _, codes = case
+    _name, flight, _, codes = case
     summary = envelope_summary(flight, codes)
     assert summary["flying_samples"] > 0.5 * flight.t.size
     assert 0 < summary["marked_flying_fraction"] <= 0.10
@@ -109,10 +109,11 @@ def _inject(flight, col, onset, kind):
 @pytest.mark.parametrize("kind", ["step", "ramp"])
 def test_injected_gyro_faults_never_change_the_marking(case, kind):
     """10 °/s steps and 0.5 °/s/s ramps on each axis of each IMU, from the start, a quarter
-    and half of the flying time (the ramp from the start reaches 90 °/s on flight 41): no sample goes in or out of the envelope, through the monitor's
-    path (calibrated rates) or the calibration's (nominal axes, uncalibrated). A sample
-    already out of the envelope may gain a reason (a real tumble right at the rate limit:
-    up to 4 samples of flight 41 near 136.4 s, on the nominal path)."""
+    and half of the flying time (the ramp from the start reaches 90 °/s on flight 41): no
+    sample goes in or out of the envelope, through the monitor's path (calibrated rates)
+    or the calibration's (nominal axes, uncalibrated). A sample already out of the
+    envelope may gain a reason (a real tumble right at the rate limit: up to 4 samples of
+    flight 41 near 136.4 s, on the nominal path)."""
     name, flight, cal, codes = case
     clean_nominal = flight_envelope(flight, None)
     fly = np.flatnonzero(flying_mask(flight))
