@@ -60,6 +60,15 @@ def run(args: argparse.Namespace) -> int:
         print(f"  {imu['name']} ({imu['source']}): {imu['samples_in']} in, {imu['kept']} kept, "
               f"{imu['resampled_on_base']} resampled, {dropped} dropped, "
               f"{imu['missing_on_base']} missing on the base")
+    if flight.events:
+        cats = {c: sum(e.category == c for e in flight.events)
+                for c in ("crash", "estimator", "info")}
+        print(f"  log events: {len(flight.events)} ({cats['crash']} crash, "
+              f"{cats['estimator']} estimator, {cats['info']} info) in manifest.json 'events'")
+        for e in flight.events:
+            if e.category != "info":
+                end = "end of log" if e.t_end_s == float("inf") else f"{e.t_end_s:.2f} s"
+                print(f"    {e.t_s:.2f} s to {end}: {e.text} ({e.category})")
     if read.damage is not None:
         d = read.damage
         where = f" at byte offset {d.offset}" if d.offset is not None else ""

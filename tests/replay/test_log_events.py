@@ -119,3 +119,20 @@ def test_bad_events_are_refused_naming_the_field(tmp_path, bad, field):
     (tmp_path / "manifest.json").write_text(json.dumps(man))
     with pytest.raises(FileFormatError, match=re.escape(f"field '{field}'")):
         load_flight_dir(tmp_path)
+
+
+def test_shared_ulogs_give_their_messages_and_no_declared_event():
+    """The shared ULogs are short samples: vehicle_status and estimator_status exist with
+    every flag clear, so only the logged text messages come out (category info)."""
+    from replay.ingest.px4 import read_px4
+    from tests.calibration._erle import SHARED
+
+    path = SHARED / "px4_ulog" / "sample_log_small.ulg"
+    if not path.exists():
+        pytest.skip(f"{path} not found (set RIMU_SHARED_DATA)")
+    read = read_px4(path)
+    assert [e.text for e in read.events] == ["[commander] Takeoff detected",
+                                             "[commander] Landing detected",
+                                             "[commander] Disarmed by landing"]
+    assert {e.category for e in read.events} == {"info"}
+    assert read.events[0].t_s == pytest.approx(22.683736)
