@@ -127,3 +127,22 @@ def test_injected_gyro_faults_never_change_the_marking(case, kind):
                     f"flight {name} {kind} on {flight.sensor_names[col]} at "
                     f"{flight.t[onset]:.1f} s ({path}) moves {moved.size} samples: "
                     f"{reason_names(int(np.bitwise_or.reduce(got[moved] | ref[moved])))}")
+
+
+def test_blocks_of_a_real_flight_give_the_same_codes(case):
+    """The monitor feeds the tracker block by block (sizes 1 to 300 here): same codes."""
+    from fdi.envelope import EnvelopeTracker
+    from replay.log_events import declared_intervals
+
+    _, flight, cal, codes = case
+    rates, H = flight_rates(flight, cal)
+    acc = flight_accel(flight)
+    tr = EnvelopeTracker(H=H, groups=list(flight.imu_groups().values()),
+                         declared=declared_intervals(flight.events))
+    rng = np.random.default_rng(17)
+    out, i = [], 0
+    while i < flight.t.size:
+        j = min(flight.t.size, i + int(rng.choice([1, 2, 7, 50, 300])))
+        out.append(tr.update(flight.t[i:j], rates[i:j], acc[i:j]))
+        i = j
+    assert np.array_equal(np.concatenate(out), codes)
