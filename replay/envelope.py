@@ -24,12 +24,14 @@ from replay.log_events import DEFAULT_DECLARED, declared_intervals
 
 __all__ = [
     "EnvelopePeriod",
+    "describe_summary",
     "envelope_periods",
     "envelope_summary",
     "flight_accel",
     "flight_envelope",
     "flight_rates",
     "flying_mask",
+    "uncalibrated_summary",
 ]
 
 
@@ -161,3 +163,23 @@ def envelope_summary(flight: Flight, codes: np.ndarray) -> dict[str, Any]:
             "marked_flying_fraction": float((marked & fly).sum() / nf) if nf else 0.0,
             "by_reason": per,
             "periods": [p.to_dict() for p in envelope_periods(flight.t, codes)]}
+
+
+def uncalibrated_summary(flight: Flight) -> dict[str, Any] | None:
+    """:func:`envelope_summary` on the raw rates (nominal axes), as ingest can give it
+    before any calibration; None when the flight is not an IMU set in rad/s."""
+    try:
+        codes = flight_envelope(flight, None)
+    except ConfigError:
+        return None
+    doc = envelope_summary(flight, codes)
+    doc["rates"] = "uncalibrated (nominal axes of each IMU)"
+    return doc
+
+
+def describe_summary(doc: dict[str, Any]) -> str:
+    """One line: the fraction of flying time marked, per reason."""
+    per = ", ".join(f"{k} {100 * v['flying_fraction']:.1f} %"
+                    for k, v in doc["by_reason"].items() if v["samples"])
+    return (f"{100 * doc['marked_flying_fraction']:.1f} % of the flying time out of the "
+            f"envelope in {len(doc['periods'])} period(s)" + (f" ({per})" if per else ""))
