@@ -191,3 +191,20 @@ def test_blocks_of_any_size_give_identical_codes(cuts):
     edges = [0, *sorted(cuts), 600]
     parts = [tr.update(t[i:j], r[i:j], a[i:j]) for i, j in itertools.pairwise(edges)]
     assert np.array_equal(np.concatenate(parts), whole)
+
+
+_BAD = st.one_of(st.floats(allow_nan=True, allow_infinity=True, width=64),
+                 st.sampled_from([0.0, 1e308, -1e308, 35.0, -35.0]))
+
+
+@settings(max_examples=60, deadline=None)
+@given(data=st.data(), b=st.integers(1, 12))
+def test_any_numbers_never_raise(data, b):
+    """The runtime never raises on bad numbers: NaN, inf, huge, in times, rates, accel."""
+    t = np.array(data.draw(st.lists(_BAD, min_size=b, max_size=b)))
+    r = np.array(data.draw(st.lists(_BAD, min_size=6 * b, max_size=6 * b))).reshape(b, 6)
+    a = np.array(data.draw(st.lists(_BAD, min_size=6 * b, max_size=6 * b))).reshape(b, 2, 3)
+    tr = EnvelopeTracker(H=H2, groups=GROUPS, declared=[DeclaredInterval(0.0, 1.0)])
+    for _ in range(2):
+        c = tr.update(t, r, a)
+        assert c.shape == (b,) and c.dtype == np.int64 and np.all((c >= 0) & (c < 16))
