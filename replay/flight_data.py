@@ -187,4 +187,4 @@ def concat_flights(pieces: Sequence[Flight]) -> Flight:
                    valid=np.concatenate([p.valid for p in pieces]),
                    omega_true=(np.concatenate([p.omega_true for p in pieces])
                                if has_truth else None),
-                   aux=aux, events=tuple(e for p in pieces for e in p.events))
+                   aux=aux, events=tuple(dict.fromkeys(e for p in pieces for e in p.events)))
