@@ -274,13 +274,12 @@ class EnvelopeTracker:
         out = (length >= int(self.settings.repeat_samples)) & big
         return out, x[-1].copy(), length[-1].astype(np.int64)
 
-    def _held(self, t: np.ndarray, cond: np.ndarray, bit: int, extra_s: float = 0.0
-              ) -> np.ndarray:
-        """True where ``cond`` held within ``hold_s`` (+ ``extra_s``) before; updates state."""
+    def _held(self, t: np.ndarray, cond: np.ndarray, bit: int) -> np.ndarray:
+        """True where ``cond`` held within ``hold_s`` before; updates the state."""
         last = np.maximum.accumulate(np.where(cond, t, -np.inf))
         last = np.maximum(last, self._last[bit])
         self._last[bit] = float(last[-1])
-        return (t - last) <= self.settings.hold_s + extra_s
+        return (t - last) <= self.settings.hold_s
 
     # -- the update ---------------------------------------------------------------------
     def update(self, t: np.ndarray, rates: np.ndarray, accel: np.ndarray | None = None
