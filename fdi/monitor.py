@@ -35,6 +35,7 @@ from fdi import state as S
 from fdi.answer import CAPABILITIES, Answer, BlockResult, Event
 from fdi.calfile import Calibration
 from fdi.detector import chi2_threshold, default_thresholds
+from fdi.envelope import reason_names
 from fdi.errors import ConfigError
 from fdi.health import health_limits
 from fdi.isolation import IsolationDecision, decide, isolate, magnitude
@@ -744,8 +745,8 @@ def _env_code(x: Any) -> int:
 
 
 def _env_reason(code: int) -> str:
-    """Why a sample is out of the envelope (the names of its bits)."""
-    return f"out of envelope (code {code})"
+    """Why a sample is out of the envelope: the names of its bits, "shock+tumble"."""
+    return "+".join(reason_names(code))
 
 
 def _join(names: list[str]) -> str:
