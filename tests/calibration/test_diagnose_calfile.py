@@ -23,7 +23,7 @@ def test_effects_and_adequacy_round_trip(tmp_path, fitted):
     p = tmp_path / "cal.json"
     cal.save(p)
     doc = json.loads(p.read_text())
-    assert doc["schema"] == "rimu.calibration/2"
+    assert doc["schema"] == "rimu.calibration/3"
     assert doc["effects"][0]["name"] == "bias_drift" and doc["effects"][0]["sensor"] == 2
     back = load_calibration(p)
     assert len(back.effects) == 1 and isinstance(back.effects[0], EffectTerm)
@@ -55,7 +55,7 @@ def test_version_1_file_loads_without_effects(tmp_path, fitted):
     back = load_calibration(p)
     assert back.effects == () and back.adequacy is None
     back.save(tmp_path / "new.json")                       # migrated on save
-    assert json.loads((tmp_path / "new.json").read_text())["schema"] == "rimu.calibration/2"
+    assert json.loads((tmp_path / "new.json").read_text())["schema"] == "rimu.calibration/3"
 
 
 @pytest.mark.parametrize(("edit", "field"), [
