@@ -35,6 +35,7 @@ Per scale:
 from __future__ import annotations
 
 import math
+import warnings
 
 import numpy as np
 from scipy import optimize, stats
@@ -141,6 +142,8 @@ def _empirical(S: np.ndarray, n_eff: int, conf: float
         ps.append(float(p))
         qs.append(float(np.quantile(Ss, 1.0 - p)))
         qu.append(float(Ss[max(M - 1 - k, 0)]))
+    if not ps:                  # too few windows for 10 %: one point, the largest window
+        ps, qs, qu = [min(p_min, 0.5)], [float("nan")], [float(Ss[-1])]
     return ps, qs, qu, p_min
 
 
@@ -310,9 +313,12 @@ def fit_tail_model(residual: np.ndarray, H: np.ndarray, noise_cov: np.ndarray,
             verdict = ok
         ps, qs, qu, p_min = _empirical(S, n_eff, confidence)
         src = ["empirical"] * len(ps)
-        rest = [float(p) for p in _grid() if p < p_min]
-        gpd, gq, gu, why = _gpd(S, end, w, n_eff, confidence, rest) if rest and not ok else (
-            None, [], [], "")
+        rest = [float(p) for p in _grid() if p < min(p_min, ps[-1])]
+        gpd, gq, gu, why = None, [], [], ""
+        if rest and not ok:
+            with np.errstate(all="ignore"), warnings.catch_warnings():
+                warnings.simplefilter("ignore", RuntimeWarning)   # degenerate likelihoods
+                gpd, gq, gu, why = _gpd(S, end, w, n_eff, confidence, rest)
         if why:
             notes.append(why)
         vr = float(np.mean(S)) / df
