@@ -16,7 +16,9 @@ Per scale:
    so colour alone does not fail it), each at ``level/(2K)`` for K scales (Bonferroni:
    a Gaussian white residual fails somewhere with probability at most ``level``). Fewer than
    :data:`MIN_TEST_WINDOWS` windows cannot be tested: the scale inherits the verdict of
-   the longest tested scale below it.
+   the longest tested scale below it. A scale with fewer than :data:`MIN_POWER_WINDOWS`
+   windows that passes while a shorter scale failed is not taken as Gaussian (too few
+   windows to show that the tails average out): it fails with the shorter one.
 2. **Empirical tail** at half-decade probabilities p from 0.1 down to what the data
    resolve: the upper bound ``q⁺(p)`` is the empirical quantile whose exceedance count has a
    one-sided Clopper–Pearson upper limit p, counting exceedances in units of the
@@ -43,7 +45,8 @@ from scipy import optimize, stats
 from fdi.parity import parity_matrix
 from fdi.tails import GpdFit, ScaleTail, TailModel
 
-__all__ = ["CONFIDENCE", "LEVEL", "MIN_CLUSTERS", "MIN_TEST_WINDOWS", "SMALLEST_PROBABILITY",
+__all__ = ["CONFIDENCE", "LEVEL", "MIN_CLUSTERS", "MIN_POWER_WINDOWS", "MIN_TEST_WINDOWS",
+           "SMALLEST_PROBABILITY",
            "fit_tail_model", "whitened_parity", "window_statistics"]
 
 CONFIDENCE = 0.95
@@ -51,6 +54,8 @@ CONFIDENCE = 0.95
 LEVEL = 0.01
 """Family-wise significance level of the normality check (all scales, both tests)."""
 MIN_TEST_WINDOWS = 20
+MIN_POWER_WINDOWS = 200
+"""Independent windows below which a pass does not outweigh a shorter scale's failure."""
 """Non-overlapping windows below which a scale's normality cannot be tested."""
 MIN_CLUSTERS = 10
 """Declustered exceedances below which no GPD is fitted."""
@@ -58,7 +63,7 @@ SMALLEST_PROBABILITY = 1e-10
 """Smallest per-sample probability the curve is extrapolated to."""
 TAIL_FRACTION = 0.05
 """Share of the window statistics above the GPD threshold u (at most MAX_EXCEEDANCES)."""
-MAX_EXCEEDANCES = 2000
+MAX_EXCEEDANCES = 1000
 """Cap on the exceedances fitted (long recordings: u moves up instead)."""
 _CAP = 1e15
 """Largest tabulated bound (a flat profile likelihood: the data bound nothing)."""
@@ -162,8 +167,9 @@ def _sigma_for(xi: float, xp: float, u: float, ratio: float) -> float:
     return xi * (xp - u) / (ratio**xi - 1.0)
 
 
-_XI_GRID = np.linspace(-0.45, 3.0, 346)
-"""ξ values over which the profile likelihood of a quantile is maximised (step 0.01)."""
+_XI_GRID = np.linspace(-0.45, 3.0, 139)
+"""ξ values over which the profile likelihood of a quantile is maximised (step 0.025; the
+maximum on the grid is at most the true one, so the limit it gives is slightly wider)."""
 
 
 def _profile(y: np.ndarray, xp: float, u: float, ratio: float) -> float:
@@ -240,7 +246,8 @@ def _gpd(S: np.ndarray, end: np.ndarray, w: int, n_eff: int, conf: float,
             qu.append(_CAP)
             continue
         lo_ = x0 if hi == x0 else lo_
-        qu.append(float(optimize.brentq(dev, lo_, hi, xtol=1e-6 * hi)) if hi > lo_ else hi)
+        qu.append(float(optimize.brentq(dev, lo_, hi, xtol=1e-3 * (hi - u))) if hi > lo_
+                  else hi)
     return gpd, qs, qu, ""
 
 
@@ -309,6 +316,10 @@ def fit_tail_model(residual: np.ndarray, H: np.ndarray, noise_cov: np.ndarray,
             ok = True if verdict is None else verdict
             notes.append(f"{n_eff} independent windows: normality not testable, verdict of "
                          "the longest tested shorter scale")
+        elif ok and n_eff < MIN_POWER_WINDOWS and any(not r.gaussian for r in out):
+            ok = False
+            notes.append(f"passes on {n_eff} independent windows (< {MIN_POWER_WINDOWS}) but "
+                         "a shorter scale fails: not taken as Gaussian")
         else:
             verdict = ok
         ps, qs, qu, p_min = _empirical(S, n_eff, confidence)
@@ -324,8 +335,8 @@ def fit_tail_model(residual: np.ndarray, H: np.ndarray, noise_cov: np.ndarray,
         vr = float(np.mean(S)) / df
         if gpd is not None:
             ps, qs, qu, src = ps + rest, qs + gq, qu + gu, src + ["gpd"] * len(rest)
-        elif rest and out and not ok:
-            prev = out[-1]
+        elif rest and not ok and any(r.gpd is not None or "carried" in r.source for r in out):
+            prev = [r for r in out if r.gpd is not None or "carried" in r.source][-1]
             ratio = max(1.0, vr / prev.variance_ratio)
             pp = dict(zip(prev.probability, prev.quantile_upper, strict=True))
             add = [(p, pp[p] * ratio) for p in rest if p in pp]

@@ -102,8 +102,13 @@ def variance_factors(allan: AllanTable | None, noise_cov: np.ndarray, sample_rat
 
 
 def noise_model(choices: tuple) -> str:
-    """``"overbound"`` when some scale's factor is the overbound, else ``"gaussian-white"``."""
-    return "overbound" if any(c.choice == "overbound" for c in choices) else "gaussian-white"
+    """``"overbound"`` when some scale's factor is the overbound, ``"gaussian-measured-variance"``
+    when some scale's is the measured variance, else ``"gaussian-white"``."""
+    if any(c.choice == "overbound" for c in choices):
+        return "overbound"
+    if any(c.choice == "measured-variance" for c in choices):
+        return "gaussian-measured-variance"
+    return "gaussian-white"
 
 
 def tail_note(choices: tuple) -> str:
@@ -112,8 +117,11 @@ def tail_note(choices: tuple) -> str:
     if all(math.isnan(c.excess_kurtosis) and c.choice == "gaussian-white" for c in choices):
         return ""                       # no tail model kept
 
+    mv = [c.scale for c in choices if c.choice == "measured-variance"]
     return ("; residual tails (calibration's tail model): overbound factor at scale(s) "
-            + (", ".join(map(str, over)) if over else "none") + ", gaussian white at "
+            + (", ".join(map(str, over)) if over else "none")
+            + (", measured variance at " + ", ".join(map(str, mv)) if mv else "")
+            + ", gaussian white at "
             + (", ".join(str(c.scale) for c in choices if c.choice == "gaussian-white")
                or "none"))
 

@@ -31,9 +31,10 @@ THRESHOLDS_SCHEMA = "rimu.thresholds/2"
 THRESHOLDS_SCHEMAS = ("rimu.thresholds/1", THRESHOLDS_SCHEMA)
 """Versions the loader reads (``/1``: no calibration fingerprint, Gaussian white noise)."""
 DETECTORS = ("windows", "cusum", "both")
-NOISE_MODELS = ("gaussian-white", "overbound")
-"""What the variance factors rest on: the Allan factors of a Gaussian residual, or at one
-scale at least the overbound of the calibration's residual tail model (:mod:`fdi.tails`)."""
+NOISE_MODELS = ("gaussian-white", "gaussian-measured-variance", "overbound")
+"""What the variance factors rest on: the Allan factors of a Gaussian residual; at one scale
+at least the measured window-mean variance (significantly above Allan's); at one scale at
+least the overbound of the calibration's residual tail model (:mod:`fdi.tails`)."""
 
 
 @dataclass(frozen=True)

@@ -44,6 +44,7 @@ __all__ = [
     "ScaleTail",
     "TailChoice",
     "TailModel",
+    "measured_variance_factor",
     "overbound_factor",
     "tail_model_from_fields",
     "tail_variance_factors",
@@ -56,7 +57,7 @@ TAIL_METHOD = "rimu.tails/1"
 TAIL_SOURCES = ("empirical", "gpd", "carried")
 """Where a tabulated quantile comes from: the data, the GPD extrapolation, or a shorter
 scale's curve carried over (the scale had too few independent windows)."""
-TAIL_CHOICES = ("gaussian-white", "overbound", "allan")
+TAIL_CHOICES = ("gaussian-white", "overbound", "allan", "measured-variance")
 """What a scale's variance factor rests on (see :class:`TailChoice`)."""
 
 
@@ -233,10 +234,16 @@ class TailChoice:
     scale : int
     choice : str
         ``"gaussian-white"`` (no tail model, or the scale passes its normality check),
-        ``"overbound"`` (fails it; the overbound factor is larger than the Allan one) or
-        ``"allan"`` (fails it, but the Allan factor already covers the overbound).
+        ``"overbound"`` (fails it; the overbound factor is the largest), ``"allan"`` (fails
+        it, but the Allan factor already covers the overbound) or ``"measured-variance"``
+        (the measured variance of the window mean is significantly above the Allan factor,
+        e.g. a slow offset the Allan variance differences away, and its upper bound is the
+        largest candidate).
     allan_factor, overbound_factor, factor : float
-        The two candidates and the one used.
+        Two candidates and the one used.
+    variance_factor_upper : float
+        The measured variance ratio's upper bound where it is significantly above the Allan
+        factor (the third candidate), NaN otherwise.
     excess_kurtosis, shape, shape_sd : float
         From the record (NaN when absent).
     """
@@ -249,9 +256,16 @@ class TailChoice:
     excess_kurtosis: float = float("nan")
     shape: float = float("nan")
     shape_sd: float = float("nan")
+    variance_factor_upper: float = float("nan")
 
     def text(self) -> str:
         """One line: ``scale 8: overbound f=3.2 (kurtosis 41, GPD ξ=0.30±0.10)``."""
+        if self.choice == "measured-variance":
+            return (f"scale {self.scale}: measured variance f={self.factor:.3g} (window-mean "
+                    f"variance significantly above the Allan f={self.allan_factor:.3g}; "
+                    f"kurtosis {self.excess_kurtosis:.3g}"
+                    + (f", overbound f={self.overbound_factor:.3g})"
+                       if math.isfinite(self.overbound_factor) else ")"))
         if self.choice == "gaussian-white":
             why = ("passes" if math.isfinite(self.excess_kurtosis)
                    else "no tail model in the calibration")
@@ -346,6 +360,7 @@ def tail_variance_factors(model: TailModel | None, scales: tuple[int, ...],
     choices : tuple of TailChoice
     """
     out, why = [], []
+    n_scales = max(len(scales), 1)
     for w, a, fa in zip(scales, alphas, allan_factors, strict=True):
         rec = None if model is None else _record_for(model, int(w))
         if rec is None:
@@ -355,18 +370,40 @@ def tail_variance_factors(model: TailModel | None, scales: tuple[int, ...],
         g = rec.gpd
         xi = g.shape if g is not None else float("nan")
         xsd = g.shape_sd if g is not None else float("nan")
-        if rec.gaussian:
-            out.append(float(fa))
-            why.append(TailChoice(int(w), "gaussian-white", float(fa), float("nan"),
-                                  float(fa), rec.excess_kurtosis, xi, xsd))
-            continue
-        fo = overbound_factor(rec, float(a), model.df)
-        f = max(float(fa), fo)
+        fv = measured_variance_factor(rec, float(fa), model.df, model.confidence,
+                                      model.level / n_scales)
+        fo = float("nan") if rec.gaussian else overbound_factor(rec, float(a), model.df)
+        cands = {"allan": float(fa)}
+        if math.isfinite(fv):
+            cands["measured-variance"] = fv
+        if not rec.gaussian:
+            cands["overbound"] = fo if not math.isnan(fo) else math.inf
+        choice = max(cands, key=lambda k: cands[k])
+        f = cands[choice]
+        if choice == "allan":
+            choice = "gaussian-white" if rec.gaussian else "allan"
         f = f if math.isfinite(f) else 1e300
         out.append(f)
-        why.append(TailChoice(int(w), "overbound" if fo > fa else "allan", float(fa), fo, f,
-                              rec.excess_kurtosis, xi, xsd))
+        why.append(TailChoice(int(w), choice, float(fa), fo, f, rec.excess_kurtosis, xi, xsd,
+                              fv))
     return tuple(out), tuple(why)
+
+
+def measured_variance_factor(rec: ScaleTail, allan_factor: float, df: int, confidence: float,
+                             level: float) -> float:
+    """Upper bound of the measured variance ratio where it is significantly above Allan's.
+
+    ``mean(S_w)/df`` over ``ν = independent·df`` degrees of freedom; significant when
+    ``χ²_ν.sf(ν·ratio/f_Allan) < level``; the bound is ``ratio·ν/χ²_ν.ppf(1 − c)``. NaN
+    when not significant or not measured.
+    """
+    nu = rec.independent * df
+    vr = rec.variance_ratio
+    if nu < 1 or not (vr > 0 and math.isfinite(vr)) or not allan_factor > 0:
+        return float("nan")
+    if not float(stats.chi2.sf(nu * vr / allan_factor, nu)) < level:
+        return float("nan")
+    return float(vr * nu / stats.chi2.ppf(1.0 - confidence, nu))
 
 
 def _record_for(model: TailModel, w: int) -> ScaleTail | None:
