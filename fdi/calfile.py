@@ -355,11 +355,16 @@ class Calibration:
         of :meth:`to_dict` without :data:`FINGERPRINT_VOLATILE` and the ``extra`` keys in
         :data:`FINGERPRINT_VOLATILE_EXTRA`: a file saved, loaded and saved again (or
         migrated to a newer version) keeps its fingerprint; any change of a number the
-        monitor or the thresholds read changes it.
+        monitor or the thresholds read changes it. A calibration that cannot be written
+        (a scale-factor unit without a file form) has none: ``""``.
         """
         import hashlib
 
-        doc = {k: v for k, v in self.to_dict().items() if k not in FINGERPRINT_VOLATILE}
+        try:
+            full = self.to_dict()
+        except ConfigError:
+            return ""
+        doc = {k: v for k, v in full.items() if k not in FINGERPRINT_VOLATILE}
         if isinstance(doc.get("extra"), dict):
             doc["extra"] = {k: v for k, v in doc["extra"].items()
                             if k not in FINGERPRINT_VOLATILE_EXTRA}
