@@ -148,11 +148,23 @@ def flight_holdout(flight: Flight, *, targets: tuple[float, ...] = (1.0, 100.0, 
                                      flight.sample_rate_hz)
                     r["variance_factor"] = list(thr.variance_factor)
                     r["noise_model"] = thr.noise_model
+                    r.update(_detectable(cal, thr))
                     rec[label] = _verdict(r, R)
                 res[str(R)] = rec
             way["results"][how] = res
         out["ways"].append(way)
     return out
+
+
+def _detectable(cal: Calibration, thr: Thresholds) -> dict[str, Any]:
+    """Smallest step (deg/s) one full window detects with 99 % at rest, best scale and w = 1
+    (:func:`thresholds.tune.detectable_sizes`, worst sensor)."""
+    from thresholds.tune import detectable_sizes
+
+    d = detectable_sizes(cal, thr, draws=500)
+    best = min(d, key=lambda x: x.size_unit_value)
+    return {"detectable_dps_scale1": d[0].size_unit_value,
+            "detectable_dps_best": best.size_unit_value, "detectable_best_scale": best.scale}
 
 
 def _model_summary(cal: Calibration) -> list[dict[str, Any]]:
@@ -207,6 +219,7 @@ def static_holdout_tails(t: np.ndarray, y: np.ndarray, names: tuple[str, ...], *
                     r = count_alarms(cal, thr, tc - tc[0], yc, valid, keep, fs)
                     r["variance_factor"] = list(thr.variance_factor)
                     r["noise_model"] = thr.noise_model
+                    r.update(_detectable(cal, thr))
                     rec[label] = _verdict(r, R)
                 res[str(R)] = rec
             way["results"][how] = res
