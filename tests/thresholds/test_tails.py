@@ -142,3 +142,30 @@ def test_file_round_trip_fingerprint_and_bad_field(tmp_path):
         load_calibration(tmp_path / "bad.json")
     assert ei.value.field == "residual_tails.gyro.scales[1].gpd.scale_param"
     assert math.isfinite(thr.variance_factor[0])
+
+
+def test_tune_prints_the_choice_and_writes_fingerprint_and_noise_model(tmp_path, capsys):
+    from fdi.settings import load_thresholds
+    from rimu.cli import main
+    from thresholds.select import load_any_thresholds
+
+    rng = np.random.default_rng(8)
+    heavy = _cal_with_tails(_t_noise(rng, 20_000))
+    white = _cal_with_tails(rng.normal(0.0, 0.01, (20_000, 6)))
+    for cal, want in ((heavy, "overbound f="), (white, "gaussian white: passes")):
+        p = tmp_path / "cal.json"
+        cal.save(p)
+        out = tmp_path / "t.json"
+        assert main(["tune", "--cal", str(p), "--false-alarms-per-hour", "60",
+                     "--simulate-hours", "0", "--scales", "1,2,4,8", "--out", str(out)]) == 0
+        text = capsys.readouterr().out
+        assert "scale 1: " + want in text, text
+        thr, _, ass = load_any_thresholds(out)
+        assert thr.calibration_fingerprint == cal.fingerprint()
+        assert thr.noise_model == ("overbound" if cal is heavy else "gaussian-white")
+        assert len(ass["residual_tails"]["per_scale"]) == 4
+        plain = tmp_path / "plain.json"
+        thr.save(plain)
+        back = load_thresholds(plain)
+        assert (back.calibration_fingerprint, back.noise_model, back.variance_factor) == (
+            thr.calibration_fingerprint, thr.noise_model, thr.variance_factor)

@@ -21,7 +21,7 @@ from pathlib import Path
 import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "calibration"))
-from _erle import DATA, FLIGHTS, SHARED, read_erle  # noqa: E402
+from _erle import DATA, FLIGHTS, SHARED, read_erle
 
 TARGETS = (1.0, 100.0, 1000.0)
 pytestmark = pytest.mark.slow
