@@ -26,12 +26,13 @@ Per scale:
    smallest resolved p is ``1 − (1 − c)^(1/n_eff)`` (no exceedance at all).
 3. **Peaks over threshold** below it: a generalised Pareto law (``scipy.stats.genpareto``,
    maximum likelihood, location 0) fitted to the exceedances of the (1 − p_u) quantile
-   u; runs of exceedances closer than w samples form one cluster. The upper bound of the
-   quantile at p (down to :data:`SMALLEST_PROBABILITY`) is its profile-likelihood limit
-   at one-sided confidence c, the log-likelihood scaled by clusters/exceedances (a
-   dependence adjustment: each cluster counts once), with ζ_u at its Clopper–Pearson upper
-   limit. Fewer than :data:`MIN_CLUSTERS` clusters: no fit; the scale carries the curve of
-   the next shorter scale over, scaled by the ratio of the measured variance ratios.
+   u (the top 2 %, at most 1000 values); runs of exceedances closer than w samples form
+   one cluster. The upper bound of the quantile at p (down to
+   :data:`SMALLEST_PROBABILITY`) is its profile-likelihood limit at one-sided confidence
+   c, the log-likelihood scaled by clusters/exceedances (a dependence adjustment: each
+   cluster counts once), with ζ_u at its Clopper–Pearson upper limit. Fewer than
+   :data:`MIN_CLUSTERS` clusters: no fit; the scale carries the curve of the nearest
+   shorter fitted scale over, scaled by the ratio of the measured variance ratios.
 """
 
 from __future__ import annotations
@@ -61,7 +62,7 @@ MIN_CLUSTERS = 10
 """Declustered exceedances below which no GPD is fitted."""
 SMALLEST_PROBABILITY = 1e-10
 """Smallest per-sample probability the curve is extrapolated to."""
-TAIL_FRACTION = 0.05
+TAIL_FRACTION = 0.02
 """Share of the window statistics above the GPD threshold u (at most MAX_EXCEEDANCES)."""
 MAX_EXCEEDANCES = 1000
 """Cap on the exceedances fitted (long recordings: u moves up instead)."""
