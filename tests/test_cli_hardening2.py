@@ -21,6 +21,7 @@ import numpy as np
 import pytest
 
 from calibration.ferraris_sim import imucal_like_truth, simulate_ferraris
+from fdi.calfile import CALIBRATION_SCHEMA
 from replay.flight import save_flight_dir, simulate_flight
 from replay.live import StreamDecoder
 from replay.logio import resolve_map, write_flight_log
@@ -399,7 +400,7 @@ def test_hints_for_the_natural_wrong_command(files, capsys):
 def test_calibration_schema_error_names_the_written_version(files, capsys):
     refused(capsys, files["d"], ["monitor-file", files["flight6"], "--cal",
                                  files["flight6"] / "manifest.json"],
-            "expected 'rimu.calibration/2'")
+            f"expected '{CALIBRATION_SCHEMA}'")
 
 
 def test_report_names_sensors_and_carries_units(files, tmp_path, capsys):

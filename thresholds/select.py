@@ -3,7 +3,7 @@
 :func:`select` is the single place that turns the options of ``rimu monitor-file``,
 ``rimu replay`` and ``rimu monitor`` into thresholds:
 
-1. a thresholds file (``--thresholds``): a ``rimu.thresholds/1`` file, or a
+1. a thresholds file (``--thresholds``): a ``rimu.thresholds/2`` (or ``/1``) file, or a
    ``rimu.tuning/1`` file written by ``rimu tune`` (thresholds with their assumptions);
    source ``"file"`` or ``"tuned"``;
 2. otherwise thresholds computed from the calibration for a false-alarm budget
@@ -43,8 +43,9 @@ class ThresholdChoice:
     ----------
     thresholds : Thresholds
     source : str
-        ``"file"`` (a ``rimu.thresholds/1`` file), ``"tuned"`` (a ``rimu.tuning/1`` file)
-        or ``"calibration"`` (computed here from the calibration's statistics).
+        ``"file"`` (a ``rimu.thresholds/2`` (or ``/1``) file), ``"tuned"`` (a
+        ``rimu.tuning/1`` file) or ``"calibration"`` (computed here from the
+        calibration's statistics).
     assumptions : dict
         What the thresholds rest on: the file, the budget, and for tuned files the
         assumptions ``rimu tune`` recorded (noise model, Allan deviation per scale, ...).
@@ -66,7 +67,7 @@ class ThresholdChoice:
 
 
 def load_any_thresholds(path: str | Path) -> tuple[Thresholds, str, dict[str, Any]]:
-    """Read a ``rimu.thresholds/1`` or ``rimu.tuning/1`` file.
+    """Read a ``rimu.thresholds/2`` (or ``/1``) or ``rimu.tuning/1`` file.
 
     Returns
     -------
@@ -114,7 +115,7 @@ def select(cal: Calibration, *, kind: str = "gyro", thresholds_file: str | Path 
     kind : str
         Sensor set the monitor watches.
     thresholds_file : path, optional
-        A ``rimu.thresholds/1`` or ``rimu.tuning/1`` file; wins over the budget.
+        A ``rimu.thresholds/2`` (or ``/1``) or ``rimu.tuning/1`` file; wins over the budget.
     false_alarms_per_hour : float, optional
         Budget for thresholds computed from the calibration (default
         :data:`DEFAULT_FALSE_ALARMS_PER_HOUR`).

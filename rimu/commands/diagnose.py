@@ -30,7 +30,7 @@ def configure(p: argparse.ArgumentParser) -> None:
                    help="truth sidecar (DIR/truth.json): parameter errors in sigma before "
                         "and after the refit")
     p.add_argument("--out", metavar="FILE",
-                   help="write the refit calibration (rimu.calibration/2, with effects)")
+                   help="write the refit calibration (rimu.calibration/3, with effects)")
 
 
 def _p(e: dict) -> str:

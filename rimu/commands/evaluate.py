@@ -28,7 +28,7 @@ HELP = ("evaluate the monitor on simulated flights (every fault kind, a sweep of
 def configure(p: argparse.ArgumentParser) -> None:
     p.add_argument("--cal", required=True, metavar="FILE", help="calibration file")
     p.add_argument("--thresholds", metavar="FILE",
-                   help="rimu.thresholds/1 or rimu.tuning/1 file (default: computed from "
+                   help="rimu.thresholds/2 (or /1) or rimu.tuning/1 file (default: computed from "
                         "the calibration for --false-alarms-per-hour)")
     p.add_argument("--false-alarms-per-hour", type=positive_float(3.6e6), metavar="X",
                    help="budget for computed thresholds (default 1e-3)")

@@ -44,6 +44,7 @@ def configure(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from fdi.fileio import to_jsonable
+    from replay.envelope import describe_summary, uncalibrated_summary
     from replay.flight_io import save_flight_dir
     from replay.ingest import align_streams, read_any
     from replay.ingest.readers import merge_reads
@@ -70,6 +71,9 @@ def run(args: argparse.Namespace) -> int:
         read = merge_reads(reads)
         bar.set_description("ingest: aligning")
         flight, report = align_streams(read, reference=args.reference, salvage=args.salvage)
+        envelope = uncalibrated_summary(flight)
+        if envelope is not None:
+            report["envelope"] = envelope
         bar.update()
         bar.set_description(f"ingest: writing {out}")
         with atomic_dir(out) as tmp:        # the flight and its report: all or nothing
@@ -86,6 +90,17 @@ def run(args: argparse.Namespace) -> int:
         print(f"  {imu['name']} ({imu['source']}): {imu['samples_in']} in, {imu['kept']} kept, "
               f"{imu['resampled_on_base']} resampled, {dropped} dropped, "
               f"{imu['missing_on_base']} missing on the base")
+    if flight.events:
+        cats = {c: sum(e.category == c for e in flight.events)
+                for c in ("crash", "estimator", "info")}
+        print(f"  log events: {len(flight.events)} ({cats['crash']} crash, "
+              f"{cats['estimator']} estimator, {cats['info']} info) in manifest.json 'events'")
+        for e in flight.events:
+            if e.category != "info":
+                end = "end of log" if e.t_end_s == float("inf") else f"{e.t_end_s:.2f} s"
+                print(f"    {e.t_s:.2f} s to {end}: {e.text} ({e.category})")
+    if envelope is not None:
+        print(f"  envelope (uncalibrated rates): {describe_summary(envelope)}")
     if read.damage is not None:
         d = read.damage
         where = f" at byte offset {d.offset}" if d.offset is not None else ""

@@ -48,7 +48,7 @@ def _check_effect_options(args: argparse.Namespace) -> None:
 
 def configure(p: argparse.ArgumentParser) -> None:
     p.add_argument("--cal", metavar="FILE",
-                   help="calibration file (rimu.calibration/2); required unless --imus")
+                   help="calibration file (rimu.calibration/3); required unless --imus")
     p.add_argument("--duration", required=True, type=positive_float(DAY_S), metavar="S",
                    help="flight length (s, at most one day)")
     p.add_argument("--seed", type=nonnegative_int(SEED_MAX), default=0,

@@ -79,6 +79,9 @@ def run(args: argparse.Namespace) -> int:
     names = [c.name for c in cal.kind(args.kind).sensors]
     who = f"{d0.sensor} ({names[d0.sensor - 1]})" if 1 <= d0.sensor <= len(names) else d0.sensor
     print(f"detectable sizes: one full window, at rest, worst sensor {who}")
+    print(f"noise model: {th.noise_model} (residual tails of the calibration, per scale):")
+    for c in tu.choices:
+        print(f"  {c.text()}")
     with atomic_file(out) as tmp:
         tu.save(tmp)
     print(f"wrote {out}")
