@@ -324,6 +324,8 @@ def test_ingest_refuses_seconds_read_as_milliseconds(tmp_path, capsys):
     log = tmp_path / "ms.csv"
     _csv_log(log, rate_hz=200.0, time_col="time_ms")     # seconds in a time_ms column
     refused(capsys, tmp_path, ["ingest", log, "--out", tmp_path / "f"], "faster than any IMU")
+    _csv_log(log, rate_hz=200.0, time_col="time_s", scale=1000.0)    # milliseconds as s
+    refused(capsys, tmp_path, ["ingest", log, "--out", tmp_path / "f"], "slower than any IMU")
 
 
 def test_rda_without_map_refused_before_parsing(tmp_path, capsys, monkeypatch):

@@ -17,8 +17,9 @@ Before that, each stream loses the samples whose time is not finite or does not 
 
 Implausible logs are refused, not ingested: rates beyond any gyro's range
 (:data:`MAX_RATE_DPS`; with ``salvage`` those samples are dropped and counted instead) and
-a time base faster than any IMU (:data:`MAX_SAMPLE_RATE_HZ`: seconds read as milliseconds,
-a wrong time unit in the map).
+a time base faster or slower than any IMU (:data:`MAX_SAMPLE_RATE_HZ`,
+:data:`MIN_SAMPLE_RATE_HZ`: seconds read as milliseconds or the reverse, a wrong time unit
+in the map).
 
 No time offset is applied: the IMUs are taken at their stamps (finding a lag between
 them is the job of the in-flight calibration).
@@ -35,7 +36,8 @@ from fdi.units import DPS
 from replay.flight_data import AuxChannels, Flight
 from replay.ingest.stream import ImuStream, LogRead
 
-__all__ = ["INGEST_REPORT_SCHEMA", "MAX_RATE_DPS", "MAX_SAMPLE_RATE_HZ", "align_streams"]
+__all__ = ["INGEST_REPORT_SCHEMA", "MAX_RATE_DPS", "MAX_SAMPLE_RATE_HZ", "MIN_SAMPLE_RATE_HZ",
+           "align_streams"]
 
 INGEST_REPORT_SCHEMA = "rimu.ingest-report/1"
 MAX_RATE_DPS = 1e5
@@ -43,6 +45,8 @@ MAX_RATE_DPS = 1e5
 larger or non-finite-overflowing value is damage, not motion."""
 MAX_SAMPLE_RATE_HZ = 2e4
 """No IMU log is sampled faster than this (Hz): a faster time base has a wrong time unit."""
+MIN_SAMPLE_RATE_HZ = 1.0
+"""Nor slower than this (Hz): milliseconds or microseconds read as seconds."""
 _BEYOND = "rate beyond any gyro's range"
 _AXES = ("x", "y", "z")
 
@@ -225,6 +229,12 @@ def align_streams(read: LogRead, *, reference: str | None = None, gap_factor: fl
                           f"({1.0 / dt_b:.3g} Hz), faster than any IMU (at most "
                           f"{MAX_SAMPLE_RATE_HZ:g} Hz): the time stamps are in another unit "
                           "than read (seconds taken as milliseconds?); set the time unit in "
+                          "the --map")
+    if 1.0 / dt_b < MIN_SAMPLE_RATE_HZ:
+        raise ConfigError(f"{read.path}: {streams[r].name} is sampled every {dt_b:.3g} s "
+                          f"({1.0 / dt_b:.3g} Hz), slower than any IMU (at least "
+                          f"{MIN_SAMPLE_RATE_HZ:g} Hz): the time stamps are in another unit "
+                          "than read (milliseconds taken as seconds?); set the time unit in "
                           "the --map")
     tol = tol_fraction * dt_b
     m = tb.shape[0]
