@@ -1,8 +1,11 @@
 """The ``rimu`` command: one sub-command per module in :mod:`rimu.commands`.
 
 Every module there defines ``HELP`` (one line), ``configure(parser)`` and
-``run(args) -> int``. A :class:`fdi.errors.RimuError` becomes one line on stderr and exit
-code 2; Ctrl-C exits 130; nothing prints a traceback unless ``--debug`` is given.
+``run(args) -> int``; only the module of the command named is imported (its ``configure``
+imports nothing numerical), so ``rimu --version`` and ``rimu COMMAND --help`` start fast.
+A :class:`fdi.errors.RimuError` becomes one line on stderr and exit code 2; Ctrl-C exits
+130; nothing prints a traceback unless ``--debug`` is given. Python warnings become one
+``rimu: warning:`` line each (once per text).
 """
 
 from __future__ import annotations
@@ -76,6 +79,7 @@ def _log_to_stderr() -> None:
     root.setLevel(logging.INFO)
     root.propagate = False
     warnings.showwarning = _show_warning
+    _SHOWN.clear()                  # once per text and per command run
     from rimu.kernel_notice import install
 
     install()                       # "compiling the monitor kernel, once, about 8 s"
@@ -90,7 +94,13 @@ def _show_warning(message, category, filename, lineno, file=None, line=None) -> 
         text = f"numerical {text} (a value out of range in the input?)"
     elif category not in (UserWarning, RuntimeWarning):
         text += f" ({category.__name__})"
+    if text in _SHOWN:                  # the same numerical warning from many places: once
+        return
+    _SHOWN.add(text)
     logging.getLogger("rimu").warning(text)
+
+
+_SHOWN: set[str] = set()
 
 
 def _add(sub: argparse._SubParsersAction, name: str, module: str) -> None:

@@ -363,6 +363,7 @@ def test_python_warnings_are_one_rimu_line(files, monkeypatch, capsys):
         warnings.warn("sensors 1 and 2 are collinear\n  (second line)", stacklevel=1)
         with np.errstate(over="warn"):
             np.float64(1e308) * 10
+            np.float64(1e308) * 20              # the same text again: not repeated
         return 0
 
     monkeypatch.setattr(parity, "run", noisy)
