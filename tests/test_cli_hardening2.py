@@ -666,3 +666,25 @@ def test_evaluate_states_the_sweep_runs(files, tmp_path, capsys):
     out = capsys.readouterr().out
     assert "6 runs (2 flights + 4 sweep runs" in out, out
     assert "(2 flights + 4 sweep runs" in (tmp_path / "ev" / "summary.md").read_text()
+
+
+def test_evaluate_and_diagnose_leave_nothing_when_a_late_write_fails(files, tmp_path,
+                                                                     monkeypatch, capsys):
+    """A failure while the outputs are written (the plots, the report page) leaves neither
+    the folder nor the files written before it."""
+    from importlib import import_module
+
+    def broken(*a, **k):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(import_module("thresholds.plots"), "plot_all", broken)
+    refused(capsys, tmp_path, ["evaluate", "--cal", files["cal6"], "--runs", "1",
+                               "--sweep-runs", "0", "--duration", "2", "--no-progress",
+                               "--out", tmp_path / "ev"], "No space left")
+    cal = tmp_path / "in" / "cal.json"
+    cal.parent.mkdir()
+    assert main(["calibrate", str(files["sess"]), "--out", str(cal)]) == 0
+    monkeypatch.setattr(import_module("calibration.diagnose.report"), "write_report", broken)
+    refused(capsys, tmp_path, ["diagnose", files["sess"], "--cal", cal, "--out",
+                               tmp_path / "refit.json", "--report", tmp_path / "rep"],
+            "No space left")
