@@ -74,7 +74,7 @@ def _resample(t: np.ndarray, ts: np.ndarray, inside: np.ndarray, right: np.ndarr
     its validity: both neighbours valid and ``ts`` within the record; NaN elsewhere."""
     ok = ok & np.isfinite(x)
     both = ok[right - 1] & ok[right] & inside
-    out = np.interp(ts, t[ok], x[ok]) if ok.sum() >= 2 else np.array(x, float, copy=True)
+    out = np.interp(ts, t[ok], x[ok]) if ok.sum() >= 2 else np.full(ts.shape, np.nan)
     out[~both] = np.nan
     return out, both
 
