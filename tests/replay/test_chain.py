@@ -228,3 +228,26 @@ def test_each_block_carries_what_the_envelope_needs(lagged):
     # calibrated rates of both IMUs agree with the true rate along the axes (≈ 1 °/s noise)
     err = blk.rates[ok[:, 0], 0] - (f.omega_true[:B][ok[:, 0]] @ s.H[0])
     assert np.sqrt(np.mean(err ** 2)) < np.radians(2.0)
+
+
+def test_a_maps_auxiliary_channels_move_with_their_imu(lagged, tmp_path):
+    """write_flight_log's accelerometer channels (each applied to one IMU's sensors) move
+    with that IMU; the replay with them gives the same statistics as without the map's
+    auxiliary channels (the gyro samples do not depend on them here: no effect terms)."""
+    from replay.channel_map import default_channel_map
+
+    f, cal = lagged
+    log = tmp_path / "aux.log"
+    aux = write_flight_log(f, log)
+    s = cal.kind("gyro")
+    cmap = default_channel_map(s.n, axes=s.H_nominal, names=tuple(c.name for c in s.sensors),
+                               auxiliary=aux)
+    ch = chain_for_map(cal, cmap)
+    from replay.chain import moved_aux
+    assert moved_aux(ch) == ["accel:imu2.x", "accel:imu2.y", "accel:imu2.z"]
+    db, _ = resolve_map(cal)
+    rep = report_log(ch, LogStream(log, cal, db, cmap, progress=False), f)
+    assert rep["time_offsets_aux_moved"] == ["accel:imu2.x", "accel:imu2.y", "accel:imu2.z"]
+    assert rep["frames"]["rejected"].get("unknown_id", 0) == 0
+    _, plain, _ = _stream_report(log, cal)
+    assert [e["t"] for e in rep["events"]] == [e["t"] for e in plain["events"]]
