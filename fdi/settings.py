@@ -218,6 +218,17 @@ class MonitorSettings:
         takes 35 rad/s (2000 °/s) for gyros and 160 m/s² (16 g) for accelerometers.
     missed_detection : float or None
         Missed-detection probability for the protection level; None takes the thresholds'.
+    wrong_exclusion : float
+        Risk that one isolation decision excludes a healthy sensor while another one is
+        faulty (:func:`fdi.isolation.decide`). Decisions are taken when a longer window lies
+        wholly within the detection (at most one per window scale, then one per longest
+        window), so the risk per fault episode is at most this times the number of scales
+        plus one per longest window the episode lasts.
+    isolation_ratio : float
+        A set is reported able to isolate ("isolate") only when every pair of healthy
+        sensors can be told apart from a bias at most this many times the largest
+        detectable bias (:func:`fdi.reconstruction.isolation_sizes`); otherwise it detects,
+        reports which sensors disagree and never excludes on the parity.
     """
 
     persistence: int = 3
@@ -230,8 +241,14 @@ class MonitorSettings:
     raw_range: tuple[float, float] | None = None
     max_input: float | None = None
     missed_detection: float | None = None
+    wrong_exclusion: float = 1e-7
+    isolation_ratio: float = 10.0
 
     def __post_init__(self) -> None:
+        if not 0.0 < self.wrong_exclusion < 0.5:
+            raise ConfigError("wrong_exclusion must lie in (0, 0.5)")
+        if not (self.isolation_ratio >= 1.0 and math.isfinite(self.isolation_ratio)):
+            raise ConfigError("isolation_ratio must be finite and >= 1")
         if int(self.persistence) < 1:
             raise ConfigError("persistence must be >= 1 sample")
         if not 0.0 < self.clear_ratio <= 1.0:
