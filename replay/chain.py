@@ -41,11 +41,11 @@ from fdi.calfile import Calibration
 from fdi.effects import Compensator
 from fdi.effects_monitor import CompensatedMonitor
 from fdi.monitor import Monitor
-from replay.channel_map import ChannelMap
+from replay.channel_map import ChannelMap, aux_assignment
 from replay.effect_inputs import (
-    accel_triads,
     flight_effect_inputs,
     map_available,
+    map_effect_inputs,
     map_reasons,
     row_inputs,
     stream_inputs,
@@ -239,9 +239,35 @@ class MonitorChain:
         """What the envelope is decided from, for the samples of ``piece``."""
         raw = np.asarray(piece.raw, float)
         rates = np.where(np.asarray(piece.valid, bool), raw * self._sf - self._b, np.nan)
-        imus, accel = accel_triads(piece)
+        imus, accel = self._accel(piece)
         return ChainBlock(t=np.asarray(piece.t, float), rates=rates, accel=accel,
                           accel_imus=imus, piece=piece)
+
+    def _accel(self, piece: Flight) -> tuple[tuple[str, ...], np.ndarray | None]:
+        """Each IMU's specific force (B, k, 3) m/s²: a flight's accelerometer triads
+        (:func:`replay.envelope.flight_accel`), or a map's auxiliary channels resolved onto
+        the body axes (:func:`replay.effect_inputs.map_effect_inputs`, the first sensor of
+        each IMU that has one)."""
+        if self.cmap is None:
+            from replay.envelope import flight_accel
+
+            acc = flight_accel(piece)
+            if acc is None:
+                return (), None
+            imu = piece.aux.select("accel").imu
+            return tuple(g for g in dict.fromkeys(imu) if imu.count(g) == 3), acc
+        aux = getattr(piece.aux, "values", None)
+        force, _ = map_effect_inputs(self.cmap, aux)
+        if force is None:
+            return (), None
+        has = aux_assignment(self.cmap)["specific_force"]
+        first: dict[str, int] = {}
+        for i, g in enumerate(self.groups):
+            if g and has[i] and g not in first:
+                first[g] = i
+        if not first:
+            return (), None
+        return tuple(first), force[:, list(first.values()), :]
 
     def _inputs(self, piece: Flight) -> dict[str, np.ndarray]:
         """``force`` / ``temperature`` of the compensated monitor for these samples."""

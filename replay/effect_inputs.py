@@ -33,8 +33,8 @@ import numpy as np
 from replay.channel_map import ChannelMap, aux_assignment
 from replay.flight_data import Flight
 
-__all__ = ["accel_triads", "flight_effect_inputs", "map_available", "map_effect_inputs",
-           "map_reasons", "row_inputs", "stream_inputs"]
+__all__ = ["flight_effect_inputs", "map_available", "map_effect_inputs", "map_reasons",
+           "row_inputs", "stream_inputs"]
 
 _AXES = ("x", "y", "z")
 
@@ -55,16 +55,6 @@ def _triads(flight: Flight) -> dict[str, np.ndarray]:
     return {g: np.where(aux.valid[:, [c[a] for a in _AXES]],
                         aux.values[:, [c[a] for a in _AXES]], np.nan)
             for g, c in cols.items() if all(a in c for a in _AXES)}
-
-
-def accel_triads(flight: Flight) -> tuple[tuple[str, ...], np.ndarray | None]:
-    """Each IMU's accelerometer triad: the IMUs (groups, or name prefixes of channels of no
-    IMU) and their triads, shape (N, k, 3) in m/s² (NaN where invalid); ``((), None)``
-    without a complete triad."""
-    tri = _triads(flight)
-    if not tri:
-        return (), None
-    return tuple(tri), np.stack(list(tri.values()), axis=1)
 
 
 def _flight_force(flight: Flight, groups: list[str]) -> np.ndarray | None:

@@ -65,15 +65,17 @@ def test_empty_block_has_the_widths_of_the_block_path(cal):
 
 
 def test_a_new_field_flows_through(cal, monkeypatch):
+    """A field added to both Answer and BlockResult is stacked without an edit of
+    fdi.blocks (a per-sample code and a per-axis flag here)."""
     @dataclasses.dataclass(frozen=True)
     class A2(Answer):
-        envelope: int = 0
-        unverified: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(3, bool))
+        novel_code: int = 0
+        novel_flags: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(3, bool))
 
     @dataclasses.dataclass(frozen=True)
     class B2(BlockResult):
-        envelope: np.ndarray | None = None
-        unverified: np.ndarray | None = None
+        novel_code: np.ndarray | None = None
+        novel_flags: np.ndarray | None = None
 
     monkeypatch.setattr(blocks, "Answer", A2)
     monkeypatch.setattr(blocks, "BlockResult", B2)
@@ -83,20 +85,19 @@ def test_a_new_field_flows_through(cal, monkeypatch):
     for k in range(f.t.size):
         a = mon.step(float(f.t[k]), f.raw[k], f.valid[k])
         answers.append(A2(**{x.name: getattr(a, x.name) for x in dataclasses.fields(Answer)},
-                          envelope=k % 3, unverified=np.array([k % 2 == 0, False, True])))
+                          novel_code=k % 3, novel_flags=np.array([k % 2 == 0, False, True])))
     b = block_from_answers(answers, mon.n, mon.K)
-    assert b.envelope.dtype == np.int64 and b.envelope.tolist() == [k % 3 for k in
-                                                                    range(f.t.size)]
-    assert b.unverified.dtype == bool and b.unverified.shape == (f.t.size, 3)
+    assert b.novel_code.dtype == np.int64
+    assert b.novel_code.tolist() == [k % 3 for k in range(f.t.size)]
+    assert b.novel_flags.dtype == bool and b.novel_flags.shape == (f.t.size, 3)
+    assert b.novel_flags[:, 0].tolist() == [k % 2 == 0 for k in range(f.t.size)]
     e = block_from_answers([], mon.n, mon.K)
-    assert e.envelope.shape == (0,) and e.envelope.dtype == np.int64
-    assert e.unverified.shape == (0, 3) and e.unverified.dtype == bool
+    assert e.novel_code.shape == (0,)      # an unknown field: one value per sample
 
 
 def test_one_capability_table():
     assert state.CAPABILITY_CODE is CAPABILITY_CODE
     assert list(CAPABILITY_CODE) == list(CAPABILITIES)
-    assert kernel._ISOLATE == CAPABILITY_CODE["isolate"]
     assert kernel._NONE == CAPABILITY_CODE["none"]
     codes = np.array([CAPABILITY_CODE[c] for c in CAPABILITIES])
     assert capability_names(codes).tolist() == list(CAPABILITIES)

@@ -251,3 +251,24 @@ def test_a_maps_auxiliary_channels_move_with_their_imu(lagged, tmp_path):
     assert rep["frames"]["rejected"].get("unknown_id", 0) == 0
     _, plain, _ = _stream_report(log, cal)
     assert [e["t"] for e in rep["events"]] == [e["t"] for e in plain["events"]]
+
+
+def test_an_envelope_tracker_in_the_chain_gives_its_codes_to_the_monitor(lagged):
+    """The chain's per-block seam: an EnvelopeTracker given to the chain sees the moved
+    samples' calibrated rates and accelerometer triads, and its codes reach the answers
+    (the codes flight_envelope gives on the moved flight)."""
+    from fdi.envelope import SHOCK, EnvelopeTracker
+    from replay.envelope import flight_envelope
+
+    f, cal = lagged
+    vals = f.aux.values.copy()
+    acc = [j for j, k in enumerate(f.aux.kinds) if k == "accel"]
+    vals[300:306, acc] = 300.0                                 # a shock of ~50 g
+    f = replace(f, aux=replace(f.aux, values=vals))
+    moved, _ = apply_time_offsets(f, cal)
+    want = flight_envelope(moved, cal)
+    assert (want & SHOCK).any()
+    tr = EnvelopeTracker(H=cal.gyro.H, groups=list(f.imu_groups().values()))
+    res, rep = run_flight(chain_for_flight(f, cal, ChainOptions(envelope=tr)), f)
+    np.testing.assert_array_equal(res.envelope, want)
+    assert any(e["type"] == "envelope" for e in rep["events"])
