@@ -137,7 +137,6 @@ class MonitorChain:
         self.thresholds_how = thresholds_how
         self.recorder: Any = None
         self.last_answers: list[Answer] = []
-        self.timing = {"monitor": 0.0}
         comp = getattr(monitor, "compensator", None)
         self._needs_inputs = comp is not None and bool(
             comp.needs & {"specific_force", "temperature"})
@@ -283,7 +282,6 @@ class MonitorChain:
         self.last_answers = []
         if piece is None or piece.t.shape[0] == 0:
             return None
-        t1 = time.perf_counter()
         kw = self._inputs(piece)
         if self.envelope is not None:
             # the operating envelope of these samples (fdi.envelope): context for the
@@ -296,7 +294,6 @@ class MonitorChain:
             result = self._step(piece, kw, on_event)
         else:
             result = self.monitor.run(piece.t, piece.raw, piece.valid, **kw)
-        self.timing["monitor"] += time.perf_counter() - t1
         if self.report is not None:
             self.report.update(result, piece.omega_true)
         if self.recorder is not None:
