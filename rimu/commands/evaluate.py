@@ -122,7 +122,8 @@ def run(args: argparse.Namespace) -> int:
     kinds = _kinds(args.faults)
     cal = load_calibration(args.cal)
     choice = select(cal, kind=args.kind, thresholds_file=args.thresholds,
-                    false_alarms_per_hour=args.false_alarms_per_hour)
+                    false_alarms_per_hour=args.false_alarms_per_hour,
+                    calibration_file=args.cal)
     thr = choice.thresholds
     if args.corpus:
         items = _corpus_items(args.corpus)
