@@ -74,6 +74,9 @@ def _plots(res: dict[str, Any]) -> list[str]:
     fig, axs = plt.subplots(2, 1, figsize=(8, 5.5))
     for ax, (fl, s) in zip(axs, sorted(res["_series"].items()), strict=True):
         t, r, env = np.asarray(s["t"]), np.asarray(s["ratio"]), np.asarray(s["envelope"])
+        gap = np.flatnonzero(np.diff(t) > 0.5) + 1            # no line across a gap
+        t, r = np.insert(t, gap, np.nan), np.insert(r, gap, np.nan)
+        env = np.insert(env, gap, 0)
         ax.semilogy(t, np.where(r > 0, r, np.nan), lw=0.6, color="C0",
                     label="largest statistic / threshold")
         ax.axhline(1.0, color="k", lw=0.8, ls="--")
@@ -107,6 +110,8 @@ def _plots(res: dict[str, Any]) -> list[str]:
         ax.axhline(FAULT_S * 1.3, color="grey", lw=0.5)
         ax.set_title(f"flight {fl}: detection delay (top line: missed)", fontsize=9)
         ax.set_xlabel("fault size reached (deg/s)")
+        ax.set_xticks([1, 2, 5, 10], ["1", "2", "5", "10"])
+        ax.minorticks_off()
     axs[0].set_ylabel("delay (s)")
     axs[0].legend(fontsize=7)
     fig.tight_layout()
@@ -218,6 +223,7 @@ def _injection_table(res: dict, key: str = "injection") -> list[str]:
 
 def _markdown(doc: dict, images: list[str]) -> str:
     now, before = doc["current"], doc.get("baseline")
+    runs = [("before", before), ("now", now)] if before and before != now else [("now", now)]
     L = ["# The monitor on measured data (issue 17)", "",
          "Written by `docs/make_field_results.py` from `thresholds.field.field_results` "
          f"(commit {now['commit']}, {now['elapsed_s']:.0f} s); the numbers are in "
@@ -239,11 +245,13 @@ def _markdown(doc: dict, images: list[str]) -> str:
           "≈ 1 expected alarm (zero alarms would then show the rate is below 3× the target "
           "at 95 %); intervals are exact Poisson (Garwood) 95 % intervals; *flying time* "
           "runs from the first to the last sample turning faster than 0.1 rad/s.", "",
-          f"Out-of-envelope periods: {now['envelope_source']}.", "",
+          "Out-of-envelope periods: " + "; ".join(
+              f"flight {k}: {f['from_start'][-1]['envelope_source']}"
+              for k, f in sorted(now["flights"].items())) + ".", "",
           "## From the start of the log, as a user runs it", "",
           "Calibrated on the whole flight, monitored from its first sample, with the "
           "default thresholds of `rimu monitor-file` and with `rimu tune` at 1 per hour.", ""]
-    for lab, r in (("before", before), ("now", now)):
+    for lab, r in runs:
         if r:
             L += [f"**{lab}**", "", *_start_table(r), ""]
     L += ["![statistic over time](img/field_statistic.png)", "",
@@ -293,7 +301,7 @@ def _markdown(doc: dict, images: list[str]) -> str:
         L.append(f"- flight {k}: onsets {', '.join(f'{x:.1f}' for x in inj['onsets_s'])} s; "
                  f"detectable {inj['detectable_dps']:.2f} °/s (smallest over the scales)")
     L.append("")
-    for lab, r in (("before", before), ("now", now)):
+    for lab, r in runs:
         if r:
             L += [f"**{lab}, monitor from the first sample of the log** (the Must-hold runs)",
                   "", *_injection_table(r), ""]
@@ -326,7 +334,14 @@ def main(argv: list[str] | None = None) -> int:
                    help="store this run as the baseline ('before') too")
     p.add_argument("--no-plots", action="store_true")
     p.add_argument("--no-progress", action="store_true")
+    p.add_argument("--markdown-only", action="store_true",
+                   help="rewrite field-results.md from field-results.json (no computation)")
     args = p.parse_args(argv)
+    if args.markdown_only:
+        doc = json.loads(JSON_PATH.read_text(encoding="utf-8"))
+        MD_PATH.write_text(_markdown(doc, []), encoding="utf-8")
+        print(f"wrote {MD_PATH}")
+        return 0
     t0 = time.perf_counter()
     res = field_results(data_dir(args.data), progress=not args.no_progress)
     res["elapsed_s"] = time.perf_counter() - t0

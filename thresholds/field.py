@@ -374,10 +374,10 @@ def _ratio(res: Any) -> np.ndarray:
 
 # --------------------------------------------------------------------------- injection
 def calm_onsets(flight: Flight, cal: Calibration, env: np.ndarray, *, count: int = 3,
-                length_s: float = FAULT_S, lead_s: float = 10.0) -> list[float]:
-    """Onsets of calm stretches in flight: ``length_s`` after the onset (and 2 s before)
-    inside the envelope, without a gap, at least ``lead_s`` after the first sample; the
-    ``count`` stretches with the least specific-force variation, ``length_s`` apart.
+                length_s: float = FAULT_S, lead_s: float = LOCAL_START_S) -> list[float]:
+    """Onsets of calm stretches in flight: from ``lead_s`` before the onset to ``length_s``
+    after it in flight, inside the envelope and without a gap; the ``count`` stretches with
+    the least specific-force variation, ``length_s`` apart.
 
     Chosen from the data only (never from the monitor's output).
     """
@@ -394,7 +394,7 @@ def calm_onsets(flight: Flight, cal: Calibration, env: np.ndarray, *, count: int
         t0 = t[k]
         if t0 - t[0] < lead_s:
             continue
-        w = (t >= t0 - 2.0) & (t < t0 + length_s)
+        w = (t >= t0 - lead_s) & (t < t0 + length_s)
         if t0 + length_s > t[-1] or not fly[w].all() or env[w].any() or gap[w][1:].any():
             continue
         cands.append((float(np.std(mag[w])), float(t0)))
