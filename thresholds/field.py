@@ -427,7 +427,8 @@ def inject_flight(flight: Flight, cal: Calibration, thresholds: Any, detectable:
 
     Each run starts at the first sample of the flight, or with ``start_before_s`` that long
     before the onset (a monitor started in the calm stretch: its isolation logic without
-    what happened earlier in the flight).
+    what happened earlier in the flight). The same stretch is monitored without the fault;
+    its alarms are false alarms and do not count as detections.
     """
     from replay.scenario import apply_faults
 
@@ -439,15 +440,16 @@ def inject_flight(flight: Flight, cal: Calibration, thresholds: Any, detectable:
     det_dps = float(min(d.size_unit_value for d in detectable))
     rows = []
     for onset in onsets:
+        k0 = 0 if start_before_s is None else int(np.searchsorted(flight.t,
+                                                                  onset - start_before_s))
+        clean = run_monitor(_part(flight, slice(k0, None)), cal, thresholds, codes[k0:])
+        known = {(e.t, e.type, e.sensor) for e in clean.events}
         for label, size, f in _faults(flight.n, onset):
             raw, valid = apply_faults(flight.t, flight.raw, flight.valid, [f], cal,
                                       kind=flight.kind)
-            run, c = replace(flight, raw=raw, valid=valid), codes
-            if start_before_s is not None:
-                k0 = int(np.searchsorted(flight.t, onset - start_before_s))
-                run, c = _part(run, slice(k0, None)), codes[k0:]
-            res = run_monitor(run, cal, thresholds, c)
-            rows.append(_outcome(res, f, label, size, det_dps, s.H, groups))
+            run = _part(replace(flight, raw=raw, valid=valid), slice(k0, None))
+            res = run_monitor(run, cal, thresholds, codes[k0:])
+            rows.append(_outcome(res, f, label, size, det_dps, s.H, groups, known))
             if progress:
                 progress()
     return {"rows": rows, "onsets_s": list(onsets), "detectable_dps": det_dps,
@@ -459,11 +461,15 @@ def inject_flight(flight: Flight, cal: Calibration, thresholds: Any, detectable:
 
 
 def _outcome(res: Any, f: Fault, label: str, size: float, det_dps: float, H: np.ndarray,
-             groups: tuple[str, ...]) -> dict[str, Any]:
+             groups: tuple[str, ...], known: set[tuple[float, str, int | None]]
+             ) -> dict[str, Any]:
+    """One faulted run against the clean run of the same stretch: an alarm the clean run
+    also raised (same sample, type and sensor: a false alarm) does not count as detection."""
     t = np.asarray(res.t, float)
     i = f.sensor
-    after = [e for e in res.events if e.type in ALARM_EVENTS
-             and f.onset - 1e-9 <= e.t < f.onset + FAULT_S]
+    window = [e for e in res.events if e.type in ALARM_EVENTS
+              and f.onset - 1e-9 <= e.t < f.onset + FAULT_S]
+    after = [e for e in window if (e.t, e.type, e.sensor) not in known]
     first = after[0] if after else None
     excl = [e for e in res.events if e.type in EXCLUDING_EVENTS and e.sensor is not None]
     wrong = sorted({e.sensor for e in excl if e.sensor != i})
@@ -484,6 +490,7 @@ def _outcome(res: Any, f: Fault, label: str, size: float, det_dps: float, H: np.
             "detected": first is not None,
             "delay_s": None if first is None else float(first.t - f.onset),
             "first_event": None if first is None else first.type,
+            "false_alarm_in_window": len(window) > len(after),
             "wrong_exclusions": wrong, "wrong_exclusions_after_onset": wrong_after,
             "first_exclusion": None if first_iso is None else first_iso.sensor,
             "first_exclusion_healthy": first_iso is not None and first_iso.sensor != i,
