@@ -155,7 +155,8 @@ def _f(x: Any, fmt: str = ".3g") -> str:
 def _holds_table(now: dict, before: dict | None) -> list[str]:
     mh_now = must_hold(now)
     if not before or before == now:
-        out = ["| must hold (issue 17) | holds |", "| --- | --- |"]
+        col = "baseline (before issue 17)" if before else "holds"
+        out = [f"| must hold (issue 17) | {col} |", "| --- | --- |"]
         return out + [f"| {c} | {'yes' if h else '**no**'}: {d} |" for c, h, d in mh_now]
     mh_before = {c: (h, d) for c, h, d in must_hold(before)}
     out = ["| must hold (issue 17) | before | now |", "| --- | --- | --- |"]
@@ -227,13 +228,15 @@ def _injection_table(res: dict, key: str = "injection") -> list[str]:
 
 def _markdown(doc: dict, images: list[str]) -> str:
     now, before = doc["current"], doc.get("baseline")
-    runs = [("before", before), ("now", now)] if before and before != now else [("now", now)]
+    runs = ([("before", before), ("now", now)] if before and before != now
+            else [("baseline (before issue 17)" if before else "now", now)])
     L = ["# The monitor on measured data (issue 17)", "",
          "Written by `docs/make_field_results.py` from `thresholds.field.field_results` "
          f"(commit {now['commit']}, {now['elapsed_s']:.0f} s); the numbers are in "
          "`docs/field-results.json`, the slow test `tests/thresholds/test_field_results.py` "
-         "recomputes them and checks the list below. *Before* is the run on the code before "
-         f"issue 17 (commit {before['commit'] if before else '–'}); *now* is this run.", "",
+         "recomputes them and checks the list below. *Before* (the baseline) is the run on "
+         f"the code before issue 17 (commit {before['commit'] if before else '–'}); *now* is "
+         "this run.", "",
          "Recordings: two ArduCopter flights with two IMUs on one board (41: heavy "
          "vibration, crash; 83: clean, cut at the end), read as `rimu ingest --salvage` reads "
          "them; four MPU9250 IMUs at rest for 16 min. The flights are calibrated in flight "
