@@ -621,9 +621,13 @@ def must_hold(res: dict[str, Any]) -> list[tuple[str, bool, str]]:
                 f"{len(wrong)} of {len(inj)} runs excluded a healthy sensor"))
     due = [r for _, r in inj if r["at_or_above_detectable"]]
     missed = [r for r in due if not r["detected"]]
+    stated = ", ".join(f"{k}: {f['injection']['detectable_dps']:.3g} deg/s"
+                       for k, f in fl.items())
     out.append((f"injected faults at or above the detectable size: detected within "
                 f"{FAULT_S:g} s", bool(due) and not missed,
-                f"{len(missed)} missed of {len(due)}"))
+                f"{len(missed)} missed of {len(due)}" if due else
+                f"no injected fault reaches the detectable size rimu tune states ({stated}): "
+                f"nothing shown"))
     s10 = [r for _, r in inj if r["fault"] == "step 10 deg/s"]
     late = [r for r in s10 if not r["detected"] or r["delay_s"] > 1.0]
     out.append(("10 deg/s step on any axis of either IMU: detected within 1 s",
