@@ -266,10 +266,10 @@ def _markdown(doc: dict, images: list[str]) -> str:
           "Each recording is cut in the middle; calibrated and tuned on one half, counted on "
           "the other outside the out-of-envelope periods, both ways round.", ""]
     for k, f in sorted(now["flights"].items()):
-        L += [f"**flight {k}** (now; cut at {f['holdout']['split_at_s']:.1f} s)", ""]
+        L += [f"**flight {k}** ({runs[-1][0]}; cut at {f['holdout']['split_at_s']:.1f} s)", ""]
         L += [*_holdout_table(f["holdout"]["rows"]), ""]
     st = now["static_4x_mpu9250"]
-    L += [f"**4× MPU9250 at rest** (now; {st['duration_s']:.0f} s at "
+    L += [f"**4× MPU9250 at rest** ({runs[-1][0]}; {st['duration_s']:.0f} s at "
           f"{st['sample_rate_hz']:.1f} Hz, isolation on)", ""]
     L += [*_holdout_table(st["rows"]), ""]
     w = st["whole_record_1_per_hour"]
