@@ -182,8 +182,10 @@ def test_thresholds_of_another_rate_or_calibration_are_refused(lagged, tmp_path,
     with pytest.raises(ConfigError, match=r"t\.json: thresholds made for 100 Hz, the "
                                           r"calibration c\.json is at 50 Hz"):
         check_made_for(replace(thr, sample_rate_hz=100.0), cal, "t.json", "c.json")
+    check_made_for(thr, cal, "t.json", "c.json")       # /2 made for this calibration
+    old = replace(thr, calibration_fingerprint="")      # as a /1 file loads
     with caplog.at_level(logging.WARNING, logger="rimu"):
-        check_made_for(thr, cal, "t.json", "c.json")   # /1: no fingerprint, warned
+        check_made_for(old, cal, "t.json", "c.json")   # /1: no fingerprint, warned
     assert [r.getMessage() for r in caplog.records if "fingerprint" in r.getMessage()]
     # through monitor-file: one line naming both files, exit 2, no report
     folder = tmp_path / "f"
