@@ -659,7 +659,8 @@ IMPLAUSIBLE_ALPHA = 1e-9
 
 
 def check_compatible(cal: Calibration, n_sensors: int, raw_unit: Any, source: str, *,
-                     kind: str = "gyro", names: Any = None) -> None:
+                     kind: str = "gyro", names: Any = None,
+                     cal_source: str | None = None) -> None:
     """Refuse data that the calibration cannot describe (sensor count, raw unit).
 
     Parameters
@@ -676,6 +677,8 @@ def check_compatible(cal: Calibration, n_sensors: int, raw_unit: Any, source: st
         ``"gyro"`` or ``"accel"``.
     names : sequence of str, optional
         The data's sensor names (only used in the message).
+    cal_source : str, optional
+        The calibration's file, named in the message beside its configuration.
 
     Raises
     ------
@@ -683,7 +686,8 @@ def check_compatible(cal: Calibration, n_sensors: int, raw_unit: Any, source: st
         One line naming ``source``, the calibration and what disagrees.
     """
     s = cal.kind(kind)
-    where = f"calibration of {cal.configuration}"
+    where = (f"calibration {cal_source} ({cal.configuration})" if cal_source
+             else f"calibration of {cal.configuration}")
     if int(n_sensors) != s.n:
         raise ConfigError(f"{source}: {int(n_sensors)} {kind} sensors, the {where} has {s.n}: "
                           "a calibration only applies to the sensor set it was made for")

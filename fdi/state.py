@@ -42,6 +42,8 @@ from dataclasses import dataclass
 import numpy as np
 from numba.extending import register_jitable
 
+from fdi.blocks import CAPABILITY_CODE as _CAPABILITY_CODE
+
 __all__ = [
     "CAPABILITY_CODE",
     "DetectorState",
@@ -70,7 +72,9 @@ F_SLOTS = 12
 DF, N_WINDOWS, HAS_CUSUM, CAPABILITY, HAS_OMEGA, STUCK_COUNT, PERSISTENCE, CLEAR_SAMPLES, \
     READMISSION, N_SENSORS, ASK_ISOLATE = range(11)
 I_SLOTS = 11
-CAPABILITY_CODE = {"isolate": 0, "detect": 1, "reconstruct": 2, "none": 3}
+CAPABILITY_CODE = _CAPABILITY_CODE
+"""Capability name → code: :data:`fdi.blocks.CAPABILITY_CODE` (positions in the one table,
+:data:`fdi.answer.CAPABILITIES`)."""
 
 # ---------------------------------------------------------------- cusum (4, n)
 S_UP, MIN_UP, S_DOWN, MIN_DOWN = range(4)

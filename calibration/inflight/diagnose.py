@@ -317,8 +317,9 @@ def _effect_record(c: Any, s: slice, fit: Any, g: str, sensors: list[int],
     known = cal.extra.get("inflight", {}).get("imus", {}).get(g, {})
     if c.name == "time_skew" and "time_offset_ms" in known:
         rec["detail"] = (f"the calibration records {known['time_offset_ms']:+.3f} ± "
-                         f"{known['time_offset_ms_sd']:.3f} ms for {g}; the monitor does not "
-                         f"shift samples, so it stays in the residual")
+                         f"{known['time_offset_ms_sd']:.3f} ms for {g}; the monitor moves the "
+                         f"samples by it (unless --no-time-offsets), this diagnosis does "
+                         f"not, so it stays in this residual")
     return rec
 
 

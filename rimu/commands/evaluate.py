@@ -156,7 +156,8 @@ def run(args: argparse.Namespace) -> int:
     out = output_dir(args.out, "--out", inputs=(args.corpus, args.cal, args.thresholds))
     cal = load_calibration(args.cal)
     choice = select(cal, kind=args.kind, thresholds_file=args.thresholds,
-                    false_alarms_per_hour=args.false_alarms_per_hour)
+                    false_alarms_per_hour=args.false_alarms_per_hour,
+                    calibration_file=args.cal)
     thr = choice.thresholds
     if args.corpus:
         items = _corpus_items(args.corpus)
