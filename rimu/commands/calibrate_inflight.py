@@ -13,6 +13,7 @@ import numpy as np
 
 from calibration.inflight.calfile import calibration_from_fit
 from calibration.inflight.fit import MODELS, fit_inflight
+from calibration.inflight.offset_check import check_lines
 from replay.flight_io import load_flight_dir
 
 __all__ = ["configure_options", "run", "summary_text"]
@@ -54,7 +55,10 @@ def summary_text(doc: dict) -> str:
                      f"{r['time_offset_ms_sd']:.3f} ms; residual rms [" + ", ".join(
                          f"{x:.3g}" for x in r["residual_rms_dps"]) + f"] deg/s; HAC lags "
                      f"{r['hac_lags']}")
+        lines.extend(f"      {x}" for x in check_lines(r.get("time_offset_check") or {}))
         lines.extend(f"      note: {n}" for n in r["notes"])
+    if doc.get("time_offset_sign"):
+        lines.append(f"  sign: {doc['time_offset_sign']}")
     return "\n".join(lines)
 
 

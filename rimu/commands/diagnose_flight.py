@@ -20,8 +20,23 @@ def format_text(doc: dict) -> str:
     lines = [f"diagnosis of {doc['source']} against {doc['reference']} "
              f"({doc['samples_used']} of {doc['samples']} samples; alpha {doc['alpha']:g}, "
              f"{doc['correction']}, {doc['candidates']} candidates)"]
+    lines.extend(f"  warning: {w}" for w in doc.get("warnings", []))
     for s in doc["left_out"]:
-        lines.append(f"  left out {s['t0_s']:.2f}-{s['t1_s']:.2f} s: {s['reason']}")
+        lines.append(f"  left out {s['t0_s']:.2f}-{s['t1_s']:.2f} s: {s['reason']}"
+                     + (f" ({s['detail']})" if s.get("detail") else ""))
+    lines.append("  (the same samples the in-flight calibration used)")
+    for tm in doc.get("timing", []):
+        head = (f"  time offset {tm['imu']}: calibration {tm['calibration_ms']:+.3f} ± "
+                f"{tm['calibration_sd_ms']:.3f} ms applied; ")
+        if tm["left"]:
+            lines.append(head + f"left {tm['left_ms']:+.3f} ± {tm['left_sd_ms']:.3f} ms "
+                         f"(p={tm['p_value']:.2g}), total {tm['total_ms']:+.3f} ms, "
+                         f"{tm['apart_in_combined_sd']:.1f} combined sd from the calibration")
+        else:
+            lines.append(head + f"nothing left ({tm['left_ms']:+.3f} ± {tm['left_sd_ms']:.3f}"
+                         f" ms, p={tm['p_value']:.2g})")
+    if doc.get("time_offset_sign"):
+        lines.append(f"  sign: {doc['time_offset_sign']}")
     if not doc["effects"]:
         lines.append("  no effect found")
     for e in doc["effects"]:
@@ -31,7 +46,16 @@ def format_text(doc: dict) -> str:
                 + "]"
         else:
             val = f"{est:+.4g} ± {sd:.2g}"
-        lines.append(f"  {e['name']:<18s} {e['imu']}: {val} {e['unit']} (p={e['p_value']:.2g})")
+        if e.get("matrix"):
+            m = e["matrix"]
+            lines.append(f"  {e['name']:<18s} {e['imu']}: [{m['unit']}] (p={e['p_value']:.2g})")
+            lines.append("      " + " " * 16 + "".join(f"{c:>22s}" for c in m["cols"]))
+            for rn, vr, sr in zip(m["rows"], m["values"], m["sd"], strict=True):
+                lines.append(f"      {rn:<16s}" + "".join(
+                    f"{f'{v:+.3g} ± {q:.2g}':>22s}" for v, q in zip(vr, sr, strict=True)))
+        else:
+            lines.append(f"  {e['name']:<18s} {e['imu']}: {val} {e['unit']} "
+                         f"(p={e['p_value']:.2g})")
         if e.get("detail"):
             lines.append(f"      {e['detail']}")
     b, a = doc["error_before"], doc["error_after"]
