@@ -10,9 +10,10 @@ colour from one stretch to the next, and the lag between two IMUs' samples can m
   ``s_t = Σ_c X[t, c, :]·e[t, c]``; the fit is linear at convergence, so
   ``β̂* − β̂ = M⁻¹·Σ s*_t``): the sd of τ when the residual is correlated over seconds.
 - **Independent pieces**: the used samples are cut into :data:`PIECES` contiguous pieces
-  of equal size, each fitted on its own (same model, its own HAC sd; a piece whose motion
-  does not excite the gain matrix on its own is fitted with the whole flight's gain held
-  and its own bias and τ). Their weighted mean
+  of equal size (fewer when a piece would be shorter than :data:`PIECE_MIN_S`), each
+  fitted on its own (same model, its own HAC sd; a piece whose motion does not excite the
+  gain matrix on its own is fitted with the whole flight's gain held and its own bias
+  and τ). Their weighted mean
   ``τ̄`` and ``χ² = Σ (τ_k − τ̄)²/σ_k²`` on ``K − 1`` degrees of freedom test whether one
   offset explains every piece; the external sd of the mean
   ``σ_ext = σ_int·sqrt(χ²/dof)`` (``σ_int = (Σ 1/σ_k²)^(-1/2)``) is the scatter of the
@@ -36,13 +37,16 @@ from collections.abc import Callable
 import numpy as np
 from scipy import stats
 
-__all__ = ["BLOCK_S", "CONSISTENCY_ALPHA", "PIECES", "SIGN_CONVENTION", "block_bootstrap_sd",
-           "check_lines", "check_offset", "consistency"]
+__all__ = ["BLOCK_S", "CONSISTENCY_ALPHA", "PIECES", "PIECE_MIN_S", "SIGN_CONVENTION",
+           "block_bootstrap_sd", "check_lines", "check_offset", "consistency"]
 
 BLOCK_S = 4.0
 """Length (s) of the moving blocks of the bootstrap (several manoeuvres long)."""
 PIECES = 6
 """Number of contiguous pieces the used samples are cut into for the consistency test."""
+PIECE_MIN_S = 5.0
+"""Shortest piece (s of used samples): fewer pieces when the flight is short (the HAC sd of
+a shorter piece rests on too few lags to be trusted)."""
 CONSISTENCY_ALPHA = 0.01
 """Level of the piece-consistency χ² test."""
 _N_BOOT = 400
@@ -151,8 +155,9 @@ def check_offset(t: np.ndarray, used: np.ndarray, X: np.ndarray, e: np.ndarray,
     block = max(1, round(BLOCK_S * fs))
     sd_boot = float(block_bootstrap_sd(X, e, block)[-1])
     rows = np.flatnonzero(used)
+    k = min(pieces, int(rows.size // max(PIECE_MIN_S * fs, 1)))
     out_p = []
-    for chunk in np.array_split(rows, pieces) if rows.size >= pieces else []:
+    for chunk in np.array_split(rows, k) if k >= 2 else []:
         m = np.zeros(t.shape[0], bool)
         m[chunk] = True
         m &= used
