@@ -104,8 +104,15 @@ def test_corrupt_bytes_in_the_middle(two_imu_log, tmp_path, capsys):
     assert "corrupt" in str(ei.value) and str(bad) in str(ei.value)
     assert f"offset {ends[79]}" in str(ei.value)
     r = read_ardupilot(bad, salvage=True)
-    assert [s.size for s in r.streams] == [80, 80]
-    np.testing.assert_array_equal(r.streams[1].gyro, g[1][:80])
+    # row 80 is lost (its IMU message holds the zeros, its IMU2 header is zeroed); the
+    # reader resynchronises at row 81 and keeps every row after it
+    assert [s.size for s in r.streams] == [199, 199]
+    rows = np.r_[0:80, 81:200]
+    np.testing.assert_array_equal(r.streams[1].gyro, g[1][rows])
+    np.testing.assert_array_equal(r.streams[0].gyro, g[0][rows])
+    (x,) = r.damage.stretches
+    assert (x["start"], x["end"]) == (ends[79], ends[80])
+    assert x["lost"]["imu_samples"] == {"imu1": 1, "imu2": 1}
     assert main(["ingest", str(bad), "--out", str(tmp_path / "o")]) == 2
     assert "corrupt" in capsys.readouterr().err
 
