@@ -351,6 +351,10 @@ def read_ardupilot(path: str | Path, *, salvage: bool = False) -> LogRead:
     fields = {t: _imu_fields(p, r.formats[r.name_to_id[t]], t) for t in types}
     meta: dict[str, Any] = {"messages": {t: int(r.counts[r.name_to_id[t]]) for t in types},
                             "bytes": int(r.data_len)}
+    empty = [t for t in IMU_TYPES if t in r.name_to_id and t not in types]
+    if empty:
+        meta["warnings"] = [f"the log's format declares {t} but holds no {t} sample (that "
+                            f"IMU logged nothing)" for t in empty]
     if damage is None:
         cols = _collect(r, types, fields, r.data_len)
         return LogRead(p, "ardupilot", tuple(_streams(cols, fields)), None, meta)

@@ -55,6 +55,9 @@ def run(args: argparse.Namespace) -> int:
     print(f"wrote {out}: {flight.t.shape[0]} samples of {len(report['imus'])} IMU(s) "
           f"({flight.n} gyro axes) at {tb['sample_rate_hz']:.4g} Hz, "
           f"{tb['t_end_s'] - tb['t_start_s']:.1f} s, {tb['n_gaps']} gap(s)")
+    for rd in reads:
+        for w in rd.meta.get("warnings", []):
+            print(f"  warning: {rd.path}: {w}")
     for imu in report["imus"]:
         dropped = sum(imu["dropped"].values())
         print(f"  {imu['name']} ({imu['source']}): {imu['samples_in']} in, {imu['kept']} kept, "

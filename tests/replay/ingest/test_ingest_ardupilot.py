@@ -205,3 +205,24 @@ def test_monitor_file_takes_the_folder(two_imu_log, tmp_path, capsys):
     assert rc == 0, capsys.readouterr()
     doc = json.loads(rep.read_text())
     assert doc["schema"] == "rimu.report/1"
+
+
+def test_declared_imu_that_logged_nothing_is_warned(tmp_path, capsys):
+    from ingest_helpers import _fmt_msg
+
+    t, g, a = small_imu_data(n=60, k=1)
+    p = tmp_path / "one.BIN"
+    write_dataflash(p, t, g, a)
+    data = p.read_bytes()
+    # the FMT of IMU2 declared (as an ArduPilot log with two IMUs does), no IMU2 sample
+    p.write_bytes(_fmt_msg(0x82, "IMU2", "Iffffff", "TimeMS,GyrX,GyrY,GyrZ,AccX,AccY,AccZ")
+                  + data)
+    r = read_ardupilot(p)
+    assert len(r.streams) == 1
+    assert r.meta["warnings"] == ["the log's format declares IMU2 but holds no IMU2 sample "
+                                  "(that IMU logged nothing)"]
+    out = tmp_path / "o"
+    assert main(["ingest", str(p), "--out", str(out)]) == 0
+    assert "warning:" in capsys.readouterr().out
+    rep = json.loads((out / "ingest_report.json").read_text())
+    assert "IMU2" in rep["meta"]["warnings"][0]
