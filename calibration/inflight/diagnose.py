@@ -117,7 +117,7 @@ def flight_residual(flight: Flight, cal: Calibration, reference: str | None = No
         raise ConfigError(f"{flight.source}: diagnose of a flight needs two or more IMU "
                           f"groups of three gyros (manifest 'imu')")
     ref = reference or str(cal.extra.get("inflight", {}).get("reference", "")) \
-        or next(iter(groups))
+        or str(cal.extra.get("static", {}).get("reference", "")) or next(iter(groups))
     if ref not in groups:
         ref = next(iter(groups))
     y = flight.raw * s.scale_factors - s.biases
@@ -462,10 +462,54 @@ def _timing_record(g: str, chosen: list[_Cand], sl: list[slice], fit: Any,
     known = cal.extra.get("inflight", {}).get("imus", {}).get(g, {})
     csd = float(known.get("time_offset_ms_sd", 0.0)) if "time_offset_ms" in known else 0.0
     comb = math.hypot(csd, dsd)
-    return {"imu": g, "calibration_ms": 1e3 * tau_s, "calibration_sd_ms": csd,
+    return {"imu": g, "calibration_ms": 1e3 * tau_s if "time_offset_ms" in known else None,
+            "calibration_sd_ms": csd,
             "left_ms": d, "left_sd_ms": dsd, "p_value": p, "left": bool(p < alpha_each),
             "total_ms": 1e3 * tau_s + d, "combined_sd_ms": comb,
             "apart_in_combined_sd": abs(d) / comb if comb > 0 else math.inf}
+
+
+def _drift_p1(chosen: list[_Cand], sl: list[slice], fit: Any, cands: list[_Cand],
+              r0: np.ndarray, keep: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """The linear (Legendre P1) drift of the three channels over the record, first to last
+    sample (rad/s), and its HAC covariance, in the final model (with ``bias_drift`` added
+    when it was not chosen)."""
+    names = [c.name for c in chosen]
+    if "bias_drift" in names:
+        f, s = fit, sl[names.index("bias_drift")]
+    else:
+        cand = next((c for c in cands if c.name == "bias_drift"), None)
+        if cand is None:
+            return None
+        base = np.zeros((r0.shape[0], 3, 3))
+        for j in range(3):
+            base[:, j, j] = 1.0
+        X, sls = _design(base, [*chosen, cand])
+        f, s = stacked_lstsq(X[keep], r0[keep]), sls[-1]
+    idx = np.arange(s.start, s.start + 3)              # P1 of x, y, z (module layout)
+    return 2 * f.beta[idx], 4 * f.cov[np.ix_(idx, idx)]
+
+
+def _attribution(p1: dict[str, tuple[np.ndarray, np.ndarray]], groups: dict[str, list[int]],
+                 H: np.ndarray, ref: str, alpha: float) -> dict[str, Any] | None:
+    """Which drift is the reference's: the P1 drifts of the residuals in the body frame
+    (``r_j = D_j − H_j·D_ref``, so ``H_j⁻¹·r_j`` shares ``−D_ref``), through
+    :func:`calibration.inflight.static.attribute_drift`; deg/s."""
+    from calibration.inflight.static import attribute_drift
+
+    if not p1:
+        return None
+    rel, cov = {}, {}
+    for g, (b, C) in p1.items():
+        Hi = np.linalg.pinv(H[groups[g]])
+        rel[g] = Hi @ b
+        cov[g] = Hi @ C @ Hi.T
+    a = attribute_drift(rel, cov, ref, alpha=alpha)
+    return {**a, "common": (np.asarray(a["common"]) / DPS).tolist(),
+            "common_sd": (np.asarray(a["common_sd"]) / DPS).tolist(),
+            "own": {g: {"drift": (np.asarray(v["drift"]) / DPS).tolist(), "z": v["z"]}
+                    for g, v in a["own"].items()},
+            "unit": "deg/s, linear drift over the record (body frame of the reference)"}
 
 
 def _vibration_record(residual: np.ndarray, vibration: np.ndarray, g: str,
@@ -524,6 +568,7 @@ def diagnose_flight(flight: Flight, cal: Calibration, *, alpha: float = 0.01,
     M = sum(len(c) for c in per_imu.values()) + sum(v is not None for v in vib.values())
     alpha_each = alpha / max(M, 1)
     effects, detail, timing = [], [], []
+    p1: dict[str, tuple[np.ndarray, np.ndarray]] = {}
     chans, before, after = [], [], []
     for g, r in res.items():
         r0 = np.nan_to_num(r)
@@ -540,6 +585,9 @@ def diagnose_flight(flight: Flight, cal: Calibration, *, alpha: float = 0.01,
         effects += [grp] if grp is not None else []
         timing.append(_timing_record(g, chosen, sl, fit, per_imu[g], r0, keep, cal,
                                      offsets[g], alpha_each))
+        d1 = _drift_p1(chosen, sl, fit, per_imu[g], r0, keep)
+        if d1 is not None:
+            p1[g] = d1
         if vib[g] is not None:
             rec = _vibration_record(fit.residual, vib[g][keep], g, sensors, alpha_each)
             effects += [rec] if rec is not None else []
@@ -554,6 +602,9 @@ def diagnose_flight(flight: Flight, cal: Calibration, *, alpha: float = 0.01,
             "effects": effects, "unexplained": bool(detail), "unexplained_detail": detail,
             "not_testable": not_testable,
             "timing": timing, "time_offset_sign": SIGN_CONVENTION, "warnings": warnings,
+            "drift_attribution": _attribution(p1, groups, H, ref, alpha),
+            "calibration_kind": ("in-flight" if "inflight" in cal.extra else
+                                 "static" if "static" in cal.extra else "turntable"),
             "error_before": {"unit": "deg/s", "channels": chans, "rms": before},
             "error_after": {"unit": "deg/s", "channels": chans, "rms": after},
             "left_out": [s.to_dict() for s in segs],

@@ -24,10 +24,12 @@ def format_text(doc: dict) -> str:
     for s in doc["left_out"]:
         lines.append(f"  left out {s['t0_s']:.2f}-{s['t1_s']:.2f} s: {s['reason']}"
                      + (f" ({s['detail']})" if s.get("detail") else ""))
-    lines.append("  (the same samples the in-flight calibration used)")
+    if doc.get("calibration_kind") == "in-flight":
+        lines.append("  (the same samples the in-flight calibration used)")
     for tm in doc.get("timing", []):
         head = (f"  time offset {tm['imu']}: calibration {tm['calibration_ms']:+.3f} ± "
-                f"{tm['calibration_sd_ms']:.3f} ms applied; ")
+                f"{tm['calibration_sd_ms']:.3f} ms applied; " if tm["calibration_ms"] is not None
+                else f"  time offset {tm['imu']}: none calibrated; ")
         if tm["left"]:
             lines.append(head + f"left {tm['left_ms']:+.3f} ± {tm['left_sd_ms']:.3f} ms "
                          f"(p={tm['p_value']:.2g}), total {tm['total_ms']:+.3f} ms, "
@@ -63,6 +65,14 @@ def format_text(doc: dict) -> str:
         lines.append(f"  residual {c}: rms {x:.4g} -> {y:.4g} {b['unit']}")
     for n in doc["not_testable"]:
         lines.append(f"  not testable: {n['name']} ({n['imu']}): {n['reason']}")
+    a = doc.get("drift_attribution")
+    if a and any(e["name"] in ("bias_drift", "slow_bias_change") for e in doc["effects"]):
+        lines.append(f"  drift: {a['statement']}")
+        lines.append("    shared by every IMU relative to the reference: [" + ", ".join(
+            f"{c:+.4f} ± {q:.4f}" for c, q in zip(a["common"], a["common_sd"], strict=True))
+            + f"] deg/s (p={a['common_p']:.2g}); beyond it: " + "; ".join(
+                f"{g} [" + ", ".join(f"{d:+.4f}" for d in v["drift"]) + "]"
+                for g, v in a["own"].items()) + " deg/s")
     lines.append("  unexplained: " + ("yes" if doc["unexplained"] else "no"))
     lines.extend(f"    {d}" for d in doc["unexplained_detail"])
     return "\n".join(lines)
