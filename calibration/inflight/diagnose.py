@@ -507,7 +507,7 @@ def _attribution(p1: dict[str, tuple[np.ndarray, np.ndarray]], groups: dict[str,
     a = attribute_drift(rel, cov, ref, alpha=alpha)
     return {**a, "common": (np.asarray(a["common"]) / DPS).tolist(),
             "common_sd": (np.asarray(a["common_sd"]) / DPS).tolist(),
-            "own": {g: {"drift": (np.asarray(v["drift"]) / DPS).tolist(), "z": v["z"]}
+            "own": {g: {**v, "drift": (np.asarray(v["drift"]) / DPS).tolist()}
                     for g, v in a["own"].items()},
             "unit": "deg/s, linear drift over the record (body frame of the reference)"}
 

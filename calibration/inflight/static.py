@@ -150,9 +150,12 @@ def attribute_drift(rel: dict[str, np.ndarray], cov: dict[str, np.ndarray], ref:
     dict
         ``common`` (the weighted mean ``c = −D_ref`` estimate, body frame), ``common_sd``,
         ``common_p`` (Wald test that c = 0), ``consistent_p`` (χ² test that every IMU's
-        relative drift equals c), ``own`` (per IMU ``D_j − D_ref − c``, its z), and
-        ``statement``: which drift is whose, and that the reference's drift cannot be told
-        from every other IMU drifting together.
+        relative drift equals c),
+        ``own`` (per IMU its drift relative to the reference, z per axis and the χ² p that
+        it is 0), ``statement``: which drift is whose (the reference's when every IMU
+        drifts alike; an IMU's own when it drifts from the reference and from the IMUs
+        that agree with it), and that the reference's drift cannot be told from every
+        other IMU drifting together.
     """
     names = list(rel)
     W = {g: np.linalg.pinv(cov[g]) for g in names}
@@ -163,25 +166,32 @@ def attribute_drift(rel: dict[str, np.ndarray], cov: dict[str, np.ndarray], ref:
     dof = 3 * (len(names) - 1)
     p_cons = float(stats.chi2.sf(chi2, dof)) if dof > 0 else 1.0
     p_c = float(stats.chi2.sf(float(c @ S @ c), 3))
-    own = {}
+    own, moved = {}, []
     for g in names:
-        d = rel[g] - (c if len(names) > 1 else 0.0)
-        sd = np.sqrt(np.clip(np.diag(cov[g] + (C if len(names) > 1 else 0.0)
-                                     - (2 * C if len(names) > 1 else 0.0)), 1e-30, None))
-        own[g] = {"drift": d.tolist(), "z": (d / sd).tolist()}
+        d = rel[g]
+        sd = np.sqrt(np.clip(np.diag(cov[g]), 1e-30, None))
+        p_g = float(stats.chi2.sf(float(d @ W[g] @ d), 3))
+        own[g] = {"drift": d.tolist(), "z": (d / sd).tolist(), "p_value": p_g}
+        if p_g < alpha / len(names):
+            moved.append(g)
     if len(names) < 2:
         statement = (f"with one IMU besides {ref}, a relative drift cannot be attributed: "
                      f"it is {names[0]}'s or {ref}'s")
     elif p_c < alpha and p_cons >= alpha:
         statement = (f"every IMU drifts alike relative to {ref}: that is {ref}'s own drift "
                      f"(it cannot be separated from all the others drifting together)")
-    elif p_c < alpha:
-        statement = (f"a drift shared by every IMU relative to {ref} is {ref}'s own (it "
-                     f"cannot be separated from all the others drifting together); the "
-                     f"IMUs also drift differently from each other (chi2 p={p_cons:.2g})")
+    elif moved and len(moved) < len(names):
+        rest = [g for g in names if g not in moved]
+        statement = (f"{', '.join(moved)} drift{'s' if len(moved) == 1 else ''} relative to "
+                     f"{ref} and to {', '.join(rest)} (which agree with {ref}): "
+                     f"{'its' if len(moved) == 1 else 'their'} own drift")
+    elif moved:
+        statement = (f"every IMU drifts relative to {ref}, and differently from each other "
+                     f"(chi2 p={p_cons:.2g}): {ref}'s own share cannot be separated from "
+                     f"theirs; what they share, {ref}'s drift at most, is 'common'")
     else:
-        statement = (f"no drift common to every IMU relative to {ref}: {ref}'s own drift, "
-                     f"which cannot be separated from the others', is not seen")
+        statement = (f"no IMU drifts relative to {ref}; {ref}'s own drift, which cannot be "
+                     f"separated from all the others drifting together, is not seen")
     return {"common": c.tolist(), "common_sd": np.sqrt(np.diag(C)).tolist(),
             "common_p": p_c, "consistent_chi2": chi2, "consistent_dof": dof,
             "consistent_p": p_cons, "own": own, "statement": statement,
@@ -277,7 +287,7 @@ def calibrate_static(flight: Flight, *, reference: str | None = None, alpha: flo
     attr = attribute_drift(rel_drift, rel_cov, ref, alpha=alpha)
     attr_dps = {**attr, "common": (np.asarray(attr["common"]) / DPS).tolist(),
                 "common_sd": (np.asarray(attr["common_sd"]) / DPS).tolist(),
-                "own": {g: {"drift": (np.asarray(v["drift"]) / DPS).tolist(), "z": v["z"]}
+                "own": {g: {**v, "drift": (np.asarray(v["drift"]) / DPS).tolist()}
                         for g, v in attr["own"].items()},
                 "unit": "deg/s over the record (body frame of the reference)"}
     notes.append("scale factors are not observable at rest: taken as 1")
@@ -315,7 +325,7 @@ def static_text(doc: dict[str, Any]) -> str:
                  + f"] deg/s, p {a['common_p']:.2g}; the IMUs differ from it with chi2 "
                    f"p {a['consistent_p']:.2g}")
     for g, v in a["own"].items():
-        lines.append(f"    {g} beyond the shared part: [" + ", ".join(
+        lines.append(f"    {g} relative to the reference: [" + ", ".join(
             f"{d:+.4f} (z {z:+.1f})" for d, z in zip(v["drift"], v["z"], strict=True))
             + "] deg/s")
     lines.append(f"  {a['statement']}")

@@ -70,7 +70,7 @@ def format_text(doc: dict) -> str:
         lines.append(f"  drift: {a['statement']}")
         lines.append("    shared by every IMU relative to the reference: [" + ", ".join(
             f"{c:+.4f} ± {q:.4f}" for c, q in zip(a["common"], a["common_sd"], strict=True))
-            + f"] deg/s (p={a['common_p']:.2g}); beyond it: " + "; ".join(
+            + f"] deg/s (p={a['common_p']:.2g}); relative to the reference: " + "; ".join(
                 f"{g} [" + ", ".join(f"{d:+.4f}" for d in v["drift"]) + "]"
                 for g, v in a["own"].items()) + " deg/s")
     lines.append("  unexplained: " + ("yes" if doc["unexplained"] else "no"))
