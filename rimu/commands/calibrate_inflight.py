@@ -31,6 +31,9 @@ def configure_options(p: argparse.ArgumentParser) -> None:
                         "'rotation', or 'auto' (full when the motion excites it; default)")
     p.add_argument("--no-time-offset", action="store_true",
                    help="with --in-flight: do not fit the time offsets")
+    p.add_argument("--report", metavar="DIR",
+                   help="with --in-flight: write report.md and PNG plots (residual before "
+                        "and after, the offset of each piece, the periods left out) into DIR")
 
 
 def summary_text(doc: dict) -> str:
@@ -68,6 +71,11 @@ def run(args: argparse.Namespace) -> int:
 
     out = output_file(args.out, "--out")
     input_path(args.in_flight, "--in-flight", kind="dir")
+    rep = None
+    if getattr(args, "report", None):
+        from rimu.outputs import output_dir
+
+        rep = output_dir(args.report, "--report")
     flight = load_flight_dir(args.in_flight)
     fit = fit_inflight(flight, reference=getattr(args, "reference", None),
                        model=getattr(args, "model", "auto"),
@@ -77,4 +85,13 @@ def run(args: argparse.Namespace) -> int:
         cal.save(tmp)
     print(summary_text(cal.extra["inflight"]))
     print(f"wrote {out}")
+    if rep is not None:
+        from calibration.inflight.report import write_flight_plots
+        from rimu.outputs import atomic_write_text
+
+        rep.mkdir(parents=True, exist_ok=True)
+        pngs = write_flight_plots(flight, cal, rep)
+        atomic_write_text(rep / "report.md", "```\n" + summary_text(cal.extra["inflight"])
+                          + "\n```\n\n" + "".join(f"![{p.stem}]({p.name})\n" for p in pngs))
+        print(f"wrote {rep / 'report.md'} and {', '.join(p.name for p in pngs)}")
     return 0

@@ -93,9 +93,14 @@ def run_flight(path: str, cal_path: str, *, alpha: float = 0.01, as_json: bool =
     js = json.dumps(doc, indent=1, allow_nan=False) + "\n"
     print(js if as_json else text, end="\n" if not as_json else "")
     if out is not None:
+        from calibration.inflight.report import write_flight_plots
+
         out.mkdir(parents=True, exist_ok=True)
-        atomic_write_text(out / "report.md", "```\n" + text + "\n```\n")
+        pngs = write_flight_plots(flight, cal, out)
+        atomic_write_text(out / "report.md", "```\n" + text + "\n```\n\n" + "".join(
+            f"![{p.stem}]({p.name})\n" for p in pngs))
         atomic_write_text(out / "diagnosis.json", js)
         if not as_json:
-            print(f"wrote {out / 'report.md'} and {out / 'diagnosis.json'}")
+            print(f"wrote {out / 'report.md'}, {out / 'diagnosis.json'} and "
+                  f"{', '.join(p.name for p in pngs)}")
     return 0
