@@ -135,9 +135,9 @@ def _design_effect(e2: np.ndarray, w: int) -> float:
     v = float(x @ x)
     if w <= 1 or v <= 0:
         return 1.0
-    rho = [float(x[l:] @ x[:-l]) / v for l in range(1, w)]
-    return max(1.0, 1.0 + 2.0 * sum((1 - l / w) * r for l, r in zip(range(1, w), rho,
-                                                                     strict=True)))
+    rho = [float(x[lag:] @ x[:-lag]) / v for lag in range(1, w)]
+    return max(1.0, 1.0 + 2.0 * sum((1 - lag / w) * r
+                                    for lag, r in zip(range(1, w), rho, strict=True)))
 
 
 def variance_probes(d: KindData, e: np.ndarray) -> list[dict[str, Any]]:
