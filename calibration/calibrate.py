@@ -325,9 +325,10 @@ def run_stages(session: Session, *, bias_method: str = "model", denoise: bool = 
     acc = None
     if session.raw_accel is not None and session.accel_config is not None:
         acc = accel_stages(session, noise_model=noise_model, allan=allan)
-    sets = {"gyro": g.sensor_set}
+    sets = {"gyro": _with_tails(g.sensor_set, g.residuals_si, session.sample_rate_hz)}
     if acc is not None:
-        sets["accel"] = acc.sensor_set
+        sets["accel"] = _with_tails(acc.sensor_set, acc.residuals_raw
+                                    * acc.sensor_set.scale_factors, session.sample_rate_hz)
     cal = Calibration(
         configuration=session.gyro_config.name, sets=sets,
         sample_rate_hz=float(session.sample_rate_hz),
@@ -338,6 +339,21 @@ def run_stages(session: Session, *, bias_method: str = "model", denoise: bool = 
                      denoise=denoise, noise_model=noise_model))
     return CalibrationStages(gyro=g, earth_rate=er, accel=acc, warnings=tuple(warnings),
                              calibration=cal)
+
+
+def _with_tails(s: SensorSet, residual: np.ndarray, fs: float) -> SensorSet:
+    """The set with the tail model of its rate-test residual (:mod:`calibration.tails`).
+
+    The residual rows are the used samples of the steps, concatenated: a window may span
+    two steps (each step's residual is zero-mean by the fit).
+    """
+    from dataclasses import replace
+
+    from calibration.tails import fit_tail_model
+
+    model = fit_tail_model(residual, s.H, s.noise_covariance, float(fs),
+                           source="turntable rate-test residual (used samples of the steps)")
+    return replace(s, tails=model)
 
 
 def calibrate(session: Session, *, bias_method: str = "model", denoise: bool = True,

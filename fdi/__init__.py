@@ -26,6 +26,7 @@ from fdi.calfile import (
 )
 from fdi.effects import Compensator
 from fdi.effects_monitor import CompensatedMonitor
+from fdi.envelope import EnvelopeSettings, EnvelopeTracker, reason_names
 from fdi.errors import CalibrationError, ConfigError, FileFormatError, ReplayError, RimuError
 from fdi.geometry import Configuration, cone6, load_configuration, tetrad, triad
 from fdi.monitor import Monitor
@@ -43,6 +44,8 @@ __all__ = [
     "Compensator",
     "ConfigError",
     "Configuration",
+    "EnvelopeSettings",
+    "EnvelopeTracker",
     "Event",
     "FileFormatError",
     "Monitor",
@@ -60,6 +63,7 @@ __all__ = [
     "load_configuration",
     "load_thresholds",
     "parity_matrix",
+    "reason_names",
     "reconstruction_matrix",
     "tetrad",
     "triad",

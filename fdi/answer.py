@@ -13,8 +13,11 @@ import numpy as np
 
 __all__ = ["CAPABILITIES", "EVENT_TYPES", "STATUSES", "Answer", "BlockResult", "Event"]
 
-EVENT_TYPES = ("detected", "isolated", "health", "readmitted")
-"""Kinds of :class:`Event`."""
+EVENT_TYPES = ("detected", "isolated", "disagree", "health", "readmitted", "envelope")
+"""Kinds of :class:`Event`: ``"disagree"`` names sensors whose fault hypotheses the data
+cannot tell apart (no exclusion; the rate along their axes is unverified); ``"envelope"``
+marks leaving (reason: the envelope reasons) and re-entering (reason ``"in"``) the operating
+envelope."""
 
 CAPABILITIES = ("isolate", "detect", "reconstruct", "none")
 """What the monitor can still do with its healthy sensors (best first)."""
@@ -43,7 +46,7 @@ class Event:
     sensor : int or None
         1-based sensor, None for a detection not attributed to a sensor.
     type : str
-        ``"detected"``, ``"isolated"``, ``"health"`` or ``"readmitted"``.
+        One of :data:`EVENT_TYPES`.
     reason : str
         ``"parity scale 8"`` (window of 8 samples), ``"cusum"``, ``"stuck"``,
         ``"nonfinite"``, ``"stale"``, ``"range"``, ``"length"``, ...
@@ -53,6 +56,10 @@ class Event:
         Window length in samples of the scale that fired.
     magnitude : float or None
         Estimated fault size (SI input units: rad/s for gyros), where estimable.
+    sensors : tuple of int
+        1-based sensors a ``"disagree"`` event names (empty otherwise).
+    envelope : int
+        Operating-envelope code of the sample (0: inside; :mod:`fdi.envelope` bits).
     """
 
     t: float
@@ -63,12 +70,15 @@ class Event:
     threshold: float = float("nan")
     scale: int | None = None
     magnitude: float | None = None
+    sensors: tuple[int, ...] = ()
+    envelope: int = 0
 
     def _key(self) -> tuple:
         def k(x: float | None) -> Any:
             return ("nan",) if isinstance(x, float) and math.isnan(x) else x
         return (self.t, self.sensor, self.type, self.reason, k(self.statistic),
-                k(self.threshold), self.scale, k(self.magnitude))
+                k(self.threshold), self.scale, k(self.magnitude), self.sensors,
+                self.envelope)
 
     def __eq__(self, other: object) -> bool:
         """Field-wise equality in which NaN equals NaN (two identical events are equal)."""
@@ -84,7 +94,8 @@ class Event:
         return {"t": float(self.t), "sensor": self.sensor, "type": self.type,
                 "reason": self.reason, "statistic": _num(self.statistic),
                 "threshold": _num(self.threshold), "scale": self.scale,
-                "magnitude": _num(self.magnitude)}
+                "magnitude": _num(self.magnitude), "sensors": list(self.sensors),
+                "envelope": int(self.envelope)}
 
 
 @dataclass(frozen=True)
@@ -115,8 +126,18 @@ class Answer:
         ``"isolate"``, ``"detect"``, ``"reconstruct"`` or ``"none"``.
     protection_level : float
         Largest rate error (rad/s, vector norm) that a not yet detected fault on one
-        sensor could cause, at the stated missed-detection probability (inf without
-        detection capability).
+        sensor could cause, at the stated missed-detection probability; inf where the answer
+        is not verified (no detection capability, a detection active, out of the envelope).
+    envelope : int
+        Operating-envelope code of the sample (0: inside; bits of :mod:`fdi.envelope`). Out
+        of the envelope the monitor excludes nothing on the parity.
+    unverified : ndarray of bool, shape (3,)
+        Body axes whose rate the monitor cannot vouch for: a detection is active and a
+        fault on one of the suspected sensors would move that axis (see
+        :meth:`fdi.monitor.Monitor.step`).
+    suspects : tuple of int
+        1-based sensors under suspicion while a detection is active (the hypotheses the
+        data do not reject); empty otherwise.
     """
 
     t: float
@@ -130,6 +151,9 @@ class Answer:
     events: tuple[Event, ...]
     capability: str
     protection_level: float
+    envelope: int = 0
+    unverified: np.ndarray = field(default_factory=lambda: np.zeros(3, bool))
+    suspects: tuple[int, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -148,6 +172,10 @@ class BlockResult:
         In time order.
     parity : ndarray, shape (N, n - 3)
         Parity vectors (NaN-padded), as in :class:`Answer`.
+    envelope : ndarray of int, shape (N,)
+        Operating-envelope code per sample (None from producers that do not track it).
+    unverified : ndarray of bool, shape (N, 3)
+        Unverified body axes per sample, as in :class:`Answer`.
     """
 
     t: np.ndarray
@@ -160,6 +188,8 @@ class BlockResult:
     capability: np.ndarray
     events: list[Event] = field(default_factory=list)
     parity: np.ndarray | None = None
+    envelope: np.ndarray | None = None
+    unverified: np.ndarray | None = None
 
     def __len__(self) -> int:
         return int(self.t.shape[0])

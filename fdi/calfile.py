@@ -1,4 +1,4 @@
-"""The calibration file ``rimu.calibration/2``: what the calibration produces and the runtime reads.
+"""The calibration file ``rimu.calibration/3``: what the calibration produces and the runtime reads.
 
 Model per sensor (seed 000 Eq. 13, seed 001 Eq. 1), internally in SI::
 
@@ -12,7 +12,7 @@ The compensated output the runtime uses is ``y_i = SF_i·u_i − b_i``.
 In the JSON file each value carries its unit (``scale_factor_unit``, ``bias_unit``); arrays
 are nested lists. Keys other tools read (keep them stable)::
 
-    {"schema": "rimu.calibration/2",
+    {"schema": "rimu.calibration/3",
      "sensors": {"gyro": [{"name", "axis", "axis_nominal", "misalignment_mrad",
                            "misalignment_mrad_sd", "scale_factor", "scale_factor_sd",
                            "scale_factor_unit", "bias", "bias_sd", "bias_unit",
@@ -33,6 +33,13 @@ effects and no adequacy record; it is migrated on the next save)::
                   "inputs": ["time"], "params": {...}}, ...],
      "adequacy": {"verdict": "adequate" | "adequate within sequence limits" |
                              "effects not ruled out" | "effects suspected", ...details}
+
+Version 3 adds one optional top-level key, the residual's tail per window scale (a ``/2``
+file loads without it; :mod:`fdi.tails`, ``docs/noise-tails.md``)::
+
+     "residual_tails": {"gyro": {"method": "rimu.tails/1", "df": 3, "samples": 6431,
+                                 "scales": [{"scale": 1, "probability": [...],
+                                             "quantile_upper": [...], "gpd": {...}}, ...]}}
 
 Each effect term adds ``estimate · g(inputs; params)`` to the sensor's output in the
 model (see :mod:`calibration.diagnose.library` for the regressors ``g``).
@@ -60,6 +67,7 @@ import numpy as np
 
 from fdi.errors import ConfigError
 from fdi.fileio import Fields, read_json_object, to_jsonable
+from fdi.tails import TailModel, tail_model_from_fields
 from fdi.units import (
     input_unit_factor,
     scale_factor_from_si,
@@ -71,6 +79,8 @@ from fdi.units import (
 __all__ = [
     "CALIBRATION_SCHEMA",
     "CALIBRATION_SCHEMAS",
+    "FINGERPRINT_VOLATILE",
+    "FINGERPRINT_VOLATILE_EXTRA",
     "KINDS",
     "AllanTable",
     "Calibration",
@@ -83,9 +93,14 @@ __all__ = [
     "tangent_basis",
 ]
 
-CALIBRATION_SCHEMA = "rimu.calibration/2"
-CALIBRATION_SCHEMAS = ("rimu.calibration/1", CALIBRATION_SCHEMA)
-"""Versions the loader reads (``/1``: no effects, no adequacy record)."""
+CALIBRATION_SCHEMA = "rimu.calibration/3"
+CALIBRATION_SCHEMAS = ("rimu.calibration/1", "rimu.calibration/2", CALIBRATION_SCHEMA)
+"""Versions the loader reads (``/1``: no effects, no adequacy record; ``/2``: no residual
+tail model)."""
+FINGERPRINT_VOLATILE = ("schema",)
+"""Top-level keys left out of :meth:`Calibration.fingerprint` (a migrated file keeps it)."""
+FINGERPRINT_VOLATILE_EXTRA = ("created", "source", "written")
+"""Keys of ``extra`` left out of the fingerprint (when and from which path, not what)."""
 KINDS = ("gyro", "accel")
 _INPUT_SI = {"gyro": "rad/s", "accel": "m/s^2"}
 
@@ -238,6 +253,9 @@ class SensorSet:
     misalignment_matrices : tuple of ndarray
         M per group as the papers print it (H̃_g = M·H_g).
     allan : AllanTable or None
+    tails : TailModel or None
+        The residual's tail per window scale (:mod:`fdi.tails`, ``rimu.calibration/3``);
+        None when not measured.
     """
 
     kind: str
@@ -246,6 +264,7 @@ class SensorSet:
     groups: tuple[tuple[int, ...], ...] = ()
     misalignment_matrices: tuple[np.ndarray, ...] = ()
     allan: AllanTable | None = None
+    tails: TailModel | None = None
 
     @property
     def n(self) -> int:
@@ -329,8 +348,32 @@ class Calibration:
             raise ConfigError(f"calibration has no {kind} sensors") from None
 
     # -- writing -----------------------------------------------------------------------
+    def fingerprint(self) -> str:
+        """Short identity of the calibration: 16 hex digits of a sha256.
+
+        Hashes the canonical JSON (sorted keys, no spaces, floats to 12 significant digits)
+        of :meth:`to_dict` without :data:`FINGERPRINT_VOLATILE` and the ``extra`` keys in
+        :data:`FINGERPRINT_VOLATILE_EXTRA`: a file saved, loaded and saved again (or
+        migrated to a newer version) keeps its fingerprint; any change of a number the
+        monitor or the thresholds read changes it. A calibration that cannot be written
+        (a scale-factor unit without a file form) has none: ``""``.
+        """
+        import hashlib
+
+        try:
+            full = self.to_dict()
+        except ConfigError:
+            return ""
+        doc = {k: v for k, v in full.items() if k not in FINGERPRINT_VOLATILE}
+        if isinstance(doc.get("extra"), dict):
+            doc["extra"] = {k: v for k, v in doc["extra"].items()
+                            if k not in FINGERPRINT_VOLATILE_EXTRA}
+        text = json.dumps(_canonical(doc), sort_keys=True, separators=(",", ":"),
+                          allow_nan=True)
+        return hashlib.sha256(text.encode("utf-8")).hexdigest()[:16]
+
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready dictionary in the ``rimu.calibration/2`` layout."""
+        """JSON-ready dictionary in the ``rimu.calibration/3`` layout."""
         from fdi.parity import parity_matrix
 
         doc: dict[str, Any] = {"schema": self.schema, "configuration": self.configuration,
@@ -338,6 +381,10 @@ class Calibration:
                                "noise_covariance": {"unit": {},
                                                     "sample_rate_hz": self.sample_rate_hz},
                                "misalignment_matrices": {}, "allan": {}}
+        tails = {kind: s.tails.to_dict() for kind, s in self.sets.items()
+                 if s.tails is not None}
+        if tails:
+            doc["residual_tails"] = to_jsonable(tails)
         for kind, s in self.sets.items():
             doc["sensors"][kind] = [_sensor_to_dict(c) for c in s.sensors]
             doc["noise_covariance"][kind] = s.noise_covariance.tolist()
@@ -366,6 +413,17 @@ class Calibration:
     def save(self, path: str | Path) -> None:
         """Write the calibration as JSON."""
         Path(path).write_text(json.dumps(self.to_dict(), indent=1) + "\n", encoding="utf-8")
+
+
+def _canonical(v: Any) -> Any:
+    """Floats to 12 significant digits (a normalised axis may move its last bit on load)."""
+    if isinstance(v, float):
+        return float(f"{v:.12g}") if math.isfinite(v) else str(v)
+    if isinstance(v, dict):
+        return {str(k): _canonical(x) for k, x in v.items()}
+    if isinstance(v, list | tuple):
+        return [_canonical(x) for x in v]
+    return v
 
 
 def _sensor_to_dict(c: SensorCal) -> dict[str, Any]:
@@ -399,7 +457,7 @@ _WRITTEN_ONLY = ("parity", "parity_accel")
 
 
 def load_calibration(path: str | Path) -> Calibration:
-    """Read and validate a ``rimu.calibration/2`` (or ``/1``) file.
+    """Read and validate a ``rimu.calibration/3`` (or ``/2``, ``/1``) file.
 
     Raises
     ------
@@ -427,6 +485,8 @@ def calibration_from_dict(doc: Mapping[str, Any], path: str = "<calibration>") -
     noise.accept("unit", "sample_rate_hz")
     for sub in (noise, mm, allan):
         sub.finish(accept=sets)
+    if version == CALIBRATION_SCHEMA:
+        sets = _tails(r, sets)
     cal = Calibration(
         configuration=str(r.get("configuration", "")), sets=sets, sample_rate_hz=rate,
         earth_rate_dph=r.number("earth_rate_dph", None),
@@ -436,6 +496,27 @@ def calibration_from_dict(doc: Mapping[str, Any], path: str = "<calibration>") -
         adequacy=_adequacy(r) if version != CALIBRATION_SCHEMAS[0] else None)
     r.finish(accept=_WRITTEN_ONLY)
     return cal
+
+
+def _tails(r: Fields, sets: dict[str, SensorSet]) -> dict[str, SensorSet]:
+    """``residual_tails``: the tail model per kind (``/3``, optional)."""
+    from dataclasses import replace
+
+    t = r.mapping("residual_tails", None)
+    if t is None:
+        return sets
+    out = dict(sets)
+    for kind in sets:
+        sub = t.mapping(kind, None)
+        if sub is None:
+            continue
+        model = tail_model_from_fields(sub)
+        if model.df > sets[kind].n:
+            raise sub.error("df", f"{model.df} parity dimensions for {sets[kind].n} {kind} "
+                            "sensors")
+        out[kind] = replace(sets[kind], tails=model)
+    t.finish(accept=sets)
+    return out
 
 
 def _effects(r: Fields, sets: Mapping[str, SensorSet]) -> tuple[EffectTerm, ...]:
@@ -578,7 +659,8 @@ IMPLAUSIBLE_ALPHA = 1e-9
 
 
 def check_compatible(cal: Calibration, n_sensors: int, raw_unit: Any, source: str, *,
-                     kind: str = "gyro", names: Any = None) -> None:
+                     kind: str = "gyro", names: Any = None,
+                     cal_source: str | None = None) -> None:
     """Refuse data that the calibration cannot describe (sensor count, raw unit).
 
     Parameters
@@ -595,6 +677,8 @@ def check_compatible(cal: Calibration, n_sensors: int, raw_unit: Any, source: st
         ``"gyro"`` or ``"accel"``.
     names : sequence of str, optional
         The data's sensor names (only used in the message).
+    cal_source : str, optional
+        The calibration's file, named in the message beside its configuration.
 
     Raises
     ------
@@ -602,7 +686,8 @@ def check_compatible(cal: Calibration, n_sensors: int, raw_unit: Any, source: st
         One line naming ``source``, the calibration and what disagrees.
     """
     s = cal.kind(kind)
-    where = f"calibration of {cal.configuration}"
+    where = (f"calibration {cal_source} ({cal.configuration})" if cal_source
+             else f"calibration of {cal.configuration}")
     if int(n_sensors) != s.n:
         raise ConfigError(f"{source}: {int(n_sensors)} {kind} sensors, the {where} has {s.n}: "
                           "a calibration only applies to the sensor set it was made for")

@@ -28,6 +28,7 @@ from scipy import optimize, stats
 from fdi.calfile import AllanTable, Calibration
 from fdi.errors import ConfigError
 from fdi.settings import Thresholds
+from fdi.tails import tail_variance_factors
 
 __all__ = [
     "alpha_per_sample",
@@ -36,6 +37,8 @@ __all__ = [
     "default_scales",
     "default_thresholds",
     "minimum_detectable_noncentrality",
+    "noise_model",
+    "tail_note",
     "variance_factors",
 ]
 
@@ -98,6 +101,31 @@ def variance_factors(allan: AllanTable | None, noise_cov: np.ndarray, sample_rat
     return tuple(out)
 
 
+def noise_model(choices: tuple) -> str:
+    """``"overbound"`` when some scale's factor is the overbound, ``"gaussian-measured-variance"``
+    when some scale's is the measured variance, else ``"gaussian-white"``."""
+    if any(c.choice == "overbound" for c in choices):
+        return "overbound"
+    if any(c.choice == "measured-variance" for c in choices):
+        return "gaussian-measured-variance"
+    return "gaussian-white"
+
+
+def tail_note(choices: tuple) -> str:
+    """``"; residual tails: overbound at scales 1, 2 (gaussian white at 128)"`` or ``""``."""
+    over = [c.scale for c in choices if c.choice == "overbound"]
+    if all(math.isnan(c.excess_kurtosis) and c.choice == "gaussian-white" for c in choices):
+        return ""                       # no tail model kept
+
+    mv = [c.scale for c in choices if c.choice == "measured-variance"]
+    return ("; residual tails (calibration's tail model): overbound factor at scale(s) "
+            + (", ".join(map(str, over)) if over else "none")
+            + (", measured variance at " + ", ".join(map(str, mv)) if mv else "")
+            + ", gaussian white at "
+            + (", ".join(str(c.scale) for c in choices if c.choice == "gaussian-white")
+               or "none"))
+
+
 def _siegmund_arl0(h: float, nu: float) -> float:
     """Siegmund's approximation of the in-control ARL of a one-sided CUSUM.
 
@@ -146,7 +174,11 @@ def default_thresholds(cal: Calibration, *, kind: str = "gyro",
                        detector: str = "windows", cusum_drift: float = 0.5,
                        missed_detection: float = 1e-3,
                        sample_rate_hz: float | None = None) -> Thresholds:
-    """Thresholds from a calibration: χ² per scale, Allan variance factors, CUSUM h.
+    """Thresholds from a calibration: χ² per scale, variance factors, CUSUM h.
+
+    The variance factor of each scale is the Allan one, or where the calibration's tail
+    model says the residual fails its normality check, ``max(Allan, overbound f_w(α_w))``
+    (:func:`fdi.tails.tail_variance_factors`).
 
     Parameters
     ----------
@@ -179,16 +211,19 @@ def default_thresholds(cal: Calibration, *, kind: str = "gyro",
     n_tests = len(sc) + (1 if detector != "windows" else 0)
     share = a_tot / n_tests
     df = s.n - 3
-    vf = variance_factors(s.allan, s.noise_covariance, fs, sc)
+    vf_allan = variance_factors(s.allan, s.noise_covariance, fs, sc)
+    vf, choices = tail_variance_factors(s.tails, sc, tuple(share for _ in sc), vf_allan)
     thr = tuple(chi2_threshold(share, df) if df >= 1 else 1e300 for _ in sc)
     h = cusum_threshold(share, cusum_drift, 2 * s.n) if detector != "windows" else float("nan")
     notes = (f"per-sample alpha {a_tot:.3e} = {false_alarms_per_hour:g}/h at {fs:g} Hz split "
              f"equally over {n_tests} test(s) (Bonferroni, conservative for correlated "
              f"running means); chi-square with m-3 dof; variance factors from "
-             f"{'the Allan table' if s.allan is not None else 'white noise (no Allan table)'}; "
-             f"detector {detector}")
+             f"{'the Allan table' if s.allan is not None else 'white noise (no Allan table)'}"
+             f"{tail_note(choices)}; detector {detector}")
     return Thresholds(kind=kind, n=s.n, sample_rate_hz=fs,
                       false_alarms_per_hour=float(false_alarms_per_hour), scales=sc,
                       alpha=tuple(share for _ in sc), detector=detector,
                       variance_factor=vf, threshold=thr, cusum_drift=float(cusum_drift),
-                      cusum_threshold=h, missed_detection=float(missed_detection), notes=notes)
+                      cusum_threshold=h, missed_detection=float(missed_detection), notes=notes,
+                      calibration_fingerprint=cal.fingerprint(),
+                      noise_model=noise_model(choices))

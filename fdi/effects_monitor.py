@@ -37,13 +37,13 @@ class CompensatedMonitor:
         return getattr(self.monitor, name)
 
     def step(self, t: float, raw: Any, valid: Any = None, *, force: Any = None,
-             temperature: Any = None) -> Answer:
+             temperature: Any = None, **kw: Any) -> Answer:
         """One sample (see :meth:`fdi.monitor.Monitor.step`); ``force`` (3,) or (n, 3) in
-        m/s², ``temperature`` scalar or (n,) in °C."""
+        m/s², ``temperature`` scalar or (n,) in °C; other keywords go to the monitor."""
         if not self.compensator.active:
-            return self.monitor.step(t, raw, valid)
+            return self.monitor.step(t, raw, valid, **kw)
         c = self.compensator.one(raw, force, temperature)
-        return self.monitor.step(t, raw, valid, correction=c)
+        return self.monitor.step(t, raw, valid, correction=c, **kw)
 
     def run(self, t: Any, raw: Any, valid: Any = None, *, force: Any = None,
             temperature: Any = None, **kw: Any) -> BlockResult:

@@ -6,10 +6,13 @@ noncentrality to λ = b²·|u_i|²/f₁. The minimum detectable bias at missed-d
 probability P_md is ``MDB_i = sqrt(λ*·f₁)/|u_i|`` with ``ncx2.cdf(T₁, df, λ*) = P_md``; it moves
 ω̂ by ``MDB_i·|G e_i|``. The protection level is the worst sensor's, plus k·σ of the noise::
 
-    PL = max_i MDB_i·|G e_i| · sqrt(1 + γ₁) + k · sqrt(λmax(GΣGᵀ) + ρ·λmax(G diag(Σ) Gᵀ))
+    PL = max_i MDB_i·|G e_i| · sqrt(1 + γ₁) + k · sqrt(f₁·λmax(GΣGᵀ) + ρ·λmax(G diag(Σ) Gᵀ))
 
 γ₁ = κ·ρ/f₁ the threshold inflation for the calibration uncertainty at the current rate
-(ρ = max_i ω̂ᵀC_iω̂/Σ_ii), k = Φ⁻¹(1 − P_md/2). All but ρ are precomputed per healthy set.
+(ρ = max_i ω̂ᵀC_iω̂/Σ_ii), k = Φ⁻¹(1 − P_md/2), f₁ the variance factor of the single-sample
+scale (1 for white noise; the overbound of the measured residual where the calibration
+holds one, :mod:`fdi.tails`). The level holds only where the answer is verified: the
+monitor reports it infinite while a detection is active or out of the envelope. All but ρ are precomputed per healthy set.
 """
 
 from __future__ import annotations
@@ -68,7 +71,9 @@ def protection_level_constants(U: np.ndarray, G: np.ndarray, noise_cov: np.ndarr
     df = U.shape[0]
     k = float(stats.norm.isf(missed_detection / 2.0))
     P = G @ noise_cov @ G.T
-    d = float(np.linalg.eigvalsh(P).max()) if G.size else float("inf")
+    # the noise term carries the same variance factor (an overbound of the measured
+    # single-sample residual where the calibration holds one) as the detection term
+    d = float(f1 * np.linalg.eigvalsh(P).max()) if G.size else float("inf")
     Gd = G @ np.diag(np.diag(noise_cov)) @ G.T
     e = float(np.linalg.eigvalsh(Gd).max()) if G.size else 0.0
     if df < 1:

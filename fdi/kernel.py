@@ -42,6 +42,7 @@ from numba import njit
 from fdi.cusum import cusum_update
 from fdi.state import (
     ALARM_RUN,
+    ASK_ISOLATE,
     AXIS0,
     BIAS,
     BLOCK_ROWS,
@@ -101,6 +102,7 @@ from fdi.state import (
     STALE_TIMEOUT_S,
     STARTED,
     STATS0,
+    STOP_CLEARED,
     STOP_CODE,
     STOP_DETECTED,
     STOP_HEALTH,
@@ -127,7 +129,6 @@ __all__ = ["advance", "compensate", "reconstruct_row"]
 _KERNEL = dict(error_model="numpy", _nrt=False)
 _INLINE = dict(_KERNEL, inline="always")
 
-_ISOLATE = 0                                # CAPABILITY_CODE["isolate"]
 _NONE = 3                                   # CAPABILITY_CODE["none"]
 
 
@@ -290,13 +291,16 @@ def readmission_check(t, raw, r, corr, cr, valid, vr, sensors, mats, df, capabil
 
 
 @njit(**_INLINE)
-def detection_machine(alarm, clear, fired, can_isolate, persistence, clear_samples,
+def detection_machine(alarm, clear, fired, ask_isolate, persistence, clear_samples,
                       counters) -> int:
     """Detection state machine for one complete sample; returns the stop code.
 
-    The first alarm detects; ``persistence`` consecutive alarms isolate (when the set can
-    isolate); a detection clears after ``clear_samples`` samples below the clearing
-    thresholds (hysteresis: one event per onset).
+    The first alarm detects; ``persistence`` consecutive alarms ask the monitor to isolate
+    (when the set can tell hypotheses apart, ``ask_isolate``; the monitor decides,
+    :func:`fdi.isolation.decide`, and is asked again at every further alarm until it
+    excludes); a detection clears after
+    ``clear_samples`` samples below the clearing thresholds (hysteresis: one event per
+    onset) and stops the kernel after that sample (the monitor forgets its suspects).
     """
     code = STOP_NONE
     if counters[DETECTED] == 0:
@@ -312,11 +316,12 @@ def detection_machine(alarm, clear, fired, can_isolate, persistence, clear_sampl
         counters[DETECTED_ROWS] += 1
         counters[ALARM_RUN] = counters[ALARM_RUN] + 1 if alarm else 0
         counters[CLEAR_RUN] = counters[CLEAR_RUN] + 1 if clear else 0
-    if can_isolate and counters[ALARM_RUN] >= persistence:
+    if ask_isolate and counters[ALARM_RUN] >= persistence:
         counters[FIRED] = fired
         code |= STOP_ISOLATE
     elif counters[DETECTED] != 0 and counters[CLEAR_RUN] >= clear_samples:
         counters[DETECTED] = 0
+        code = STOP_CLEARED
     return code
 
 
@@ -400,7 +405,7 @@ def _advance(t, raw, corr, valid, r0, r1, kset, values, counters, out) -> int:
     ic = SET_ICONST0
     has_omega = kset[ic + HAS_OMEGA] != 0.0
     has_cusum = kset[ic + HAS_CUSUM] != 0.0
-    can_isolate = int(kset[ic + CAPABILITY]) == _ISOLATE
+    ask_isolate = kset[ic + ASK_ISOLATE] != 0.0
     capability = int(kset[ic + CAPABILITY])
     readmission = kset[ic + READMISSION] != 0.0
     stuck = kset[ic + STUCK_COUNT]
@@ -454,7 +459,7 @@ def _advance(t, raw, corr, valid, r0, r1, kset, values, counters, out) -> int:
             zr = block[r - b0]              # z (first df entries) and ρ (entry n) of row r
             alarm, clear, fired = parity_tests(zr, zr[n], df, sensors, scales, mats, fconst,
                                                has_cusum, windows, cusum, counters, K, out, r)
-            code = detection_machine(alarm, clear, fired, can_isolate, persistence,
+            code = detection_machine(alarm, clear, fired, ask_isolate, persistence,
                                      clear_samples, counters)
         else:
             _untested_row(out, r, scales, fconst, nw, K, parity0)

@@ -26,6 +26,7 @@ protection level (no parity test was possible).
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
@@ -33,10 +34,11 @@ import numpy as np
 from fdi import state as S
 from fdi.answer import CAPABILITIES, Answer, BlockResult, Event
 from fdi.calfile import Calibration
-from fdi.detector import default_thresholds
+from fdi.detector import chi2_threshold, default_thresholds
+from fdi.envelope import reason_names
 from fdi.errors import ConfigError
 from fdi.health import health_limits
-from fdi.isolation import isolate, magnitude
+from fdi.isolation import IsolationDecision, decide, isolate, magnitude
 from fdi.kernel import advance, reconstruct_row
 from fdi.reconstruction import SetCache, SetModel
 from fdi.settings import MonitorSettings, Thresholds
@@ -52,6 +54,12 @@ _INF = float("inf")
 _CHUNK = 1 << 16
 _CAP_CODE = {c: k for k, c in enumerate(CAPABILITIES)}
 _CAP_NAMES = np.array(CAPABILITIES, dtype=object)
+_NO_AXES = np.zeros(3, bool)
+_NO_AXES.setflags(write=False)
+_AXIS_SHARE = 0.1
+"""A suspected sensor's fault leaves a body axis unverified when it moves that axis by at
+least this share of the axis it moves most (or by one ω̂ standard deviation at the
+estimated fault size)."""
 
 
 class Monitor:
@@ -100,7 +108,9 @@ class Monitor:
         self._sigma = np.asarray(s.noise_covariance, float)
         bsd = np.array([c.bias_sd for c in s.sensors], float)
         self.cache = SetCache(s.H, s.scale_factors, s.biases, self._sigma, cin,
-                              self.thresholds, md, bsd)
+                              self.thresholds, md, bsd,
+                              wrong_exclusion=self.settings.wrong_exclusion,
+                              isolation_ratio=self.settings.isolation_ratio)
         self.cache.precompute(max(self.n - 2, 0))        # bounded step time through two isolations
         self._limits = health_limits(self.settings, kind, s.scale_factors, s.biases)
         self._packed: dict[int, S.KernelSet] = {}
@@ -126,6 +136,7 @@ class Monitor:
         self._state.counters[S.HAS_PARITY] = 1
         self._status = ["ok"] * self.n
         self._length_bad = False
+        self._env = 0
         self._set_model(self._full_mask)
 
     def _kernel_set(self, mask: int) -> S.KernelSet:
@@ -147,6 +158,14 @@ class Monitor:
         self._status_detected = tuple("detected" if s == "ok" else s for s in self._status)
         self._omega_sd = self._model.omega_sd
         self._capability = self._model.capability
+        self._clear_suspects()
+
+    def _clear_suspects(self) -> None:
+        """No detection active: nothing suspected, every axis verified."""
+        self._suspects: tuple[int, ...] = ()
+        self._unverified = _NO_AXES
+        self._iso_due = 0
+        self._no_fit = False                # no single-sensor fault explains this detection
 
     def _healthy_array(self, mask: int) -> np.ndarray:
         a = self._healthy_arr.get(mask)
@@ -216,7 +235,8 @@ class Monitor:
         return np.array(ok, bool).reshape(1, n) if len(ok) == n else None
 
     # ------------------------------------------------------------------ step
-    def step(self, t: float, raw: Any, valid: Any = None, correction: Any = None) -> Answer:
+    def step(self, t: float, raw: Any, valid: Any = None, correction: Any = None,
+             envelope: Any = 0) -> Answer:
         """Process one sample; never raises.
 
         Parameters
@@ -231,6 +251,20 @@ class Monitor:
             Run-time correction of the calibration's effect terms (rad/s), subtracted from
             the compensated outputs: y = SF·u − b − c. A non-finite entry counts as 0; a
             correction of the wrong shape is ignored (no correction).
+        envelope : int
+            Operating-envelope code of the sample (0: inside; bits of :mod:`fdi.envelope`;
+            anything that is not a non-negative integer counts as 0). Out of the envelope the
+            monitor detects and reports as usual but excludes nothing on the parity; when
+            the envelope is re-entered its windows start afresh (what the excursion put in
+            them is not a sensor fault).
+
+        Notes
+        -----
+        While a detection is active the answer names the suspected sensors (the fault
+        hypotheses the data do not reject, :func:`fdi.isolation.decide`), marks the body
+        axes a fault on any of them would move as ``unverified`` and gives an infinite
+        protection level; a sensor is excluded only when a single hypothesis remains and the
+        subset without it passes its own test.
         """
         try:
             tf = float(t)
@@ -238,6 +272,10 @@ class Monitor:
             tf = _NAN
         try:
             u = ok = corr = events = None
+            env = _env_code(envelope)
+            if env != self._env:
+                events = []
+                self._env_change(tf, env, events)
             if (type(raw) is np.ndarray and raw.dtype is _F64 and raw.shape == self._shape1
                     and raw.flags.c_contiguous):                      # the common case,
                 corr = (self._no_correction if correction is None     # quickly
@@ -246,7 +284,8 @@ class Monitor:
                 u = raw[None]
                 self._length_bad = False
             if corr is None or ok is None:
-                u, ok, corr, events = self._parse_sample(raw, valid, correction, tf)
+                u, ok, corr, ev = self._parse_sample(raw, valid, correction, tf)
+                events = ev if events is None else events + ev
             # one sample through the kernel (the same entry point as run's)
             self._t1[0] = tf
             st = self._state
@@ -263,6 +302,8 @@ class Monitor:
             else:
                 detected = code >= _RETURN_DETECTED
             r = self._row0.copy()
+            if self._suspects or self._env:
+                r[S.PROTECTION] = _INF                      # not verified: no bound
             o, s0, t0, p0 = self._columns
             # an Answer without the frozen dataclass's per-field __setattr__ calls (a third
             # of the step's Python time once); same fields, same object
@@ -274,7 +315,8 @@ class Monitor:
                 "status": self._status_detected if detected else self._status_now,
                 "parity": r[p0:], "statistics": r[s0:t0], "thresholds": r[t0:p0],
                 "events": tuple(events) if events else (), "capability": self._capability,
-                "protection_level": float(r[S.PROTECTION])})
+                "protection_level": float(r[S.PROTECTION]), "envelope": self._env,
+                "unverified": self._unverified, "suspects": self._suspects})
             return a
         except Exception as exc:
             self._state.counters[S.PHASE] = S.PHASE_HEALTH
@@ -282,7 +324,8 @@ class Monitor:
             return Answer(tf, np.full(3, _NAN), np.full(3, _NAN),
                           self._healthy_array(self._mask), tuple(self._status),
                           np.full(max(self.n - 3, 0), _NAN), np.full(self.K, _NAN),
-                          np.full(self.K, _NAN), (ev,), self._model.capability, _INF)
+                          np.full(self.K, _NAN), (ev,), self._model.capability, _INF,
+                          self._env, np.ones(3, bool), self._suspects)
 
     def _parse_sample(self, raw: Any, valid: Any, correction: Any, t: float
                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[Event]]:
@@ -330,16 +373,18 @@ class Monitor:
     # ------------------------------------------------------------------ the loop
     def _advance(self, t: np.ndarray, raw: np.ndarray, corr: np.ndarray, valid: np.ndarray,
                  has_valid: bool, out: np.ndarray, events: list[Event], rows: _Rows | None,
-                 chunk: int = _CHUNK) -> np.ndarray | None:
-        """Run the kernel over every row, handling the samples it hands back.
+                 chunk: int = _CHUNK, r0: int = 0, r1: int | None = None
+                 ) -> np.ndarray | None:
+        """Run the kernel over rows r0 … r1−1 (all by default), handling the samples it hands
+        back.
 
         The counters HAS_VALID, HAS_PARITY and PHASE must be set by the caller.
 
         Returns the ω̂ standard deviation of the last row when it differs from the model's
         (an incomplete sample), else None.
         """
-        N = t.shape[0]
-        r = 0
+        N = t.shape[0] if r1 is None else r1
+        r = r0
         osd = None
         while r < N:
             stop, code = self._kernel(t, raw, corr, valid, r, min(N, r + chunk), out)
@@ -374,7 +419,9 @@ class Monitor:
             c[S.PHASE] = S.PHASE_PARITY
             return stop, None
         osd = None
-        if code == S.STOP_INCOMPLETE:
+        if code == S.STOP_CLEARED:
+            self._clear_suspects()
+        elif code == S.STOP_INCOMPLETE:
             osd = self._on_incomplete(raw, corr, stop, valid[stop if has_valid else 0], out[stop])
         else:
             self._on_detection(tr, code, raw, corr, stop, out[stop], events)
@@ -430,21 +477,139 @@ class Monitor:
 
     def _on_detection(self, t: float, code: int, raw: np.ndarray, corr: np.ndarray, r: int,
                       row: np.ndarray, events: list[Event]) -> None:
-        """Name a detection and/or isolate; ω̂ and PL of the sample from the new set."""
+        """Name a detection, test the fault hypotheses, exclude only a verified single
+        sensor; ω̂ and PL of the sample from the new set after an exclusion."""
         mdl = self._model
-        fired = int(self._state.counters[S.FIRED])
+        c = self._state.counters
+        fired = int(c[S.FIRED])
         stat = float(row[S.STATS0 + fired])
         thr = float(row[self._layout.thresholds0 + fired])
-        sensor, mag, reason, scale = self._attribute(mdl, fired)
         if code & S.STOP_DETECTED:
-            iso = mdl.capability == "isolate"
-            events.append(Event(t, sensor if iso else None, "detected", reason, stat, thr,
-                                scale, mag if iso else None))
-        if code & S.STOP_ISOLATE:
-            events.append(Event(t, sensor, "isolated", reason, stat, thr, scale, mag))
-            self._isolate(sensor - 1, "isolated")
-            ks = self._kset
-            reconstruct_row(raw, corr, r, ks.packed, self._state.values, row)
+            sensor, mag, reason, scale = self._attribute(mdl, fired)
+            dec, w = self._decide(mdl, row, fired)
+            single = mdl.capability == "isolate" and dec is not None \
+                and dec.consistent == (dec.best,)
+            events.append(Event(t, sensor if single else None, "detected", reason, stat, thr,
+                                scale, mag if single else None, envelope=self._env))
+            self._iso_due = self.settings.persistence
+            self._suspect(t, mdl, dec, w, events)
+        if not code & S.STOP_ISOLATE:
+            return
+        rows = int(c[S.DETECTED_ROWS])
+        if self._env or rows < self._iso_due:               # out of the envelope: no exclusion
+            return
+        self._iso_due = self._next_attempt(rows)
+        dec, w = self._decide(mdl, row, fired)
+        if dec is None or dec.exclude is None or mdl.capability != "isolate":
+            self._suspect(t, mdl, dec, w, events)         # a set that only detects narrows
+            return                                        # its suspects, never excludes
+        k = dec.exclude
+        wm = self._episode_window()
+        mag = magnitude(mdl.U, self._state.window_sum(wm), wm, k) if wm else None
+        events.append(Event(t, mdl.idx[k] + 1, "isolated", f"parity scale {w}",
+                            float(dec.residuals[k]), dec.subset_threshold, w, mag,
+                            envelope=self._env))
+        self._isolate(mdl.idx[k], "isolated")
+        ks = self._kset
+        reconstruct_row(raw, corr, r, ks.packed, self._state.values, row)
+
+    def _next_attempt(self, rows: int) -> int:
+        """Detection age (samples) of the next isolation decision: when the next longer
+        window lies wholly within the detection, then once per longest window."""
+        for w in self._scales:
+            if w > rows:
+                return w
+        return rows + max(self._scales)
+
+    def _decide(self, mdl: SetModel, row: np.ndarray, fired: int
+                ) -> tuple[IsolationDecision | None, int]:
+        """The isolation test (:func:`fdi.isolation.decide`) on the window of most evidence:
+        the longer of the scale that fired and the longest window within the detection.
+        Under the hypothesis of the truly faulty sensor its residual is χ²(df − 1) for any
+        window, whatever the fault's size or time profile, so the choice costs no risk."""
+        c = self._state.counters
+        if mdl.df < 1:
+            return None, 0
+        rows = max(int(c[S.DETECTED_ROWS]), 1)
+        count = int(c[S.WINDOW_COUNT])
+        k = fired if 0 <= fired < len(self._scales) else -1
+        for j, w in enumerate(self._scales):
+            if w <= rows and w <= count and (k < 0 or w > self._scales[k]):
+                k = j
+        if k < 0:
+            return None, 0
+        w = self._scales[k]
+        base = mdl.thr[k]
+        infl = float(row[self._layout.thresholds0 + k]) / base if base > 0 else _NAN
+        if not (infl >= 1.0 and math.isfinite(infl)):
+            infl = 1.0
+        var = w * self.thresholds.variance_factor[k] * infl
+        sub = chi2_threshold(self.thresholds.alpha[k], mdl.df - 1) if mdl.df > 1 else _INF
+        return decide(mdl.U, self._state.window_sum(w), var, self.settings.wrong_exclusion,
+                      sub), w
+
+    def _suspect(self, t: float, mdl: SetModel, dec: IsolationDecision | None, w: int,
+                 events: list[Event]) -> None:
+        """Record the suspected sensors of an active detection and the body axes a fault on
+        them would move; a ``"disagree"`` event when they are not a single sensor or change.
+
+        Within one detection the suspects only narrow: a hypothesis rejected once stays
+        rejected (each rejection is a decision at the stated risk), so the set is the
+        intersection of the consistent hypotheses of every decision; when that is empty no
+        single-sensor fault explains the episode and every healthy sensor is suspected.
+        """
+        every = tuple(range(mdl.m))
+        if self._no_fit:
+            return
+        cols = every if dec is None else dec.consistent
+        if self._suspects and cols:
+            before = {i - 1 for i in self._suspects}
+            cols = tuple(j for j in cols if mdl.idx[j] in before)
+        none_fits = dec is not None and not cols
+        self._no_fit = none_fits
+        cols = cols or every
+        sus = tuple(sorted(mdl.idx[j] + 1 for j in cols))
+        G = mdl.G
+        axes = np.zeros(3, bool)
+        s_w = self._state.window_sum(w) if w else None
+        for j in cols:
+            g = np.abs(G[:, mdl.idx[j]])
+            top = float(g.max()) if np.isfinite(g).all() else _INF
+            axes |= ~(g < _AXIS_SHARE * top)
+            if s_w is not None:
+                f = abs(magnitude(mdl.U, s_w, w, j))
+                with np.errstate(invalid="ignore", over="ignore"):
+                    axes |= ~(g * f < mdl.omega_sd)
+        axes.setflags(write=False)
+        changed = sus != self._suspects
+        self._suspects = sus
+        self._unverified = axes
+        if changed and (len(sus) > 1 or mdl.capability != "isolate"):
+            names = [self.sensor_names[i - 1] for i in sus]
+            if none_fits:
+                why = ("no single-sensor fault explains the parity: "
+                       + _join(names) + " unverified")
+            else:
+                why = (_join(names) + (" disagree: cannot tell which" if len(sus) > 1 else
+                                       ": suspected (this set cannot isolate)"))
+            stat = _NAN
+            if dec is not None and len(dec.consistent) < mdl.m:
+                rej = [float(dec.residuals[j]) for j in range(mdl.m) if j not in dec.consistent]
+                stat = min(rej)
+            events.append(Event(t, None, "disagree", why, stat,
+                                dec.rejection_level if dec is not None else _NAN,
+                                w or None, None, sus, self._env))
+
+    def _env_change(self, t: float, env: int, events: list[Event]) -> None:
+        """Leaving, changing or re-entering the operating envelope."""
+        old, self._env = self._env, env
+        if env:
+            events.append(Event(t, None, "envelope", _env_reason(env), envelope=env))
+            return
+        events.append(Event(t, None, "envelope", "in", envelope=0))
+        if old:                       # back inside: what the excursion put in the windows goes
+            self._state.new_set(self._model.df)
+            self._clear_suspects()
 
     def _attribute(self, mdl: SetModel, fired: int) -> tuple[int, float | None, str,
                                                             int | None]:
@@ -457,19 +622,25 @@ class Monitor:
             w = self._scales[fired]
             k, _ = isolate(mdl.U, st.window_sum(w), w)
             reason, scale = f"parity scale {w}", w
-        # magnitude from the longest window that lies within the detection episode
-        rows = max(int(st.counters[S.DETECTED_ROWS]), 1)
-        count = int(st.counters[S.WINDOW_COUNT])
+        wm = self._episode_window()
+        mag = magnitude(mdl.U, st.window_sum(wm), wm, k) if wm else None
+        return mdl.idx[k] + 1, mag, reason, scale
+
+    def _episode_window(self) -> int:
+        """The longest window that lies within the detection episode (0: none); the fault
+        magnitude is estimated from it (no sample from before the onset of a step)."""
+        c = self._state.counters
+        rows = max(int(c[S.DETECTED_ROWS]), 1)
+        count = int(c[S.WINDOW_COUNT])
         wm = 0
         for w in self._scales:
             if w <= rows and w <= count:
                 wm = w
-        mag = magnitude(mdl.U, st.window_sum(wm), wm, k) if wm else None
-        return mdl.idx[k] + 1, mag, reason, scale
+        return wm
 
     # ------------------------------------------------------------------ block
     def run(self, t: Any, raw: Any, valid: Any = None, *, parity: bool = False,
-            chunk: int = _CHUNK, correction: Any = None) -> BlockResult:
+            chunk: int = _CHUNK, correction: Any = None, envelope: Any = None) -> BlockResult:
         """Process a block of samples; answers bit-identical to :meth:`step` on each row.
 
         Parameters
@@ -483,6 +654,9 @@ class Monitor:
             Most rows per kernel call.
         correction : array_like, shape (N, n) or (n,), optional
             Run-time correction of the effect terms (rad/s), as in :meth:`step`.
+        envelope : array_like of int, shape (N,), optional
+            Operating-envelope code per sample, as in :meth:`step` (another shape: ignored,
+            every sample inside).
 
         Returns
         -------
@@ -503,7 +677,7 @@ class Monitor:
         except (TypeError, ValueError):
             shaped = False
         if not shaped:
-            return self._run_rows(t, raw, valid, parity, correction)
+            return self._run_rows(t, raw, valid, parity, correction, envelope)
         N = ta.shape[0]
         out = np.empty((N, self._layout.width(parity)))
         rows = _Rows(N, n)
@@ -514,17 +688,21 @@ class Monitor:
             c[S.HAS_VALID] = va is not None
             c[S.HAS_PARITY] = parity
             c[S.PHASE] = S.PHASE_HEALTH
+            corr = self._correction(correction, N)
+            vv = self._all_valid if va is None else va
             try:
-                self._advance(ta, ra, self._correction(correction, N),
-                              self._all_valid if va is None else va, va is not None,
-                              out, events, rows, max(1, int(chunk)))
+                for r0, r1, env in _envelope_runs(envelope, N, self._env):
+                    if env != self._env:
+                        self._env_change(float(ta[r0]), env, events)
+                    self._advance(ta, ra, corr, vv, va is not None, out, events, rows,
+                                  max(1, int(chunk)), r0, r1)
             finally:
                 c[S.HAS_PARITY] = 1                          # step() always fills the parity
                 c[S.PHASE] = S.PHASE_HEALTH                  # and starts a sample afresh
         return rows.result(ta, out, self._layout, parity, events)
 
-    def _run_rows(self, t: Any, raw: Any, valid: Any, parity: bool, correction: Any
-                  ) -> BlockResult:
+    def _run_rows(self, t: Any, raw: Any, valid: Any, parity: bool, correction: Any,
+                  envelope: Any = None) -> BlockResult:
         """Fallback for blocks of odd shape: step row by row."""
         try:
             rows = list(raw)
@@ -542,9 +720,38 @@ class Monitor:
             except TypeError:
                 vl = None
         cl = self._correction(correction, N) if N else self._no_correction
+        codes = np.zeros(N, np.int64)
+        for r0, r1, e in _envelope_runs(envelope, N, 0):
+            codes[r0:r1] = e
         answers = [self.step(ts[r], rows[r], vl[r] if vl is not None and r < len(vl) else None,
-                             cl[r if cl.shape[0] > 1 else 0]) for r in range(N)]
+                             cl[r if cl.shape[0] > 1 else 0], int(codes[r]))
+                   for r in range(N)]
         return _from_answers(np.asarray(ts[:N], float), answers, self, parity)
+
+
+_ENV_LIMIT = 1 << 16
+"""Envelope codes are bit sets below 2^16; anything else counts as 0 (inside)."""
+
+
+def _env_code(x: Any) -> int:
+    """An envelope code as an int in [0, 2^16); 0 for anything else (never raises)."""
+    if type(x) is int:
+        return x if 0 < x < _ENV_LIMIT else 0
+    try:
+        v = int(x)
+    except Exception:
+        return 0
+    return v if 0 < v < _ENV_LIMIT and v == x else 0
+
+
+def _env_reason(code: int) -> str:
+    """Why a sample is out of the envelope: the names of its bits, "shock+tumble"."""
+    return "+".join(reason_names(code))
+
+
+def _join(names: list[str]) -> str:
+    """'a', 'a and b', 'a, b and c'."""
+    return names[0] if len(names) == 1 else ", ".join(names[:-1]) + " and " + names[-1]
 
 
 def _to_float(x: Any) -> float:
@@ -557,13 +764,36 @@ def _to_float(x: Any) -> float:
         return _NAN
 
 
+def _envelope_runs(envelope: Any, N: int, current: int) -> list[tuple[int, int, int]]:
+    """(r0, r1, code) runs of equal envelope code over N rows; one run at ``current`` when
+    there is no usable envelope (None, another shape, not integers)."""
+    if envelope is None or N == 0:
+        return [(0, N, current)] if N else []
+    try:
+        e = np.asarray(envelope)
+        if e.shape != (N,) or e.dtype.kind not in "iub":
+            return [(0, N, current)]
+        e = e.astype(np.int64)
+        e = np.where((e > 0) & (e < _ENV_LIMIT), e, 0)
+    except (TypeError, ValueError):
+        return [(0, N, current)]
+    cut = np.flatnonzero(np.diff(e)) + 1
+    starts = np.concatenate([[0], cut])
+    ends = np.concatenate([cut, [N]])
+    return [(int(a), int(b), int(e[a])) for a, b in zip(starts, ends, strict=True)]
+
+
 class _Rows:
-    """Per-row outputs that change only with the healthy set: health, capability, ω̂ sd."""
+    """Per-row outputs that change only at the monitor's stops: health, capability, ω̂ sd,
+    envelope, unverified axes and whether the answer is verified."""
 
     def __init__(self, N: int, n: int) -> None:
         self.healthy = np.empty((N, n), bool)
         self.cap = np.empty(N, np.int8)
         self.omega_sd = np.empty((N, 3))
+        self.envelope = np.empty(N, np.int64)
+        self.unverified = np.empty((N, 3), bool)
+        self.verified = np.empty(N, bool)
 
     def fill(self, r0: int, r1: int, mon: Monitor, omega_sd: np.ndarray | None = None) -> None:
         if r1 <= r0:
@@ -571,15 +801,21 @@ class _Rows:
         _fill_rows(self.healthy, r0, r1, mon._healthy_array(mon._mask))
         self.cap[r0:r1] = _CAP_CODE[mon.model.capability]
         _fill_rows(self.omega_sd, r0, r1, mon.model.omega_sd if omega_sd is None else omega_sd)
+        self.envelope[r0:r1] = mon._env
+        _fill_rows(self.unverified, r0, r1, mon._unverified)
+        self.verified[r0:r1] = not (mon._suspects or mon._env)
 
     def result(self, t: np.ndarray, out: np.ndarray, lay: S.OutLayout, parity: bool,
                events: list[Event]) -> BlockResult:
+        pl = out[:, S.PROTECTION]
+        pl[~self.verified] = _INF                    # not verified: no bound (as step)
         return BlockResult(t=t, omega=out[:, S.OMEGA0:S.OMEGA0 + 3], omega_sd=self.omega_sd,
                            healthy=self.healthy, statistics=out[:, S.STATS0:lay.thresholds0],
                            thresholds=out[:, lay.thresholds0:lay.parity0],
-                           protection_level=out[:, S.PROTECTION],
+                           protection_level=pl,
                            capability=_CAP_NAMES[self.cap], events=events,
-                           parity=out[:, lay.parity0:] if parity else None)
+                           parity=out[:, lay.parity0:] if parity else None,
+                           envelope=self.envelope, unverified=self.unverified)
 
 
 def _fill_rows(a: np.ndarray, r0: int, r1: int, row: np.ndarray) -> None:
@@ -608,4 +844,7 @@ def _from_answers(t: np.ndarray, answers: list[Answer], mon: Monitor,
                                                  float).reshape(N),
                        capability=np.array([a.capability for a in answers], dtype=object),
                        events=[e for a in answers for e in a.events],
-                       parity=stack("parity", max(n - 3, 0)) if parity else None)
+                       parity=stack("parity", max(n - 3, 0)) if parity else None,
+                       envelope=np.array([a.envelope for a in answers], np.int64).reshape(N),
+                       unverified=np.array([a.unverified for a in answers],
+                                           bool).reshape(N, 3))

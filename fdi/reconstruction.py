@@ -17,12 +17,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from fdi.detector import chi2_threshold, cusum_threshold
+from fdi.detector import chi2_threshold, cusum_threshold, minimum_detectable_noncentrality
 from fdi.integrity import ProtectionLevel, protection_level_constants
-from fdi.parity import isolability, parity_matrix, reconstruction_matrix
+from fdi.isolation import pair_sines, rejection_level
+from fdi.parity import parity_matrix, reconstruction_matrix
 from fdi.settings import Thresholds
 
-__all__ = ["SetCache", "SetModel", "build_set_model"]
+__all__ = ["SetCache", "SetModel", "build_set_model", "isolation_sizes"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -60,6 +61,16 @@ class SetModel:
         constant-offset inflation 1 + w·β/f_w (threshold ``T_w·(offset_gain + rho_gain·Σρ)``).
     cusum_h : float
         CUSUM decision threshold h (NaN without a CUSUM bank).
+    sines : ndarray, shape (m, m)
+        sin θ_ij between the whitened parity columns of healthy sensors i and j (how well
+        their fault hypotheses can be told apart; :func:`fdi.isolation.pair_sines`).
+    detectable : ndarray, shape (m,)
+        Bias (SI) on each healthy sensor detected with probability 1 − P_md by the longest
+        window at rest.
+    isolable_from : ndarray, shape (m, m)
+        Bias (SI) on sensor i (row) from which the longest window rejects the hypothesis of
+        sensor j (column) with probability 1 − P_md at the risk of wrong exclusion
+        (:func:`isolation_sizes`); inf where the two cannot be told apart.
     pl : ProtectionLevel
     sf, bias : ndarray, shape (n,)
         Scale factors (SI per raw unit) and biases (SI): y = sf·u − bias.
@@ -84,6 +95,9 @@ class SetModel:
     beta: float
     offset_gain: tuple[float, ...]
     cusum_h: float
+    sines: np.ndarray
+    detectable: np.ndarray
+    isolable_from: np.ndarray
     pl: ProtectionLevel
     sf: np.ndarray = field(repr=False)
     bias: np.ndarray = field(repr=False)
@@ -158,22 +172,65 @@ def _reconstruction(H: np.ndarray, healthy: np.ndarray, Sig: np.ndarray,
     return G, cov, np.sqrt(np.diag(cov))
 
 
-def _capability(V: np.ndarray, Sig: np.ndarray, idx: tuple[int, ...], full: bool,
-                df: int) -> str:
-    """What the set can do: isolate, detect, reconstruct or none."""
+def isolation_sizes(U: np.ndarray, thresholds: Thresholds, missed_detection: float,
+                    wrong_exclusion: float) -> tuple[np.ndarray, np.ndarray]:
+    """Detectable and reliably isolable bias sizes (SI) at the longest window, at rest.
+
+    A bias b on sensor i over a full window of w samples gives the detection statistic the
+    noncentrality λ = w·b²·|u_i|²/f_w (χ²(df) against T_w) and the residual of the
+    hypothesis of sensor j the noncentrality λ·sin²θ_ij (χ²(df − 1) against the rejection
+    level c of :func:`fdi.isolation.rejection_level`). The sizes solve
+    ``ncx2.cdf(level, dof, λ) = P_md`` (:func:`fdi.detector.minimum_detectable_noncentrality`).
+
+    Returns
+    -------
+    detectable : ndarray, shape (m,)
+    isolable_from : ndarray, shape (m, m)
+        Row i, column j: the bias on i from which j's hypothesis is rejected (inf on the
+        diagonal and where sin θ_ij = 0).
+    """
+    df, m = U.shape
+    if df < 1 or m == 0:
+        return np.full(m, np.inf), np.full((m, m), np.inf)
+    k = int(np.argmax(thresholds.scales))
+    w, f = float(thresholds.scales[k]), float(thresholds.variance_factor[k])
+    un = np.linalg.norm(U, axis=0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        lam_det = minimum_detectable_noncentrality(chi2_threshold(thresholds.alpha[k], df), df,
+                                                   missed_detection)
+        det = np.where(un > 0, np.sqrt(lam_det * f / w) / un, np.inf)
+        c = rejection_level(df, m, wrong_exclusion)
+        lam_iso = minimum_detectable_noncentrality(c, df - 1, missed_detection) if df > 1 \
+            else float("inf")
+        sn = pair_sines(U)
+        iso = np.where(sn > 0, np.sqrt(lam_iso * f / w) / (un[:, None] * sn), np.inf)
+    np.fill_diagonal(iso, np.inf)
+    return det, iso
+
+
+def _capability(full: bool, df: int, detectable: np.ndarray, isolable_from: np.ndarray,
+                isolation_ratio: float) -> str:
+    """What the set can do: isolate, detect, reconstruct or none.
+
+    "isolate" needs every pair of healthy sensors to be told apart, statistically, from a
+    bias at most ``isolation_ratio`` times the largest detectable one: two nearly aligned
+    triads detect but do not isolate (their columns are a degree or two apart), however
+    different their axes are on paper.
+    """
     if not full:
         return "none"
     if df == 0:
         return "reconstruct"
-    if df == 1:
+    if df == 1 or isolable_from.size == 0:
         return "detect"
-    iso = isolability(V[:, list(idx)], Sig[np.ix_(list(idx), list(idx))])
-    return "isolate" if iso["can_isolate"] else "detect"
+    worst = float(np.max(isolable_from[~np.eye(isolable_from.shape[0], dtype=bool)]))
+    return "isolate" if worst <= isolation_ratio * float(np.max(detectable)) else "detect"
 
 
 def build_set_model(H: np.ndarray, sf: np.ndarray, bias: np.ndarray, noise_cov: np.ndarray,
                     input_error_cov: np.ndarray, mask: int, thresholds: Thresholds,
-                    missed_detection: float, bias_sd: np.ndarray | None = None) -> SetModel:
+                    missed_detection: float, bias_sd: np.ndarray | None = None, *,
+                    wrong_exclusion: float = 1e-7, isolation_ratio: float = 10.0) -> SetModel:
     """Compute (once) the model of one healthy set. See :class:`SetModel`.
 
     Parameters
@@ -190,6 +247,11 @@ def build_set_model(H: np.ndarray, sf: np.ndarray, bias: np.ndarray, noise_cov: 
     missed_detection : float
     bias_sd : ndarray, shape (n,), optional
         Standard deviation of the calibrated biases (SI); zero when omitted.
+    wrong_exclusion : float
+        Risk of excluding a healthy sensor per isolation decision
+        (:attr:`fdi.settings.MonitorSettings.wrong_exclusion`).
+    isolation_ratio : float
+        Capability rule (:func:`_capability`).
     """
     n = H.shape[0]
     if bias_sd is None:
@@ -206,7 +268,9 @@ def build_set_model(H: np.ndarray, sf: np.ndarray, bias: np.ndarray, noise_cov: 
     Sig = np.asarray(noise_cov, float)
     A, U, kappa, beta = _whitening(V, Sig, idx, bias_sd)
     G, cov, osd = _reconstruction(H, healthy, Sig, idx, full)
-    cap = _capability(V, Sig, idx, full, df)
+    det, iso = isolation_sizes(U, thresholds, missed_detection, wrong_exclusion)
+    cap = _capability(full, df, det, iso, isolation_ratio)
+    sines = pair_sines(U)
     # calibration uncertainty: ρ_i = ω̂ᵀ C_i ω̂ / Σ_ii on (ω0², ω1², ω2², ω0ω1, ω0ω2, ω1ω2)
     with np.errstate(over="ignore", divide="ignore", invalid="ignore"):   # huge/0: inf, nan
         C = np.asarray(input_error_cov, float) / np.diag(Sig)[:, None, None]
@@ -226,11 +290,12 @@ def build_set_model(H: np.ndarray, sf: np.ndarray, bias: np.ndarray, noise_cov: 
                                     missed_detection)
     sf = np.array(sf, float)
     bias = np.array(bias, float)
-    for a in (V, A, U, G, cov, osd, sf, bias, coef):
+    for a in (V, A, U, G, cov, osd, sf, bias, coef, sines, det, iso):
         a.setflags(write=False)
     return SetModel(mask=mask, idx=idx, df=df, capability=cap, V=V, A=A, U=U, G=G, cov=cov,
                     omega_sd=osd, kappa=kappa, thr=thr, chi2_scale=chi2_scale,
-                    rho_gain=rho_gain, beta=beta, offset_gain=offset_gain, cusum_h=h, pl=pl,
+                    rho_gain=rho_gain, beta=beta, offset_gain=offset_gain, cusum_h=h,
+                    sines=sines, detectable=det, isolable_from=iso, pl=pl,
                     sf=sf, bias=bias, cal_coef=coef)
 
 
@@ -239,8 +304,11 @@ class SetCache:
 
     def __init__(self, H: np.ndarray, sf: np.ndarray, bias: np.ndarray,
                  noise_cov: np.ndarray, input_error_cov: np.ndarray, thresholds: Thresholds,
-                 missed_detection: float, bias_sd: np.ndarray | None = None) -> None:
+                 missed_detection: float, bias_sd: np.ndarray | None = None, *,
+                 wrong_exclusion: float = 1e-7, isolation_ratio: float = 10.0) -> None:
         self.H = np.asarray(H, float)
+        self.wrong_exclusion = float(wrong_exclusion)
+        self.isolation_ratio = float(isolation_ratio)
         self.n = self.H.shape[0]
         self.sf = np.asarray(sf, float)
         self.bias = np.asarray(bias, float)
@@ -257,7 +325,9 @@ class SetCache:
         if mdl is None:
             mdl = build_set_model(self.H, self.sf, self.bias, self.noise_cov,
                                   self.input_error_cov, mask, self.thresholds,
-                                  self.missed_detection, self.bias_sd)
+                                  self.missed_detection, self.bias_sd,
+                                  wrong_exclusion=self.wrong_exclusion,
+                                  isolation_ratio=self.isolation_ratio)
             self._models[mask] = mdl
         return mdl
 

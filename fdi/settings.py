@@ -1,8 +1,8 @@
 """Settings of the monitor: detection thresholds (a file) and behaviour (persistence, health).
 
 :class:`Thresholds` is what ``thresholds.compute_thresholds`` produces and
-``rimu.thresholds/1`` files hold; :class:`MonitorSettings` is the rest of the monitor's
-behaviour (persistence, hysteresis, re-admission, health limits).
+``rimu.thresholds/2`` files hold (``/1`` still loads); :class:`MonitorSettings` is the rest
+of the monitor's behaviour (persistence, hysteresis, re-admission, health limits).
 """
 
 from __future__ import annotations
@@ -18,15 +18,23 @@ from fdi.fileio import Fields, read_json_object
 
 __all__ = [
     "DETECTORS",
+    "NOISE_MODELS",
     "THRESHOLDS_SCHEMA",
+    "THRESHOLDS_SCHEMAS",
     "MonitorSettings",
     "Thresholds",
     "load_thresholds",
     "thresholds_from_dict",
 ]
 
-THRESHOLDS_SCHEMA = "rimu.thresholds/1"
+THRESHOLDS_SCHEMA = "rimu.thresholds/2"
+THRESHOLDS_SCHEMAS = ("rimu.thresholds/1", THRESHOLDS_SCHEMA)
+"""Versions the loader reads (``/1``: no calibration fingerprint, Gaussian white noise)."""
 DETECTORS = ("windows", "cusum", "both")
+NOISE_MODELS = ("gaussian-white", "gaussian-measured-variance", "overbound")
+"""What the variance factors rest on: the Allan factors of a Gaussian residual; at one scale
+at least the measured window-mean variance (significantly above Allan's); at one scale at
+least the overbound of the calibration's residual tail model (:mod:`fdi.tails`)."""
 
 
 @dataclass(frozen=True)
@@ -56,7 +64,8 @@ class Thresholds:
         Per-sample false-alarm probability of each scale (Bonferroni split of the budget).
     variance_factor : tuple of float
         f_k ≥ 1: variance of the window mean relative to white noise (σ²/w), from the
-        Allan variance of the calibration residuals at τ = w/fs.
+        Allan variance of the calibration residuals at τ = w/fs, or the overbound of the
+        residual's measured tail where that is larger and the residual is not Gaussian.
     threshold : tuple of float
         Threshold on D_k for the full set (m = n), for reference; the monitor recomputes it
         for each set of healthy sensors from ``alpha``.
@@ -71,6 +80,11 @@ class Thresholds:
         CUSUM bank) or ``"both"``.
     notes : str
         How the numbers were obtained.
+    calibration_fingerprint : str
+        :meth:`fdi.calfile.Calibration.fingerprint` of the calibration they were made from
+        (empty: unknown, a ``/1`` file).
+    noise_model : str
+        One of :data:`NOISE_MODELS`.
     """
 
     kind: str
@@ -86,6 +100,8 @@ class Thresholds:
     missed_detection: float = 1e-3
     detector: str = "windows"
     notes: str = ""
+    calibration_fingerprint: str = ""
+    noise_model: str = "gaussian-white"
     schema: str = THRESHOLDS_SCHEMA
 
     def __post_init__(self) -> None:
@@ -102,6 +118,9 @@ class Thresholds:
             raise ConfigError("thresholds: alpha must lie in (0, 1)")
         if any(not (f > 0.0 and math.isfinite(f)) for f in self.variance_factor):
             raise ConfigError("thresholds: variance_factor must be positive and finite")
+        if self.noise_model not in NOISE_MODELS:
+            raise ConfigError(f"thresholds: noise_model must be one of {NOISE_MODELS}, "
+                              f"got {self.noise_model!r}")
         if self.detector not in DETECTORS:
             raise ConfigError(f"thresholds: detector must be one of {DETECTORS}, "
                               f"got {self.detector!r}")
@@ -116,8 +135,10 @@ class Thresholds:
         return len(self.scales)
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready dictionary in the ``rimu.thresholds/1`` layout."""
-        return {"schema": self.schema, "kind": self.kind, "n": self.n,
+        """JSON-ready dictionary in the ``rimu.thresholds/2`` layout."""
+        return {"schema": THRESHOLDS_SCHEMA,
+                "calibration_fingerprint": self.calibration_fingerprint,
+                "noise_model": self.noise_model, "kind": self.kind, "n": self.n,
                 "sample_rate_hz": self.sample_rate_hz,
                 "false_alarms_per_hour": self.false_alarms_per_hour,
                 "scales": list(self.scales), "alpha": list(self.alpha),
@@ -134,7 +155,7 @@ class Thresholds:
 
 
 def load_thresholds(path: str | Path) -> Thresholds:
-    """Read and validate a ``rimu.thresholds/1`` file.
+    """Read and validate a ``rimu.thresholds/2`` (or ``/1``) file.
 
     Raises
     ------
@@ -151,7 +172,7 @@ MAX_SCALE = 1 << 20
 def thresholds_from_dict(doc: Any, path: str = "<thresholds>") -> Thresholds:
     """Build :class:`Thresholds` from its JSON dictionary (see :func:`load_thresholds`)."""
     r = Fields(doc, path)
-    r.schema(THRESHOLDS_SCHEMA)
+    version = r.schema(THRESHOLDS_SCHEMAS)
     scales = r.numbers("scales")
     bad = [x for x in scales if x < 1 or x != int(x) or x > MAX_SCALE]
     if bad:         # the monitor keeps a ring of max(scales) sums: 1e308 would hang it
@@ -170,6 +191,13 @@ def thresholds_from_dict(doc: Any, path: str = "<thresholds>") -> Thresholds:
         cusum_threshold=r.number("cusum_threshold", float("nan")),
         missed_detection=_probabilities(r, "missed_detection", None),
         notes=r.string("notes", "", nonempty=False))
+    if version != THRESHOLDS_SCHEMAS[0]:
+        fp = r.string("calibration_fingerprint", "", nonempty=False)
+        if fp and not (len(fp) == 16 and all(c in "0123456789abcdef" for c in fp)):
+            raise r.error("calibration_fingerprint", f"expected 16 hex digits (from "
+                          f"Calibration.fingerprint), got {fp!r}")
+        fields["calibration_fingerprint"] = fp
+        fields["noise_model"] = r.choice("noise_model", NOISE_MODELS)
     r.finish()
     if fields["detector"] != "windows" and not fields["cusum_threshold"] > 0:
         raise r.error("cusum_threshold", f"a {fields['detector']!r} detector needs a positive "
@@ -218,6 +246,17 @@ class MonitorSettings:
         takes 35 rad/s (2000 °/s) for gyros and 160 m/s² (16 g) for accelerometers.
     missed_detection : float or None
         Missed-detection probability for the protection level; None takes the thresholds'.
+    wrong_exclusion : float
+        Risk that one isolation decision excludes a healthy sensor while another one is
+        faulty (:func:`fdi.isolation.decide`). Decisions are taken when a longer window lies
+        wholly within the detection (at most one per window scale, then one per longest
+        window), so the risk per fault episode is at most this times the number of scales
+        plus one per longest window the episode lasts.
+    isolation_ratio : float
+        A set is reported able to isolate ("isolate") only when every pair of healthy
+        sensors can be told apart from a bias at most this many times the largest
+        detectable bias (:func:`fdi.reconstruction.isolation_sizes`); otherwise it detects,
+        reports which sensors disagree and never excludes on the parity.
     """
 
     persistence: int = 3
@@ -230,8 +269,14 @@ class MonitorSettings:
     raw_range: tuple[float, float] | None = None
     max_input: float | None = None
     missed_detection: float | None = None
+    wrong_exclusion: float = 1e-7
+    isolation_ratio: float = 10.0
 
     def __post_init__(self) -> None:
+        if not 0.0 < self.wrong_exclusion < 0.5:
+            raise ConfigError("wrong_exclusion must lie in (0, 0.5)")
+        if not (self.isolation_ratio >= 1.0 and math.isfinite(self.isolation_ratio)):
+            raise ConfigError("isolation_ratio must be finite and >= 1")
         if int(self.persistence) < 1:
             raise ConfigError("persistence must be >= 1 sample")
         if not 0.0 < self.clear_ratio <= 1.0:

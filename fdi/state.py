@@ -42,6 +42,8 @@ from dataclasses import dataclass
 import numpy as np
 from numba.extending import register_jitable
 
+from fdi.blocks import CAPABILITY_CODE as _CAPABILITY_CODE
+
 __all__ = [
     "CAPABILITY_CODE",
     "DetectorState",
@@ -68,9 +70,11 @@ F_SLOTS = 12
 
 # ---------------------------------------------------------------- iconst
 DF, N_WINDOWS, HAS_CUSUM, CAPABILITY, HAS_OMEGA, STUCK_COUNT, PERSISTENCE, CLEAR_SAMPLES, \
-    READMISSION, N_SENSORS = range(10)
-I_SLOTS = 10
-CAPABILITY_CODE = {"isolate": 0, "detect": 1, "reconstruct": 2, "none": 3}
+    READMISSION, N_SENSORS, ASK_ISOLATE = range(11)
+I_SLOTS = 11
+CAPABILITY_CODE = _CAPABILITY_CODE
+"""Capability name → code: :data:`fdi.blocks.CAPABILITY_CODE` (positions in the one table,
+:data:`fdi.answer.CAPABILITIES`)."""
 
 # ---------------------------------------------------------------- cusum (4, n)
 S_UP, MIN_UP, S_DOWN, MIN_DOWN = range(4)
@@ -86,9 +90,10 @@ HEALTH0 = 15                                # + i: health verdict of sensor i th
 # where the kernel stops (STOP_CODE) and hands a sample to the monitor
 STOP_NONE, STOP_HEALTH, STOP_READMIT, STOP_INCOMPLETE, STOP_DETECTED, STOP_ISOLATE = \
     0, 1, 2, 3, 4, 8
+STOP_CLEARED = 16                           # a detection cleared (after its sample)
 # added to the stop code that fdi.kernel.advance returns while a detection is active
-RETURN_DETECTED = 16
-STOP_MASK = 15                              # the stop code in advance's return value
+RETURN_DETECTED = 32
+STOP_MASK = 31                              # the stop code in advance's return value
 # PHASE: where the kernel resumes a stopped sample
 PHASE_HEALTH, PHASE_READMIT, PHASE_PARITY = 0, 1, 2
 # health verdicts
@@ -224,6 +229,10 @@ def pack_set(model, H: np.ndarray, sigma_diag: np.ndarray, lo: tuple[float, ...]
     iconst[CLEAR_SAMPLES] = settings.clear_samples
     iconst[READMISSION] = bool(settings.readmission)
     iconst[N_SENSORS] = n
+    # persistent alarms go to the monitor's isolation test wherever it can tell hypotheses
+    # apart at all (df ≥ 2): a set that isolates may exclude, one that only detects narrows
+    # its suspects (fdi.monitor)
+    iconst[ASK_ISOLATE] = df >= 2 and model.capability in ("isolate", "detect")
     fconst[READMIT_DWELL_S] = settings.readmit_dwell_s
     o_scales, o_mats, end = set_layout(n, df, nw)
     packed = np.zeros(end)

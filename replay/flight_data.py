@@ -22,6 +22,7 @@ import numpy as np
 
 from fdi.errors import ConfigError
 from replay.faults import Fault
+from replay.log_events import LogEvent
 
 __all__ = ["AUX_KINDS", "AUX_UNITS", "FLIGHT_TRUTH_SCHEMA", "AuxChannels", "Flight",
            "concat_flights"]
@@ -129,6 +130,10 @@ class Flight:
     aux : AuxChannels or None
         Accelerometers, temperatures (and gyros of an accelerometer flight) kept beside the
         monitored sensors on the same time base.
+    events : tuple of LogEvent
+        What the log declared (crash checks, estimator flags, messages) on the flight's
+        time base (:mod:`replay.log_events`); those with ``envelope`` set are declared out
+        of the operating envelope.
     """
 
     t: np.ndarray
@@ -144,6 +149,7 @@ class Flight:
     kind: str = "gyro"
     imu: tuple[str, ...] = ()
     aux: AuxChannels | None = None
+    events: tuple[LogEvent, ...] = ()
 
     @property
     def n(self) -> int:
@@ -181,4 +187,4 @@ def concat_flights(pieces: Sequence[Flight]) -> Flight:
                    valid=np.concatenate([p.valid for p in pieces]),
                    omega_true=(np.concatenate([p.omega_true for p in pieces])
                                if has_truth else None),
-                   aux=aux)
+                   aux=aux, events=tuple(dict.fromkeys(e for p in pieces for e in p.events)))

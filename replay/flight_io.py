@@ -39,6 +39,14 @@ does not know them may ignore (``samples.csv`` is unchanged)::
                          {"kind": "temperature", "name": "imu1", "imu": "imu1",
                           "unit": "degC"}, ...]}
 
+Events the log declared (optional, backward compatible)
+-------------------------------------------------------
+``"events": [{"t": 86.6, "t_end": 120.1, "source": "ERR", "text": "ERR CRASH_CHECK 1:
+crash", "code": 1, "category": "crash"}, ...]``: times in s on the samples' clock,
+``t_end`` ``null`` when the event lasts to the end of the log; ``category`` is ``crash``
+(declared out of the operating envelope), ``estimator`` or ``info``
+(:mod:`replay.log_events`).
+
 ``DIR/aux.csv``: header ``t,<kind>:<name>,...`` (``accel:imu1.x``, ``temperature:imu1``),
 one line per sample on the same times as ``samples.csv`` (same ``t`` column), empty cell
 = no sample. Units are fixed per kind (:data:`replay.flight_data.AUX_UNITS`).
@@ -60,6 +68,7 @@ from fdi.errors import ConfigError, FileFormatError
 from fdi.fileio import Fields, read_json_object, to_jsonable
 from replay.faults import Fault, fault_from_dict
 from replay.flight_data import AUX_KINDS, AUX_UNITS, FLIGHT_TRUTH_SCHEMA, AuxChannels, Flight
+from replay.log_events import LogEvent, event_from_dict, event_to_dict
 
 __all__ = [
     "AUX_FILE",
@@ -109,6 +118,8 @@ def save_flight_dir(flight: Flight, directory: str | Path) -> None:
         "source": flight.source}
     if flight.imu:
         manifest["imu"] = list(flight.imu)
+    if flight.events:
+        manifest["events"] = [event_to_dict(e) for e in flight.events]
     t_col = _fmt_column(flight.t, np.ones_like(flight.t, bool))
     cols = [t_col] + [_fmt_column(flight.raw[:, i], flight.valid[:, i]) for i in range(n)]
     _write_csv(d / "samples.csv", manifest["columns"], cols)
@@ -386,8 +397,9 @@ def load_flight_dir(directory: str | Path) -> Flight:
     f.free("meta", None)
     if isinstance(man.get("aux"), Mapping):
         Fields(man["aux"], mp, "aux").finish(accept=("file", "channels"))
+    events = _events(man, mp)
     f.finish(accept=("sample_rate_hz", "sensor_names", "columns", "imu", "samples_file",
-                     "aux"))
+                     "aux", "events"))
     spath = _file_beside(d, mp, man.get("samples_file", "samples.csv"), "samples_file")
     vals, missing = _load_samples(spath, len(columns), columns)
     if n_samples is not None and n_samples != vals.shape[0]:
@@ -407,4 +419,12 @@ def load_flight_dir(directory: str | Path) -> Flight:
     return Flight(t=t, raw=raw, valid=valid, sample_rate_hz=fs,
                   sensor_names=tuple(names), raw_unit=raw_unit,
                   omega_true=rates, faults=faults, truth=truth, source=str(d), kind=kind,
-                  imu=imu, aux=aux)
+                  imu=imu, aux=aux, events=events)
+
+
+def _events(man: Mapping[str, Any], mp: str) -> tuple[LogEvent, ...]:
+    """The manifest's optional ``events`` list."""
+    ev = man.get("events", [])
+    if not isinstance(ev, list):
+        raise FileFormatError(mp, f"expected a list, got {type(ev).__name__}", field="events")
+    return tuple(event_from_dict(d, mp, f"events[{j}]") for j, d in enumerate(ev))

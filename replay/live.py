@@ -22,6 +22,7 @@ import math
 import time
 from collections import deque
 from collections.abc import Callable, Sequence
+from dataclasses import replace
 from typing import Any
 
 import can
@@ -29,37 +30,16 @@ import cantools
 import numpy as np
 
 from fdi.answer import Answer, BlockResult, Event
+from fdi.blocks import block_from_answers
 from replay.accounting import FrameAccounting
 from replay.assemble import BlockDecoder, RawFrames, Samples
 from replay.channel_map import ChannelMap
-from replay.effect_inputs import row_inputs, stream_inputs
-from replay.logio import _norm_channel
+from replay.effect_inputs import row_inputs
+from replay.logio import _norm_channel, aux_channels
 
 __all__ = ["Pacer", "StreamDecoder", "block_from_answers", "format_event", "run_live"]
 
 _Sample = tuple[float, np.ndarray, np.ndarray]
-
-
-def block_from_answers(answers: Sequence[Answer], n: int, K: int) -> BlockResult:
-    """Stack per-sample answers into a :class:`~fdi.answer.BlockResult`."""
-    N = len(answers)
-    if N == 0:
-        return BlockResult(t=np.zeros(0), omega=np.zeros((0, 3)), omega_sd=np.zeros((0, 3)),
-                           healthy=np.zeros((0, n), bool), statistics=np.zeros((0, K)),
-                           thresholds=np.zeros((0, K)), protection_level=np.zeros(0),
-                           capability=np.zeros(0, dtype="<U11"), events=[],
-                           parity=np.zeros((0, max(n - 3, 1))))
-    return BlockResult(
-        t=np.array([a.t for a in answers], float),
-        omega=np.array([a.omega for a in answers], float),
-        omega_sd=np.array([a.omega_sd for a in answers], float),
-        healthy=np.array([a.healthy for a in answers], bool),
-        statistics=np.array([a.statistics for a in answers], float),
-        thresholds=np.array([a.thresholds for a in answers], float),
-        protection_level=np.array([a.protection_level for a in answers], float),
-        capability=np.array([a.capability for a in answers]),
-        events=[e for a in answers for e in a.events],
-        parity=np.array([a.parity for a in answers], float))
 
 
 def format_event(e: Event, names: Sequence[str] = ()) -> str:
@@ -153,16 +133,17 @@ class Pacer:
         self._t0 = 0.0
 
     def run(self, monitor: Any, t: np.ndarray, raw: np.ndarray, valid: np.ndarray, *,
-            force: np.ndarray | None = None, temperature: np.ndarray | None = None
-            ) -> BlockResult:
+            force: np.ndarray | None = None, temperature: np.ndarray | None = None,
+            **more: np.ndarray | None) -> BlockResult:
         """Step ``monitor`` through the samples at their pace; returns their answers.
 
         ``force`` (N, ...) and ``temperature`` (N, ...): the effect terms' inputs of a
-        :class:`~fdi.effects_monitor.CompensatedMonitor`, passed row by row when given.
+        :class:`~fdi.effects_monitor.CompensatedMonitor`, and any other per-sample input
+        of ``step`` (N, ...), passed row by row when given.
         """
         answers = []
-        inputs = {name: v for name, v in (("force", force), ("temperature", temperature))
-                  if v is not None}
+        inputs = {name: v for name, v in (("force", force), ("temperature", temperature),
+                                          *more.items()) if v is not None}
         for k in range(len(t)):
             kw = row_inputs(inputs, k)
             if self._start is None:
@@ -189,14 +170,19 @@ def run_live(bus: can.BusABC, decoder: StreamDecoder, monitor: Any, *,
 
     Sample time = frame time − the first frame's time + ``t_start`` (as the offline replay).
     Frames are taken from the bus in batches: the first waits up to ``poll_s``, the rest of
-    the batch are those already queued (at most ``batch_frames``).
+    the batch are those already queued (at most ``batch_frames``). Each batch's samples go
+    through the monitoring chain (:class:`replay.chain.MonitorChain`: time offsets,
+    compensation, envelope, report, recording) and the monitor, sample by sample.
 
     Parameters
     ----------
+    monitor : MonitorChain, Monitor or CompensatedMonitor
+        A bare monitor is run in a chain of its own (no time offsets, no report).
     window : int, optional
         Keep only the last ``window`` answers (None: all; a long run needs a window).
     summary : replay.report.RunningReport, optional
-        Updated with every batch of answers (events, running summaries).
+        Updated with every batch of answers (events, running summaries), besides the
+        chain's own report.
 
     Returns
     -------
@@ -205,29 +191,33 @@ def run_live(bus: can.BusABC, decoder: StreamDecoder, monitor: Any, *,
     frames : dict
         Frame accounting (:meth:`~replay.accounting.FrameAccounting.to_dict`).
     """
+    from replay.chain import MonitorChain
+    from replay.flight_data import Flight
+
+    chain = monitor if isinstance(monitor, MonitorChain) else MonitorChain(
+        monitor, monitor.cal, cmap=decoder.cmap, time_offsets=False)
     answers: deque[Answer] = deque(maxlen=window)
     t0 = time.monotonic()
     last_rx = t0
     got = 0
-    K = 0
+    n = decoder.n
+    header = Flight(t=np.zeros(0), raw=np.zeros((0, n)), valid=np.zeros((0, n), bool),
+                    sample_rate_hz=float(chain.cal.sample_rate_hz),
+                    sensor_names=chain.sensor_names, kind=chain.kind, source="<bus>")
+
+    def keep(result: BlockResult | None) -> None:
+        if result is None:
+            return
+        answers.extend(chain.last_answers)
+        if summary is not None:
+            summary.update(result)
 
     def consume(smp: Samples) -> None:
-        nonlocal K
-        new = []
-        inputs = stream_inputs(monitor, decoder.cmap, smp.aux) if smp.t.size else {}
-        for k in range(smp.t.size):
-            kw = row_inputs(inputs, k)
-            ans = monitor.step(float(smp.t[k]) - decoder.t_first + t_start, smp.raw[k],
-                               smp.valid[k], **kw)
-            new.append(ans)
-            if on_event is not None:
-                for e in ans.events:
-                    on_event(e)
-        if new:
-            K = len(new[0].statistics)
-            answers.extend(new)
-            if summary is not None:
-                summary.update(block_from_answers(new, decoder.n, K))
+        if not smp.t.size:
+            return
+        piece = replace(header, t=smp.t - decoder.t_first + t_start, raw=smp.raw,
+                        valid=smp.valid, aux=aux_channels(decoder.cmap, smp.aux))
+        keep(chain.feed(piece, stepwise=True, on_event=on_event))
 
     try:
         while True:
@@ -254,4 +244,6 @@ def run_live(bus: can.BusABC, decoder: StreamDecoder, monitor: Any, *,
     except KeyboardInterrupt:
         pass
     consume(decoder.flush_samples())
-    return block_from_answers(list(answers), decoder.n, K), decoder.acct.to_dict()
+    keep(chain.finish(stepwise=True, on_event=on_event))
+    return (block_from_answers(list(answers), n, int(chain.monitor.K)),
+            decoder.acct.to_dict())

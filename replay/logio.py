@@ -257,7 +257,8 @@ def write_flight_log(flight: Any, path: str | Path, *, dbc: str | Path | None = 
                         "dbc": "rimu_imu.dbc" if dbc is None else str(dbc),
                         "t0_epoch_s": t0_epoch_s, "t_start_s": float(t[0]) if N else 0.0,
                         "frame_gap_s": frame_gap_s, "jitter_s": jitter_s,
-                        "frames": int(ts.size)}
+                        "frames": int(ts.size), "raw_unit": str(flight.raw_unit),
+                        "sensor_names": list(flight.sensor_names)}
     if extra:
         truth["can_log"]["auxiliary"] = [
             {"name": a.name, "quantity": a.quantity, "message": a.message,
@@ -746,6 +747,22 @@ def read_log(path: str | Path, cal: Calibration, *, dbc: str | Path | None = Non
     return flight, acct.to_dict()
 
 
+def _check_log_set(truth: dict[str, Any], cal: Calibration, cmap: ChannelMap, source: str,
+                   cal_source: str | None) -> None:
+    """The sensor count and raw unit a rimu-written log's sidecar records, against the
+    calibration (one line naming both when they disagree)."""
+    rec = truth.get("can_log")
+    if not isinstance(rec, dict) or truth.get("kind", cmap.kind) != cmap.kind:
+        return
+    names, unit = rec.get("sensor_names"), rec.get("raw_unit")
+    if not isinstance(names, list) or not isinstance(unit, str):
+        return
+    if not cmap.source.startswith("<") and len(names) != cmap.n:
+        return                       # a map that picks a subset of the log's sensors
+    check_compatible(cal, len(names), unit, source, kind=cmap.kind, names=names,
+                     cal_source=cal_source)
+
+
 class LogStream:
     """A CAN log read, decoded and handed over in pieces: bounded memory on long logs.
 
@@ -770,6 +787,15 @@ class LogStream:
         Refuse a log that carries messages like the mapped ones for more sensors than the
         calibration has (e.g. ``RIMU_GYRO_05`` and ``_06`` with a 4-sensor calibration);
         for the default map, where the calibration chose the sensors.
+    cal_source : str, optional
+        The calibration's file, named in the messages of a refused log.
+
+    Raises
+    ------
+    ConfigError
+        The truth sidecar says the log is of another sensor set than the calibration's
+        (sensor count, or the raw unit the log's writer recorded), as ``rimu monitor-file``
+        refuses such a flight folder (:func:`fdi.calfile.check_compatible`).
 
     Attributes
     ----------
@@ -780,7 +806,8 @@ class LogStream:
 
     def __init__(self, path: str | Path, cal: Calibration, db: Any, cmap: ChannelMap, *,
                  strict: bool = False, progress: bool = True,
-                 chunk_frames: int = 1 << 16, check_sensor_set: bool = False) -> None:
+                 chunk_frames: int = 1 << 16, check_sensor_set: bool = False,
+                 cal_source: str | None = None) -> None:
         from replay.flight_data import Flight
         from replay.flight_io import read_truth_sidecar
 
@@ -805,7 +832,9 @@ class LogStream:
             sig = truth.get("sigma")
             if isinstance(sig, list) and truth.get("kind", cmap.kind) == cmap.kind:
                 check_compatible(cal, len(sig), None, f"{self.path} (truth sidecar {tp.name})",
-                                 kind=cmap.kind)
+                                 kind=cmap.kind, cal_source=cal_source)
+            _check_log_set(truth, cal, cmap, f"{self.path} (truth sidecar {tp.name})",
+                           cal_source)
         self.header = Flight(
             t=np.zeros(0), raw=np.zeros((0, s.n)), valid=np.zeros((0, s.n), bool),
             sample_rate_hz=self.fs, sensor_names=tuple(c.name for c in s.sensors),

@@ -24,7 +24,7 @@ from fdi.errors import ConfigError
 from replay.faults import Fault
 from replay.scenario import add_fault_signal
 
-__all__ = ["ChunkInjector"]
+__all__ = ["ChunkInjector", "scenario_injector"]
 
 
 class ChunkInjector:
@@ -94,3 +94,17 @@ class ChunkInjector:
                 add_fault_signal(raw, m, f, t, sf, b, sd, self.rng)
         raw[~valid] = np.nan
         return replace(piece, raw=raw, valid=valid)
+
+
+def scenario_injector(path: Any, cal: Calibration, header: Any, *, kind: str = "gyro",
+                      n: int | None = None) -> tuple[ChunkInjector, Any]:
+    """A scenario file's injector and the log's header with its faults and truth added
+    (``rimu replay --inject``)."""
+    from replay.scenario import load_scenario
+
+    faults, seed = load_scenario(path, cal, kind=kind)
+    injector = ChunkInjector(faults, cal, kind=kind, seed=seed, n=n)
+    truth = dict(header.truth)
+    truth["injected"] = {"faults": [f.to_dict() for f in faults], "seed": int(seed),
+                         "source": str(path)}
+    return injector, replace(header, faults=tuple(header.faults) + tuple(faults), truth=truth)

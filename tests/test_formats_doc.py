@@ -63,6 +63,8 @@ def test_flight_folder(examples):
     assert f.n == 4 and f.t.size == 5 and f.raw_unit == "mV"
     assert not f.valid[2, 1] and np.isnan(f.raw[2, 1])      # empty cell: no sample
     assert f.valid[4, 3] and np.isnan(f.raw[4, 3])          # nan: a value sent
+    (ev,) = f.events
+    assert ev.category == "crash" and ev.t_s == 0.02 and ev.t_end_s == float("inf")
 
 
 def test_channel_map_and_scenario_against_a_tetrad_calibration(examples):

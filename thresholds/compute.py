@@ -1,4 +1,4 @@
-"""Detection thresholds from a calibration (``rimu.thresholds/1``).
+"""Detection thresholds from a calibration (``rimu.thresholds/2``).
 
 ``compute_thresholds`` sets, for a stated false-alarm rate, the threshold of each window
 scale of the monitor (:mod:`fdi.detector` holds the arithmetic the runtime shares):
@@ -9,7 +9,9 @@ scale of the monitor (:mod:`fdi.detector` holds the arithmetic the runtime share
 - threshold of scale w: ``chi2.isf(alpha_w, m − 3)`` on ``D_w = |Σ_w z|²/(w f_w)``.
 - ``f_w``: variance of a w-sample mean relative to white noise, from the Allan variance
   of the calibration residuals at τ = w/fs (the calibration file's table, or residuals
-  given here, run through ``allantools.oadev``).
+  given here, run through ``allantools.oadev``); where the calibration's residual tail
+  model fails its normality check, the overbound of the measured tail when larger
+  (:mod:`fdi.tails`).
 """
 
 from __future__ import annotations
@@ -74,7 +76,7 @@ def compute_thresholds(cal: Calibration, *, false_alarms_per_hour: float = 1e-3,
     Returns
     -------
     Thresholds
-        Saved with ``.save(path)`` as ``"schema": "rimu.thresholds/1"``.
+        Saved with ``.save(path)`` as ``"schema": "rimu.thresholds/2"``.
     """
     if residuals is not None:
         s = cal.kind(kind)

@@ -116,7 +116,7 @@ def static_calibration(y: np.ndarray, fs: float, names: tuple[str, ...],
                                  scale_factor=1.0, scale_factor_sd=1e-6, bias=float(mean[i]),
                                  bias_sd=float(bsd[i]),
                                  input_error_cov=1e-12 * np.eye(3), raw_unit="rad/s",
-                                 scale_factor_unit="(rad/s)/(rad/s)", bias_unit="rad/s",
+                                 scale_factor_unit="(rad/s)/raw", bias_unit="rad/s",
                                  residual_rms=float(sd[i])))
     table = table if allan else None
     groups = tuple(tuple(range(k, k + 3)) for k in range(0, n, 3))

@@ -56,11 +56,18 @@ import numpy as np
 from scipy import integrate, linalg, optimize, stats
 
 from fdi.calfile import Calibration
-from fdi.detector import chi2_threshold, minimum_detectable_noncentrality, variance_factors
+from fdi.detector import (
+    chi2_threshold,
+    minimum_detectable_noncentrality,
+    noise_model,
+    tail_note,
+    variance_factors,
+)
 from fdi.errors import ConfigError
 from fdi.fileio import to_jsonable
 from fdi.parity import parity_matrix
 from fdi.settings import MAX_SCALE, Thresholds
+from fdi.tails import TailChoice, tail_variance_factors
 from fdi.units import DPS
 from thresholds.select import TUNING_SCHEMA
 
@@ -242,12 +249,16 @@ class Tuning:
     assumptions : dict
         Noise model, Allan deviation per scale, calibration covariance, residual tails, the
         simulated correction.
+    choices : tuple of TailChoice
+        Per scale, what the variance factor rests on (Gaussian white or the overbound of
+        the calibration's residual tail model), for printing.
     schema : str
     """
 
     thresholds: Thresholds
     detectable: tuple[DetectableSize, ...]
     assumptions: dict[str, Any] = field(default_factory=dict)
+    choices: tuple[TailChoice, ...] = ()
     schema: str = TUNING_SCHEMA
 
     def to_dict(self) -> dict[str, Any]:
@@ -327,7 +338,12 @@ def _assumptions(cal: Calibration, thr: Thresholds, kind: str, df: int, beta: fl
             "input_error_cov_trace": [float(np.trace(c.input_error_cov)) for c in s.sensors],
             "parity_dof": df, "bias_inflation_beta": beta},
         "residual_tails": {
-            "assumed": "Gaussian (chi-square detection statistics)",
+            "assumed": ("Gaussian (chi-square detection statistics)" if s.tails is None else
+                        "the calibration's tail model (rimu.tails/1): per scale Gaussian white "
+                        "where the residual passes its normality check, else the variance "
+                        "factor max(Allan, overbound)"),
+            "model_source": None if s.tails is None else s.tails.source,
+            "model_samples": None if s.tails is None else s.tails.samples,
             "residual_rms": [c.residual_rms for c in s.sensors],
             "calibration_step_residuals": "recorded in the calibration file" if steps
             else "not recorded",
@@ -395,12 +411,22 @@ def tune(cal: Calibration, *, false_alarms_per_hour: float, kind: str = "gyro",
                        "rate_per_hour": cnt / hrs, "correction_before": gamma})
         gamma = gamma * meas / Rc
     thr = _share_thresholds(base, per_sample / len(sc) / gamma, df)
+    # the simulated correction is measured on Gaussian flights with the Allan factors; the
+    # measured tails then inflate the variance per scale at the alpha it ended with
+    vf_used, choices = tail_variance_factors(s.tails, sc, thr.alpha, vf)
     notes = (f"tuned for {R:g} false alarms/h: exact white-noise upcrossing rate per scale, "
-             f"equal shares, simulated correction {gamma:.3f} (rimu tune)")
+             f"equal shares, simulated correction {gamma:.3f}{tail_note(choices)} (rimu tune)")
     thr = Thresholds(kind=kind, n=s.n, sample_rate_hz=fs, false_alarms_per_hour=R,
-                     scales=sc, alpha=thr.alpha, variance_factor=vf, threshold=thr.threshold,
-                     detector="windows", notes=notes)
+                     scales=sc, alpha=thr.alpha, variance_factor=vf_used,
+                     threshold=thr.threshold, detector="windows", notes=notes,
+                     calibration_fingerprint=cal.fingerprint(),
+                     noise_model=noise_model(choices))
     ass = _assumptions(cal, thr, kind, df, beta)
+    ass["residual_tails"]["per_scale"] = [
+        {"scale": c.scale, "choice": c.choice, "allan_factor": c.allan_factor,
+         "overbound_factor": c.overbound_factor, "variance_factor": c.factor,
+         "excess_kurtosis": c.excess_kurtosis, "gpd_shape": c.shape,
+         "gpd_shape_sd": c.shape_sd, "text": c.text()} for c in choices]
     ass["method"] = "rimu tune: upcrossing shares + simulated correction"
     ass["simulation_correction"] = {
         "factor": gamma, "passes": passes,
@@ -411,4 +437,4 @@ def tune(cal: Calibration, *, false_alarms_per_hour: float, kind: str = "gyro",
                  else f"measured at {Rc:g}/h and carried over to {R:g}/h" if R < Rc
                  else "measured at the target")}
     ass["created"] = datetime.now(UTC).isoformat(timespec="seconds")
-    return Tuning(thr, detectable_sizes(cal, thr, kind=kind), ass)
+    return Tuning(thr, detectable_sizes(cal, thr, kind=kind), ass, choices)

@@ -1,4 +1,4 @@
-"""The in-flight calibration as a ``rimu.calibration/1`` file the monitor reads.
+"""The in-flight calibration as a ``rimu.calibration/3`` file the monitor reads.
 
 Frame and sensor model: the reference IMU defines the frame, so its axes are the unit
 vectors, its scale factors 1 and its biases 0 (its absolute bias is not observable against
@@ -17,6 +17,8 @@ coloured noise. Time offsets are kept under ``extra.inflight`` with their checks
 (:mod:`.offset_check`), their sign convention and the identity of the flight they were
 fitted on; ``rimu monitor-file`` and ``rimu diagnose`` move each IMU by its offset
 (:mod:`.timing`).
+The tail of the residual's parity statistic per window scale is kept too
+(:func:`sensor_residuals`, :mod:`calibration.tails`).
 """
 
 from __future__ import annotations
@@ -29,11 +31,12 @@ from calibration.inflight.fit import InflightFit, decompose
 from calibration.inflight.offset_check import SIGN_CONVENTION
 from calibration.inflight.timing import flight_identity
 from calibration.residuals import allan_table
+from calibration.tails import fit_tail_model
 from fdi.calfile import AllanTable, Calibration, SensorCal, SensorSet, tangent_basis
 from fdi.units import DPH, DPS, RAW_UNITS
 from replay.flight_data import Flight
 
-__all__ = ["INFLIGHT_METHOD", "calibration_from_fit", "noise_split"]
+__all__ = ["INFLIGHT_METHOD", "calibration_from_fit", "noise_split", "sensor_residuals"]
 
 INFLIGHT_METHOD = "in-flight alignment to a reference IMU (calibration.inflight/1)"
 _AXES = "xyz"
@@ -89,8 +92,32 @@ def _sf_unit(raw_unit: str) -> str:
     return f"(rad/s)/{raw_unit}" if raw_unit in RAW_UNITS else "(rad/s)/raw"
 
 
-def calibration_from_fit(fit: InflightFit, flight: Flight) -> Calibration:
-    """The ``rimu.calibration/1`` calibration of a flight's gyro set (module docstring)."""
+def sensor_residuals(fit: InflightFit, flight: Flight) -> np.ndarray:
+    """Residual per sensor (N, n) rad/s whose parity is the monitor's parity of the flight.
+
+    The reference's compensated outputs are its readings (SF 1, bias 0); IMU j's axis k
+    reads ``y = (u − c_k)/|A_k|``, so ``y_jk − h_k·y_ref = r_jk/|A_k|`` with ``r`` the fit
+    residual. The reference's column is 0, IMU j's is ``r_jk/|A_k|``: ``V·e`` equals the
+    parity of the compensated outputs (``V·H̃ = 0``). NaN on the samples the fit left out.
+    """
+    e = np.zeros((flight.t.shape[0], flight.n))
+    e[~fit.used] = np.nan
+    for g, idx in flight.imu_groups().items():
+        a = fit.alignments.get(g)
+        if a is None:
+            continue
+        for k, i in enumerate(idx):
+            e[:, i] = a.residual[:, k] / float(np.linalg.norm(a.A[k]))
+    return e
+
+
+def calibration_from_fit(fit: InflightFit, flight: Flight, *, tails: bool = True
+                         ) -> Calibration:
+    """The ``rimu.calibration/3`` calibration of a flight's gyro set (module docstring).
+
+    With ``tails`` the residual's tail model per window scale is fitted and kept
+    (:mod:`calibration.tails`).
+    """
     noise = noise_split(fit)
     groups = flight.imu_groups()
     sensors: list[SensorCal] = []
@@ -122,8 +149,13 @@ def calibration_from_fit(fit: InflightFit, flight: Flight) -> Calibration:
                 bias=c / g_k, bias_sd=c_sd / g_k, input_error_cov=C, misalignment_sd=ms,
                 raw_unit=flight.raw_unit, scale_factor_unit=sfu, bias_unit="deg/h",
                 residual_rms=rms))
+    H = np.array([c.axis for c in sensors])
+    model = (fit_tail_model(sensor_residuals(fit, flight), H, cov, fit.sample_rate_hz,
+                            source="in-flight alignment residual (samples the fit used)")
+             if tails else None)
     return Calibration(configuration=f"{len(groups)} IMUs in flight", sets={
-        "gyro": SensorSet("gyro", tuple(sensors), cov, allan=_allan(fit, noise))},
+        "gyro": SensorSet("gyro", tuple(sensors), cov, allan=_allan(fit, noise),
+                          tails=model)},
         sample_rate_hz=fit.sample_rate_hz, extra={"method": INFLIGHT_METHOD,
                                                  "source": fit.source,
                                                  "inflight": fit_summary(fit, flight)})

@@ -1,14 +1,19 @@
 """Segments of a flight to leave out, found from the data.
 
-- ``saturation``: a gyro or accelerometer channel sits at its largest magnitude for at
-  least :data:`CLIP_RUN` samples in a row (a clipped sensor repeats its full-scale value);
-- ``shock``: the specific-force magnitude of an IMU exceeds :data:`SHOCK_G` g (an impact:
-  hard take-off or landing, crash); labelled ``crash`` when it is followed by no motion
-  or by the end of the log, ``take-off`` when it comes before the first motion;
+The operating envelope is decided in one place, :mod:`fdi.envelope` (through
+:func:`replay.envelope.flight_envelope`, the same codes the monitor gets); this module turns
+its codes into segments and adds what only the offline fit needs:
+
+- ``shock``, ``saturation``, ``tumble``, ``declared``: the envelope's reasons (see
+  docs/envelope.md). A shock is labelled ``crash`` when it is followed by no motion or by
+  the end of the log, ``take-off`` when it comes before the first motion;
 - ``gap``: the samples next to a gap in the time base (more than two sample periods);
 - ``invalid``: a sample some sensor did not send.
 
-Every segment is widened by :data:`PAD_S` on both sides and overlapping ones are merged.
+The calibration is not causal: every envelope segment is widened by :data:`PAD_S` before
+(the envelope already holds each reason ``hold_s`` after), gaps and invalid samples by
+:data:`PAD_S` on both sides; overlapping segments of one reason are merged. Declared
+events of the ``crash`` category count (:data:`replay.log_events.DEFAULT_DECLARED`).
 """
 
 from __future__ import annotations
@@ -17,17 +22,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fdi.units import G0
+from fdi.envelope import REASONS, SHOCK, EnvelopeSettings
+from replay.envelope import flight_envelope, flying_mask
 from replay.flight_data import Flight
 
-__all__ = ["CLIP_RUN", "PAD_S", "SHOCK_G", "Segment", "find_segments", "keep_mask"]
+__all__ = ["PAD_S", "Segment", "find_segments", "keep_mask"]
 
-CLIP_RUN = 3
-"""Consecutive samples at the channel's extreme value that count as saturation."""
-SHOCK_G = 4.0
-"""Specific force (g) above which a sample is an impact."""
 PAD_S = 0.5
-"""Margin (s) added on both sides of every segment."""
+"""Margin (s) added before every segment (and after gaps and invalid samples)."""
 
 
 @dataclass(frozen=True)
@@ -51,43 +53,6 @@ def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
     return list(zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1), strict=True))
 
 
-def _clipped(x: np.ndarray) -> np.ndarray:
-    """Samples where a channel repeats its extreme magnitude CLIP_RUN times or more."""
-    out = np.zeros(x.shape[0], bool)
-    a = np.abs(x)
-    if not np.isfinite(a).any():
-        return out
-    top = np.nanmax(a)
-    if not top > 0:
-        return out
-    at = a >= top * (1 - 1e-9)
-    for s, e in _runs(at):
-        if e - s >= CLIP_RUN:
-            out[s:e] = True
-    return out
-
-
-def _saturation_and_shock(flight: Flight) -> tuple[np.ndarray, np.ndarray]:
-    """Samples where a gyro or accelerometer channel sits at full scale, and samples whose
-    specific force (per IMU, three accelerometer axes) exceeds ``SHOCK_G``; shape (N,)."""
-    N = flight.t.shape[0]
-    sat = np.zeros(N, bool)
-    for i in range(flight.n):
-        sat |= _clipped(flight.raw[:, i])
-    acc = flight.aux.select("accel") if flight.aux is not None else None
-    shock = np.zeros(N, bool)
-    if acc is None or not acc.m:
-        return sat, shock
-    for j in range(acc.m):
-        sat |= _clipped(acc.values[:, j])
-    for g in sorted(set(acc.imu)):
-        cols = [k for k, h in enumerate(acc.imu) if h == g]
-        if len(cols) == 3:
-            mag = np.linalg.norm(acc.values[:, cols], axis=1)
-            shock |= np.nan_to_num(mag, nan=0.0) > SHOCK_G * G0
-    return sat, shock
-
-
 def _gap_samples(flight: Flight) -> np.ndarray:
     """The samples on either side of a jump of the time base by more than two periods."""
     t = flight.t
@@ -99,44 +64,54 @@ def _gap_samples(flight: Flight) -> np.ndarray:
     return gap
 
 
-def find_segments(flight: Flight) -> list[Segment]:
+def _why(flight: Flight, bit: int, t0: float, t1: float,
+         settings: EnvelopeSettings) -> str:
+    if bit == SHOCK:
+        return f"specific force above {settings.shock_limit_g:g} g, confirmed by every IMU"
+    if bit == 2:
+        return "a channel at its range or repeating a large value, confirmed"
+    if bit == 4:
+        return (f"every IMU above {settings.tumble_rate_dps:g} deg/s, or the IMUs' "
+                f"disagreement jumps by {settings.disagree_spike_dps:g} deg/s in a fast turn")
+    texts = [e.text for e in flight.events if e.category == "crash"
+             and e.t_s <= t1 and e.t_end_s >= t0 - settings.hold_s]
+    return "declared by the log: " + "; ".join(dict.fromkeys(texts)) if texts else \
+        "declared by the log"
+
+
+def find_segments(flight: Flight, settings: EnvelopeSettings | None = None) -> list[Segment]:
     """Segments to leave out (module docstring), sorted by time, merged, padded."""
+    settings = settings if settings is not None else EnvelopeSettings()
     t = flight.t
     N = t.shape[0]
     if N == 0:
         return []
-    sat, shock = _saturation_and_shock(flight)
-    flags: list[tuple[np.ndarray, str, str]] = [
-        (sat, "saturation", "a channel repeats its full-scale value"),
-        (_gap_samples(flight), "gap", "time base jumps by more than two sample periods")]
-    flags.append((~flight.valid.all(axis=1), "invalid", "a sensor sent no sample"))
-    moving = _moving(flight)
+    codes = flight_envelope(flight, None, settings)
+    moving = flying_mask(flight)
     first_move = int(np.argmax(moving)) if moving.any() else N
     last_move = N - 1 - int(np.argmax(moving[::-1])) if moving.any() else -1
     segs: list[Segment] = []
-    for s, e in _runs(shock):
-        reason = ("take-off" if e <= first_move else "crash" if s >= last_move - 1
-                  else "shock")
-        segs.append(Segment(float(t[s]), float(t[e - 1]), reason,
-                            f"specific force above {SHOCK_G:g} g"))
+    for bit, name in REASONS.items():
+        for s, e in _runs((codes & bit) != 0):
+            reason = name
+            if bit == SHOCK:
+                reason = ("take-off" if e <= first_move else "crash" if s >= last_move - 1
+                          else "shock")
+            t0, t1 = float(t[s]), float(t[e - 1])
+            segs.append(Segment(t0 - PAD_S, t1, reason, _why(flight, bit, t0, t1, settings)))
+    flags: list[tuple[np.ndarray, str, str]] = [
+        (_gap_samples(flight), "gap", "time base jumps by more than two sample periods"),
+        (~flight.valid.all(axis=1), "invalid", "a sensor sent no sample")]
     for mask, reason, why in flags:
-        segs.extend(Segment(float(t[s]), float(t[e - 1]), reason, why)
+        segs.extend(Segment(float(t[s]) - PAD_S, float(t[e - 1]) + PAD_S, reason, why)
                     for s, e in _runs(mask))
     return _merge(sorted(segs, key=lambda g: g.t0_s))
-
-
-def _moving(flight: Flight) -> np.ndarray:
-    """Samples where the body turns: rate magnitude (first IMU) above 0.1 rad/s."""
-    k = min(3, flight.n)
-    r = np.linalg.norm(np.nan_to_num(flight.raw[:, :k]), axis=1)
-    base = np.median(r[: max(1, r.shape[0] // 20)])
-    return r > base + 0.1
 
 
 def _merge(segs: list[Segment]) -> list[Segment]:
     out: list[Segment] = []
     for g in segs:
-        a, b = g.t0_s - PAD_S, g.t1_s + PAD_S
+        a, b = g.t0_s, g.t1_s
         if out and a <= out[-1].t1_s and out[-1].reason == g.reason:
             p = out[-1]
             out[-1] = Segment(p.t0_s, max(p.t1_s, b), p.reason, p.detail)

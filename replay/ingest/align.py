@@ -234,7 +234,7 @@ def align_streams(read: LogRead, *, reference: str | None = None, gap_factor: fl
     fs = 1.0 / dt_b
     flight = Flight(t=np.asarray(tb, float), raw=raw, valid=valid, sample_rate_hz=fs,
                     sensor_names=tuple(names), raw_unit="rad/s", source=read.path,
-                    kind="gyro", imu=tuple(imu_groups), aux=aux)
+                    kind="gyro", imu=tuple(imu_groups), aux=aux, events=read.events)
     gaps = _gaps(tb, gap_factor * dt_b)
     report = {
         "schema": INGEST_REPORT_SCHEMA, "source": read.path, "format": read.format,
@@ -245,5 +245,8 @@ def align_streams(read: LogRead, *, reference: str | None = None, gap_factor: fl
                       "median_dt_s": dt_b, "sample_rate_hz": fs,
                       "tolerance_s": tol, "gap_factor": gap_factor,
                       "gaps": gaps[:50], "n_gaps": len(gaps)},
-        "imus": imus, "meta": read.meta}
+        "imus": imus, "meta": read.meta,
+        "events": {"count": len(read.events),
+                   "by_category": {c: sum(e.category == c for e in read.events)
+                                   for c in sorted({e.category for e in read.events})}}}
     return flight, report

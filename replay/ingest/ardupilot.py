@@ -7,6 +7,18 @@ temperature ``Temp`` or ``T`` (°C; a column that is 0 throughout is taken as no
 the error counters ``ErrG``/``EG``. Values are what ArduPilot logged: body frame, after its
 board rotation and its own calibration.
 
+Events: ``ERR`` (subsystem and code: crash check, EKF check, EKF/INAV failsafe, ...),
+``EV`` (arming, landing, flips) and ``MSG`` (text) become :class:`~replay.log_events.LogEvent`
+records. Old logs give these messages no time field; an event then starts at the time of
+the last IMU sample before it in the file (the log is written in time order) and an
+interval ends at the first IMU sample after its closing message (logging pauses while
+disarmed, so the two can be far apart: the span is taken wide). Category ``crash``: a
+crash check (``ERR`` 12, code 1 crash or 2 loss of control) until the next ``EV`` ARMED
+or the end of the log, a thrust-loss check (25) until its code 0, a flip from ``EV``
+FLIP_START to FLIP_END. Category ``estimator``: an EKF check (16, code 2 bad variance) or
+EKF/INAV failsafe (17) until the same subsystem logs code 0, an EKF primary change (24,
+an instant). Everything else is ``info``.
+
 Damage is found from pymavlink's own index of message offsets: a message that runs past
 the end of the file (truncated log) or bytes between two messages that belong to none
 (corruption) is reported with its byte offset. pymavlink resynchronises silently over
@@ -32,11 +44,33 @@ import numpy as np
 from fdi.errors import FileFormatError
 from fdi.units import TIME_UNITS
 from replay.ingest.stream import Damage, ImuStream, LogRead
+from replay.log_events import LogEvent
 
-__all__ = ["IMU_TYPES", "looks_like_dataflash", "read_ardupilot"]
+__all__ = ["ERR_SUBSYSTEMS", "EVENT_TYPES", "EV_IDS", "IMU_TYPES", "ardupilot_events",
+           "looks_like_dataflash", "read_ardupilot"]
 
 IMU_TYPES = ("IMU", "IMU2", "IMU3")
 """DataFlash message types that carry IMU samples."""
+EVENT_TYPES = ("ERR", "EV", "MSG")
+"""DataFlash message types read as events."""
+ERR_SUBSYSTEMS = {
+    1: "MAIN", 2: "RADIO", 3: "COMPASS", 4: "OPTFLOW", 5: "FAILSAFE_RADIO",
+    6: "FAILSAFE_BATT", 7: "FAILSAFE_GPS", 8: "FAILSAFE_GCS", 9: "FAILSAFE_FENCE",
+    10: "FLIGHT_MODE", 11: "GPS", 12: "CRASH_CHECK", 13: "FLIP", 14: "AUTOTUNE",
+    15: "PARACHUTE", 16: "EKFCHECK", 17: "FAILSAFE_EKFINAV", 18: "BARO", 19: "CPU",
+    20: "FAILSAFE_ADSB", 21: "TERRAIN", 22: "NAVIGATION", 23: "FAILSAFE_TERRAIN",
+    24: "EKF_PRIMARY", 25: "THRUST_LOSS_CHECK"}
+"""ArduCopter ``ERR.Subsys`` numbers (ArduCopter ``defines.h``)."""
+EV_IDS = {
+    10: "ARMED", 11: "DISARMED", 15: "AUTO_ARMED", 16: "TAKEOFF",
+    17: "LAND_COMPLETE_MAYBE", 18: "LAND_COMPLETE", 19: "LOST_GPS", 21: "FLIP_START",
+    22: "FLIP_END", 25: "SET_HOME", 28: "NOT_LANDED", 60: "EKF_ALT_RESET",
+    62: "EKF_YAW_RESET"}
+"""ArduCopter ``EV.Id`` numbers (``DATA_*`` in ``defines.h``) that rimu names."""
+_CRASH = 12
+_UNTIL_CLEARED = {16: "estimator", 17: "estimator", 25: "crash"}
+_ERR_TEXT = {(12, 1): "crash", (12, 2): "loss of control", (16, 2): "bad variance",
+             (16, 0): "variance cleared", (13, 2): "abandoned"}
 _HEAD = b"\xa3\x95"
 
 
@@ -260,20 +294,44 @@ def _imu_fields(p: str, fmt: Any, t: str) -> tuple[str | None, ...]:
     return f
 
 
+def _own_time(m: Any) -> float | None:
+    """An event's own time (TimeUS/TimeMS, s) when it has one."""
+    for col, unit in (("TimeUS", "us"), ("TimeMS", "ms")):
+        v = getattr(m, col, None)
+        if isinstance(v, int | float) and not isinstance(v, bool):
+            return float(v) * TIME_UNITS[unit]
+    return None
+
+
 def _collect(r: Any, types: list[str], fields: dict[str, tuple[str | None, ...]],
-             limit: int, trusted: set[int] | None = None
+             limit: int, raw_events: list[list[Any]] | None = None,
+             trusted: set[int] | None = None
              ) -> dict[tuple[str, int], dict[str, list[float]]]:
-    """The IMU messages before byte ``limit`` (and, with ``trusted``, only those whose
-    start is in it), as columns per (type, instance); ``"off"`` holds each one's start."""
+    """The IMU messages before byte ``limit`` (and, with ``trusted``, only the messages whose
+    start is in it), as columns per (type, instance), ``"off"`` holding each one's start;
+    the ``EVENT_TYPES`` messages go to ``raw_events`` as [time before s, time after s, type,
+    fields] (the last IMU time before it and the first after it, or its own time)."""
     cols: dict[tuple[str, int], dict[str, list[float]]] = {}
+    ev_types = [e for e in EVENT_TYPES if e in r.name_to_id] if raw_events is not None \
+        else []
+    last_imu = float("nan")
+    waiting: list[list[Any]] = []
     with _quiet():
         while True:
-            m = r.recv_match(type=types)
+            m = r.recv_match(type=types + ev_types)
             if m is None or r.offset > limit:
                 break
             t = m.get_type()
             start = int(r.offset) - int(r.formats[r.name_to_id[t]].len)
             if trusted is not None and start not in trusted:
+                continue
+            if t in EVENT_TYPES:
+                own = _own_time(m)
+                rec = [own if own is not None else last_imu,
+                       own if own is not None else float("nan"), t, m.to_dict()]
+                raw_events.append(rec)
+                if own is None:
+                    waiting.append(rec)
                 continue
             tcol, icol, tempcol, ecol, acol = fields[t]
             inst = int(getattr(m, icol)) if icol else 0
@@ -282,6 +340,10 @@ def _collect(r: Any, types: list[str], fields: dict[str, tuple[str | None, ...]]
                                              "temp", "err", "off")})
             c["off"].append(start)
             c["t"].append(getattr(m, tcol))
+            last_imu = float(getattr(m, tcol)) * TIME_UNITS["us" if tcol == "TimeUS" else "ms"]
+            for rec in waiting:
+                rec[1] = last_imu
+            waiting.clear()
             c["gx"].append(m.GyrX)
             c["gy"].append(m.GyrY)
             c["gz"].append(m.GyrZ)
@@ -351,19 +413,23 @@ def read_ardupilot(path: str | Path, *, salvage: bool = False) -> LogRead:
     fields = {t: _imu_fields(p, r.formats[r.name_to_id[t]], t) for t in types}
     meta: dict[str, Any] = {"messages": {t: int(r.counts[r.name_to_id[t]]) for t in types},
                             "bytes": int(r.data_len)}
+    meta["events"] = {e: int(r.counts[r.name_to_id[e]]) for e in EVENT_TYPES
+                      if e in r.name_to_id}
     empty = [t for t in IMU_TYPES if t in r.name_to_id and t not in types]
     if empty:
         meta["warnings"] = [f"the log's format declares {t} but holds no {t} sample (that "
                             f"IMU logged nothing)" for t in empty]
+    raw_events: list[list[Any]] = []
     if damage is None:
-        cols = _collect(r, types, fields, r.data_len)
-        return LogRead(p, "ardupilot", tuple(_streams(cols, fields)), None, meta)
+        cols = _collect(r, types, fields, r.data_len, raw_events)
+        return LogRead(p, "ardupilot", tuple(_streams(cols, fields)), None, meta,
+                       events=ardupilot_events(raw_events))
     try:
         data = Path(p).read_bytes()[:int(r.data_len)]
     except OSError as exc:
         raise FileFormatError(p, f"cannot read ({exc.strerror})") from None
     stretches, trusted = _stretches(r, data)
-    cols = _collect(r, types, fields, r.data_len + 1, trusted)
+    cols = _collect(r, types, fields, r.data_len + 1, raw_events, trusted)
     streams = _streams(cols, fields)
     offsets = {s.name: np.asarray(cols[key]["off"], np.int64) for s, key in zip(
         streams, sorted(cols, key=lambda ti: (IMU_TYPES.index(ti[0]), ti[1])), strict=True)}
@@ -375,4 +441,64 @@ def read_ardupilot(path: str | Path, *, salvage: bool = False) -> LogRead:
                  samples_after=sum(s.size for s in streams) - before)
     if not salvage:
         raise dmg.error()
-    return LogRead(p, "ardupilot", tuple(streams), dmg, meta)
+    return LogRead(p, "ardupilot", tuple(streams), dmg, meta,
+                   events=ardupilot_events(raw_events))
+
+
+def _int(d: dict[str, Any], key: str) -> int:
+    v = d.get(key, 0)
+    try:
+        return int(v)
+    except (TypeError, ValueError):
+        return 0
+
+
+def ardupilot_events(raw: list[list[Any]]) -> tuple[LogEvent, ...]:
+    """Events from [time before s, time after s, type, fields] of ``ERR``/``EV``/``MSG``
+    messages in log order (module docstring).
+
+    A missing time before (an event ahead of the first IMU sample) takes the time after,
+    a missing time after (no IMU sample follows) the time before.
+    """
+    items = []
+    for tb, ta, typ, d in raw:
+        tb = tb if np.isfinite(tb) else ta
+        ta = ta if np.isfinite(ta) else tb
+        if not np.isfinite(tb):
+            tb = ta = 0.0
+        items.append((float(tb), float(ta), typ, d))
+
+    def until(k: int, match: Any) -> float:
+        """Time after the first later message that ``match``es, else inf."""
+        return next((ta for _, ta, ty, e in items[k + 1:] if match(ty, e)), float("inf"))
+
+    out: list[LogEvent] = []
+    for k, (t, _, typ, d) in enumerate(items):
+        if typ == "MSG":
+            out.append(LogEvent(t, t, "MSG", str(d.get("Message", "")).strip()))
+        elif typ == "EV":
+            i = _int(d, "Id")
+            name = EV_IDS.get(i, f"id {i}")
+            if i == 21:      # FLIP_START: to the FLIP_END after it
+                end = until(k, lambda ty, e: ty == "EV" and _int(e, "Id") == 22)
+                out.append(LogEvent(t, max(end, t), "EV", f"EV {name}", i, "crash"))
+            else:
+                out.append(LogEvent(t, t, "EV", f"EV {name}", i))
+        elif typ == "ERR":
+            sub, code = _int(d, "Subsys"), _int(d, "ECode")
+            name = ERR_SUBSYSTEMS.get(sub, f"subsystem {sub}")
+            what = _ERR_TEXT.get((sub, code), "")
+            text = f"ERR {name} {code}" + (f": {what}" if what else "")
+            if sub == _CRASH and code != 0:
+                end = until(k, lambda ty, e: ty == "EV" and _int(e, "Id") == 10)
+                out.append(LogEvent(t, max(end, t), "ERR", text, code, "crash"))
+            elif sub in _UNTIL_CLEARED and code != 0:
+                end = until(k, lambda ty, e, sub=sub: ty == "ERR" and _int(e, "Subsys") == sub
+                            and _int(e, "ECode") == 0)
+                out.append(LogEvent(t, max(end, t), "ERR", text, code, _UNTIL_CLEARED[sub]))
+            elif sub == 24:
+                out.append(LogEvent(t, t, "ERR", f"ERR EKF_PRIMARY {code}: primary core "
+                                                 f"changed to {code}", code, "estimator"))
+            else:
+                out.append(LogEvent(t, t, "ERR", text, code))
+    return tuple(out)

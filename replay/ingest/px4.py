@@ -8,6 +8,14 @@ interpolation (counted in the stream's notes). A log without ``sensor_gyro`` but
 ``vehicle_imu`` gives rates from its delta angles: ``delta_angle / delta_angle_dt``
 (the mean rate over each integration interval, stamped at the interval's end).
 
+Events (:class:`~replay.log_events.LogEvent`), where the topics exist:
+``vehicle_status.failure_detector_status`` bits roll, pitch, ext (flight termination) and
+motor as category ``crash`` (PX4's failure detector: the attitude is beyond its limits or
+the vehicle is terminated), the other bits and ``vehicle_status.failsafe`` as ``info``;
+``estimator_status.filter_fault_flags`` (instance 0) as ``estimator``; each span from the
+first sample with the bits set to the first sample where they clear. The log's text
+messages (``logged_messages``) as ``info``.
+
 Damage: pyulog stops silently where the file is cut (or where a corrupt header claims more
 bytes than the file has), and flags other corruption (``file_corruption``) while
 resynchronising over it. rimu watches pyulog's reads to find where it stopped short, and
@@ -31,11 +39,17 @@ import numpy as np
 from fdi.errors import ConfigError, FileFormatError
 from fdi.units import TIME_UNITS
 from replay.ingest.stream import Damage, ImuStream, LogRead
+from replay.log_events import LogEvent, flag_intervals
 
-__all__ = ["PX4_TOPICS", "TOPICS", "looks_like_ulog", "read_px4"]
+__all__ = ["FAILURE_DETECTOR_BITS", "PX4_TOPICS", "TOPICS", "looks_like_ulog", "px4_events",
+           "read_px4"]
 
-TOPICS = ("sensor_gyro", "sensor_accel", "vehicle_imu")
+TOPICS = ("sensor_gyro", "sensor_accel", "vehicle_imu", "vehicle_status", "estimator_status")
 """ULog topics the reader loads."""
+FAILURE_DETECTOR_BITS = {1: "roll", 2: "pitch", 4: "alt", 8: "ext", 16: "arm_esc",
+                         32: "battery", 64: "imbalanced_prop", 128: "motor"}
+"""``vehicle_status.failure_detector_status`` bits (PX4 ``vehicle_status.msg``)."""
+_FD_CRASH = 1 | 2 | 8 | 128
 PX4_TOPICS = ("auto", "sensor_gyro", "vehicle_imu")
 """Values of ``topic``: where the rates come from."""
 _MAGIC = b"ULog\x01\x12\x35"
@@ -416,4 +430,41 @@ def read_px4(path: str | Path, *, salvage: bool = False, topic: str = "auto") ->
     if not streams or all(s.size == 0 for s in streams):
         what = "sensor_gyro or vehicle_imu" if topic == "auto" else topic
         raise FileFormatError(p, f"no {what} data in the log")
-    return LogRead(p, "px4", tuple(streams), dmg, meta)
+    events = px4_events(u)
+    if dmg is not None and streams:
+        last = max((float(s.t[-1]) for s in streams if s.size), default=np.inf)
+        events = tuple(e for e in events if e.t_s <= last)
+    return LogRead(p, "px4", tuple(streams), dmg, meta, events=events)
+
+
+def _bits(code: int) -> str:
+    return "+".join(n for b, n in FAILURE_DETECTOR_BITS.items() if code & b) or str(code)
+
+
+def px4_events(u: Any) -> tuple[LogEvent, ...]:
+    """Events of a parsed ULog (module docstring), sorted by time."""
+    by = {(d.name, d.multi_id): d.data for d in u.data_list}
+    out: list[LogEvent] = []
+    vs = by.get(("vehicle_status", 0))
+    if vs is not None and len(vs.get("timestamp", ())):
+        t = np.asarray(vs["timestamp"], float) * TIME_UNITS["us"]
+        if "failure_detector_status" in vs:
+            fd = np.asarray(vs["failure_detector_status"])
+            src = "vehicle_status.failure_detector_status"
+            for t0, t1, c in flag_intervals(t, fd, _FD_CRASH):
+                out.append(LogEvent(t0, t1, src, f"failure detector: {_bits(c)}", c, "crash"))
+            for t0, t1, c in flag_intervals(t, fd, ~_FD_CRASH):
+                out.append(LogEvent(t0, t1, src, f"failure detector: {_bits(c)}", c))
+        if "failsafe" in vs:
+            for t0, t1, c in flag_intervals(t, np.asarray(vs["failsafe"])):
+                out.append(LogEvent(t0, t1, "vehicle_status.failsafe", "failsafe", c))
+    es = by.get(("estimator_status", 0))
+    if es is not None and "filter_fault_flags" in es and len(es.get("timestamp", ())):
+        t = np.asarray(es["timestamp"], float) * TIME_UNITS["us"]
+        for t0, t1, c in flag_intervals(t, np.asarray(es["filter_fault_flags"])):
+            out.append(LogEvent(t0, t1, "estimator_status.filter_fault_flags",
+                                f"estimator filter fault flags {c:#x}", c, "estimator"))
+    for m in getattr(u, "logged_messages", ()):
+        ts = float(m.timestamp) * TIME_UNITS["us"]
+        out.append(LogEvent(ts, ts, "logged_message", str(m.message).strip()))
+    return tuple(sorted(out, key=lambda e: e.t_s))

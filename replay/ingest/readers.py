@@ -91,4 +91,6 @@ def merge_reads(reads: list[LogRead]) -> LogRead:
     fmts = sorted({r.format for r in reads})
     damage = next((r.damage for r in reads if r.damage is not None), None)
     return LogRead(" + ".join(r.path for r in reads), "+".join(fmts), tuple(streams), damage,
-                   {"files": [{"path": r.path, "format": r.format, **r.meta} for r in reads]})
+                   {"files": [{"path": r.path, "format": r.format, **r.meta} for r in reads]},
+                   events=tuple(sorted((e for r in reads for e in r.events),
+                                       key=lambda e: e.t_s)))

@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 
 from fdi.errors import ConfigError, FileFormatError
+from replay.log_events import LogEvent
 
 __all__ = ["Damage", "ImuStream", "LogRead"]
 
@@ -146,6 +147,9 @@ class LogRead:
         before the damage (a reader returns this only when asked to salvage).
     meta : dict
         Format-specific facts worth reporting (message counts, vehicle, rates).
+    events : tuple of LogEvent
+        What the log declares about itself (crash checks, estimator flags, messages), on
+        the streams' clock (:mod:`replay.log_events`).
     """
 
     path: str
@@ -153,3 +157,4 @@ class LogRead:
     streams: tuple[ImuStream, ...]
     damage: Damage | None = None
     meta: dict[str, Any] = field(default_factory=dict)
+    events: tuple[LogEvent, ...] = ()

@@ -1,7 +1,7 @@
 """``rimu calibrate SESSION --out cal.json``: calibrate a turntable session.
 
 Reads a session directory (``calibration.session_io.load_session``), runs
-:func:`calibration.calibrate.calibrate`, writes the ``rimu.calibration/2`` file and prints a
+:func:`calibration.calibrate.calibrate`, writes the ``rimu.calibration/3`` file and prints a
 summary; ``--compare TRUTH`` adds estimate, truth, error and error/σ side by side.
 """
 
@@ -28,7 +28,7 @@ def configure(p: argparse.ArgumentParser) -> None:
     p.add_argument("session", nargs="?",
                    help="session directory (manifest.json + samples.csv)")
     p.add_argument("--out", required=True, metavar="FILE",
-                   help="calibration file to write (rimu.calibration/2 JSON)")
+                   help="calibration file to write (rimu.calibration/3 JSON)")
     p.add_argument("--compare", metavar="TRUTH",
                    help="truth sidecar (DIR/truth.json): print estimate, truth, error, error/sd")
     p.add_argument("--bias-method", choices=BIAS_METHODS, default="model",

@@ -84,6 +84,15 @@ def run(args: argparse.Namespace) -> int:
     with atomic_file(out) as tmp:
         cal.save(tmp)
     print(summary_text(cal.extra["inflight"]))
+    tails = cal.gyro.tails
+    if tails is not None:
+        bad = [str(r.scale) for r in tails.scales if not r.gaussian]
+        r1 = tails.scales[0]
+        print(f"residual tails ({tails.samples} samples): "
+              + (f"not Gaussian at window(s) {', '.join(bad)}" if bad else "Gaussian white")
+              + f"; w={r1.scale}: excess kurtosis {r1.excess_kurtosis:.3g}"
+              + (f", GPD xi {r1.gpd.shape:.2f} +- {r1.gpd.shape_sd:.2f}" if r1.gpd else "")
+              + " (rimu tune and the monitor overbound the non-Gaussian scales)")
     print(f"wrote {out}")
     if rep is not None:
         from calibration.inflight.report import write_flight_plots

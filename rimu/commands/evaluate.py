@@ -17,7 +17,7 @@ HELP = ("evaluate the monitor on simulated flights (every fault kind, a sweep of
 def configure(p: argparse.ArgumentParser) -> None:
     p.add_argument("--cal", required=True, metavar="FILE", help="calibration file")
     p.add_argument("--thresholds", metavar="FILE",
-                   help="rimu.thresholds/1 or rimu.tuning/1 file (default: computed from "
+                   help="rimu.thresholds/2 (or /1) or rimu.tuning/1 file (default: computed from "
                         "the calibration for --false-alarms-per-hour)")
     p.add_argument("--false-alarms-per-hour", type=float, metavar="X",
                    help="budget for computed thresholds (default 1e-3)")
@@ -122,7 +122,8 @@ def run(args: argparse.Namespace) -> int:
     kinds = _kinds(args.faults)
     cal = load_calibration(args.cal)
     choice = select(cal, kind=args.kind, thresholds_file=args.thresholds,
-                    false_alarms_per_hour=args.false_alarms_per_hour)
+                    false_alarms_per_hour=args.false_alarms_per_hour,
+                    calibration_file=args.cal)
     thr = choice.thresholds
     if args.corpus:
         items = _corpus_items(args.corpus)

@@ -39,6 +39,7 @@ def configure(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from replay.envelope import describe_summary, uncalibrated_summary
     from replay.flight_io import save_flight_dir
     from replay.ingest import align_streams, read_any
     from replay.ingest.readers import merge_reads
@@ -47,6 +48,9 @@ def run(args: argparse.Namespace) -> int:
                       px4_topic=args.px4_topic) for log in args.logs]
     read = merge_reads(reads)
     flight, report = align_streams(read, reference=args.reference)
+    envelope = uncalibrated_summary(flight)
+    if envelope is not None:
+        report["envelope"] = envelope
     out = Path(args.out)
     save_flight_dir(flight, out)
     (out / REPORT_FILE).write_text(json.dumps(to_jsonable(report), indent=1) + "\n",
@@ -63,6 +67,17 @@ def run(args: argparse.Namespace) -> int:
         print(f"  {imu['name']} ({imu['source']}): {imu['samples_in']} in, {imu['kept']} kept, "
               f"{imu['resampled_on_base']} resampled, {dropped} dropped, "
               f"{imu['missing_on_base']} missing on the base")
+    if flight.events:
+        cats = {c: sum(e.category == c for e in flight.events)
+                for c in ("crash", "estimator", "info")}
+        print(f"  log events: {len(flight.events)} ({cats['crash']} crash, "
+              f"{cats['estimator']} estimator, {cats['info']} info) in manifest.json 'events'")
+        for e in flight.events:
+            if e.category != "info":
+                end = "end of log" if e.t_end_s == float("inf") else f"{e.t_end_s:.2f} s"
+                print(f"    {e.t_s:.2f} s to {end}: {e.text} ({e.category})")
+    if envelope is not None:
+        print(f"  envelope (uncalibrated rates): {describe_summary(envelope)}")
     if read.damage is not None:
         d = read.damage
         if d.stretches:

@@ -10,12 +10,9 @@ from fdi.errors import ConfigError, ReplayError
 from rimu.argtypes import positive_float, positive_int
 from rimu.commands.replay import (
     add_monitor_options,
-    aux_record,
+    chain_options,
     check_monitor_paths,
-    effects_extra,
-    format_aux,
-    make_monitor,
-    warn_silent_aux,
+    describe_chain,
     write_report,
 )
 
@@ -44,17 +41,17 @@ def configure(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     import can
-    import numpy as np
 
-    from replay.flight import Flight
-    from replay.live import StreamDecoder, format_event, run_live
+    from replay.chain import chain_for_map, format_aux, report_bus
+    from replay.live import StreamDecoder, format_event
     from replay.logio import resolve_map
-    from replay.report import RunningReport, format_report
+    from replay.report import format_report
 
     check_monitor_paths(args)
     cal = load_calibration(args.cal)
     db, cmap = resolve_map(cal, dbc=args.dbc, channel_map=args.channel_map)
-    mon, how = make_monitor(cal, args, cmap.kind, cmap)
+    chain = chain_for_map(cal, cmap, chain_options(args, median_exact_max=10_000))
+    describe_chain(chain)
     kw = {}
     if args.bitrate:
         kw["bitrate"] = args.bitrate
@@ -64,35 +61,25 @@ def run(args: argparse.Namespace) -> int:
         bus = can.Bus(interface=args.interface, channel=args.channel, **kw)
     except (can.CanError, OSError, ValueError, ImportError, NotImplementedError) as exc:
         raise ReplayError(f"cannot open {args.interface} bus {args.channel}: {exc}") from None
-    dec = StreamDecoder(db, cmap, cal.sample_rate_hz)
-    names = mon.sensor_names
-    acc = RunningReport(median_exact_max=10_000)
+    names = chain.sensor_names
     print(f"monitoring {args.interface}:{args.channel}, {cmap.n} {cmap.kind} sensors "
           f"(Ctrl-C to stop)", flush=True)
     try:
-        _, frames = run_live(bus, dec, mon, duration_s=args.duration,
-                             max_frames=args.max_frames, idle_timeout_s=args.idle_timeout,
-                             on_event=lambda e: print(format_event(e, names), flush=True),
-                             window=args.window, summary=acc)
+        report, frames = report_bus(
+            chain, bus, StreamDecoder(db, cmap, cal.sample_rate_hz),
+            source=f"{args.interface}:{args.channel}", window=args.window,
+            on_event=lambda e: print(format_event(e, names), flush=True),
+            duration_s=args.duration, max_frames=args.max_frames,
+            idle_timeout_s=args.idle_timeout)
     finally:
         bus.shutdown()
-    if acc.samples == 0:
+    if report is None:
         logging.getLogger("rimu").warning(f"no sample decoded: frames {frames}")
         if args.report:
             raise ConfigError("no sample decoded; no report written")
         return 0
-    s = cal.kind(cmap.kind)
-    header = Flight(t=np.zeros(0), raw=np.zeros((0, s.n)), valid=np.zeros((0, s.n), bool),
-                    sample_rate_hz=cal.sample_rate_hz, sensor_names=names,
-                    source=f"{args.interface}:{args.channel}", kind=cmap.kind)
-    extra = {"thresholds": how, "live": True, "window": args.window,
-             **effects_extra(mon, cal)}
-    if cmap.auxiliary:
-        extra["auxiliary"] = aux_record(cmap, dec.block)
-        warn_silent_aux(extra["auxiliary"], f"{args.interface}:{args.channel}")
-    report = acc.build(header, cal, frames=frames, extra=extra)
     print(format_report(report, max_events=0))
-    if cmap.auxiliary:
-        print(format_aux(extra["auxiliary"]))
+    if "auxiliary" in report:
+        print(format_aux(report["auxiliary"]))
     write_report(report, args.report)
     return 0

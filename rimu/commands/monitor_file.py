@@ -7,7 +7,7 @@ import json
 
 from fdi.calfile import load_calibration
 from replay.flight import load_flight_dir
-from replay.report import build_report, format_report
+from replay.report import format_report
 from rimu.argtypes import nonnegative_int, positive_float
 
 HELP = "run the monitor over a flight sample directory; print events and a summary"
@@ -19,8 +19,9 @@ def configure(p: argparse.ArgumentParser) -> None:
     p.add_argument("--false-alarms-per-hour", type=positive_float(1e9), metavar="X",
                    help="false-alarm budget for computed thresholds (default 1e-3)")
     p.add_argument("--thresholds", metavar="FILE",
-                   help="a rimu.thresholds/1 or rimu.tuning/1 (rimu tune) file (default: "
-                        "computed from the calibration)")
+                   help="a rimu.thresholds or rimu.tuning (rimu tune) file made for this "
+                        "calibration and sample rate (default: computed from the "
+                        "calibration)")
     p.add_argument("--report", metavar="FILE", help="write the rimu.report/1 JSON here")
     p.add_argument("--max-events", type=nonnegative_int(), default=50,
                    help="events to print (default 50)")
@@ -35,6 +36,8 @@ def configure(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from fdi.calfile import check_compatible
+    from replay.chain import ChainOptions, chain_for_flight, run_flight
+    from rimu.commands.replay import describe_chain
     from rimu.outputs import atomic_write_text, input_path, output_file
 
     input_path(args.flight, "DIR", kind="dir")
@@ -46,39 +49,13 @@ def run(args: argparse.Namespace) -> int:
     cal = load_calibration(args.cal)
     flight = load_flight_dir(args.flight)
     check_compatible(cal, flight.n, flight.raw_unit, str(args.flight), kind=flight.kind,
-                     names=flight.sensor_names)
-    from fdi.monitor import Monitor
-    from replay.effect_inputs import flight_effect_inputs
-    from rimu.commands.replay import compensated, effects_extra
-    from thresholds.select import select
-
-    choice = select(cal, kind=flight.kind, thresholds_file=args.thresholds,
-                    false_alarms_per_hour=args.false_alarms_per_hour)
-    thr, how = choice.thresholds, choice.to_dict()
-    extra: dict = {"thresholds": how}
-    if not args.no_time_offsets:
-        from calibration.inflight.timing import apply_time_offsets, moved_aux_channels
-
-        flight, shifted = apply_time_offsets(flight, cal)
-        if shifted:
-            extra["time_offsets_applied_ms"] = shifted
-            moved = moved_aux_channels(flight, shifted)
-            if moved:
-                extra["time_offsets_aux_moved"] = moved
-            print("moved onto the reference's timing: " + ", ".join(
-                f"{g} {ms:+.3f} ms" for g, ms in shifted.items())
-                + (f" (with {len(moved)} auxiliary channel(s): {', '.join(moved)})"
-                   if moved else ""))
-    force = temp = None
-    avail: dict = {}
-    if not args.no_effects and cal.effects:
-        force, temp, avail = flight_effect_inputs(flight)
-    mon = compensated(Monitor(cal, thr, kind=flight.kind), cal, flight.kind,
-                      enabled=not args.no_effects, available=avail,
-                      names=flight.sensor_names)
-    result = mon.run(flight.t, flight.raw, flight.valid, force=force, temperature=temp)
-    extra.update(effects_extra(mon, cal))               # with the missing-input counts
-    report = build_report(result, flight, cal, extra=extra)
+                     names=flight.sensor_names, cal_source=args.cal)
+    chain = chain_for_flight(flight, cal, ChainOptions(
+        thresholds_file=args.thresholds, calibration_file=args.cal,
+        false_alarms_per_hour=args.false_alarms_per_hour, effects=not args.no_effects,
+        time_offsets=not args.no_time_offsets))
+    describe_chain(chain, flight)
+    _, report = run_flight(chain, flight)
     print(format_report(report, max_events=args.max_events))
     if args.report:
         atomic_write_text(args.report, json.dumps(report, indent=1, allow_nan=False) + "\n")

@@ -6,10 +6,9 @@ import argparse
 import contextlib
 import json
 import logging
-import time
 from typing import Any
 
-from fdi.calfile import Calibration, load_calibration
+from fdi.calfile import load_calibration
 from fdi.errors import ConfigError
 from rimu.argtypes import nonnegative_int, positive_float
 
@@ -27,7 +26,8 @@ def add_monitor_options(p: argparse.ArgumentParser) -> None:
                         "channels for the effect terms (default: the shipped DBC's "
                         "RIMU_GYRO_ii messages, no auxiliary channel)")
     p.add_argument("--thresholds", metavar="FILE",
-                   help="a rimu.thresholds/1 or rimu.tuning/1 (rimu tune) file")
+                   help="a rimu.thresholds or rimu.tuning (rimu tune) file, made for this "
+                        "calibration and sample rate")
     p.add_argument("--false-alarms-per-hour", type=positive_float(1e9), metavar="X",
                    help="compute thresholds for this false-alarm budget (default 1e-3 "
                         "per hour)")
@@ -40,6 +40,10 @@ def add_monitor_options(p: argparse.ArgumentParser) -> None:
                         "compensated, and g-sensitivity and temperature terms when the "
                         "channel map has [[auxiliary]] specific-force or temperature "
                         "channels for the sensor)")
+    p.add_argument("--no-time-offsets", action="store_true",
+                   help="do not move each IMU by the time offset its in-flight calibration "
+                        "records (default: moved onto the reference's timing, the answers "
+                        "held back by the largest negative offset)")
 
 
 def configure(p: argparse.ArgumentParser) -> None:
@@ -59,78 +63,33 @@ def configure(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
-def make_monitor(cal: Calibration, args: argparse.Namespace, kind: str,
-                 cmap: Any = None) -> tuple[Any, dict]:
-    """The monitor the options ask for, and how its thresholds were chosen."""
-    from fdi.monitor import Monitor
-    from thresholds.select import select
+def chain_options(args: argparse.Namespace, **more: Any) -> Any:
+    """The monitoring chain's options (:class:`replay.chain.ChainOptions`) from the
+    shared options."""
+    from replay.chain import ChainOptions
 
-    choice = select(cal, kind=kind, thresholds_file=args.thresholds,
-                    false_alarms_per_hour=args.false_alarms_per_hour)
-    thr, how = choice.thresholds, choice.to_dict()
-    avail, lacking = {}, None
-    if cmap is not None:
-        from replay.effect_inputs import map_available, map_reasons
-
-        avail, lacking = map_available(cmap), map_reasons(cmap)
-    return compensated(Monitor(cal, thr, kind=kind), cal, kind,
-                       enabled=not getattr(args, "no_effects", False), available=avail,
-                       lacking=lacking), how
+    return ChainOptions(thresholds_file=args.thresholds, calibration_file=args.cal,
+                        false_alarms_per_hour=args.false_alarms_per_hour,
+                        effects=not args.no_effects,
+                        time_offsets=not args.no_time_offsets, **more)
 
 
-def compensated(mon: Any, cal: Calibration, kind: str, *, enabled: bool,
-                available: Any = None, lacking: Any = None, names: Any = None) -> Any:
-    """The monitor wrapped with the compensation of the calibration's effect terms
-    (:class:`fdi.effects.Compensator`: ``available`` and ``lacking`` as there, from a
-    channel map's auxiliary channels or a flight's); prints what is and is not compensated
-    (sensors named ``names``, default the monitor's)."""
-    from fdi.effects import Compensator
-    from fdi.effects_monitor import CompensatedMonitor
+def describe_chain(chain: Any, flight: Any = None) -> None:
+    """Print what the chain compensates and which IMUs (and auxiliary channels, of
+    ``flight`` or the chain's map) it moves in time."""
+    from replay.chain import moved_aux
 
-    out = CompensatedMonitor(mon, Compensator(cal, kind, available=available or {},
-                                              enabled=enabled, lacking=lacking))
-    if cal.effects:
-        print(out.compensator.summary(mon.sensor_names if names is None else names),
-              flush=True)
-    return out
-
-
-def effects_extra(mon: Any, cal: Calibration) -> dict[str, Any]:
-    """``{"effects": record}`` for a report when the calibration has effect terms."""
-    comp = getattr(mon, "compensator", None)
-    return {"effects": comp.to_dict()} if cal.effects and comp is not None else {}
-
-
-def aux_record(cmap: Any, decoder: Any) -> dict[str, Any]:
-    """The report's ``auxiliary`` block: the map's auxiliary channels and their frames."""
-    st = decoder.aux_stats
-    chans, c = [], 0
-    for a in cmap.auxiliary:
-        m = len(a.signals)
-        chans.append({"name": a.name, "quantity": a.quantity, "message": a.message,
-                      "signals": list(a.signals), "unit": a.unit,
-                      "sensors": "all" if a.sensors is None else list(a.sensors),
-                      "timeout_s": a.timeout_s, "values_received": st["received"][c:c + m]})
-        c += m
-    return {"channels": chans, "frames": {k: v for k, v in st.items() if k != "received"}}
-
-
-def format_aux(rec: dict[str, Any]) -> str:
-    """One line on the auxiliary channels of a report."""
-    fr = rec["frames"]
-    chans = ", ".join(f"{c['name']} {sum(c['values_received'])}" for c in rec["channels"])
-    rej = ", ".join(f"{v} {k}" for k, v in sorted(fr["rejected"].items())) or "none"
-    return (f"auxiliary channels (values received): {chans}; frames used {fr['used']}, "
-            f"rejected {rej}, lost {fr['lost_frames']}")
-
-
-def warn_silent_aux(rec: dict[str, Any], source: str) -> None:
-    """Warn about auxiliary channels that never delivered a value."""
-    silent = [ch["name"] for ch in rec["channels"] if not any(ch["values_received"])]
-    if silent:
-        logging.getLogger("rimu").warning(
-            f"{source}: no frame at all from auxiliary channel(s) {', '.join(silent)}: the "
-            "effect terms they feed got no input (counted in the report's effects block)")
+    text = chain.compensation_summary()
+    if text:
+        print(text, flush=True)
+    if chain.time_offsets_ms:
+        moved = moved_aux(chain, flight)
+        print("moved onto the reference's timing: " + ", ".join(
+            f"{g} {ms:+.3f} ms" for g, ms in chain.time_offsets_ms.items())
+            + (f" (with {len(moved)} auxiliary channel(s): {', '.join(moved)})"
+               if moved else "")
+            + (f"; answers held back up to {1e3 * chain.delay_s:.3f} ms plus one sample"
+               if chain.delay_s > 0 else ""), flush=True)
 
 
 def write_report(report: dict, path: str | None) -> None:
@@ -165,19 +124,11 @@ def has_display() -> bool:
     return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
 
 
-def warn_reader_errors(frames: dict, source: str) -> None:
-    """Reader errors of a log as warnings on stderr (garbage lines are in the counts)."""
-    log = logging.getLogger("rimu")
-    for e in frames["errors"]:
-        if e.get("kind") != "garbage_line":
-            log.warning(f"{source}: {e['where']}: {e['why']}")
-
-
 def run(args: argparse.Namespace) -> int:
-    from replay.effect_inputs import stream_inputs
+    from replay.chain import chain_for_map, format_aux, report_log
     from replay.live import Pacer, format_event
     from replay.logio import LogStream, resolve_map
-    from replay.report import RunningReport, format_report
+    from replay.report import format_report
     from rimu.outputs import atomic_file, input_path, output_file
 
     input_path(args.log, "LOG")
@@ -199,81 +150,32 @@ def run(args: argparse.Namespace) -> int:
     db, cmap = resolve_map(cal, dbc=args.dbc, channel_map=args.channel_map)
     stream = LogStream(args.log, cal, db, cmap, strict=args.strict,
                        progress=not args.no_progress,
-                       check_sensor_set=args.channel_map is None)
-    header = stream.header
-    injector = None
+                       check_sensor_set=args.channel_map is None, cal_source=args.cal)
+    header, injector = stream.header, None
     if args.inject:
-        from dataclasses import replace
+        from replay.stream import scenario_injector
 
-        from replay.scenario import load_scenario
-        from replay.stream import ChunkInjector
-
-        faults, seed = load_scenario(args.inject, cal, kind=cmap.kind)
-        injector = ChunkInjector(faults, cal, kind=cmap.kind, seed=seed, n=cmap.n)
-        truth = dict(header.truth)
-        truth["injected"] = {"faults": [f.to_dict() for f in faults], "seed": int(seed),
-                             "source": str(args.inject)}
-        header = replace(header, faults=tuple(header.faults) + tuple(faults), truth=truth)
-    mon, how = make_monitor(cal, args, cmap.kind, cmap)
-    acc = RunningReport()
+        injector, header = scenario_injector(args.inject, cal, header, kind=cmap.kind,
+                                             n=cmap.n)
+    chain = chain_for_map(cal, cmap, chain_options(args), injector=injector)
+    describe_chain(chain)
     names = header.sensor_names
     pacer = Pacer(lambda e: print(format_event(e, names), flush=True)) if args.realtime \
         else None
-    timing = {"read_decode": 0.0, "monitor": 0.0}
     with contextlib.ExitStack() as stack:
-        recorder = None
         if args.rrd or spawn:
-            from replay.rerun_log import Recorder
-
             rrd = stack.enter_context(atomic_file(args.rrd)) if args.rrd else None
-            recorder = Recorder(cal, names, cmap.kind, path=rrd, spawn=spawn,
-                                has_truth=header.omega_true is not None,
-                                thresholds=mon.thresholds)
+            recorder = chain.record(rrd, spawn=spawn, has_truth=header.omega_true is not None)
             stack.callback(recorder.abort)      # on an error: stop writing the temp file
-        clock = [time.perf_counter()]
-
-        def on_samples(piece: Any) -> None:
-            t1 = time.perf_counter()
-            timing["read_decode"] += t1 - clock[0]
-            if injector is not None:
-                piece = injector.apply(piece)
-            kw = stream_inputs(mon, cmap, piece.aux)
-            if pacer is not None:
-                result = pacer.run(mon, piece.t, piece.raw, piece.valid, **kw)
-            else:
-                result = mon.run(piece.t, piece.raw, piece.valid, **kw)
-            acc.update(result, piece.omega_true)
-            if recorder is not None:
-                recorder.log(result, piece)
-            clock[0] = time.perf_counter()
-            timing["monitor"] += clock[0] - t1
-
-        frames = stream.run(on_samples)
-        timing["read_decode"] += time.perf_counter() - clock[0]
-        warn_reader_errors(frames, str(args.log))
-        silent = stream.silent_sensors()
-        if silent and acc.samples:
-            logging.getLogger("rimu").warning(
-                f"{args.log}: no frame at all from sensor(s) {', '.join(silent)}: is the "
-                "calibration for this log's sensor set?")
-        if acc.samples == 0:
-            raise ConfigError(f"{args.log}: no sample could be decoded ({frames['read']} "
-                              f"frames read, rejected {frames['rejected']})")
-        extra: dict[str, Any] = {"thresholds": how, "timing_s": timing,
-                                 **effects_extra(mon, cal)}
-        if cmap.auxiliary:
-            extra["auxiliary"] = aux_record(cmap, stream.decoder)
-            warn_silent_aux(extra["auxiliary"], str(args.log))
-        if args.inject:
-            extra["injected"] = str(args.inject)
-        report = acc.build(header, cal, frames=frames, extra=extra)
+        report = report_log(chain, stream, header, pacer=pacer,
+                            extra={"injected": str(args.inject)} if args.inject else None)
         print(format_report(report, max_events=args.max_events))
-        if cmap.auxiliary:
-            print(format_aux(extra["auxiliary"]))
-        if recorder is not None:
-            tim = recorder.close()
-            timing["rerun"] = tim["log_s"] + tim["flush_s"]
+        if "auxiliary" in report:
+            print(format_aux(report["auxiliary"]))
+        if chain.recorder is not None:
+            tim = chain.recorder.close()
+            report["timing_s"]["rerun"] = tim["log_s"] + tim["flush_s"]
     if args.rrd:
-        print(f"wrote {args.rrd} ({timing['rerun']:.2f} s)")
+        print(f"wrote {args.rrd} ({report['timing_s']['rerun']:.2f} s)")
     write_report(report, args.report)
     return 0

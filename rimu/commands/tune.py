@@ -66,6 +66,9 @@ def run(args: argparse.Namespace) -> int:
         print(f"{w:6d} {w / th.sample_rate_hz:9.3f} {a:10.3e} {t:9.2f} {f:6.2f} "
               f"{d.size_unit_value:12.4g} {d.unit:5s} {d.size_sigma:7.2f}")
     print(f"detectable sizes: one full window, at rest, worst sensor {d0.sensor}")
+    print(f"noise model: {th.noise_model} (residual tails of the calibration, per scale):")
+    for c in tu.choices:
+        print(f"  {c.text()}")
     tu.save(args.out)
     print(f"wrote {args.out}")
     return 0

@@ -97,7 +97,7 @@ def test_file_has_every_field_the_issue_lists(tmp_path):
     p = tmp_path / "cal.json"
     cal.save(p)
     doc = json.loads(p.read_text())
-    assert doc["schema"] == "rimu.calibration/2"
+    assert doc["schema"] == "rimu.calibration/3"
     for kind in ("gyro", "accel"):
         for e in doc["sensors"][kind]:
             for key in ("name", "axis", "axis_nominal", "misalignment_mrad",

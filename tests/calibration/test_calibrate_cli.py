@@ -28,7 +28,7 @@ def test_writes_file_summary_and_comparison(tetrad_dir, tmp_path, capsys):
                            tetrad_dir / "truth.json")
     assert code == 0, err
     doc = json.loads(out.read_text())
-    assert doc["schema"] == "rimu.calibration/2" and len(doc["sensors"]["gyro"]) == 4
+    assert doc["schema"] == "rimu.calibration/3" and len(doc["sensors"]["gyro"]) == 4
     for key in ("SF ", "bias ", "misalignment (", "residual rms", "M (sensors 1,2,3)",
                 "M (sensors 4)", "v   =", "v_c =", "Earth rate from the outer-axis",
                 "turns", "chi2/dof"):

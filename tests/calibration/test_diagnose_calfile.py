@@ -23,7 +23,7 @@ def test_effects_and_adequacy_round_trip(tmp_path, fitted):
     p = tmp_path / "cal.json"
     cal.save(p)
     doc = json.loads(p.read_text())
-    assert doc["schema"] == "rimu.calibration/2"
+    assert doc["schema"] == "rimu.calibration/3"
     assert doc["effects"][0]["name"] == "bias_drift" and doc["effects"][0]["sensor"] == 2
     back = load_calibration(p)
     assert len(back.effects) == 1 and isinstance(back.effects[0], EffectTerm)
@@ -50,12 +50,13 @@ def test_version_1_file_loads_without_effects(tmp_path, fitted):
     doc = dataclasses.replace(cal, effects=(), adequacy=None).to_dict()
     doc["schema"] = "rimu.calibration/1"
     del doc["effects"]
+    doc.pop("residual_tails", None)                 # /3 only
     p = tmp_path / "old.json"
     p.write_text(json.dumps(doc))
     back = load_calibration(p)
     assert back.effects == () and back.adequacy is None
     back.save(tmp_path / "new.json")                       # migrated on save
-    assert json.loads((tmp_path / "new.json").read_text())["schema"] == "rimu.calibration/2"
+    assert json.loads((tmp_path / "new.json").read_text())["schema"] == "rimu.calibration/3"
 
 
 @pytest.mark.parametrize(("edit", "field"), [

@@ -66,7 +66,7 @@ def test_text_report_and_refit_file(drift_dir, tmp_path, capsys):
     assert "gyro_step_means.png" in pngs and "gyro_spectrum.png" in pngs
     assert "gyro_2_bias_drift.png" in pngs
     doc = json.loads((tmp_path / "cal2.json").read_text())
-    assert doc["schema"] == "rimu.calibration/2" and doc["effects"][0]["name"] == "bias_drift"
+    assert doc["schema"] == "rimu.calibration/3" and doc["effects"][0]["name"] == "bias_drift"
 
 
 def test_calibrate_prints_the_verdict_and_fits_asked_effects(drift_dir, tmp_path, capsys):

@@ -11,7 +11,12 @@ the definitions instead:
 - ρ as max_i ω̂ᵀC_iω̂/Σ_ii from the 3×3 input-error covariances (the kernel: six packed
   coefficients);
 - the CUSUM as Page's recursion g = max(0, g + x) (the kernel: S − min S);
-- the health checks, the state machine and the attribution as numpy/Python.
+- the health checks, the state machine and the attribution as numpy/Python;
+- the isolation decision from its definition: each single-sensor hypothesis fitted to the
+  normalised window sum by least squares (``numpy.linalg.lstsq``), rejected when its
+  residual exceeds χ²_{df−1} isf(P_we/(m − 1)); exclusion when one hypothesis remains and
+  its own residual passes the subset test (the kernel side: projections,
+  :func:`fdi.isolation.decide`).
 
 Re-admission (opt-in) is not modelled.
 """
@@ -22,6 +27,7 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy import stats as sstats
 
 from fdi.detector import chi2_threshold, cusum_threshold
 from fdi.health import health_limits
@@ -57,7 +63,10 @@ class OracleMonitor:
         self.settings = settings
         md = settings.missed_detection or thresholds.missed_detection
         self.cache = SetCache(s.H, self.sf, self.bias, self.sigma, self.cin, thresholds, md,
-                              np.array([c.bias_sd for c in s.sensors], float))
+                              np.array([c.bias_sd for c in s.sensors], float),
+                              wrong_exclusion=settings.wrong_exclusion,
+                              isolation_ratio=settings.isolation_ratio)
+        self.names = [c.name for c in s.sensors]
         self.lim = health_limits(settings, kind, self.sf, self.bias)
         self.scales = [int(w) for w in thresholds.scales]
         self.cusum = thresholds.detector != "windows"
@@ -81,6 +90,9 @@ class OracleMonitor:
         self.g_down = np.zeros(m)
         self.detected = False
         self.det_rows = self.alarm_run = self.clear_run = 0
+        self.suspects: tuple[int, ...] = ()
+        self.no_fit = False
+        self.due = 0
 
     def _base_thresholds(self) -> np.ndarray:
         df = self.model.df
@@ -134,6 +146,8 @@ class OracleMonitor:
                 w, rho = self._reconstruct(self.model, u)
         pl = self.model.pl
         level = pl.a * math.sqrt(1.0 + pl.b * rho) + pl.c * math.sqrt(pl.d + pl.e * rho)
+        if self.suspects:
+            level = np.inf
         return OracleSample(w, self.model.omega_sd, self.healthy.copy(), stats, thrs, par,
                             level, self.model.capability, events)
 
@@ -181,6 +195,8 @@ class OracleMonitor:
             T = thr * (1.0 + w * mdl.beta / f + mdl.kappa / f * float(np.sum(self.hist_rho[-w:])))
             stats.append(D)
             thrs.append(T)
+            self.last_T = getattr(self, "last_T", {})
+            self.last_T[w] = T
             ratios.append(D / T if D > T else -np.inf)
             clear &= D < self.settings.clear_ratio * thr
         if self.cusum:
@@ -208,21 +224,96 @@ class OracleMonitor:
                 return events
             self.detected, self.det_rows, self.alarm_run, self.clear_run = True, 1, 1, 0
             sensor, mag, reason = self._attribute(fired)
-            iso = mdl.capability == "isolate"
-            events.append(("detected", sensor if iso else None, reason, stats[fired],
-                           thrs[fired], mag if iso else None))
+            cons, _, _ = self._hypotheses(fired)
+            single = mdl.capability == "isolate" and cons is not None and len(cons) == 1
+            events.append(("detected", sensor if single else None, reason, stats[fired],
+                           thrs[fired], mag if single else None))
+            self.due = self.settings.persistence
+            events += self._suspect(cons)
         else:
             self.det_rows += 1
             self.alarm_run = self.alarm_run + 1 if alarm else 0
             self.clear_run = self.clear_run + 1 if clear else 0
-        if mdl.capability == "isolate" and self.alarm_run >= self.settings.persistence:
-            sensor, mag, reason = self._attribute(fired)
-            events.append(("isolated", sensor, reason, stats[fired], thrs[fired], mag))
-            self.healthy[sensor - 1] = False
-            self._new_set()
+        ask = mdl.df >= 2 and mdl.capability in ("isolate", "detect")
+        if ask and self.alarm_run >= self.settings.persistence:
+            if self.det_rows >= self.due:
+                nxt = [w for w in self.scales if w > self.det_rows]
+                self.due = nxt[0] if nxt else self.det_rows + max(self.scales)
+                cons, res, wd = self._hypotheses(fired)
+                sub = chi2_threshold(self.th.alpha[self.scales.index(wd)], mdl.df - 1)
+                if (mdl.capability == "isolate" and cons is not None and len(cons) == 1
+                        and res[cons[0]] <= sub):
+                    k = cons[0]
+                    wm = max([w for w in self.scales if w <= self.det_rows
+                              and w <= len(self.hist_z)], default=0)
+                    s = np.sum(self.hist_z[-wm:], axis=0)
+                    mag = (float(mdl.U[:, k] @ s) / (wm * float(mdl.U[:, k] @ mdl.U[:, k]))
+                           if wm else None)
+                    sensor = mdl.idx[k] + 1
+                    events.append(("isolated", sensor, f"parity scale {wd}", res[k], sub, mag))
+                    self.healthy[sensor - 1] = False
+                    self._new_set()
+                else:
+                    events += self._suspect(cons)
         elif self.detected and self.clear_run >= self.settings.clear_samples:
             self.detected = False
+            self.suspects = ()
+            self.no_fit = False
         return events
+
+    def _hypotheses(self, fired: int):
+        """Consistent hypotheses (columns, best first), residuals and the window used."""
+        mdl = self.model
+        if mdl.df < 1:
+            return None, None, 0
+        cand = [w for w in self.scales if w <= max(self.det_rows, 1) and w <= len(self.hist_z)]
+        if 0 <= fired < len(self.scales):
+            cand.append(self.scales[fired])
+        if not cand:
+            return None, None, 0
+        w = max(cand)
+        k = self.scales.index(w)
+        base = chi2_threshold(self.th.alpha[k], mdl.df)
+        infl = self.last_T[w] / base
+        s = np.sum(self.hist_z[-w:], axis=0) / math.sqrt(w * self.th.variance_factor[k] * infl)
+        res = []
+        for j in range(mdl.m):
+            a, *_ = np.linalg.lstsq(mdl.U[:, [j]], s, rcond=None)
+            r = s - mdl.U[:, j] * a[0]
+            res.append(float(r @ r))
+        res = np.array(res)
+        c = (sstats.chi2.isf(self.settings.wrong_exclusion / (mdl.m - 1), mdl.df - 1)
+             if mdl.df > 1 else np.inf)
+        best = int(np.argmin(res))
+        cons = [best] + [j for j in np.argsort(res) if j != best and res[j] <= c]
+        if res[best] > c:
+            cons = cons[1:]
+        return cons, res, w
+
+    def _suspect(self, cons) -> list:
+        """Suspects narrow within a detection: the intersection of the consistent sets."""
+        mdl = self.model
+        if self.no_fit:
+            return []
+        cand = set(range(mdl.m)) if cons is None else set(cons)
+        if self.suspects and cand:
+            cand &= {mdl.idx.index(i - 1) for i in self.suspects}
+        none_fits = cons is not None and not cand
+        self.no_fit = none_fits
+        cols = sorted(cand) if cand else list(range(mdl.m))
+        sus = tuple(sorted(mdl.idx[j] + 1 for j in cols))
+        changed = sus != self.suspects
+        self.suspects = sus
+        if changed and (len(sus) > 1 or mdl.capability != "isolate"):
+            names = [self.names[i - 1] for i in sus]
+            joined = names[0] if len(names) == 1 else ", ".join(names[:-1]) + " and " + names[-1]
+            if none_fits:
+                why = "no single-sensor fault explains the parity: " + joined + " unverified"
+            else:
+                why = joined + (" disagree: cannot tell which" if len(sus) > 1 else
+                                ": suspected (this set cannot isolate)")
+            return [("disagree", None, why, None, None, None)]
+        return []
 
     def _attribute(self, fired: int) -> tuple[int, float | None, str]:
         mdl = self.model

@@ -52,7 +52,7 @@ def test_round_trip(tmp_path):
     np.testing.assert_allclose(back.gyro.allan.adev, cal.gyro.allan.adev)
     assert back.earth_rate_dph == 15.1 and back.latitude_deg == -23.2
     doc = json.loads(p.read_text())
-    assert doc["schema"] == "rimu.calibration/2"
+    assert doc["schema"] == "rimu.calibration/3"
     for key in ("name", "axis", "axis_nominal", "misalignment_mrad", "misalignment_mrad_sd",
                 "scale_factor", "scale_factor_sd", "scale_factor_unit", "bias", "bias_sd",
                 "bias_unit"):

@@ -78,7 +78,7 @@ def compare(cal, th, t, raw, valid, mset=None) -> list:
         _close(res.protection_level[r], o.protection_level, f"PL row {r}")
         ev_o += [(t[r], e[0], e[1], e[2]) for e in o.events]
         for e in o.events:
-            if e[0] != "health":
+            if e[0] != "health" and e[3] is not None:
                 k = next(x for x in res.events if (x.t, x.type) == (t[r], e[0]))
                 _close([k.statistic, k.threshold], [e[3], e[4]], f"event row {r}", rtol=1e-7)
                 if e[5] is not None:

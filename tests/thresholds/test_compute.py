@@ -19,13 +19,30 @@ def test_round_trip_and_schema(tmp_path):
     p = tmp_path / "th.json"
     th.save(p)
     doc = json.loads(p.read_text())
-    assert doc["schema"] == "rimu.thresholds/1"
+    assert doc["schema"] == "rimu.thresholds/2"
+    assert doc["calibration_fingerprint"] == CAL.fingerprint()
+    assert doc["noise_model"] == "gaussian-white"
     assert load_thresholds(p) == th
     assert th.scales == (1, 2, 4, 8, 16, 32)
     assert sum(th.alpha) + th.alpha[0] == pytest.approx(1e-3 / 360000.0)   # 6 scales + CUSUM
 
 
-@pytest.mark.parametrize(("key", "value"), [("schema", "rimu.thresholds/2"), ("alpha", [2.0]),
+def test_version_1_file_still_loads(tmp_path):
+    doc = compute_thresholds(CAL, scales=3).to_dict()
+    doc["schema"] = "rimu.thresholds/1"
+    del doc["calibration_fingerprint"], doc["noise_model"]
+    p = tmp_path / "old.json"
+    p.write_text(json.dumps(doc))
+    th = load_thresholds(p)
+    assert th.calibration_fingerprint == "" and th.noise_model == "gaussian-white"
+    assert th.scales == (1, 2, 4, 8)
+    th.save(tmp_path / "new.json")                          # migrated on save
+    assert json.loads((tmp_path / "new.json").read_text())["schema"] == "rimu.thresholds/2"
+
+
+@pytest.mark.parametrize(("key", "value"), [("schema", "rimu.thresholds/3"), ("alpha", [2.0]),
+                                           ("calibration_fingerprint", "xyz"),
+                                           ("noise_model", "laplace"),
                                            ("n", None), ("kind", "magnetometer"),
                                            ("variance_factor", [1.0, "x"]),
                                            ("false_alarm_per_hour", 1.0)])
