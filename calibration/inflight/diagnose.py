@@ -471,13 +471,13 @@ def _timing_record(g: str, chosen: list[_Cand], sl: list[slice], fit: Any,
 
 def _drift_p1(chosen: list[_Cand], sl: list[slice], fit: Any, cands: list[_Cand],
               r0: np.ndarray, keep: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
-    """The linear (Legendre P1) drift of the three channels over the record, first to last
-    sample (rad/s), and its HAC covariance, in the final model (with ``bias_drift`` added
-    when it was not chosen)."""
-    names = [c.name for c in chosen]
-    if "bias_drift" in names:
-        f, s = fit, sl[names.index("bias_drift")]
-    else:
+    """The change of the slow bias of the three channels from the first to the last used
+    sample (rad/s) and its HAC covariance: from the functions of time in the final model
+    (warm-up and drift together when both were chosen: their sum is what is identified),
+    or with ``bias_drift`` added when none was chosen."""
+    idx = [k for k, c in enumerate(chosen) if c.name in GENERIC]
+    f, cs, sls = fit, chosen, sl
+    if not idx:
         cand = next((c for c in cands if c.name == "bias_drift"), None)
         if cand is None:
             return None
@@ -485,9 +485,13 @@ def _drift_p1(chosen: list[_Cand], sl: list[slice], fit: Any, cands: list[_Cand]
         for j in range(3):
             base[:, j, j] = 1.0
         X, sls = _design(base, [*chosen, cand])
-        f, s = stacked_lstsq(X[keep], r0[keep]), sls[-1]
-    idx = np.arange(s.start, s.start + 3)              # P1 of x, y, z (module layout)
-    return 2 * f.beta[idx], 4 * f.cov[np.ix_(idx, idx)]
+        f, cs = stacked_lstsq(X[keep], r0[keep]), [*chosen, cand]
+        idx = [len(cs) - 1]
+    rows = np.flatnonzero(keep)
+    L = np.zeros((3, f.beta.shape[0]))
+    for k in idx:
+        L[:, sls[k]] = cs[k].X[rows[-1]] - cs[k].X[rows[0]]
+    return L @ f.beta, L @ f.cov @ L.T
 
 
 def _attribution(p1: dict[str, tuple[np.ndarray, np.ndarray]], groups: dict[str, list[int]],
@@ -509,7 +513,8 @@ def _attribution(p1: dict[str, tuple[np.ndarray, np.ndarray]], groups: dict[str,
             "common_sd": (np.asarray(a["common_sd"]) / DPS).tolist(),
             "own": {g: {**v, "drift": (np.asarray(v["drift"]) / DPS).tolist()}
                     for g, v in a["own"].items()},
-            "unit": "deg/s, linear drift over the record (body frame of the reference)"}
+            "unit": "deg/s, change of the slow bias over the record (body frame of the "
+                    "reference)"}
 
 
 def _vibration_record(residual: np.ndarray, vibration: np.ndarray, g: str,
