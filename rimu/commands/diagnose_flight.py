@@ -24,7 +24,7 @@ def format_text(doc: dict) -> str:
     for s in doc["left_out"]:
         lines.append(f"  left out {s['t0_s']:.2f}-{s['t1_s']:.2f} s: {s['reason']}"
                      + (f" ({s['detail']})" if s.get("detail") else ""))
-    if doc.get("calibration_kind") == "in-flight":
+    if doc.get("calibration_kind") == "in-flight" and not doc.get("warnings"):
         lines.append("  (the same samples the in-flight calibration used)")
     for tm in doc.get("timing", []):
         head = (f"  time offset {tm['imu']}: calibration {tm['calibration_ms']:+.3f} ± "
