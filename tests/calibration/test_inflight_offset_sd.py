@@ -83,3 +83,19 @@ def test_a_lag_that_changes_halfway_fails_the_piece_test_and_widens_the_sd() -> 
     text = "\n".join(check_lines(chk))
     assert "the offset varies within this flight" in text
     assert "belongs to this flight" in text
+
+
+def test_a_calibration_from_another_flight_is_named() -> None:
+    from calibration.inflight.calfile import calibration_from_fit
+    from calibration.inflight.diagnose import diagnose_flight
+    from calibration.inflight.timing import other_flight_warning
+
+    f1 = simulate_imu_set(ImuSetSpec(imus=2, duration_s=20, seed=1, time_offset_s=(0.0, TAU)))
+    f2 = simulate_imu_set(ImuSetSpec(imus=2, duration_s=20, seed=2, time_offset_s=(0.0, TAU)))
+    cal1 = calibration_from_fit(fit_inflight(f1), f1)
+    assert cal1.extra["inflight"]["flight"]["samples"] == f1.t.shape[0]
+    assert other_flight_warning(cal1, f1) is None
+    w = other_flight_warning(cal1, f2)
+    assert w is not None and "another flight" in w
+    assert diagnose_flight(f2, cal1)["warnings"] == [w]
+    assert diagnose_flight(f1, cal1)["warnings"] == []
