@@ -38,9 +38,11 @@ import numpy as np
 from fdi.answer import Answer, BlockResult, Event
 from fdi.blocks import block_from_answers
 from fdi.calfile import Calibration
+from fdi.capability import capability_report
 from fdi.effects import Compensator
 from fdi.effects_monitor import CompensatedMonitor
 from fdi.monitor import Monitor
+from fdi.units import DPS
 from replay.channel_map import ChannelMap, aux_assignment
 from replay.effect_inputs import (
     flight_effect_inputs,
@@ -51,6 +53,7 @@ from replay.effect_inputs import (
     stream_inputs,
 )
 from replay.flight_data import Flight, concat_flights
+from replay.log_events import declared_intervals
 from replay.report import RunningReport
 from replay.time_offsets import StreamAligner, imu_groups, moved_aux_channels
 
@@ -175,6 +178,14 @@ class MonitorChain:
         comp = getattr(self.monitor, "compensator", None)
         if self.cal.effects and comp is not None:
             out["effects"] = comp.to_dict()
+        mon = getattr(self.monitor, "monitor", self.monitor)
+        unit, name = (DPS, "deg/s") if self.kind == "gyro" else (1.0, "m/s^2")
+        full = mon.cache.get((1 << mon.n) - 1)               # what the whole set can do
+        out["isolation_capability"] = capability_report(full, mon.sensor_names, 1.0 / unit,
+                                                        name)
+        out["envelope_settings"] = (self.envelope.settings.to_dict()
+                                    if self.envelope is not None
+                                    and hasattr(self.envelope, "settings") else None)
         return out
 
     def record(self, path: Any = None, *, spawn: bool = False, has_truth: bool = False) -> Any:
@@ -332,9 +343,14 @@ def _compensated(mon: Monitor, cal: Calibration, kind: str, *, effects: bool,
 
 
 def _monitor(cal: Calibration, kind: str, *, thresholds_file: Any, calibration_file: Any,
-             false_alarms_per_hour: Any, settings: Any) -> tuple[Monitor, dict[str, Any]]:
+             false_alarms_per_hour: Any, settings: Any, thresholds: Any = None
+             ) -> tuple[Monitor, dict[str, Any]]:
     from thresholds.select import select
 
+    if thresholds is not None:                          # given in the library (a Thresholds)
+        return (Monitor(cal, thresholds, kind=kind, settings=settings),
+                {"source": "given", "false_alarms_per_hour":
+                 float(thresholds.false_alarms_per_hour)})
     choice = select(cal, kind=kind, thresholds_file=thresholds_file,
                     false_alarms_per_hour=false_alarms_per_hour,
                     calibration_file=calibration_file)
@@ -358,12 +374,17 @@ class ChainOptions:
     time_offsets : bool
         Apply the in-flight calibration's time offsets (``--no-time-offsets``).
     settings : MonitorSettings or None
-    envelope : object or None
-        Envelope tracker (:class:`MonitorChain`).
+    envelope : bool or object
+        True (default): the operating envelope is decided by an
+        :class:`fdi.envelope.EnvelopeTracker` on the calibrated rates, each IMU's
+        specific force and the log's declared events (:func:`default_envelope`); False or
+        None: no envelope (``--no-envelope``); any other object: that tracker.
     report : bool
         Keep the report's running summaries.
     median_exact_max : int or None
         Protection levels kept for an exact median (a live run gives a small number).
+    thresholds : Thresholds or None
+        Thresholds given in the library (win over ``thresholds_file``).
     """
 
     thresholds_file: Any = None
@@ -372,9 +393,10 @@ class ChainOptions:
     effects: bool = True
     time_offsets: bool = True
     settings: Any = None
-    envelope: Any = None
+    envelope: Any = True
     report: bool = True
     median_exact_max: int | None = None
+    thresholds: Any = None
 
 
 def _report(opts: ChainOptions) -> RunningReport | None:
@@ -385,20 +407,48 @@ def _report(opts: ChainOptions) -> RunningReport | None:
     return RunningReport()
 
 
+def default_envelope(cal: Calibration, kind: str, groups: Sequence[str],
+                     declared: Sequence[Any] = ()) -> Any:
+    """The envelope tracker of a set: the calibrated axes, one rate estimate per IMU group
+    (leave-one-out subsets when the sensors are not grouped in IMUs) and the declared
+    intervals of the log (:class:`fdi.envelope.EnvelopeTracker`)."""
+    from fdi.envelope import EnvelopeTracker
+
+    idx: dict[str, list[int]] = {}
+    for i, g in enumerate(groups):
+        idx.setdefault(g, []).append(i)
+    grouped = len(idx) > 1 and "" not in idx
+    return EnvelopeTracker(H=cal.kind(kind).H, groups=list(idx.values()) if grouped else None,
+                           declared=tuple(declared))
+
+
+def _envelope(choice: Any, cal: Calibration, kind: str, groups: Sequence[str],
+              declared: Sequence[Any] = ()) -> Any:
+    """The tracker an ``envelope`` option asks for (ChainOptions)."""
+    if choice is True:
+        return default_envelope(cal, kind, groups, declared)
+    if choice is False or choice is None:
+        return None
+    return choice
+
+
 def chain_for_flight(flight: Flight, cal: Calibration, opts: ChainOptions = ChainOptions()
                      ) -> MonitorChain:
     """A chain for a recorded flight (folder): effect inputs from its own channels."""
     mon, how = _monitor(cal, flight.kind, thresholds_file=opts.thresholds_file,
                         calibration_file=opts.calibration_file,
                         false_alarms_per_hour=opts.false_alarms_per_hour,
-                        settings=opts.settings)
+                        settings=opts.settings, thresholds=opts.thresholds)
     avail: dict[str, list[int]] = {}
     if opts.effects and cal.effects:
         _, _, avail = flight_effect_inputs(flight)
     comp = _compensated(mon, cal, flight.kind, effects=opts.effects, available=avail,
                         lacking=None)
+    env = _envelope(opts.envelope, cal, flight.kind,
+                    imu_groups(mon.sensor_names, flight.imu),
+                    declared_intervals(getattr(flight, "events", ())))
     return MonitorChain(comp, cal, imu=flight.imu, time_offsets=opts.time_offsets,
-                        report=_report(opts), envelope=opts.envelope, thresholds_how=how)
+                        report=_report(opts), envelope=env, thresholds_how=how)
 
 
 def _aux_groups(cmap: ChannelMap, groups: Sequence[str]) -> tuple[str, ...]:
@@ -420,13 +470,14 @@ def chain_for_map(cal: Calibration, cmap: ChannelMap, opts: ChainOptions = Chain
     mon, how = _monitor(cal, cmap.kind, thresholds_file=opts.thresholds_file,
                         calibration_file=opts.calibration_file,
                         false_alarms_per_hour=opts.false_alarms_per_hour,
-                        settings=opts.settings)
+                        settings=opts.settings, thresholds=opts.thresholds)
     comp = _compensated(mon, cal, cmap.kind, effects=opts.effects,
                         available=map_available(cmap), lacking=map_reasons(cmap))
     groups = imu_groups(mon.sensor_names)
+    env = _envelope(opts.envelope, cal, cmap.kind, groups)
     return MonitorChain(comp, cal, cmap=cmap, aux_groups=_aux_groups(cmap, groups),
                         time_offsets=opts.time_offsets, injector=injector,
-                        report=_report(opts), envelope=opts.envelope, thresholds_how=how)
+                        report=_report(opts), envelope=env, thresholds_how=how)
 
 
 def moved_aux(chain: MonitorChain, source: Flight | None = None) -> list[str]:

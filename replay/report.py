@@ -176,6 +176,12 @@ class RunningReport:
         self._err_sq = np.zeros(3)
         self._n_err = 0
         self._breaches: int | None = None
+        self.n_out = 0                                # samples out of the envelope
+        self.periods: list[dict[str, Any]] = []       # envelope excursions, in time order
+        self._open: dict[str, Any] | None = None      # the excursion still going on
+        self.n_unverified = 0
+        self._unv_axis = np.zeros(3, np.int64)
+        self.n_verified = 0
 
     def update(self, result: Any, omega_true: np.ndarray | None = None) -> None:
         """Add one piece of answers (``BlockResult``) and the true rates of its samples."""
@@ -193,7 +199,15 @@ class RunningReport:
         pl = np.asarray(getattr(result, "protection_level", np.zeros(0)), float)
         pl_ok = pl.shape == ok.shape
         if pl_ok:
-            self._pl.add(pl[ok] / DPS)
+            ver = ok & np.isfinite(pl)            # a protection level only where verified
+            self.n_verified += int(np.count_nonzero(ver))
+            self._pl.add(pl[ver] / DPS)
+        self._envelope(np.asarray(result.t, float), getattr(result, "envelope", None))
+        unv = getattr(result, "unverified", None)
+        if unv is not None and np.shape(unv) == (N, 3):
+            unv = np.asarray(unv, bool)
+            self.n_unverified += int(np.count_nonzero(unv.any(axis=1)))
+            self._unv_axis += unv.sum(axis=0)
         if omega_true is not None and ok.any():
             tru = np.asarray(omega_true, float)
             err = (omega[ok] - tru[ok]) / DPS
@@ -202,6 +216,44 @@ class RunningReport:
             if pl_ok:
                 norm = np.linalg.norm(omega - tru, axis=1)
                 self._breaches = (self._breaches or 0) + int(np.sum(ok & (norm > pl)))
+
+    def _envelope(self, t: np.ndarray, codes: Any) -> None:
+        """Count the samples out of the envelope and follow its excursions across pieces
+        (an excursion open at a piece's end goes on in the next piece)."""
+        N = t.shape[0]
+        if codes is None or np.shape(codes) != (N,) or N == 0:
+            return
+        c = np.asarray(codes, np.int64)
+        out = c != 0
+        self.n_out += int(np.count_nonzero(out))
+        if self._open is not None and not out[0]:
+            self._done(self._open)
+            self._open = None
+        edges = np.flatnonzero(np.diff(np.concatenate([[0], out.astype(np.int8), [0]])))
+        for a, b in zip(edges[::2], edges[1::2], strict=True):
+            if a == 0 and self._open is not None:
+                p = self._open
+            else:
+                p = {"t0_s": float(t[a]), "code": 0, "samples": 0}
+            p["t1_s"] = float(t[b - 1])
+            p["code"] |= int(np.bitwise_or.reduce(c[a:b]))
+            p["samples"] += int(b - a)
+            if b == N:
+                self._open = p
+            else:
+                self._open = None
+                self._done(p)
+
+    def _done(self, p: dict[str, Any]) -> None:
+        self.periods.append(p)
+
+    def _periods(self) -> list[dict[str, Any]]:
+        """The excursions so far (the open one included), with their reasons."""
+        from fdi.envelope import reason_names
+
+        ps = self.periods + ([self._open] if self._open is not None else [])
+        return [{"t0_s": p["t0_s"], "t1_s": p["t1_s"], "samples": p["samples"],
+                 "reasons": list(reason_names(p["code"]))} for p in ps]
 
     def _summary(self, events: list[dict[str, Any]], outcomes: list[dict[str, Any]],
                  truth: bool, n: int) -> dict[str, Any]:
@@ -222,7 +274,17 @@ class RunningReport:
             "rate_error_rms_axis_dps": None,
             "rate_available_fraction": self.n_ok / self.samples if self.samples else 0.0,
             "protection_level_median_dps": self._pl.median(),
+            "verified_fraction": self.n_verified / self.samples if self.samples else 0.0,
             "integrity_breaches": None,
+            "envelope_out_fraction": self.n_out / self.samples if self.samples else 0.0,
+            "envelope_periods": self._periods(),
+            "alarms_in_envelope": sum(1 for e in events if e["type"] == "detected"
+                                      and not e.get("envelope")),
+            "alarms_out_of_envelope": sum(1 for e in events if e["type"] == "detected"
+                                          and e.get("envelope")),
+            "unverified_fraction": self.n_unverified / self.samples if self.samples else 0.0,
+            "unverified_axis_fraction": (self._unv_axis / self.samples).tolist()
+            if self.samples else [0.0, 0.0, 0.0],
         }
         if self._n_err:
             summary["rate_error_rms_dps"] = float(np.sqrt(self._err_sq.sum()
@@ -330,12 +392,57 @@ def format_report(report: Mapping[str, Any], *, max_events: int = 50) -> str:
                  f"(rates delivered in {100 * s['rate_available_fraction']:.1f} % of samples)")
     if s.get("protection_level_median_dps") is not None:
         lines.append(f"protection level median: {_fmt(s['protection_level_median_dps'], ' deg/s')}"
-                     f"; integrity breaches: {_fmt(s.get('integrity_breaches'))}")
+                     f" (verified answers: {100 * s.get('verified_fraction', 0.0):.1f} % of "
+                     f"samples); integrity breaches: {_fmt(s.get('integrity_breaches'))}")
+    lines.extend(_envelope_lines(s))
+    cap = report.get("isolation_capability")
+    if cap:
+        lines.append(_capability_line(cap))
     if "frames" in report:
         fr = report["frames"]
         lines.append(f"frames: read {fr.get('read')}, used {fr.get('used')}, rejected "
                      f"{fr.get('rejected')}")
     return "\n".join(lines)
+
+
+def _envelope_lines(s: Mapping[str, Any]) -> list[str]:
+    """The envelope and the unverified answers, one line each."""
+    out = []
+    periods = s.get("envelope_periods")
+    if periods is not None:
+        why: dict[str, int] = {}
+        for p in periods:
+            for r in p["reasons"]:
+                why[r] = why.get(r, 0) + 1
+        reasons = ", ".join(f"{k} {v}" for k, v in why.items())
+        out.append(f"out of the envelope: {100 * s.get('envelope_out_fraction', 0.0):.1f} % of "
+                   f"the samples in {len(periods)} period(s){f' ({reasons})' if reasons else ''}"
+                   f"; alarms {s.get('alarms_in_envelope', 0)} inside, "
+                   f"{s.get('alarms_out_of_envelope', 0)} outside (no exclusion there)")
+    if "unverified_fraction" in s:
+        ax = s.get("unverified_axis_fraction") or [0.0, 0.0, 0.0]
+        out.append(f"unverified rates: {100 * s['unverified_fraction']:.1f} % of the samples "
+                   f"(x {100 * ax[0]:.1f} %, y {100 * ax[1]:.1f} %, z {100 * ax[2]:.1f} %)")
+    return out
+
+
+def _capability_line(cap: Mapping[str, Any]) -> str:
+    """What the full set can isolate: the pairs it cannot tell apart at a useful size."""
+    det = [d for d in cap.get("detectable", {}).values() if d is not None]
+    top = max(det) if det else None
+    unit = cap.get("unit", "")
+    hard = [p for p in cap.get("pairs", []) if p.get("isolable_from") is None
+            or (top is not None and p["isolable_from"] > 10 * top)]
+    text = f"isolation capability of the full set: {cap.get('capability')}"
+    if top is not None:
+        text += f" (detectable from {_fmt(top)} {unit}"
+        if hard:
+            text += "; told apart only from: " + ", ".join(
+                f"{'/'.join(p['names'])} {_fmt(p['isolable_from'])} {unit}"
+                if p.get("isolable_from") is not None else f"{'/'.join(p['names'])} never"
+                for p in hard[:6]) + (" ..." if len(hard) > 6 else "")
+        text += ")"
+    return text
 
 
 def format_summary(report: Mapping[str, Any], *, max_events: int = 50) -> str:

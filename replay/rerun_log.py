@@ -12,8 +12,11 @@ Entities, all on one timeline ``"time"`` (duration, seconds of flight time)::
     omega/truth              true body rates (°/s), when the flight has them
     omega/error              ω̂ − ω (°/s), when the flight has truth
     integrity/protection_level_dps
+    integrity/unverified     1 where the rate of a body axis (x, y, z) is not verified (a
+                             detection whose sensors cannot be told apart), else 0
+    integrity/envelope       the operating-envelope code (0: inside; fdi.envelope bits)
     events                   one TextLog per monitor event (WARN detected, ERROR isolated,
-                             WARN health, INFO readmitted)
+                             WARN disagree, WARN health, INFO readmitted, INFO envelope)
 
 :class:`Recorder` logs it piece by piece (one ``send_columns`` per entity and piece, never
 ``rr.log`` per sample; a long replay streams its pieces to the file) and :func:`record` in one
@@ -41,7 +44,8 @@ ENTITIES = ("sensors/raw", "sensors/compensated", "sensors/health", "parity", "o
             "integrity/protection_level_dps", "events")
 """Entities every recording holds (plus ``detector/*`` and, with truth, ``omega/truth``)."""
 
-_LEVEL = {"detected": "WARN", "isolated": "ERROR", "health": "WARN", "readmitted": "INFO"}
+_LEVEL = {"detected": "WARN", "isolated": "ERROR", "health": "WARN", "readmitted": "INFO",
+          "disagree": "WARN", "envelope": "INFO"}
 
 
 def blueprint(has_truth: bool) -> rrb.Blueprint:
@@ -168,6 +172,14 @@ class Recorder:
             self._series("omega/error", t, omega - tru, [f"δω{a}" for a in axes])
         self._series("integrity/protection_level_dps", t,
                      np.asarray(result.protection_level, float) / unit, ["protection level"])
+        unv = getattr(result, "unverified", None)
+        if unv is not None and np.shape(unv) == (t.size, 3):
+            self._series("integrity/unverified", t, np.asarray(unv, float),
+                         [f"unverified {a}" for a in axes])
+        env = getattr(result, "envelope", None)
+        if env is not None and np.shape(env) == (t.size,):
+            self._series("integrity/envelope", t, np.asarray(env, float)[:, None],
+                         ["out of envelope (code)"])
         self._static_done = True
         ev = list(result.events)
         if ev:

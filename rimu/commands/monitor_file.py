@@ -28,6 +28,11 @@ def configure(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-time-offsets", action="store_true",
                    help="do not move each IMU by the time offset its in-flight calibration "
                         "records (default: moved onto the reference's timing)")
+    p.add_argument("--no-envelope", action="store_true",
+                   help="do not mark samples out of the operating envelope (default: shocks, "
+                        "saturation, tumbles and the log's declared crash events are marked; "
+                        "the monitor excludes nothing there and restarts its windows after; "
+                        "docs/envelope.md)")
     p.add_argument("--no-effects", action="store_true",
                    help="do not compensate the calibration's effect terms (default: the "
                         "terms whose inputs the flight carries are compensated: rate sign, "
@@ -53,7 +58,7 @@ def run(args: argparse.Namespace) -> int:
     chain = chain_for_flight(flight, cal, ChainOptions(
         thresholds_file=args.thresholds, calibration_file=args.cal,
         false_alarms_per_hour=args.false_alarms_per_hour, effects=not args.no_effects,
-        time_offsets=not args.no_time_offsets))
+        time_offsets=not args.no_time_offsets, envelope=not args.no_envelope))
     describe_chain(chain, flight)
     _, report = run_flight(chain, flight)
     print(format_report(report, max_events=args.max_events))
