@@ -168,7 +168,8 @@ def test_diagnose_flight_with_huge_samples(files, tmp_path, capsys):
 @pytest.mark.parametrize("argv,needle", [
     (["calibrate", "--in-flight", "{imus}", "--ferraris", "{fer}"], "--ferraris"),
     (["calibrate", "{sess}", "--in-flight", "{imus}"], "SESSION"),
-    (["calibrate", "{sess}", "--reference", "imu1"], "--in-flight only"),
+    (["calibrate", "{sess}", "--reference", "imu1"], "--in-flight and --static only"),
+    (["calibrate", "--static", "{imus}", "--in-flight", "{imus}"], "--static"),
     (["calibrate", "--in-flight", "{imus}", "--effects", "warmup"], "--effects"),
     (["calibrate", "--ferraris", "{fer}", "--sample-rate-hz", "100", "--no-denoise"],
      "--no-denoise"),

@@ -37,7 +37,6 @@ Definitions (the test asserts against these)
 
 from __future__ import annotations
 
-import inspect
 import math
 import time
 from collections.abc import Callable, Sequence
@@ -150,28 +149,14 @@ def envelope_codes(flight: Flight, cal: Calibration) -> tuple[np.ndarray, str]:
 # --------------------------------------------------------------------------- monitor
 def run_monitor(flight: Flight, cal: Calibration, thresholds: Any,
                 envelope: np.ndarray | None = None) -> Any:
-    """``rimu monitor-file`` in the library: time offsets, effect compensation, monitor.
+    """``rimu monitor-file`` in the library: the monitoring chain
+    (:func:`replay.chain.chain_for_flight`: time offsets, effect compensation, the operating
+    envelope decided online from the moved samples, the monitor). ``envelope`` is not used:
+    the chain decides it as the command does (kept for the callers' signature)."""
+    from replay.chain import ChainOptions, chain_for_flight
 
-    ``envelope`` codes are passed to the monitor when it takes them (issue 17). When the
-    library's monitoring chain lands (issue 17, item 5), this is the one place to call it.
-    """
-    from calibration.inflight.timing import apply_time_offsets
-    from fdi.effects import Compensator
-    from fdi.effects_monitor import CompensatedMonitor
-    from fdi.monitor import Monitor
-    from replay.effect_inputs import flight_effect_inputs
-
-    flight, _ = apply_time_offsets(flight, cal)
-    base = Monitor(cal, thresholds, kind=flight.kind)
-    kw: dict[str, Any] = {}
-    if envelope is not None and "envelope" in inspect.signature(base.run).parameters:
-        kw["envelope"] = envelope
-    if not cal.effects:
-        return base.run(flight.t, flight.raw, flight.valid, **kw)
-    force, temp, avail = flight_effect_inputs(flight)
-    mon = CompensatedMonitor(base, Compensator(cal, flight.kind, available=avail,
-                                               enabled=True))
-    return mon.run(flight.t, flight.raw, flight.valid, force=force, temperature=temp, **kw)
+    chain = chain_for_flight(flight, cal, ChainOptions(thresholds=thresholds, report=False))
+    return chain.feed_whole(flight)
 
 
 def alarm_episodes(events: Sequence[Any]) -> list[Any]:

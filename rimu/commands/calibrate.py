@@ -52,6 +52,9 @@ def configure(p: argparse.ArgumentParser) -> None:
 
     add_calibrate_options(p)
     configure_options(p)
+    from rimu.commands.calibrate_static import configure_options as static_options
+
+    static_options(p)
 
 
 def _set_summary(s: SensorSet, V_sd: object) -> list[str]:
@@ -171,7 +174,9 @@ def _check_modes(args: argparse.Namespace) -> None:
     from rimu.argtypes import refuse_together
 
     given = {"SESSION": args.session, "--ferraris": args.ferraris,
-             "--in-flight": getattr(args, "in_flight", None), "--compare": args.compare,
+             "--in-flight": getattr(args, "in_flight", None),
+             "--static": getattr(args, "static", None), "--compare": args.compare,
+             "--report": getattr(args, "report", None),
              "--plot": args.plot, "--sections": args.sections,
              "--sample-rate-hz": args.sample_rate_hz,
              "--reference": getattr(args, "reference", None),
@@ -184,9 +189,15 @@ def _check_modes(args: argparse.Namespace) -> None:
     session_only = ("--compare", "--plot", "--effects", "--no-denoise", "--bias-method",
                     "--noise-model")
     refuse_together("rimu calibrate", given, "--in-flight",
-                    ("SESSION", "--ferraris", "--sections", "--sample-rate-hz", *session_only))
+                    ("SESSION", "--ferraris", "--static", "--sections", "--sample-rate-hz",
+                     *session_only))
+    refuse_together("rimu calibrate", given, "--static",
+                    ("SESSION", "--ferraris", "--sections", "--sample-rate-hz", "--model",
+                     "--no-time-offset", *session_only))
     refuse_together("rimu calibrate", given, "--ferraris", ("SESSION", *session_only))
-    for opt in ("--reference", "--no-time-offset", "--model"):
+    if given["--reference"] is not None and not (given["--in-flight"] or given["--static"]):
+        raise ConfigError("rimu calibrate: --reference applies to --in-flight and --static only")
+    for opt in ("--no-time-offset", "--model", "--report"):
         if given[opt] is not None and not given["--in-flight"]:
             raise ConfigError(f"rimu calibrate: {opt} applies to --in-flight only")
     for opt in ("--sections", "--sample-rate-hz"):
@@ -218,6 +229,10 @@ def run(args: argparse.Namespace) -> int:
         from rimu.commands import calibrate_inflight
 
         return calibrate_inflight.run(args)
+    if getattr(args, "static", None):
+        from rimu.commands import calibrate_static
+
+        return calibrate_static.run(args)
     from calibration.session_io import load_session
     from fdi.calfile import check_plausible
     from rimu.commands.calibrate_effects import calibrate_with_check

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import logging
 
 from rimu.argtypes import nonnegative_int, positive_float
 
@@ -55,6 +56,11 @@ def run(args: argparse.Namespace) -> int:
     flight = load_flight_dir(args.flight)
     check_compatible(cal, flight.n, flight.raw_unit, str(args.flight), kind=flight.kind,
                      names=flight.sensor_names, cal_source=args.cal)
+    from calibration.inflight.timing import other_flight_warning
+
+    warning = other_flight_warning(cal, flight)
+    if warning:
+        logging.getLogger("rimu").warning(warning)
     chain = chain_for_flight(flight, cal, ChainOptions(
         thresholds_file=args.thresholds, calibration_file=args.cal,
         false_alarms_per_hour=args.false_alarms_per_hour, effects=not args.no_effects,
