@@ -257,10 +257,23 @@ def holdout_flight(flight: Flight, targets: Sequence[float] = TARGETS_PER_HOUR, 
 def holdout_static(t: np.ndarray, y: np.ndarray, names: tuple[str, ...],
                    targets: Sequence[float] = TARGETS_PER_HOUR, *,
                    progress: Callable[[], None] | None = None) -> dict[str, Any]:
-    """The static set: static calibration (:func:`thresholds.realnoise.static_calibration`)
-    of one half, thresholds tuned on it, the monitor (isolation on) over the other half."""
+    """The static set: static calibration (:func:`thresholds.realnoise.static_calibration`,
+    with the MPU9250's datasheet tolerances for what rest cannot observe and the bias
+    uncertainty of a later stretch) of one half, thresholds tuned on it, the monitor
+    (isolation on) over the other half."""
     from fdi.monitor import Monitor
-    from thresholds.realnoise import static_calibration
+    from thresholds.realnoise import (
+        MPU9250_CROSS_AXIS,
+        MPU9250_SCALE_FACTOR_TOLERANCE,
+        static_calibration,
+    )
+
+    def calibrate(part: np.ndarray) -> Calibration:
+        """At rest: scale factors and axes stated by the datasheet's tolerances, the bias
+        uncertainty of a later stretch (drift included)."""
+        return static_calibration(part, fs, names, drift_bias_sd=True, bias_prediction=True,
+                                  scale_factor_tolerance=MPU9250_SCALE_FACTOR_TOLERANCE,
+                                  cross_axis=MPU9250_CROSS_AXIS)
 
     t = np.asarray(t, float) - float(t[0])
     fs = (t.size - 1) / float(t[-1] - t[0])
@@ -268,7 +281,7 @@ def holdout_static(t: np.ndarray, y: np.ndarray, names: tuple[str, ...],
     rows = []
     for name, a, b in (("tune first half, count second", slice(0, k), slice(k, None)),
                        ("tune second half, count first", slice(k, None), slice(0, k))):
-        cal = static_calibration(y[a], fs, names)
+        cal = calibrate(y[a])
         for R in targets:
             thr = _tune(cal, R).thresholds
             res = Monitor(cal, thr).run(t[b], y[b])
@@ -277,7 +290,7 @@ def holdout_static(t: np.ndarray, y: np.ndarray, names: tuple[str, ...],
             rows.append(row)
             if progress:
                 progress()
-    cal = static_calibration(y, fs, names)
+    cal = calibrate(y)
     thr = _tune(cal, 1.0).thresholds
     res = Monitor(cal, thr).run(t, y)
     whole = _count(res, np.zeros(t.size, np.int64), fs, 1.0, thr)
