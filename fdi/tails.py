@@ -31,7 +31,6 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy import stats
 
 from fdi.fileio import Fields
 
@@ -318,6 +317,8 @@ def overbound_factor(tail: ScaleTail, alpha: float, df: int) -> float:
     df : int
         Parity dimension of the statistic.
     """
+    from scipy import stats  # here: loading a calibration needs no scipy
+
     p, q = _curve(tail)
     ok = (p > 0) & (p < 1) & np.isfinite(q) & (q > 0)
     p, q = p[ok], q[ok]
@@ -397,6 +398,8 @@ def measured_variance_factor(rec: ScaleTail, allan_factor: float, df: int, confi
     ``χ²_ν.sf(ν·ratio/f_Allan) < level``; the bound is ``ratio·ν/χ²_ν.ppf(1 − c)``. NaN
     when not significant or not measured.
     """
+    from scipy import stats  # here: loading a calibration needs no scipy
+
     nu = rec.independent * df
     vr = rec.variance_ratio
     if nu < 1 or not (vr > 0 and math.isfinite(vr)) or not allan_factor > 0:
