@@ -25,7 +25,8 @@ from fdi.isolation import pair_sines, rejection_level
 from fdi.parity import parity_matrix, reconstruction_matrix
 from fdi.settings import Thresholds
 
-__all__ = ["SetCache", "SetModel", "build_set_model", "isolation_sizes", "jitter_coefficients"]
+__all__ = ["SetCache", "SetModel", "build_set_model", "inflation_terms", "isolation_sizes",
+           "jitter_coefficients", "rho_series"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -160,19 +161,89 @@ class SetModel:
         -------
         ndarray, shape (N,)
         """
-        w = np.asarray(w, float)
-        q = np.stack([w[0] * w[0], w[1] * w[1], w[2] * w[2], w[0] * w[1], w[0] * w[2],
-                      w[1] * w[2]])
-        idx = list(self.idx)
-        terms = self.cal_coef[idx] @ q
-        if self.jit_coef is not None and np.any(self.jit_coef[idx]):
-            prev = np.full((3, 1), np.nan) if omega_prev is None else \
-                np.asarray(omega_prev, float).reshape(3, 1)
-            with np.errstate(invalid="ignore", over="ignore"):
-                d = np.diff(np.hstack([prev, w]), axis=1)
-                d = np.where(np.all(np.isfinite(d), axis=0), d, 0.0)
-                terms = terms + self.jit_coef[idx, None] * (self.axes[idx] @ d) ** 2
-        return np.maximum(terms.max(axis=0), 0.0)
+        return rho_series(w, self.cal_coef, self.jit_coef, self.axes, self.idx, omega_prev)
+
+
+def rho_series(w: np.ndarray, cal_coef: np.ndarray, jit_coef: np.ndarray | None,
+               axes: np.ndarray | None, idx: tuple[int, ...],
+               omega_prev: np.ndarray | None = None) -> np.ndarray:
+    """ρ_t = max_i [ω̂ᵀC_iω̂ + τ_i²·(h_iᵀω̇̂)²]/Σ_ii over the sensors ``idx`` (≥ 0).
+
+    Parameters
+    ----------
+    w : ndarray, shape (3, N)
+        ω̂ (rad/s).
+    cal_coef : ndarray, shape (n, 6)
+    jit_coef : ndarray, shape (n,), or None
+        τ_i²·fs²/Σ_ii (:func:`jitter_coefficients`).
+    axes : ndarray, shape (n, 3), or None
+    idx : tuple of int
+    omega_prev : ndarray, shape (3,), optional
+        ω̂ before the block; a non-finite Δω̂ counts as 0.
+
+    Returns
+    -------
+    ndarray, shape (N,)
+    """
+    w = np.asarray(w, float)
+    q = np.stack([w[0] * w[0], w[1] * w[1], w[2] * w[2], w[0] * w[1], w[0] * w[2],
+                  w[1] * w[2]])
+    idx = list(idx)
+    terms = cal_coef[idx] @ q
+    if jit_coef is not None and axes is not None and np.any(jit_coef[idx]):
+        prev = np.full((3, 1), np.nan) if omega_prev is None else \
+            np.asarray(omega_prev, float).reshape(3, 1)
+        with np.errstate(invalid="ignore", over="ignore"):
+            d = np.diff(np.hstack([prev, w]), axis=1)
+            d = np.where(np.all(np.isfinite(d), axis=0), d, 0.0)
+            terms = terms + jit_coef[idx, None] * (axes[idx] @ d) ** 2
+    return np.maximum(terms.max(axis=0), 0.0)
+
+
+def inflation_terms(H: np.ndarray, sf: np.ndarray, bias: np.ndarray, noise_cov: np.ndarray,
+                    input_error_cov: np.ndarray, bias_sd: np.ndarray,
+                    timing_jitter: np.ndarray, sample_rate_hz: float, raw: np.ndarray
+                    ) -> tuple[np.ndarray, float, float]:
+    """What the monitor's thresholds of the full set do with a recording: ρ_t, κ and β.
+
+    The monitor's threshold at scale w is ``thr_w·(1 + w·β/f_w + κ/f_w·Σ_w ρ)``
+    (:mod:`fdi.windows`); a tail model measured relative to it (:mod:`calibration.tails`)
+    needs these three.
+
+    Parameters
+    ----------
+    H : ndarray, shape (n, 3)
+    sf, bias : ndarray, shape (n,)
+    noise_cov : ndarray, shape (n, n)
+    input_error_cov : ndarray, shape (n, 3, 3)
+    bias_sd, timing_jitter : ndarray, shape (n,)
+        SI and s.
+    sample_rate_hz : float
+    raw : ndarray, shape (N, n)
+        Raw outputs; ρ of a row with a non-finite value is 0.
+
+    Returns
+    -------
+    rho : ndarray, shape (N,)
+    kappa, beta : float
+    """
+    H = np.asarray(H, float)
+    n = H.shape[0]
+    healthy = np.ones(n, bool)
+    idx = tuple(range(n))
+    Sig = np.asarray(noise_cov, float)
+    V = parity_matrix(H, healthy)
+    _, _, kappa, beta = _whitening(V[:max(n - 3, 0)], Sig, idx, np.asarray(bias_sd, float))
+    G, _, _ = _reconstruction(H, healthy, Sig, idx, int(np.linalg.matrix_rank(H)) == 3)
+    with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
+        C = np.asarray(input_error_cov, float) / np.diag(Sig)[:, None, None]
+    coef = np.stack([C[:, 0, 0], C[:, 1, 1], C[:, 2, 2], 2 * C[:, 0, 1], 2 * C[:, 0, 2],
+                     2 * C[:, 1, 2]], axis=1)
+    jit = jitter_coefficients(timing_jitter, np.diag(Sig), sample_rate_hz, n)
+    y = np.asarray(raw, float) * np.asarray(sf, float) - np.asarray(bias, float)
+    w = G @ y.T
+    rho = rho_series(w, coef, jit, H, idx)
+    return np.where(np.isfinite(rho), rho, 0.0), kappa, beta
 
     def healthy_mask(self) -> np.ndarray:
         """Boolean mask of the healthy sensors, shape (n,)."""

@@ -38,6 +38,7 @@ import numpy as np
 from scipy import ndimage
 from scipy.interpolate import CubicSpline
 
+from calibration.inflight.jitter import fit_timing_jitter
 from calibration.inflight.regression import StackedFit, stacked_lstsq
 from calibration.inflight.segments import Segment, find_segments, keep_mask
 from fdi.errors import CalibrationError, ConfigError
@@ -117,6 +118,9 @@ class ImuAlignment:
     c_cov : ndarray, shape (3, 3)
     time_offset_s, time_offset_sd_s : float
         τ (NaN and 0 when not fitted).
+    timing_jitter_s, timing_jitter_sd_s : float
+        Sd of the random sampling-time error against the reference and its sd (s), from the
+        residual's growth with the angular acceleration (:mod:`calibration.inflight.jitter`).
     residual : ndarray, shape (N, 3)
         ``y_j − A·y_r(t+τ) − c`` on the samples used, NaN elsewhere (rad/s).
     lags : int
@@ -137,6 +141,8 @@ class ImuAlignment:
     lags: int
     excitation: Excitation
     notes: tuple[str, ...] = ()
+    timing_jitter_s: float = 0.0
+    timing_jitter_sd_s: float = 0.0
 
     def parts(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
         """Rotation, scale and non-orthogonality of A with their sds (rad, fraction)."""
@@ -359,11 +365,14 @@ def fit_pair(t: np.ndarray, y_ref: np.ndarray, y: np.ndarray, used: np.ndarray, 
     residual = np.full(y.shape, np.nan)
     rows = np.flatnonzero(ok)[inside]
     residual[rows] = fit.residual
+    # timing jitter: the residual against the angular acceleration IMU j sees, A·ω̇_ref
+    jit = fit_timing_jitter(fit.residual, dz[inside] @ A.T, lags=fit.lags)
     return ImuAlignment(imu=label, model=model, A=A, A_cov=A_cov, c=beta[ci],
                         c_cov=cov[ci, ci],
                         time_offset_s=tau if time_offset else 0.0,
                         time_offset_sd_s=float(fit.sd[-1]) if time_offset else 0.0,
-                        residual=residual, lags=fit.lags, excitation=exc, notes=tuple(notes))
+                        residual=residual, lags=fit.lags, excitation=exc, notes=tuple(notes),
+                        timing_jitter_s=jit.tau_s, timing_jitter_sd_s=jit.tau_sd_s)
 
 
 @functools.lru_cache(maxsize=64)

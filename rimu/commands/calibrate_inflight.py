@@ -54,6 +54,10 @@ def summary_text(doc: dict) -> str:
                      f"{r['time_offset_ms_sd']:.3f} ms; residual rms [" + ", ".join(
                          f"{x:.3g}" for x in r["residual_rms_dps"]) + f"] deg/s; HAC lags "
                      f"{r['hac_lags']}")
+        if "timing_jitter_ms" in r:
+            lines.append(f"      timing jitter {g}: {r['timing_jitter_ms']:.2f} ± "
+                         f"{r['timing_jitter_ms_sd']:.2f} ms (thresholds widen with it while "
+                         "the body accelerates)")
         lines.extend(f"      note: {n}" for n in r["notes"])
     return "\n".join(lines)
 
