@@ -231,8 +231,11 @@ def compensate(raw, r, corr, cr, sensors, mats, df, has_omega, y, p, z, w, v0, v
     for i in range(n):
         s = (sensors[c, i] * q0 + sensors[c + 1, i] * q1 + sensors[c + 2, i] * q2
              + sensors[c + 3, i] * q3 + sensors[c + 4, i] * q4 + sensors[c + 5, i] * q5)
-        a = sensors[AXIS0, i] * d0 + sensors[AXIS0 + 1, i] * d1 + sensors[AXIS0 + 2, i] * d2
-        s = s + sensors[JITTER_COEF, i] * (a * a)
+        jc = sensors[JITTER_COEF, i]
+        if jc != 0.0:                   # τ = 0: exactly the calibration term (no 0·inf)
+            a = (sensors[AXIS0, i] * d0 + sensors[AXIS0 + 1, i] * d1
+                 + sensors[AXIS0 + 2, i] * d2)
+            s = s + jc * (a * a)
         if s > rho:
             rho = s
     return rho

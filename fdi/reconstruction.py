@@ -196,7 +196,8 @@ def rho_series(w: np.ndarray, cal_coef: np.ndarray, jit_coef: np.ndarray | None,
         with np.errstate(invalid="ignore", over="ignore"):
             d = np.diff(np.hstack([prev, w]), axis=1)
             d = np.where(np.all(np.isfinite(d), axis=0), d, 0.0)
-            terms = terms + jit_coef[idx, None] * (axes[idx] @ d) ** 2
+            jc = jit_coef[idx, None]
+            terms = terms + np.where(jc != 0, jc * (axes[idx] @ d) ** 2, 0.0)
     return np.maximum(terms.max(axis=0), 0.0)
 
 
