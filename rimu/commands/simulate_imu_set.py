@@ -9,7 +9,7 @@ from __future__ import annotations
 import argparse
 
 from fdi.errors import ConfigError
-from fdi.units import DPH, DPS, G0
+from fdi.units import DPH, DPS, G0, MS
 from replay.flight_io import save_flight_dir
 from replay.imu_set import ImuEffects, ImuSetSpec, simulate_imu_set
 from rimu.argtypes import nonnegative_float, positive_float, positive_int
@@ -28,6 +28,9 @@ def configure_options(p: argparse.ArgumentParser) -> None:
                         "temperatures kept beside them)")
     g.add_argument("--time-offset-ms", default="", metavar="T1,T2,...",
                    help="time offset of each IMU in ms (K values; default all 0)")
+    g.add_argument("--timing-jitter-ms", default="", metavar="S1,S2,...",
+                   help="sd of each IMU's random sampling-time error in ms, independent per "
+                        "sample (K values; default all 0)")
     g.add_argument("--misalignment-mrad", type=nonnegative_float(1e3), default=10.0, metavar="X",
                    help="sd of each IMU's misalignment angles (mrad, default 10)")
     g.add_argument("--scale-ppm", type=nonnegative_float(1e6), default=5000.0, metavar="X",
@@ -84,6 +87,8 @@ def run(args: argparse.Namespace) -> int:
                       sample_rate_hz=fs, seed=args.seed,
                       time_offset_s=tuple(1e-3 * x for x in _floats(args.time_offset_ms,
                                                                     "--time-offset-ms")),
+                      timing_jitter_s=tuple(MS * x for x in _floats(args.timing_jitter_ms,
+                                                                    "--timing-jitter-ms")),
                       misalignment_sd=1e-3 * args.misalignment_mrad,
                       scale_sd=1e-6 * args.scale_ppm, noise_sd=args.gyro_noise_dps * DPS,
                       max_rate_dps=args.max_rate if args.max_rate != 300.0 else 200.0,
