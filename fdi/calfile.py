@@ -104,8 +104,11 @@ CALIBRATION_SCHEMA = "rimu.calibration/3"
 CALIBRATION_SCHEMAS = ("rimu.calibration/1", "rimu.calibration/2", CALIBRATION_SCHEMA)
 """Versions the loader reads (``/1``: no effects, no adequacy record; ``/2``: no residual
 tail model)."""
-FINGERPRINT_VOLATILE = ("schema",)
-"""Top-level keys left out of :meth:`Calibration.fingerprint` (a migrated file keeps it)."""
+FINGERPRINT_VOLATILE = ("schema", "parity")
+"""Top-level keys left out of :meth:`Calibration.fingerprint`: the schema (a migrated file
+keeps it) and the parity matrices, which are derived from the axes (their near-zero entries,
+1e-16, change with the last bit of an axis and no rounding of significant digits can
+hold them)."""
 FINGERPRINT_VOLATILE_EXTRA = ("created", "source", "written")
 """Keys of ``extra`` left out of the fingerprint (when and from which path, not what)."""
 KINDS = ("gyro", "accel")

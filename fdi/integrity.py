@@ -12,7 +12,8 @@ probability P_md is ``MDB_i = sqrt(λ*·f₁)/|u_i|`` with ``ncx2.cdf(T₁, df, 
 (ρ = max_i ω̂ᵀC_iω̂/Σ_ii), k = Φ⁻¹(1 − P_md/2), f₁ the variance factor of the single-sample
 scale (1 for white noise; the overbound of the measured residual where the calibration
 holds one, :mod:`fdi.tails`). The level holds only where the answer is verified: the
-monitor reports it infinite while a detection is active or out of the envelope. All but ρ are precomputed per healthy set.
+monitor reports it infinite while a detection is active or out of the envelope. All but ρ
+are precomputed per healthy set.
 """
 
 from __future__ import annotations

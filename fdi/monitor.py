@@ -32,7 +32,8 @@ from typing import Any
 import numpy as np
 
 from fdi import state as S
-from fdi.answer import CAPABILITIES, Answer, BlockResult, Event
+from fdi.answer import Answer, BlockResult, Event
+from fdi.blocks import CAPABILITY_CODE, CAPABILITY_NAMES, block_from_answers
 from fdi.calfile import Calibration
 from fdi.detector import chi2_threshold, default_thresholds
 from fdi.envelope import reason_names
@@ -52,8 +53,6 @@ _RETURN_DETECTED = S.RETURN_DETECTED
 _BOOL = np.dtype(bool)
 _INF = float("inf")
 _CHUNK = 1 << 16
-_CAP_CODE = {c: k for k, c in enumerate(CAPABILITIES)}
-_CAP_NAMES = np.array(CAPABILITIES, dtype=object)
 _NO_AXES = np.zeros(3, bool)
 _NO_AXES.setflags(write=False)
 _AXIS_SHARE = 0.1
@@ -728,7 +727,7 @@ class Monitor:
         answers = [self.step(ts[r], rows[r], vl[r] if vl is not None and r < len(vl) else None,
                              cl[r if cl.shape[0] > 1 else 0], int(codes[r]))
                    for r in range(N)]
-        return _from_answers(np.asarray(ts[:N], float), answers, self, parity)
+        return block_from_answers(answers, self.n, self.K, parity)
 
 
 _ENV_LIMIT = 1 << 16
@@ -801,7 +800,7 @@ class _Rows:
         if r1 <= r0:
             return
         _fill_rows(self.healthy, r0, r1, mon._healthy_array(mon._mask))
-        self.cap[r0:r1] = _CAP_CODE[mon.model.capability]
+        self.cap[r0:r1] = CAPABILITY_CODE[mon.model.capability]
         _fill_rows(self.omega_sd, r0, r1, mon.model.omega_sd if omega_sd is None else omega_sd)
         self.envelope[r0:r1] = mon._env
         _fill_rows(self.unverified, r0, r1, mon._unverified)
@@ -815,7 +814,7 @@ class _Rows:
                            healthy=self.healthy, statistics=out[:, S.STATS0:lay.thresholds0],
                            thresholds=out[:, lay.thresholds0:lay.parity0],
                            protection_level=pl,
-                           capability=_CAP_NAMES[self.cap], events=events,
+                           capability=CAPABILITY_NAMES[self.cap], events=events,
                            parity=out[:, lay.parity0:] if parity else None,
                            envelope=self.envelope, unverified=self.unverified)
 
@@ -829,24 +828,3 @@ def _fill_rows(a: np.ndarray, r0: int, r1: int, row: np.ndarray) -> None:
         m = min(k, r1 - r0 - k)
         a[r0 + k:r0 + k + m] = a[r0:r0 + m]
         k += m
-
-
-def _from_answers(t: np.ndarray, answers: list[Answer], mon: Monitor,
-                  parity: bool) -> BlockResult:
-    """A block result assembled from stepped answers."""
-    N, n, K = len(answers), mon.n, mon.K
-
-    def stack(name: str, width: int) -> np.ndarray:
-        return np.array([getattr(a, name) for a in answers], float).reshape(N, width)
-
-    return BlockResult(t=t, omega=stack("omega", 3), omega_sd=stack("omega_sd", 3),
-                       healthy=np.array([a.healthy for a in answers], bool).reshape(N, n),
-                       statistics=stack("statistics", K), thresholds=stack("thresholds", K),
-                       protection_level=np.array([a.protection_level for a in answers],
-                                                 float).reshape(N),
-                       capability=np.array([a.capability for a in answers], dtype=object),
-                       events=[e for a in answers for e in a.events],
-                       parity=stack("parity", max(n - 3, 0)) if parity else None,
-                       envelope=np.array([a.envelope for a in answers], np.int64).reshape(N),
-                       unverified=np.array([a.unverified for a in answers],
-                                           bool).reshape(N, 3))

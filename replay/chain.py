@@ -343,9 +343,14 @@ def _compensated(mon: Monitor, cal: Calibration, kind: str, *, effects: bool,
 
 
 def _monitor(cal: Calibration, kind: str, *, thresholds_file: Any, calibration_file: Any,
-             false_alarms_per_hour: Any, settings: Any) -> tuple[Monitor, dict[str, Any]]:
+             false_alarms_per_hour: Any, settings: Any, thresholds: Any = None
+             ) -> tuple[Monitor, dict[str, Any]]:
     from thresholds.select import select
 
+    if thresholds is not None:                          # given in the library (a Thresholds)
+        return (Monitor(cal, thresholds, kind=kind, settings=settings),
+                {"source": "given", "false_alarms_per_hour":
+                 float(thresholds.false_alarms_per_hour)})
     choice = select(cal, kind=kind, thresholds_file=thresholds_file,
                     false_alarms_per_hour=false_alarms_per_hour,
                     calibration_file=calibration_file)
@@ -378,6 +383,8 @@ class ChainOptions:
         Keep the report's running summaries.
     median_exact_max : int or None
         Protection levels kept for an exact median (a live run gives a small number).
+    thresholds : Thresholds or None
+        Thresholds given in the library (win over ``thresholds_file``).
     """
 
     thresholds_file: Any = None
@@ -389,6 +396,7 @@ class ChainOptions:
     envelope: Any = True
     report: bool = True
     median_exact_max: int | None = None
+    thresholds: Any = None
 
 
 def _report(opts: ChainOptions) -> RunningReport | None:
@@ -430,7 +438,7 @@ def chain_for_flight(flight: Flight, cal: Calibration, opts: ChainOptions = Chai
     mon, how = _monitor(cal, flight.kind, thresholds_file=opts.thresholds_file,
                         calibration_file=opts.calibration_file,
                         false_alarms_per_hour=opts.false_alarms_per_hour,
-                        settings=opts.settings)
+                        settings=opts.settings, thresholds=opts.thresholds)
     avail: dict[str, list[int]] = {}
     if opts.effects and cal.effects:
         _, _, avail = flight_effect_inputs(flight)
@@ -462,7 +470,7 @@ def chain_for_map(cal: Calibration, cmap: ChannelMap, opts: ChainOptions = Chain
     mon, how = _monitor(cal, cmap.kind, thresholds_file=opts.thresholds_file,
                         calibration_file=opts.calibration_file,
                         false_alarms_per_hour=opts.false_alarms_per_hour,
-                        settings=opts.settings)
+                        settings=opts.settings, thresholds=opts.thresholds)
     comp = _compensated(mon, cal, cmap.kind, effects=opts.effects,
                         available=map_available(cmap), lacking=map_reasons(cmap))
     groups = imu_groups(mon.sensor_names)

@@ -20,6 +20,7 @@ __all__ = ["COMMANDS", "build_parser", "main"]
 
 COMMANDS: dict[str, str] = {
     "calibrate": "rimu.commands.calibrate",
+    "characterise": "rimu.commands.characterise",
     "demo": "rimu.commands.demo",
     "diagnose": "rimu.commands.diagnose",
     "evaluate": "rimu.commands.evaluate",

@@ -2,9 +2,10 @@
 tuning for a false-alarm rate, the oracle detector, and synthetic calibrations for tuning
 and tests.
 
-Evaluation campaigns (:mod:`thresholds.evaluate`, :mod:`thresholds.campaign`) and the real
-static noise checks (:mod:`thresholds.realnoise`) are imported from their modules: they
-use the flight simulation of :mod:`replay`.
+Evaluation campaigns (:mod:`thresholds.evaluate`, :mod:`thresholds.campaign`), the real
+static noise checks (:mod:`thresholds.realnoise`) and the evidence on measured recordings
+(:mod:`thresholds.field`) are imported from their modules: they use the flight simulation,
+the flight folders and the readers of :mod:`replay`.
 """
 
 from thresholds.compute import allan_from_residuals, compute_thresholds

@@ -40,7 +40,8 @@ from fdi.errors import FileFormatError
 from fdi.units import DPS
 from thresholds.compute import allan_from_residuals
 
-__all__ = ["load_adis16405", "load_mpu9250_static", "noise_shape", "static_calibration",
+__all__ = ["MPU9250_CROSS_AXIS", "MPU9250_SCALE_FACTOR_TOLERANCE", "PREDICTION_BLOCKS",
+           "load_adis16405", "load_mpu9250_static", "noise_shape", "static_calibration",
            "static_holdout", "tail_thresholds"]
 
 
@@ -90,13 +91,31 @@ def load_adis16405(folder: str | Path) -> tuple[float, np.ndarray]:
     return 100.0, a[:, :3] * DPS
 
 
+MPU9250_SCALE_FACTOR_TOLERANCE = 0.03
+"""Gyro sensitivity tolerance of the MPU9250 (datasheet: ±3 % at 25 °C)."""
+MPU9250_CROSS_AXIS = 0.02
+"""Cross-axis sensitivity of the MPU9250 (datasheet: ±2 %)."""
+PREDICTION_BLOCKS = 8
+"""Blocks whose means give the bias's scatter over the part (``bias_prediction``)."""
+
+
 def static_calibration(y: np.ndarray, fs: float, names: tuple[str, ...],
-                       *, allan: bool = True, drift_bias_sd: bool = False) -> Calibration:
+                       *, allan: bool = True, drift_bias_sd: bool = False,
+                       scale_factor_tolerance: float = 0.0, cross_axis: float = 0.0,
+                       bias_prediction: bool = False) -> Calibration:
     """A calibration of static channels (N, n) rad/s: aligned triads, SF 1, bias = mean.
 
     ``bias_sd`` is the standard error of the mean, or with ``drift_bias_sd`` the Allan
     deviation at the longest τ of the part (the in-run bias wander the mean cannot
     follow), which the monitor's bias-uncertainty inflation (1 + w·β/f_w) then carries.
+
+    At rest neither the scale factors nor the axes are observable. ``scale_factor_tolerance``
+    and ``cross_axis`` state them a priori (the datasheet's tolerances, e.g.
+    :data:`MPU9250_SCALE_FACTOR_TOLERANCE`) as the input-error covariance, so that the
+    monitor's thresholds widen when the bench moves. ``bias_prediction`` takes the bias
+    uncertainty as the scatter of :data:`PREDICTION_BLOCKS` block means times
+    sqrt(1 + 1/B) (the spread of the bias in a later stretch of the same length, drift
+    included), at least the other choices.
     """
     y = np.asarray(y, float)
     n = y.shape[1]
@@ -109,13 +128,22 @@ def static_calibration(y: np.ndarray, fs: float, names: tuple[str, ...],
     bsd = sd / math.sqrt(y.shape[0])
     if drift_bias_sd and table is not None:
         bsd = np.maximum(bsd, table.adev[-1])
+    if bias_prediction:
+        blocks = np.array_split(np.arange(y.shape[0]), PREDICTION_BLOCKS)
+        bm = np.array([y[b].mean(axis=0) for b in blocks])
+        bsd = np.maximum(bsd, bm.std(axis=0, ddof=1) * math.sqrt(1 + 1 / PREDICTION_BLOCKS))
     sensors = []
     for i in range(n):
         ax = np.eye(3)[i % 3]
+        C = 1e-12 * np.eye(3)
+        if scale_factor_tolerance or cross_axis:
+            C = (scale_factor_tolerance**2 * np.outer(ax, ax)
+                 + cross_axis**2 * (np.eye(3) - np.outer(ax, ax)) + C)
         sensors.append(SensorCal(name=names[i], axis=ax, axis_nominal=ax.copy(),
-                                 scale_factor=1.0, scale_factor_sd=1e-6, bias=float(mean[i]),
-                                 bias_sd=float(bsd[i]),
-                                 input_error_cov=1e-12 * np.eye(3), raw_unit="rad/s",
+                                 scale_factor=1.0,
+                                 scale_factor_sd=max(scale_factor_tolerance, 1e-6),
+                                 bias=float(mean[i]), bias_sd=float(bsd[i]),
+                                 input_error_cov=C, raw_unit="rad/s",
                                  scale_factor_unit="(rad/s)/raw", bias_unit="rad/s",
                                  residual_rms=float(sd[i])))
     table = table if allan else None

@@ -10,6 +10,15 @@ model of one sensor (:class:`calibration.diagnose.linmodel.LinModel`):
 - ``inputs``: the session inputs and their magnitudes (x, |x|, ẋ, specific force,
   temperature when present).
 
+Two variance probes look at what a mean model cannot show (:func:`variance_probes`):
+
+- ``transients``: the residual's mean square within :data:`TRANSIENT_S` of every step
+  change against the rest (one-sided F test; the degrees of freedom of the windows are
+  reduced by the design effect of the squared residual's autocorrelation within a
+  window): a sensor that spikes or rings at every rate change;
+- ``noise_growth``: the trend of the squared residual over the session (OLS with a HAC
+  covariance, statsmodels): noise that grows (or shrinks) over time.
+
 A probe that fails says where the structure sits: the steps whose mean residual is beyond
 3 σ, the time of the step, the frequency band.
 """
@@ -24,10 +33,14 @@ from calibration.diagnose.context import KindData
 from calibration.diagnose.library import LINE_MIN_CYCLES, line_search, step_search
 from calibration.diagnose.linmodel import LinModel
 
-__all__ = ["PROBES", "run_probes", "shared_regressors"]
+__all__ = ["PROBES", "TRANSIENT_S", "run_probes", "shared_regressors", "variance_probes"]
 
-PROBES = ("step_means", "slow", "change_point", "line", "inputs")
+PROBES = ("step_means", "slow", "change_point", "line", "inputs", "transients",
+          "noise_growth")
 SLOW_DEGREE = 10
+TRANSIENT_S = 0.1
+"""Half-width (s) of the window around each step change the ``transients`` probe reads
+(at least two samples)."""
 
 
 def _step_dummies(d: KindData) -> np.ndarray:
@@ -83,6 +96,8 @@ def run_probes(d: KindData, i: int, model: LinModel, threshold: float,
     T = d.duration_s
     shared = shared_regressors(d) if shared is None else shared
     for name in PROBES:
+        if name in _VARIANCE:
+            continue
         mult, extra, G = 1, {}, None
         if name in shared:
             Z, G = shared[name]
@@ -106,4 +121,55 @@ def run_probes(d: KindData, i: int, model: LinModel, threshold: float,
             rec = {"test": name, "p_value": p, **extra}
             rec.setdefault("steps", _bad_steps(d, model.e))
             out.append(rec)
+    out.extend(rec for rec in variance_probes(d, np.asarray(model.e, float))
+               if rec["p_value"] < threshold)
+    return out
+
+
+_VARIANCE = ("transients", "noise_growth")
+
+
+def _design_effect(e2: np.ndarray, w: int) -> float:
+    """Variance inflation of a w-sample window mean of ``e2`` from its autocorrelation."""
+    x = e2 - e2.mean()
+    v = float(x @ x)
+    if w <= 1 or v <= 0:
+        return 1.0
+    rho = [float(x[lag:] @ x[:-lag]) / v for lag in range(1, w)]
+    return max(1.0, 1.0 + 2.0 * sum((1 - lag / w) * r
+                                    for lag, r in zip(range(1, w), rho, strict=True)))
+
+
+def variance_probes(d: KindData, e: np.ndarray) -> list[dict[str, Any]]:
+    """The ``transients`` and ``noise_growth`` probes of one residual (module docstring):
+    one record each, ``{"test", "p_value", "steps" | "time_s", ...}``."""
+    import statsmodels.api as sm
+    from scipy import stats
+
+    out: list[dict[str, Any]] = []
+    e2 = e * e
+    N = e.shape[0]
+    w = max(2, round(TRANSIENT_S * d.sample_rate_hz))
+    edges = np.flatnonzero(np.diff(d.step)) + 1
+    near = np.zeros(N, bool)
+    for k in edges:
+        near[max(0, k - w):min(N, k + w)] = True
+    n1, n0 = int(near.sum()), int((~near).sum())
+    if n1 >= 2 and n0 >= 2 and e2[~near].mean() > 0:
+        deff = _design_effect(e2, 2 * w)
+        F = float(e2[near].mean() / e2[~near].mean())
+        p = float(stats.f.sf(F, max(n1 / deff, 1.0), n0 / deff))
+        worst = sorted(((float(e2[max(0, k - w):k + w].mean()), int(d.step[k])) for k in edges),
+                       reverse=True)[:8]
+        out.append({"test": "transients", "p_value": p, "variance_ratio": F,
+                    "steps": [s for _, s in worst]})
+    else:
+        out.append({"test": "transients", "p_value": 1.0})
+    tt = (d.t - d.t.mean()) / max(float(np.ptp(d.t)), 1e-12)
+    lag = max(1, int(np.ceil(4 * (N / 100) ** (2 / 9))))
+    r = sm.OLS(e2, sm.add_constant(tt)).fit(cov_type="HAC", cov_kwds={"maxlags": lag})
+    p = float(r.pvalues[1]) if np.isfinite(r.pvalues[1]) else 1.0
+    growth = float(r.params[1] / max(r.params[0], 1e-300))
+    out.append({"test": "noise_growth", "p_value": p, "relative_change": growth,
+                "steps": []})
     return out

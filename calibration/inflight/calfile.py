@@ -13,8 +13,11 @@ Noise: the fit residual of IMU j holds its own noise and the reference's
 the reference's follows from pairs (three-cornered hat:
 ``Σ_r = (Cov r_i + Cov r_j − Cov(r_i − r_j))/2``, averaged over pairs). The Allan table of
 each sensor is that of its share of the residual, so the thresholds carry the flight's own
-coloured noise. Time offsets are kept under ``extra.inflight`` (the monitor does not shift
-samples). The tail of the residual's parity statistic per window scale is kept too
+coloured noise. Time offsets are kept under ``extra.inflight`` with their checks
+(:mod:`.offset_check`), their sign convention and the identity of the flight they were
+fitted on; ``rimu monitor-file`` and ``rimu diagnose`` move each IMU by its offset
+(:mod:`.timing`).
+The tail of the residual's parity statistic per window scale is kept too
 (:func:`sensor_residuals`, :mod:`calibration.tails`).
 """
 
@@ -26,6 +29,8 @@ import math
 import numpy as np
 
 from calibration.inflight.fit import InflightFit, decompose
+from calibration.inflight.offset_check import SIGN_CONVENTION
+from calibration.inflight.timing import flight_identity
 from calibration.residuals import allan_table
 from calibration.tails import fit_tail_model
 from fdi.calfile import AllanTable, Calibration, SensorCal, SensorSet, tangent_basis
@@ -175,7 +180,7 @@ def calibration_from_fit(fit: InflightFit, flight: Flight, *, tails: bool = True
                           tails=model)},
         sample_rate_hz=fit.sample_rate_hz, extra={"method": INFLIGHT_METHOD,
                                                  "source": fit.source,
-                                                 "inflight": fit_summary(fit)})
+                                                 "inflight": fit_summary(fit, flight)})
 
 
 def _finite0(x: float) -> float:
@@ -184,8 +189,10 @@ def _finite0(x: float) -> float:
     return x if math.isfinite(x) and x >= 0 else 0.0
 
 
-def fit_summary(fit: InflightFit) -> dict[str, object]:
-    """The ``extra.inflight`` block: every estimate with its sd, excitation, residuals."""
+def fit_summary(fit: InflightFit, flight: Flight) -> dict[str, object]:
+    """The ``extra.inflight`` block: every estimate with its sd, excitation, residuals, the
+    offset checks, the sign convention of the offsets and the identity of the flight they
+    belong to."""
     imus = {}
     for g, a in fit.alignments.items():
         parts = decompose(a.A, a.A_cov)
@@ -200,6 +207,7 @@ def fit_summary(fit: InflightFit) -> dict[str, object]:
             "bias_dph_sd": (np.sqrt(np.diag(a.c_cov)) / DPH).tolist(),
             "time_offset_ms": 1e3 * a.time_offset_s,
             "time_offset_ms_sd": 1e3 * a.time_offset_sd_s,
+            "time_offset_check": a.offset_check,
             "timing_jitter_ms": a.timing_jitter_s / MS,
             "timing_jitter_ms_sd": a.timing_jitter_sd_s / MS,
             "residual_rms_dps": (np.sqrt(np.mean(r**2, axis=0)) / DPS).tolist(),
@@ -208,6 +216,7 @@ def fit_summary(fit: InflightFit) -> dict[str, object]:
             "excitation": a.excitation.to_dict(), "notes": list(a.notes)}
     return {"reference": fit.reference, "units": {
         "rotation": "rad", "scale": "fraction", "nonorthogonality": "rad"},
+        "time_offset_sign": SIGN_CONVENTION, "flight": flight_identity(flight),
         "imus": imus, "left_out": [s.to_dict() for s in fit.left_out],
         "samples_used": int(fit.used.sum()), "samples": int(fit.used.shape[0])}
 

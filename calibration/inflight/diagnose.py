@@ -2,9 +2,20 @@
 
 Residual: the calibration compensates every gyro (``y = SF·u − b``); the reference IMU's
 three axes give the body rate ``ω̂ = H_r⁻¹·y_r`` and every other IMU's axes the residual
-``r_j = y_j − H_j·ω̂`` (3 channels per IMU, together a basis of the parity space: ``r = 0``
-for a perfect model). Samples in segments to leave out (:mod:`.segments`) and invalid
-samples are dropped.
+``r_j = y_j − H_j·ω̂(t + τ_j)`` (3 channels per IMU, together a basis of the parity space:
+``r = 0`` for a perfect model), with ``τ_j`` the calibration's time offset of IMU j applied
+exactly as the in-flight fit reads it (:func:`shifted_residual`: cubic spline of the
+reference). The samples are the fit's: segments to leave out (:mod:`.segments`), invalid
+samples and the rows next to a dropped block are dropped. So the diagnosis reports what
+the calibration left, not a second estimate of what it fitted: ``time_skew`` is the skew
+left after the calibration's offset, and every IMU gets a ``timing`` record comparing the
+two (the skew left, its sd, the combined sd). A calibration fitted on another flight is
+named in ``warnings`` (an offset belongs to its flight).
+
+Functions of time chosen together (``warm_up`` and ``bias_drift``, nearly collinear over one
+flight) are reported as one ``slow_bias_change`` with their combined effect (the change of
+the fitted slow bias over the flight); matrices (``g_sensitivity``, ``bias_drift``) carry
+row and column labels and their unit (``matrix``).
 
 Candidate effects, per IMU j (regressors on its three channels):
 
@@ -47,15 +58,17 @@ from scipy import ndimage, signal, stats
 from scipy.interpolate import CubicSpline
 from scipy.special import eval_legendre
 
+from calibration.inflight.offset_check import SIGN_CONVENTION
 from calibration.inflight.regression import stacked_lstsq, wald_test
 from calibration.inflight.segments import find_segments, keep_mask
+from calibration.inflight.timing import other_flight_warning
 from fdi.calfile import Calibration
 from fdi.errors import ConfigError
 from fdi.units import DPS, G0
 from replay.flight_data import Flight
 
 __all__ = ["DIAGNOSE_SCHEMA", "GENERIC", "LINE_FACTOR", "MAX_LINES", "WARM_UP_S", "diagnose_flight",
-           "flight_residual"]
+           "flight_residual", "shifted_residual"]
 
 DIAGNOSE_SCHEMA = "rimu.diagnose-flight/1"
 LINE_FACTOR = 10.0
@@ -104,7 +117,7 @@ def flight_residual(flight: Flight, cal: Calibration, reference: str | None = No
         raise ConfigError(f"{flight.source}: diagnose of a flight needs two or more IMU "
                           f"groups of three gyros (manifest 'imu')")
     ref = reference or str(cal.extra.get("inflight", {}).get("reference", "")) \
-        or next(iter(groups))
+        or str(cal.extra.get("static", {}).get("reference", "")) or next(iter(groups))
     if ref not in groups:
         ref = next(iter(groups))
     y = flight.raw * s.scale_factors - s.biases
@@ -113,6 +126,65 @@ def flight_residual(flight: Flight, cal: Calibration, reference: str | None = No
     omega = np.linalg.solve(H[ri], y[:, ri].T).T
     res = {g: y[:, idx] - omega @ H[idx].T for g, idx in groups.items() if g != ref}
     return ref, res, groups, omega, H
+
+
+def shifted_residual(flight: Flight, cal: Calibration, keep: np.ndarray,
+                     reference: str | None = None
+                     ) -> tuple[str, dict[str, np.ndarray], dict[str, list[int]],
+                                dict[str, np.ndarray], np.ndarray, np.ndarray, dict[str, float]]:
+    """The residual the in-flight calibration leaves, on the samples it used.
+
+    As the fit (:func:`calibration.inflight.fit.fit_pair`) reads it: the reference's rate
+    ``ω̂`` through a cubic spline of its samples in ``keep``, read at ``t + τ_j`` for IMU j
+    (τ_j its calibration's offset, exact, not to first order), and the rows next to a
+    dropped block (the spline bridges it) or whose shifted time leaves the record left
+    out.
+
+    Returns
+    -------
+    reference : str
+    residual : dict of str to ndarray (N, 3)
+        ``r_j = y_j − H_j·ω̂(t + τ_j)`` (rad/s), NaN on rows not used.
+    index : dict of str to list of int
+    omega_dot : dict of str to ndarray (N, 3)
+        ``dω̂/dt`` at ``t + τ_j`` (rad/s²), the regressor of a time skew left over.
+    H : ndarray, shape (n, 3)
+    used : ndarray of bool, shape (N,)
+        Rows used for every IMU.
+    offsets : dict of str to float
+        τ_j applied (s; 0 for an IMU the calibration gives none).
+    """
+    from calibration.inflight.fit import _EDGE
+    from calibration.inflight.timing import time_offsets_s
+
+    ref, _, groups, omega, H = flight_residual(flight, cal, reference)
+    s = cal.kind("gyro")
+    y = flight.raw * s.scale_factors - s.biases
+    t = np.asarray(flight.t, float)
+    known = time_offsets_s(cal)
+    res, dots, offsets = {}, {}, {}
+    used = np.asarray(keep, bool).copy()
+    fin_ref = np.all(np.isfinite(omega), axis=1)
+    for g, idx in groups.items():
+        if g == ref:
+            continue
+        tau = float(known.get(g, 0.0))
+        ok = keep & fin_ref & np.all(np.isfinite(y[:, idx]), axis=1)
+        if ok.sum() < 4:
+            raise ConfigError(f"{flight.source}: only {int(ok.sum())} usable samples of {g}")
+        core = ok & ndimage.binary_erosion(ok, structure=np.ones(2 * _EDGE + 1, bool),
+                                           border_value=True)
+        tt = t[ok]
+        core &= (t + tau >= tt[0]) & (t + tau <= tt[-1])
+        sp = CubicSpline(tt, omega[ok], axis=0)
+        w = sp(t + tau)
+        r = y[:, idx] - w @ H[idx].T
+        r[~core] = np.nan
+        res[g] = r
+        dots[g] = sp(t + tau, 1)
+        offsets[g] = tau
+        used &= core
+    return ref, res, groups, dots, H, used, offsets
 
 
 def _aux(flight: Flight, kind: str, imu: str) -> np.ndarray | None:
@@ -312,12 +384,137 @@ def _effect_record(c: Any, s: slice, fit: Any, g: str, sensors: list[int],
            "estimate_sd": float(sd[0]) if sd.size == 1 else sd.tolist(),
            "unit": c.unit, "p_value": wald_test(fit, np.arange(s.start, s.stop))[2]}
     known = cal.extra.get("inflight", {}).get("imus", {}).get(g, {})
-    if c.name == "time_skew" and "time_offset_ms" in known:
-        rec["detail"] = (f"the calibration records {known['time_offset_ms']:+.3f} ± "
-                         f"{known['time_offset_ms_sd']:.3f} ms for {g}; the monitor moves the "
-                         f"samples by it (unless --no-time-offsets), this diagnosis does "
-                         f"not, so it stays in this residual")
+    if c.name == "time_skew":
+        cal_txt = (f"the calibration's {known['time_offset_ms']:+.3f} ± "
+                   f"{known['time_offset_ms_sd']:.3f} ms" if "time_offset_ms" in known
+                   else "no calibrated offset")
+        rec["detail"] = (f"time skew left after {cal_txt} for {g} (applied exactly, as the "
+                         f"calibration reads it; rimu monitor-file moves {g}'s samples by "
+                         f"the same offset); {SIGN_CONVENTION}")
+    if c.name == "bias_drift":
+        rec["matrix"] = {"rows": [f"{g}.{a} gyro" for a in "xyz"],
+                         "cols": ["Legendre P1", "Legendre P2", "Legendre P3"],
+                         "values": est.reshape(3, 3).T.tolist(),
+                         "sd": sd.reshape(3, 3).T.tolist(), "unit": "deg/s"}
+    if c.name == "g_sensitivity":
+        rec["matrix"] = {"rows": [f"{g}.{a} gyro" for a in "xyz"],
+                         "cols": [f"specific force {a}" for a in "xyz"],
+                         "values": est.reshape(3, 3).tolist(),
+                         "sd": sd.reshape(3, 3).tolist(), "unit": c.unit}
     return rec
+
+
+def _slow_group(chosen: list[_Cand], sl: list[slice], fit: Any, t: np.ndarray,
+                keep: np.ndarray, g: str, sensors: list[int]) -> dict[str, Any] | None:
+    """One record for the functions of time (warm-up, drift) chosen together: they are
+    nearly collinear over one flight, so only their combined effect is a claim.
+
+    The combined effect is the change of the fitted slow bias between the first and the
+    last used sample, per axis (deg/s), with its sd from the joint HAC covariance.
+    """
+    idx = [k for k, c in enumerate(chosen) if c.name in GENERIC]
+    if len(idx) < 2:
+        return None
+    cols = np.concatenate([np.arange(sl[k].start, sl[k].stop) for k in idx])
+    rows = np.flatnonzero(keep)
+    first, last = rows[0], rows[-1]
+    L = np.zeros((3, fit.beta.shape[0]))
+    for k in idx:
+        X = chosen[k].X
+        L[:, sl[k]] = X[last] - X[first]          # (3 channels, its parameters)
+    eff = L @ fit.beta / DPS
+    C = L @ fit.cov @ L.T / DPS**2
+    p = wald_test(fit, cols)[2]
+    ta, tb = chosen[idx[0]].X[keep].reshape(-1, chosen[idx[0]].X.shape[2]), \
+        chosen[idx[1]].X[keep].reshape(-1, chosen[idx[1]].X.shape[2])
+    q1, _ = np.linalg.qr(ta - ta.mean(axis=0))
+    q2, _ = np.linalg.qr(tb - tb.mean(axis=0))
+    rho = float(np.linalg.svd(q1.T @ q2, compute_uv=False)[0])
+    names = " + ".join(chosen[k].name for k in idx)
+    return {"name": "slow_bias_change", "imu": g, "sensors": sensors,
+            "members": [chosen[k].name for k in idx],
+            "estimate": eff.tolist(), "estimate_sd": np.sqrt(np.clip(np.diag(C), 0, None)).tolist(),
+            "unit": "deg/s (change of the slow bias from the first to the last used sample)",
+            "p_value": p,
+            "detail": f"{names} are nearly collinear over this flight (largest canonical "
+                      f"correlation {rho:.4f}): reported as one slow bias change, not as "
+                      f"separate physical effects"}
+
+
+def _timing_record(g: str, chosen: list[_Cand], sl: list[slice], fit: Any,
+                   cands: list[_Cand], r0: np.ndarray, keep: np.ndarray, cal: Calibration,
+                   tau_s: float, alpha_each: float) -> dict[str, Any]:
+    """What the calibration's time offset of IMU ``g`` leaves: the skew δτ in the final
+    model (with the skew added when it was not chosen), against the calibrated offset."""
+    names = [c.name for c in chosen]
+    if "time_skew" in names:
+        k = names.index("time_skew")
+        f, s = fit, sl[k]
+    else:
+        skew = next((c for c in cands if c.name == "time_skew"), None)
+        base = np.zeros((r0.shape[0], 3, 3))
+        for j in range(3):
+            base[:, j, j] = 1.0
+        X, sls = _design(base, [*chosen, skew])
+        f, s = stacked_lstsq(X[keep], r0[keep]), sls[-1]
+    d, dsd = 1e3 * float(f.beta[s][0]), 1e3 * float(f.sd[s][0])
+    p = wald_test(f, np.arange(s.start, s.stop))[2]
+    known = cal.extra.get("inflight", {}).get("imus", {}).get(g, {})
+    csd = float(known.get("time_offset_ms_sd", 0.0)) if "time_offset_ms" in known else 0.0
+    comb = math.hypot(csd, dsd)
+    return {"imu": g, "calibration_ms": 1e3 * tau_s if "time_offset_ms" in known else None,
+            "calibration_sd_ms": csd,
+            "left_ms": d, "left_sd_ms": dsd, "p_value": p, "left": bool(p < alpha_each),
+            "total_ms": 1e3 * tau_s + d, "combined_sd_ms": comb,
+            "apart_in_combined_sd": abs(d) / comb if comb > 0 else math.inf}
+
+
+def _drift_p1(chosen: list[_Cand], sl: list[slice], fit: Any, cands: list[_Cand],
+              r0: np.ndarray, keep: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """The change of the slow bias of the three channels from the first to the last used
+    sample (rad/s) and its HAC covariance: from the functions of time in the final model
+    (warm-up and drift together when both were chosen: their sum is what is identified),
+    or with ``bias_drift`` added when none was chosen."""
+    idx = [k for k, c in enumerate(chosen) if c.name in GENERIC]
+    f, cs, sls = fit, chosen, sl
+    if not idx:
+        cand = next((c for c in cands if c.name == "bias_drift"), None)
+        if cand is None:
+            return None
+        base = np.zeros((r0.shape[0], 3, 3))
+        for j in range(3):
+            base[:, j, j] = 1.0
+        X, sls = _design(base, [*chosen, cand])
+        f, cs = stacked_lstsq(X[keep], r0[keep]), [*chosen, cand]
+        idx = [len(cs) - 1]
+    rows = np.flatnonzero(keep)
+    L = np.zeros((3, f.beta.shape[0]))
+    for k in idx:
+        L[:, sls[k]] = cs[k].X[rows[-1]] - cs[k].X[rows[0]]
+    return L @ f.beta, L @ f.cov @ L.T
+
+
+def _attribution(p1: dict[str, tuple[np.ndarray, np.ndarray]], groups: dict[str, list[int]],
+                 H: np.ndarray, ref: str, alpha: float) -> dict[str, Any] | None:
+    """Which drift is the reference's: the P1 drifts of the residuals in the body frame
+    (``r_j = D_j − H_j·D_ref``, so ``H_j⁻¹·r_j`` shares ``−D_ref``), through
+    :func:`calibration.inflight.static.attribute_drift`; deg/s."""
+    from calibration.inflight.static import attribute_drift
+
+    if not p1:
+        return None
+    rel, cov = {}, {}
+    for g, (b, C) in p1.items():
+        Hi = np.linalg.pinv(H[groups[g]])
+        rel[g] = Hi @ b
+        cov[g] = Hi @ C @ Hi.T
+    a = attribute_drift(rel, cov, ref, alpha=alpha)
+    return {**a, "common": (np.asarray(a["common"]) / DPS).tolist(),
+            "common_sd": (np.asarray(a["common_sd"]) / DPS).tolist(),
+            "own": {g: {**v, "drift": (np.asarray(v["drift"]) / DPS).tolist()}
+                    for g, v in a["own"].items()},
+            "unit": "deg/s, change of the slow bias over the record (body frame of the "
+                    "reference)"}
 
 
 def _vibration_record(residual: np.ndarray, vibration: np.ndarray, g: str,
@@ -358,26 +555,25 @@ def diagnose_flight(flight: Flight, cal: Calibration, *, alpha: float = 0.01,
     """
     if not 0 < alpha < 1:
         raise ConfigError(f"alpha must be in (0, 1), got {alpha}")
-    ref, res, groups, omega, H = flight_residual(flight, cal, reference)
     t = flight.t
     segs = find_segments(flight)
-    keep = keep_mask(t, segs) & np.all(np.isfinite(omega), axis=1)
-    for r in res.values():
-        keep &= np.all(np.isfinite(r), axis=1)
+    ref, res, groups, omega_dot, H, keep, offsets = shifted_residual(
+        flight, cal, keep_mask(t, segs), reference)
     if keep.sum() < 100:
         raise ConfigError(f"{flight.source}: only {int(keep.sum())} usable samples")
-    fin = np.all(np.isfinite(omega), axis=1)
-    omega_dot = CubicSpline(t[fin], omega[fin], axis=0)(t, 1)     # angular acceleration
+    other = other_flight_warning(cal, flight)
+    warnings = [other] if other else []
     per_imu = {}
     not_testable: list[dict[str, str]] = []
     for g, r in res.items():
-        c, u = _candidates(flight, g, groups[g], H, omega_dot, np.nan_to_num(r), t, keep)
+        c, u = _candidates(flight, g, groups[g], H, omega_dot[g], np.nan_to_num(r), t, keep)
         per_imu[g] = c
         not_testable += u
     vib = {g: _vibration_level(flight, g) for g in res}
     M = sum(len(c) for c in per_imu.values()) + sum(v is not None for v in vib.values())
     alpha_each = alpha / max(M, 1)
-    effects, detail = [], []
+    effects, detail, timing = [], [], []
+    p1: dict[str, tuple[np.ndarray, np.ndarray]] = {}
     chans, before, after = [], [], []
     for g, r in res.items():
         r0 = np.nan_to_num(r)
@@ -387,8 +583,16 @@ def diagnose_flight(flight: Flight, cal: Calibration, *, alpha: float = 0.01,
         before += list(np.sqrt(np.mean(r0[keep] ** 2, axis=0)) / DPS)
         after += list(np.sqrt(np.mean(fit.residual**2, axis=0)) / DPS)
         sensors = [i + 1 for i in groups[g]]
+        grp = _slow_group(chosen, sl, fit, t, keep, g, sensors)
         effects += [_effect_record(c, s, fit, g, sensors, cal)
-                    for c, s in zip(chosen, sl, strict=True)]
+                    for c, s in zip(chosen, sl, strict=True)
+                    if grp is None or c.name not in grp["members"]]
+        effects += [grp] if grp is not None else []
+        timing.append(_timing_record(g, chosen, sl, fit, per_imu[g], r0, keep, cal,
+                                     offsets[g], alpha_each))
+        d1 = _drift_p1(chosen, sl, fit, per_imu[g], r0, keep)
+        if d1 is not None:
+            p1[g] = d1
         if vib[g] is not None:
             rec = _vibration_record(fit.residual, vib[g][keep], g, sensors, alpha_each)
             effects += [rec] if rec is not None else []
@@ -402,6 +606,10 @@ def diagnose_flight(flight: Flight, cal: Calibration, *, alpha: float = 0.01,
             "alpha": alpha, "candidates": M, "correction": "Bonferroni over all candidates",
             "effects": effects, "unexplained": bool(detail), "unexplained_detail": detail,
             "not_testable": not_testable,
+            "timing": timing, "time_offset_sign": SIGN_CONVENTION, "warnings": warnings,
+            "drift_attribution": _attribution(p1, groups, H, ref, alpha),
+            "calibration_kind": ("in-flight" if "inflight" in cal.extra else
+                                 "static" if "static" in cal.extra else "turntable"),
             "error_before": {"unit": "deg/s", "channels": chans, "rms": before},
             "error_after": {"unit": "deg/s", "channels": chans, "rms": after},
             "left_out": [s.to_dict() for s in segs],

@@ -38,7 +38,8 @@ import numpy as np
 from scipy import ndimage
 from scipy.interpolate import CubicSpline
 
-from calibration.inflight.jitter import fit_timing_jitter
+from calibration.inflight.jitter import JitterFit, fit_timing_jitter
+from calibration.inflight.offset_check import check_offset
 from calibration.inflight.regression import StackedFit, stacked_lstsq
 from calibration.inflight.segments import Segment, find_segments, keep_mask
 from fdi.errors import CalibrationError, ConfigError
@@ -127,6 +128,10 @@ class ImuAlignment:
         Newey–West lag of the covariance.
     excitation : Excitation
     notes : tuple of str
+    offset_check : dict
+        How far the offset's sd holds (:func:`calibration.inflight.offset_check.check_offset`):
+        HAC, block-bootstrap and piece sds, the piece-consistency test; empty when τ is
+        not fitted. ``time_offset_sd_s`` is the largest of those sds.
     """
 
     imu: str
@@ -141,6 +146,7 @@ class ImuAlignment:
     lags: int
     excitation: Excitation
     notes: tuple[str, ...] = ()
+    offset_check: dict[str, object] = field(default_factory=dict)
     timing_jitter_s: float = 0.0
     timing_jitter_sd_s: float = 0.0
 
@@ -270,6 +276,12 @@ def _design(model: str, z: np.ndarray, dz: np.ndarray, A: np.ndarray, with_tau: 
             X[:, k, 9 + k] = 1.0
         names = [f"A[{_AXES[k]},{_AXES[m]}]" for k in range(3) for m in range(3)]
         const = [9, 10, 11]
+    elif model == "fixed":                           # gain held: bias (and τ) only
+        p = 3 + with_tau
+        X = np.zeros((N, 3, p))
+        for k in range(3):
+            X[:, k, k] = 1.0
+        names, const = [], [0, 1, 2]
     else:
         p = 6 + with_tau
         X = np.zeros((N, 3, p))
@@ -290,7 +302,8 @@ def _design(model: str, z: np.ndarray, dz: np.ndarray, A: np.ndarray, with_tau: 
 
 def fit_pair(t: np.ndarray, y_ref: np.ndarray, y: np.ndarray, used: np.ndarray, *,
              model: str = "full", time_offset: bool = True, label: str = "imu",
-             sample_rate_hz: float | None = None) -> ImuAlignment:
+             sample_rate_hz: float | None = None, check: bool = True,
+             gain: np.ndarray | None = None, jitter: bool = True) -> ImuAlignment:
     """Fit ``y = A·y_ref(t+τ) + c`` on the samples ``used`` (module docstring).
 
     Parameters
@@ -305,6 +318,15 @@ def fit_pair(t: np.ndarray, y_ref: np.ndarray, y: np.ndarray, used: np.ndarray, 
         Fit τ (otherwise τ = 0).
     label : str
         IMU name for messages.
+    check : bool
+        With ``time_offset``: check how far τ's sd holds (block bootstrap, independently
+        fitted pieces, :mod:`calibration.inflight.offset_check`) and report the largest sd.
+    gain : ndarray, shape (3, 3), optional
+        With ``model="fixed"``: the gain A held fixed (only c and τ are fitted; used for
+        the pieces of the consistency check that do not excite A on their own).
+    jitter : bool
+        Estimate the timing jitter from the residual (:mod:`calibration.inflight.jitter`;
+        the pieces of the consistency check skip it: 0).
 
     Raises
     ------
@@ -319,7 +341,7 @@ def fit_pair(t: np.ndarray, y_ref: np.ndarray, y: np.ndarray, used: np.ndarray, 
     core = ok & ndimage.binary_erosion(ok, structure=np.ones(2 * _EDGE + 1, bool),
                                        border_value=True)
     tau = 0.0
-    A = np.eye(3)
+    A = np.eye(3) if gain is None else np.asarray(gain, float)
     fit = None
     tt = t[ok]
     spline = CubicSpline(tt, y_ref[ok], axis=0)
@@ -329,11 +351,11 @@ def fit_pair(t: np.ndarray, y_ref: np.ndarray, y: np.ndarray, used: np.ndarray, 
         z = spline(tt + tau)
         dz = spline(tt + tau, 1)
         X, names, const = _design(model, z, dz, A, time_offset)
-        Y = y[ok] - (z if model == "rotation" else 0.0)
+        Y = y[ok] - (z if model == "rotation" else z @ A.T if model == "fixed" else 0.0)
         fit = stacked_lstsq(X[inside], Y[inside])
         fit = _debias(fit, X[inside], model, A, Sr, (tau * fs) % 1.0, fs, time_offset)
         Sr = np.cov(fit.residual.T) / 2              # reference noise: half the residual
-        A = _gain(model, fit.beta)
+        A = A if model == "fixed" else _gain(model, fit.beta)
         if time_offset:
             step = float(fit.beta[-1])
             tau += step
@@ -355,6 +377,9 @@ def fit_pair(t: np.ndarray, y_ref: np.ndarray, y: np.ndarray, used: np.ndarray, 
     if model == "full":
         A_cov = cov[:9, :9]
         ci = slice(9, 12)
+    elif model == "fixed":
+        A_cov = np.zeros((9, 9))
+        ci = slice(0, 3)
     else:
         T = np.zeros((9, 3))                         # vec([θ]×) = T·θ
         T[7, 0], T[5, 0] = 1.0, -1.0
@@ -365,14 +390,35 @@ def fit_pair(t: np.ndarray, y_ref: np.ndarray, y: np.ndarray, used: np.ndarray, 
     residual = np.full(y.shape, np.nan)
     rows = np.flatnonzero(ok)[inside]
     residual[rows] = fit.residual
+    sd_tau = float(fit.sd[-1]) if time_offset else 0.0
+    chk: dict[str, object] = {}
+    if time_offset and check:
+        fitted = np.zeros(t.shape[0], bool)
+        fitted[rows] = True
+
+        def piece(mask: np.ndarray) -> tuple[float, float, str]:
+            kw = dict(time_offset=True, label=label, sample_rate_hz=fs, check=False,
+                      jitter=False)
+            try:
+                a = fit_pair(t, y_ref, y, mask, model=model, **kw)
+            except CalibrationError as exc:
+                if "time offset" in str(exc) or "bias" in str(exc) or model == "fixed":
+                    raise
+                a = fit_pair(t, y_ref, y, mask, model="fixed", gain=A, **kw)
+            return a.time_offset_s, a.time_offset_sd_s, a.model
+
+        chk = check_offset(t, fitted, X[inside], fit.residual, sd_tau, fs, piece)
+        sd_tau = 1e-3 * float(chk["sd_ms"])
     # timing jitter: the residual against the angular acceleration IMU j sees, A·ω̇_ref
-    jit = fit_timing_jitter(fit.residual, dz[inside] @ A.T, lags=fit.lags)
+    jit = (fit_timing_jitter(fit.residual, dz[inside] @ A.T, lags=fit.lags) if jitter
+           else JitterFit(0.0, 0.0, 0.0, 0.0, np.zeros((3, 3)), 0))
     return ImuAlignment(imu=label, model=model, A=A, A_cov=A_cov, c=beta[ci],
                         c_cov=cov[ci, ci],
                         time_offset_s=tau if time_offset else 0.0,
-                        time_offset_sd_s=float(fit.sd[-1]) if time_offset else 0.0,
+                        time_offset_sd_s=sd_tau,
                         residual=residual, lags=fit.lags, excitation=exc, notes=tuple(notes),
-                        timing_jitter_s=jit.tau_s, timing_jitter_sd_s=jit.tau_sd_s)
+                        offset_check=chk, timing_jitter_s=jit.tau_s,
+                        timing_jitter_sd_s=jit.tau_sd_s)
 
 
 @functools.lru_cache(maxsize=64)

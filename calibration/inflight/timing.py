@@ -4,10 +4,56 @@ The one timing model lives in :mod:`replay.time_offsets` (the whole-flight
 :func:`apply_time_offsets` and the causal :class:`~replay.time_offsets.StreamAligner` that
 ``rimu replay`` and ``rimu monitor`` use); this module re-exports the whole-flight functions
 where the calibration code has always found them.
+
+Sign of every offset rimu prints: the in-flight fit models IMU ``j`` as
+``y_j(t) = A_j · y_ref(t + τ_j) + c_j``: IMU ``j``'s sample at t matches the reference's at
+``t + τ_j``, so IMU ``j`` sees the motion ``|τ_j|`` late when ``τ_j < 0``. An offset belongs
+to the flight it was fitted on (the lag between two IMUs' samples depends on the logger's
+scheduling and on the motion): the calibration records that flight's identity
+(:func:`flight_identity`) and :func:`other_flight_warning` says when it is applied to
+another.
 """
 
 from __future__ import annotations
 
+import numpy as np
+
+from fdi.calfile import Calibration
+from replay.flight_data import Flight
 from replay.time_offsets import apply_time_offsets, moved_aux_channels, time_offsets_s
 
-__all__ = ["apply_time_offsets", "moved_aux_channels", "time_offsets_s"]
+__all__ = ["apply_time_offsets", "flight_identity", "moved_aux_channels", "other_flight_warning",
+           "time_offsets_s"]
+
+
+def flight_identity(flight: Flight) -> dict[str, object]:
+    """What identifies a flight: its source log (file name), sample count, first and last
+    time (s) and a fingerprint of its samples (sha256 of the times and rates, rounded to
+    1e-9, first 16 hex digits)."""
+    import hashlib
+    from pathlib import PurePath
+
+    t = np.asarray(flight.t, float)
+    h = hashlib.sha256()
+    h.update(np.round(t, 9).tobytes())
+    h.update(np.round(np.nan_to_num(np.asarray(flight.raw, float)), 9).tobytes())
+    return {"source": PurePath(str(flight.source)).name, "samples": int(t.shape[0]),
+            "t0_s": float(t[0]) if t.size else 0.0, "t1_s": float(t[-1]) if t.size else 0.0,
+            "fingerprint": h.hexdigest()[:16]}
+
+
+def other_flight_warning(cal: Calibration, flight: Flight) -> str | None:
+    """A warning when ``cal``'s time offsets were fitted on another flight than ``flight``
+    (None when they were fitted on this one, when the calibration has no offsets, or
+    when it does not record its flight)."""
+    inflight = cal.extra.get("inflight", {})
+    known = inflight.get("flight") if isinstance(inflight, dict) else None
+    if not time_offsets_s(cal) or not isinstance(known, dict) or "fingerprint" not in known:
+        return None
+    here = flight_identity(flight)
+    if here["fingerprint"] == known["fingerprint"]:
+        return None
+    return (f"the calibration's time offsets were fitted on another flight "
+            f"({known.get('source', '?')}, {known.get('samples', '?')} samples) than this "
+            f"one ({here['source']}, {here['samples']} samples): an offset belongs to its "
+            f"flight, so what is left here may be the difference between the two")

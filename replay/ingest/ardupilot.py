@@ -22,8 +22,13 @@ an instant). Everything else is ``info``.
 Damage is found from pymavlink's own index of message offsets: a message that runs past
 the end of the file (truncated log) or bytes between two messages that belong to none
 (corruption) is reported with its byte offset. pymavlink resynchronises silently over
-both; rimu refuses the log unless asked to salvage, and then keeps the samples that end
-before the first damaged byte.
+both (at the next header of a known format); rimu refuses the log unless asked to
+salvage, and then keeps every message that starts where the previous trusted one ends:
+each damaged stretch (byte range, what is wrong there, the messages dropped and the IMU
+samples lost, from each IMU's own time steps) is reported, and the samples after it are
+kept. The message just before a break in framing is distrusted too (DataFlash has no
+checksum: its body may hold the first corrupt bytes) unless the break is exactly one
+message whose sync bytes alone are damaged.
 """
 
 from __future__ import annotations
@@ -155,6 +160,122 @@ def _first_damage(r: Any) -> tuple[int, str] | None:
     return None
 
 
+def _index(r: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Starts, lengths and type ids of the messages pymavlink indexed, in file order
+    (types without a FMT definition left out: they are no message)."""
+    starts, lens, names = [], [], []
+    for mtype, offs in enumerate(r.offsets):
+        fmt = r.formats.get(mtype)
+        if not offs or fmt is None:
+            continue
+        starts.append(np.asarray(offs, np.int64))
+        lens.append(np.full(len(offs), fmt.len, np.int64))
+        names.append(np.full(len(offs), mtype))
+    if not starts:
+        z = np.zeros(0, np.int64)
+        return z, z, z
+    o = np.concatenate(starts)
+    order = np.argsort(o, kind="stable")
+    return o[order], np.concatenate(lens)[order], np.concatenate(names)[order]
+
+
+def _an(name: str) -> str:
+    """``name`` with its indefinite article (``an IMU``, ``a GPS``)."""
+    return f"{'an' if name[:1] in 'AEIOU' else 'a'} {name}"
+
+
+def _damaged_header(r: Any, data: bytes, a: int, b: int) -> str | None:
+    """The type name when bytes ``[a, b)`` are exactly one message whose sync bytes are
+    damaged (one of the two intact, a known type whose length is ``b - a``), else None."""
+    if b - a < 3 or not (data[a] == _HEAD[0] or data[a + 1] == _HEAD[1]):
+        return None
+    fmt = r.formats.get(data[a + 2])
+    return fmt.name if fmt is not None and fmt.len == b - a else None
+
+
+def _stretches(r: Any, data: bytes) -> tuple[list[dict[str, Any]], set[int]]:
+    """Every damaged stretch of the log and the starts of the messages to trust.
+
+    pymavlink resynchronises on the next header of a known format; a message is trusted
+    when it starts where the previous trusted one ends. Where framing breaks, the bytes up
+    to the next message are a damaged stretch; the message before the break is distrusted
+    too (DataFlash has no checksum: its body may hold the first corrupt bytes), unless the
+    break is exactly one message whose sync bytes alone are damaged.
+    """
+    o, ln, ty = _index(r)
+    n_data = int(r.data_len)
+    out: list[dict[str, Any]] = []
+    keep: list[int] = []                 # indices into o of trusted messages
+    pos = 0
+
+    def add(a: int, b: int, what: str) -> None:
+        if out and a <= out[-1]["end"]:
+            out[-1]["end"] = max(out[-1]["end"], b)
+            out[-1]["what"] += "; " + what
+        else:
+            out.append({"start": int(a), "end": int(b), "what": what})
+
+    for i in range(o.shape[0]):
+        a, e = int(o[i]), int(o[i] + ln[i])
+        if a == pos:
+            keep.append(i)
+            pos = e
+            continue
+        name = r.formats[int(ty[i])].name
+        if a > pos:
+            hdr = _damaged_header(r, data, pos, a) if keep or pos == 0 else None
+            if hdr is not None:
+                add(pos, a, f"one {hdr} message with damaged sync bytes")
+            elif keep:
+                j = keep.pop()
+                prev = r.formats[int(ty[j])].name
+                add(int(o[j]), a, f"{a - pos} bytes after {_an(prev)} message belong to "
+                                  f"no message (that {prev} message is distrusted)")
+            else:
+                add(pos, a, f"{a - pos} bytes before the first message belong to no message")
+        else:                            # a header inside the previous message
+            j = keep.pop()
+            prev = r.formats[int(ty[j])].name
+            add(int(o[j]), a, f"{_an(name)} header inside {_an(prev)} message")
+        keep.append(i)
+        pos = e
+    if keep and pos > n_data:
+        j = keep.pop()
+        add(int(o[j]), n_data, f"file ends inside {_an(r.formats[int(ty[j])].name)} "
+                               f"message (truncated: {pos - n_data} bytes missing)")
+    elif pos < n_data and keep:
+        add(pos, n_data, f"{n_data - pos} trailing bytes are no message")
+    for x in out:
+        x["bytes"] = x["end"] - x["start"]
+        inside = (o >= x["start"]) & (o < x["end"])
+        kept = np.zeros(o.shape[0], bool)
+        kept[keep] = True
+        dropped = ty[inside & ~kept]
+        x["dropped_messages"] = {r.formats[int(k)].name: int(np.sum(dropped == k))
+                                 for k in np.unique(dropped)}
+    return out, {int(o[i]) for i in keep}
+
+
+def _lost_samples(stretches: list[dict[str, Any]], streams: list[ImuStream],
+                  offsets: dict[str, np.ndarray]) -> None:
+    """Add ``lost`` (IMU samples per stream) to each stretch, from the stream's own time
+    steps on either side of it (or, at the end of the log, the messages dropped there)."""
+    for x in stretches:
+        lost = {}
+        for s in streams:
+            off = offsets[s.name]
+            before = np.flatnonzero(off < x["start"])
+            after = np.flatnonzero(off >= x["end"])
+            if before.size and after.size and s.size > 2:
+                dt = float(np.median(np.diff(s.t)))
+                gap = float(s.t[after[0]] - s.t[before[-1]])
+                lost[s.name] = max(0, round(gap / dt) - 1) if dt > 0 else 0
+            else:
+                lost[s.name] = int(x["dropped_messages"].get(s.source.split("[")[0], 0)) \
+                    if not s.source.endswith("]") else None
+        x["lost"] = {"imu_samples": lost}
+
+
 def _column(fmt: Any, *names: str) -> str | None:
     for n in names:
         if n in fmt.columns:
@@ -183,10 +304,12 @@ def _own_time(m: Any) -> float | None:
 
 
 def _collect(r: Any, types: list[str], fields: dict[str, tuple[str | None, ...]],
-             limit: int, raw_events: list[list[Any]] | None = None
+             limit: int, raw_events: list[list[Any]] | None = None,
+             trusted: set[int] | None = None
              ) -> dict[tuple[str, int], dict[str, list[float]]]:
-    """The IMU messages before byte ``limit``, as columns per (type, instance); the
-    ``EVENT_TYPES`` messages go to ``raw_events`` as [time before s, time after s, type,
+    """The IMU messages before byte ``limit`` (and, with ``trusted``, only the messages whose
+    start is in it), as columns per (type, instance), ``"off"`` holding each one's start;
+    the ``EVENT_TYPES`` messages go to ``raw_events`` as [time before s, time after s, type,
     fields] (the last IMU time before it and the first after it, or its own time)."""
     cols: dict[tuple[str, int], dict[str, list[float]]] = {}
     ev_types = [e for e in EVENT_TYPES if e in r.name_to_id] if raw_events is not None \
@@ -199,6 +322,9 @@ def _collect(r: Any, types: list[str], fields: dict[str, tuple[str | None, ...]]
             if m is None or r.offset > limit:
                 break
             t = m.get_type()
+            start = int(r.offset) - int(r.formats[r.name_to_id[t]].len)
+            if trusted is not None and start not in trusted:
+                continue
             if t in EVENT_TYPES:
                 own = _own_time(m)
                 rec = [own if own is not None else last_imu,
@@ -211,7 +337,8 @@ def _collect(r: Any, types: list[str], fields: dict[str, tuple[str | None, ...]]
             inst = int(getattr(m, icol)) if icol else 0
             c = cols.setdefault((t, inst), {k: [] for k in
                                             ("t", "gx", "gy", "gz", "ax", "ay", "az",
-                                             "temp", "err")})
+                                             "temp", "err", "off")})
+            c["off"].append(start)
             c["t"].append(getattr(m, tcol))
             last_imu = float(getattr(m, tcol)) * TIME_UNITS["us" if tcol == "TimeUS" else "ms"]
             for rec in waiting:
@@ -283,23 +410,39 @@ def read_ardupilot(path: str | Path, *, salvage: bool = False) -> LogRead:
     if not types:
         raise FileFormatError(p, f"no IMU messages ({', '.join(IMU_TYPES)}) in the log")
     damage = _first_damage(r)
-    limit = damage[0] if damage is not None else r.data_len
     fields = {t: _imu_fields(p, r.formats[r.name_to_id[t]], t) for t in types}
-    raw_events: list[list[Any]] = []
-    cols = _collect(r, types, fields, limit, raw_events)
-    streams = _streams(cols, fields)
-    events = ardupilot_events(raw_events)
     meta: dict[str, Any] = {"messages": {t: int(r.counts[r.name_to_id[t]]) for t in types},
                             "bytes": int(r.data_len)}
-    dmg = None
-    if damage is not None:
-        dmg = Damage(p, damage[1], offset=damage[0],
-                     samples_before=sum(s.size for s in streams))
-        if not salvage:
-            raise dmg.error()
     meta["events"] = {e: int(r.counts[r.name_to_id[e]]) for e in EVENT_TYPES
                       if e in r.name_to_id}
-    return LogRead(p, "ardupilot", tuple(streams), dmg, meta, events=events)
+    empty = [t for t in IMU_TYPES if t in r.name_to_id and t not in types]
+    if empty:
+        meta["warnings"] = [f"the log's format declares {t} but holds no {t} sample (that "
+                            f"IMU logged nothing)" for t in empty]
+    raw_events: list[list[Any]] = []
+    if damage is None:
+        cols = _collect(r, types, fields, r.data_len, raw_events)
+        return LogRead(p, "ardupilot", tuple(_streams(cols, fields)), None, meta,
+                       events=ardupilot_events(raw_events))
+    try:
+        data = Path(p).read_bytes()[:int(r.data_len)]
+    except OSError as exc:
+        raise FileFormatError(p, f"cannot read ({exc.strerror})") from None
+    stretches, trusted = _stretches(r, data)
+    cols = _collect(r, types, fields, r.data_len + 1, raw_events, trusted)
+    streams = _streams(cols, fields)
+    offsets = {s.name: np.asarray(cols[key]["off"], np.int64) for s, key in zip(
+        streams, sorted(cols, key=lambda ti: (IMU_TYPES.index(ti[0]), ti[1])), strict=True)}
+    _lost_samples(stretches, streams, offsets)
+    first = stretches[0] if stretches else {"start": damage[0], "what": damage[1]}
+    before = sum(int(np.sum(o < first["start"])) for o in offsets.values())
+    dmg = Damage(p, first["what"], offset=int(first["start"]), samples_before=before,
+                 stretches=tuple(stretches),
+                 samples_after=sum(s.size for s in streams) - before)
+    if not salvage:
+        raise dmg.error()
+    return LogRead(p, "ardupilot", tuple(streams), dmg, meta,
+                   events=ardupilot_events(raw_events))
 
 
 def _int(d: dict[str, Any], key: str) -> int:

@@ -20,7 +20,10 @@ Damage: pyulog stops silently where the file is cut (or where a corrupt header c
 bytes than the file has), and flags other corruption (``file_corruption``) while
 resynchronising over it. rimu watches pyulog's reads to find where it stopped short, and
 for flagged corruption finds the offset by reading prefixes of the file; it then refuses
-the log unless asked to salvage, and keeps the samples read before the damage.
+the log unless asked to salvage. Salvaged, a cut file keeps the samples before the cut; a
+corrupt one keeps every sample pyulog recovers after resynchronising, and reports each
+damaged stretch (the bytes pyulog skipped or re-read, from its reads) and the IMU samples
+lost there (from each stream's time steps).
 """
 
 from __future__ import annotations
@@ -82,6 +85,156 @@ class _TrackedBytes(io.BytesIO):
         if base + pos < 0:
             raise OSError(errno.EINVAL, "seek before the start of the file")
         return super().seek(pos, whence)
+
+
+class _AllReads(_TrackedBytes):
+    """The file's bytes, remembering every read pyulog makes (start, bytes got)."""
+
+    def __init__(self, data: bytes) -> None:
+        super().__init__(data)
+        self.log: list[tuple[int, int]] = []
+
+    def read(self, size: int | None = -1) -> bytes:
+        start = self.tell()
+        out = super().read(size)
+        self.log.append((start, len(out)))
+        return out
+
+
+_CLEAN_RUN = 8
+"""Contiguous reads (headers and bodies) after which pyulog is back on the message chain."""
+
+
+def _damaged_stretches(data: bytes, lo: int) -> list[dict[str, Any]]:
+    """Byte ranges pyulog skipped, re-read or dropped while resynchronising.
+
+    ``lo``: the longest prefix pyulog reads without a corruption flag (±16 bytes). The first
+    stretch starts at the header of the first message not inside that prefix and ends
+    where pyulog's reads run :data:`_CLEAN_RUN` times contiguously again (a dropped
+    message with a corrupt id: the message itself). Later breaks in the chain of reads
+    (pyulog seeking to resynchronise) are further stretches.
+    """
+    from pyulog import ULog
+
+    fh = _AllReads(data)
+    sink = io.StringIO()
+    try:
+        with contextlib.redirect_stdout(sink), contextlib.redirect_stderr(sink):
+            ULog(fh, list(TOPICS))
+    except Exception:
+        return [{"start": int(lo), "end": len(data), "bytes": len(data) - int(lo),
+                 "what": "pyulog could not read past this offset"}]
+    log = [(a, n) for a, n in fh.log if n > 0]
+    n = len(log)
+
+    def clean_from(j: int) -> bool:
+        run = log[j:j + _CLEAN_RUN]
+        return len(run) == _CLEAN_RUN and run[0][1] == 3 and all(
+            run[i + 1][0] == run[i][0] + run[i][1] for i in range(_CLEAN_RUN - 1))
+
+    out: list[dict[str, Any]] = []
+    k = 0
+    while k < n - 1:
+        a, m = log[k]
+        nxt = log[k + 1]
+        first = not out and m == 3 and nxt[0] == a + 3 and a + 3 + nxt[1] > lo
+        broken = out and nxt[0] != a + m
+        if not (first or broken):
+            k += 1
+            continue
+        s0 = a
+        j = k + 2 if first else k + 1
+        while j < n and not (log[j][0] > s0 and clean_from(j)):
+            j += 1
+        e = log[j][0] if j < n else len(data)
+        if out and s0 <= out[-1]["end"]:
+            out[-1]["end"] = max(out[-1]["end"], e)
+        else:
+            out.append({"start": int(s0), "end": int(e),
+                        "what": "corrupt ULog data (pyulog resynchronised after it)"})
+        k = j
+    for x in out:
+        x["bytes"] = x["end"] - x["start"]
+    return out
+
+
+_TYPES = frozenset(b"BFIMPQARDLCSO")
+"""ULog message types (pyulog reads these; anything else is no message)."""
+_MAX_MSG = 10000
+"""Largest message size pyulog accepts as plausible."""
+
+
+def _next_chain(data: bytes, start: int) -> int | None:
+    """The first offset at or after ``start`` where :data:`_CLEAN_RUN` ULog messages of
+    known types and plausible sizes follow each other (or run exactly to the end)."""
+    n = len(data)
+    for q in range(start, n - 3):
+        pos, ok = q, 0
+        while ok < _CLEAN_RUN and pos + 3 <= n:
+            size = data[pos] | (data[pos + 1] << 8)
+            if data[pos + 2] not in _TYPES or size == 0 or size > _MAX_MSG \
+                    or pos + 3 + size > n:
+                break
+            pos += 3 + size
+            ok += 1
+        if ok == _CLEAN_RUN or (ok > 0 and pos == n):
+            return q
+    return None
+
+
+def _splice_resync(p: str, data: bytes, hdr: int, topic: str
+                   ) -> tuple[list[ImuStream], list[dict[str, Any]]] | None:
+    """Skip a corrupt header pyulog stopped at: cut ``[hdr, q)`` (q the next chain of valid
+    messages, :func:`_next_chain`) and read again, repeatedly. Returns the streams and the
+    stretches cut (original byte offsets), or None when no valid message follows."""
+    from pyulog import ULog
+
+    cuts: list[tuple[int, int]] = []
+    buf = data
+    shift = 0                                   # bytes cut before the current damage
+    streams: list[ImuStream] | None = None
+    for _ in range(64):
+        q = _next_chain(buf, hdr + 3)
+        if q is None:
+            break
+        cuts.append((hdr + shift, q + shift))
+        shift += q - hdr
+        buf = buf[:hdr] + buf[q:]
+        fh = _TrackedBytes(buf)
+        sink = io.StringIO()
+        try:
+            with contextlib.redirect_stdout(sink), contextlib.redirect_stderr(sink):
+                u = ULog(fh, list(TOPICS))
+            streams, _ = _streams(u, topic)
+        except Exception:
+            return None
+        short = _short_read(fh)
+        if short is None:
+            break
+        hdr = short[0]
+    if streams is None:
+        return None
+    return streams, [{"start": a, "end": b, "bytes": b - a,
+                      "what": "corrupt ULog message header (its size runs past the next "
+                              "messages); skipped to the next chain of valid messages"}
+                     for a, b in cuts]
+
+
+def _lost_in_time(streams: list[ImuStream], t_cut: float) -> dict[str, int]:
+    """IMU samples missing from each stream at the damage: the gap in its time steps that
+    spans ``t_cut`` (the last sample time before the damage), in sample periods."""
+    lost = {}
+    for s in streams:
+        if s.size < 3:
+            lost[s.name] = 0
+            continue
+        dt = float(np.median(np.diff(s.t)))
+        i = int(np.searchsorted(s.t, t_cut, side="right"))
+        if 0 < i < s.size and dt > 0:
+            lost[s.name] = max(0, round(float(s.t[i] - s.t[i - 1]) / dt) - 1)
+        else:
+            lost[s.name] = 0
+    return lost
 
 
 def _short_read(fh: _TrackedBytes) -> tuple[int, str] | None:
@@ -190,7 +343,7 @@ def _cut_time(p: str, data: bytes) -> tuple[int, float]:
 
     lo, hi = 0, len(data)
     sink = io.StringIO()
-    while hi - lo > 64:
+    while hi - lo > 16:
         mid = (lo + hi) // 2
         try:
             with contextlib.redirect_stdout(sink), contextlib.redirect_stderr(sink):
@@ -248,14 +401,30 @@ def read_px4(path: str | Path, *, salvage: bool = False, topic: str = "auto") ->
     dmg = None
     if u.file_corruption:
         offset, last = _cut_time(p, data)
-        streams = [s.take(s.t <= last) for s in streams]
+        stretches = _damaged_stretches(data, max(0, offset - 16))
+        lost = _lost_in_time(streams, last)
+        for x in stretches:
+            x["lost"] = {"imu_samples": lost if x is stretches[0] else {}}
+        before = sum(int(np.sum(s.t <= last)) for s in streams)
         dmg = Damage(p, "corrupt ULog data (pyulog skipped bytes it could not read)",
-                     offset=offset, samples_before=sum(s.size for s in streams))
+                     offset=offset, samples_before=before, stretches=tuple(stretches),
+                     samples_after=sum(s.size for s in streams) - before)
     else:
         short = _short_read(fh)
         if short is not None:
-            dmg = Damage(p, short[1], offset=short[0],
-                         samples_before=sum(s.size for s in streams))
+            before = sum(s.size for s in streams)
+            fixed = _splice_resync(p, data, short[0], topic) if salvage else None
+            if fixed is not None:
+                last = max((float(s.t[-1]) for s in streams if s.size), default=-np.inf)
+                streams, stretches = fixed
+                lost = _lost_in_time(streams, last)
+                for x in stretches:
+                    x["lost"] = {"imu_samples": lost if x is stretches[0] else {}}
+                dmg = Damage(p, short[1], offset=short[0], samples_before=before,
+                             stretches=tuple(stretches),
+                             samples_after=sum(s.size for s in streams) - before)
+            else:
+                dmg = Damage(p, short[1], offset=short[0], samples_before=before)
     if dmg is not None and not salvage:
         raise dmg.error()
     if not streams or all(s.size == 0 for s in streams):

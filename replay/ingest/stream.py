@@ -95,7 +95,14 @@ class Damage:
     line : int or None
         1-based line (text formats).
     samples_before : int
-        IMU samples (all IMUs) read before the damage: what ``--salvage`` keeps.
+        IMU samples (all IMUs) read before the damage.
+    stretches : tuple of dict
+        Every damaged stretch when the reader resynchronises after damage (``--salvage``):
+        ``start``/``end`` (byte range, end exclusive, or ``line`` for text), ``bytes``,
+        ``what``, and what was lost there (``lost``: IMU samples per stream, or lines).
+        Empty when the reader keeps only the samples before the first damage.
+    samples_after : int
+        IMU samples (all IMUs) read after the first damage (resynchronised).
     """
 
     path: str
@@ -103,18 +110,26 @@ class Damage:
     offset: int | None = None
     line: int | None = None
     samples_before: int = 0
+    stretches: tuple[dict[str, Any], ...] = ()
+    samples_after: int = 0
 
     def error(self) -> FileFormatError:
         """The one-line error for this damage (mentions ``--salvage``)."""
         where = f" at byte offset {self.offset}" if self.offset is not None else ""
-        keep = (f"; --salvage keeps the {self.samples_before} IMU samples before it"
-                if self.samples_before else "; no IMU sample precedes it")
+        if self.stretches:
+            n = len(self.stretches)
+            keep = (f"; --salvage keeps the {self.samples_before + self.samples_after} IMU "
+                    f"samples outside the {n} damaged stretch{'es' if n > 1 else ''}")
+        else:
+            keep = (f"; --salvage keeps the {self.samples_before} IMU samples before it"
+                    if self.samples_before else "; no IMU sample precedes it")
         return FileFormatError(self.path, f"{self.message}{where}{keep}", line=self.line)
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-able form (for the ingest report)."""
         return {"message": self.message, "offset": self.offset, "line": self.line,
-                "samples_before": self.samples_before}
+                "samples_before": self.samples_before, "samples_after": self.samples_after,
+                "stretches": [dict(x) for x in self.stretches]}
 
 
 @dataclass(frozen=True, eq=False)

@@ -12,9 +12,11 @@ temperature and time, and in what unit. Without a map:
   (m/s²): one IMU per struct; the units are *assumed* SI and the report says so;
 - an R object holds no units: a map is required.
 
-Damage: a CSV line with the wrong number of cells or a cell that is not a number stops
-the table there (``--salvage`` keeps the rows before); a ``.mat`` or ``.rda`` file that
-its library cannot read has no usable rows (compressed formats), which the error says.
+Damage: a CSV line with the wrong number of cells or a cell that is not a number is
+refused, naming its line; ``--salvage`` drops every such line, counts it and keeps the
+rows after it (each run of bad lines reported as a damaged stretch); a ``.mat`` or
+``.rda`` file that its library cannot read has no usable rows (compressed formats), which
+the error says.
 """
 
 from __future__ import annotations
@@ -78,10 +80,11 @@ class Table:
 
 
 # -- CSV -------------------------------------------------------------------------------
-def _first_non_number(lines: list[str], header: list[str],
-                      rows: np.ndarray) -> tuple[int, str, str] | None:
-    """The first of ``rows`` (0-based in ``lines``) holding a cell that is neither empty,
-    NaN nor a number: (row, the cell, its column name)."""
+def _non_numbers(lines: list[str], header: list[str],
+                 rows: np.ndarray) -> dict[int, tuple[str, str]]:
+    """The ``rows`` (0-based in ``lines``) holding a cell that is neither empty, NaN nor a
+    number: ``{row: (the first such cell, its column name)}``."""
+    out: dict[int, tuple[str, str]] = {}
     for r in rows:
         for c, cell in enumerate(lines[r].split(",")):
             text = cell.strip().lower()
@@ -89,12 +92,32 @@ def _first_non_number(lines: list[str], header: list[str],
                 try:
                     float(text)
                 except ValueError:
-                    return int(r), cell.strip(), header[c]
-    return None
+                    out[int(r)] = (cell.strip(), header[c])
+                    break
+    return out
+
+
+def _bad_line_runs(bad: dict[int, str]) -> list[dict[str, Any]]:
+    """Consecutive bad data rows (0-based) merged into damaged stretches (file lines)."""
+    out: list[dict[str, Any]] = []
+    for r in sorted(bad):
+        if out and r + 2 == out[-1]["last_line"] + 1:
+            out[-1]["last_line"] = r + 2
+            out[-1]["lost"]["lines"] += 1
+        else:
+            out.append({"line": r + 2, "last_line": r + 2, "what": bad[r],
+                        "lost": {"lines": 1}})
+    return out
 
 
 def read_csv_table(path: str | Path) -> Table:
-    """A CSV file with one header line; empty cells are NaN."""
+    """A CSV file with one header line; empty cells are NaN.
+
+    A line with the wrong number of cells or a cell that is not a number is dropped and
+    counted (runs of such lines are the table's damaged stretches, :attr:`Damage.stretches`);
+    the rows after it are kept. :attr:`Table.damage` names the first one; ``rows_before``
+    in :attr:`Table.attrs` counts the rows before it.
+    """
     p = str(path)
     text = read_text(path)
     lines = text.splitlines()
@@ -106,13 +129,10 @@ def read_csv_table(path: str | Path) -> Table:
     while body and not body[-1].strip():
         body.pop()
     counts = np.array([ln.count(",") + 1 for ln in body], int)
-    bad = np.flatnonzero(counts != ncol)
-    stop = int(bad[0]) if bad.size else len(body)
-    damage = None
-    if bad.size:
-        damage = Damage(p, f"{counts[stop]} cells, expected {ncol} (truncated or corrupt "
-                           f"line)", line=stop + 2)
-    good = body[:stop]
+    bad: dict[int, str] = {int(r): f"{counts[r]} cells, expected {ncol} (truncated or "
+                                   f"corrupt line)" for r in np.flatnonzero(counts != ncol)}
+    ok_rows = np.flatnonzero(counts == ncol)
+    good = [body[r] for r in ok_rows]
     vals = np.zeros((0, ncol))
     if good:
         with warnings.catch_warnings():
@@ -120,14 +140,23 @@ def read_csv_table(path: str | Path) -> Table:
             vals = np.genfromtxt(io.StringIO("\n".join(good)), delimiter=",", dtype=float,
                                  ndmin=2, invalid_raise=False)
         vals = vals.reshape(-1, ncol)
-        rows = np.flatnonzero(np.isnan(vals).any(axis=1))
-        found = _first_non_number(good, header, rows)
-        if found is not None and (damage is None or found[0] + 2 < (damage.line or 0)):
-            r, cell, column = found
-            damage = Damage(p, f"{cell!r} is not a number (column {column!r})", line=r + 2)
-            vals = vals[:r]
+        nan_rows = np.flatnonzero(np.isnan(vals).any(axis=1))
+        found = _non_numbers(good, header, nan_rows)
+        for r, (cell, column) in found.items():
+            bad[int(ok_rows[r])] = f"{cell!r} is not a number (column {column!r})"
+        if found:
+            keep = np.ones(vals.shape[0], bool)
+            keep[list(found)] = False
+            vals = vals[keep]
+    damage = None
+    attrs: dict[str, Any] = {}
+    if bad:
+        first = min(bad)
+        runs = _bad_line_runs(bad)
+        damage = Damage(p, bad[first], line=first + 2, stretches=tuple(runs))
+        attrs["rows_before"] = first
     cols = {h: vals[:, j] for j, h in enumerate(header)}
-    return Table(p, cols, damage=damage)
+    return Table(p, cols, attrs=attrs, damage=damage)
 
 
 # -- MATLAB ----------------------------------------------------------------------------
@@ -370,8 +399,10 @@ def read_tabular(path: str | Path, fmt: str, *, map_path: str | Path | None = No
                                  "(and accel_unit, [time] rate_hz)")
     if table.damage is not None:
         n_rows = min((len(v) for v in table.columns.values()), default=0)
+        before = int(table.attrs.pop("rows_before", n_rows))
         dmg = Damage(p, table.damage.message, line=table.damage.line,
-                     samples_before=n_rows * len(imus))
+                     samples_before=before * len(imus), stretches=table.damage.stretches,
+                     samples_after=(n_rows - before) * len(imus))
         if not salvage:
             raise dmg.error()
     else:

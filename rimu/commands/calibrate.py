@@ -49,6 +49,9 @@ def configure(p: argparse.ArgumentParser) -> None:
     from rimu.commands.calibrate_inflight import configure_options
 
     configure_options(p)
+    from rimu.commands.calibrate_static import configure_options as static_options
+
+    static_options(p)
 
 
 def _set_summary(s: SensorSet, V_sd: object) -> list[str]:
@@ -160,6 +163,10 @@ def run(args: argparse.Namespace) -> int:
         from rimu.commands import calibrate_inflight
 
         return calibrate_inflight.run(args)
+    if getattr(args, "static", None):
+        from rimu.commands import calibrate_static
+
+        return calibrate_static.run(args)
     from calibration.session_io import load_session
     from fdi.calfile import check_plausible
     from rimu.commands.calibrate_effects import calibrate_with_check

@@ -13,6 +13,7 @@ import numpy as np
 
 from calibration.inflight.calfile import calibration_from_fit
 from calibration.inflight.fit import MODELS, fit_inflight
+from calibration.inflight.offset_check import check_lines
 from replay.flight_io import load_flight_dir
 
 __all__ = ["configure_options", "run", "summary_text"]
@@ -30,6 +31,9 @@ def configure_options(p: argparse.ArgumentParser) -> None:
                         "'rotation', or 'auto' (full when the motion excites it; default)")
     p.add_argument("--no-time-offset", action="store_true",
                    help="with --in-flight: do not fit the time offsets")
+    p.add_argument("--report", metavar="DIR",
+                   help="with --in-flight: write report.md and PNG plots (residual before "
+                        "and after, the offset of each piece, the periods left out) into DIR")
 
 
 def summary_text(doc: dict) -> str:
@@ -54,11 +58,14 @@ def summary_text(doc: dict) -> str:
                      f"{r['time_offset_ms_sd']:.3f} ms; residual rms [" + ", ".join(
                          f"{x:.3g}" for x in r["residual_rms_dps"]) + f"] deg/s; HAC lags "
                      f"{r['hac_lags']}")
+        lines.extend(f"      {x}" for x in check_lines(r.get("time_offset_check") or {}))
         if "timing_jitter_ms" in r:
             lines.append(f"      timing jitter {g}: {r['timing_jitter_ms']:.2f} ± "
                          f"{r['timing_jitter_ms_sd']:.2f} ms (thresholds widen with it while "
                          "the body accelerates)")
         lines.extend(f"      note: {n}" for n in r["notes"])
+    if doc.get("time_offset_sign"):
+        lines.append(f"  sign: {doc['time_offset_sign']}")
     return "\n".join(lines)
 
 
@@ -68,6 +75,11 @@ def run(args: argparse.Namespace) -> int:
 
     out = output_file(args.out, "--out")
     input_path(args.in_flight, "--in-flight", kind="dir")
+    rep = None
+    if getattr(args, "report", None):
+        from rimu.outputs import output_dir
+
+        rep = output_dir(args.report, "--report")
     flight = load_flight_dir(args.in_flight)
     fit = fit_inflight(flight, reference=getattr(args, "reference", None),
                        model=getattr(args, "model", "auto"),
@@ -86,4 +98,13 @@ def run(args: argparse.Namespace) -> int:
               + (f", GPD xi {r1.gpd.shape:.2f} +- {r1.gpd.shape_sd:.2f}" if r1.gpd else "")
               + " (rimu tune and the monitor overbound the non-Gaussian scales)")
     print(f"wrote {out}")
+    if rep is not None:
+        from calibration.inflight.report import write_flight_plots
+        from rimu.outputs import atomic_write_text
+
+        rep.mkdir(parents=True, exist_ok=True)
+        pngs = write_flight_plots(flight, cal, rep)
+        atomic_write_text(rep / "report.md", "```\n" + summary_text(cal.extra["inflight"])
+                          + "\n```\n\n" + "".join(f"![{p.stem}]({p.name})\n" for p in pngs))
+        print(f"wrote {rep / 'report.md'} and {', '.join(p.name for p in pngs)}")
     return 0

@@ -20,8 +20,25 @@ def format_text(doc: dict) -> str:
     lines = [f"diagnosis of {doc['source']} against {doc['reference']} "
              f"({doc['samples_used']} of {doc['samples']} samples; alpha {doc['alpha']:g}, "
              f"{doc['correction']}, {doc['candidates']} candidates)"]
+    lines.extend(f"  warning: {w}" for w in doc.get("warnings", []))
     for s in doc["left_out"]:
-        lines.append(f"  left out {s['t0_s']:.2f}-{s['t1_s']:.2f} s: {s['reason']}")
+        lines.append(f"  left out {s['t0_s']:.2f}-{s['t1_s']:.2f} s: {s['reason']}"
+                     + (f" ({s['detail']})" if s.get("detail") else ""))
+    if doc.get("calibration_kind") == "in-flight" and not doc.get("warnings"):
+        lines.append("  (the same samples the in-flight calibration used)")
+    for tm in doc.get("timing", []):
+        head = (f"  time offset {tm['imu']}: calibration {tm['calibration_ms']:+.3f} ± "
+                f"{tm['calibration_sd_ms']:.3f} ms applied; " if tm["calibration_ms"] is not None
+                else f"  time offset {tm['imu']}: none calibrated; ")
+        if tm["left"]:
+            lines.append(head + f"left {tm['left_ms']:+.3f} ± {tm['left_sd_ms']:.3f} ms "
+                         f"(p={tm['p_value']:.2g}), total {tm['total_ms']:+.3f} ms, "
+                         f"{tm['apart_in_combined_sd']:.1f} combined sd from the calibration")
+        else:
+            lines.append(head + f"nothing left ({tm['left_ms']:+.3f} ± {tm['left_sd_ms']:.3f}"
+                         f" ms, p={tm['p_value']:.2g})")
+    if doc.get("time_offset_sign"):
+        lines.append(f"  sign: {doc['time_offset_sign']}")
     if not doc["effects"]:
         lines.append("  no effect found")
     for e in doc["effects"]:
@@ -31,7 +48,16 @@ def format_text(doc: dict) -> str:
                 + "]"
         else:
             val = f"{est:+.4g} ± {sd:.2g}"
-        lines.append(f"  {e['name']:<18s} {e['imu']}: {val} {e['unit']} (p={e['p_value']:.2g})")
+        if e.get("matrix"):
+            m = e["matrix"]
+            lines.append(f"  {e['name']:<18s} {e['imu']}: [{m['unit']}] (p={e['p_value']:.2g})")
+            lines.append("      " + " " * 16 + "".join(f"{c:>22s}" for c in m["cols"]))
+            for rn, vr, sr in zip(m["rows"], m["values"], m["sd"], strict=True):
+                lines.append(f"      {rn:<16s}" + "".join(
+                    f"{f'{v:+.3g} ± {q:.2g}':>22s}" for v, q in zip(vr, sr, strict=True)))
+        else:
+            lines.append(f"  {e['name']:<18s} {e['imu']}: {val} {e['unit']} "
+                         f"(p={e['p_value']:.2g})")
         if e.get("detail"):
             lines.append(f"      {e['detail']}")
     b, a = doc["error_before"], doc["error_after"]
@@ -39,6 +65,14 @@ def format_text(doc: dict) -> str:
         lines.append(f"  residual {c}: rms {x:.4g} -> {y:.4g} {b['unit']}")
     for n in doc["not_testable"]:
         lines.append(f"  not testable: {n['name']} ({n['imu']}): {n['reason']}")
+    a = doc.get("drift_attribution")
+    if a and any(e["name"] in ("bias_drift", "slow_bias_change") for e in doc["effects"]):
+        lines.append(f"  drift: {a['statement']}")
+        lines.append("    shared by every IMU relative to the reference: [" + ", ".join(
+            f"{c:+.4f} ± {q:.4f}" for c, q in zip(a["common"], a["common_sd"], strict=True))
+            + f"] deg/s (p={a['common_p']:.2g}); relative to the reference: " + "; ".join(
+                f"{g} [" + ", ".join(f"{d:+.4f}" for d in v["drift"]) + "]"
+                for g, v in a["own"].items()) + " deg/s")
     lines.append("  unexplained: " + ("yes" if doc["unexplained"] else "no"))
     lines.extend(f"    {d}" for d in doc["unexplained_detail"])
     return "\n".join(lines)
@@ -59,9 +93,14 @@ def run_flight(path: str, cal_path: str, *, alpha: float = 0.01, as_json: bool =
     js = json.dumps(doc, indent=1, allow_nan=False) + "\n"
     print(js if as_json else text, end="\n" if not as_json else "")
     if out is not None:
+        from calibration.inflight.report import write_flight_plots
+
         out.mkdir(parents=True, exist_ok=True)
-        atomic_write_text(out / "report.md", "```\n" + text + "\n```\n")
+        pngs = write_flight_plots(flight, cal, out)
+        atomic_write_text(out / "report.md", "```\n" + text + "\n```\n\n" + "".join(
+            f"![{p.stem}]({p.name})\n" for p in pngs))
         atomic_write_text(out / "diagnosis.json", js)
         if not as_json:
-            print(f"wrote {out / 'report.md'} and {out / 'diagnosis.json'}")
+            print(f"wrote {out / 'report.md'}, {out / 'diagnosis.json'} and "
+                  f"{', '.join(p.name for p in pngs)}")
     return 0

@@ -59,6 +59,9 @@ def run(args: argparse.Namespace) -> int:
     print(f"wrote {out}: {flight.t.shape[0]} samples of {len(report['imus'])} IMU(s) "
           f"({flight.n} gyro axes) at {tb['sample_rate_hz']:.4g} Hz, "
           f"{tb['t_end_s'] - tb['t_start_s']:.1f} s, {tb['n_gaps']} gap(s)")
+    for rd in reads:
+        for w in rd.meta.get("warnings", []):
+            print(f"  warning: {rd.path}: {w}")
     for imu in report["imus"]:
         dropped = sum(imu["dropped"].values())
         print(f"  {imu['name']} ({imu['source']}): {imu['samples_in']} in, {imu['kept']} kept, "
@@ -77,6 +80,30 @@ def run(args: argparse.Namespace) -> int:
         print(f"  envelope (uncalibrated rates): {describe_summary(envelope)}")
     if read.damage is not None:
         d = read.damage
-        where = f" at byte offset {d.offset}" if d.offset is not None else ""
-        print(f"  salvaged: {d.message}{where}; samples after it not read")
+        if d.stretches:
+            print(f"  salvaged: {len(d.stretches)} damaged stretch(es) skipped, reading "
+                  f"resumed after each")
+            for x in d.stretches:
+                print("    " + damage_line(x))
+        else:
+            where = f" at byte offset {d.offset}" if d.offset is not None else ""
+            print(f"  salvaged: {d.message}{where}; samples after it not read")
     return 0
+
+
+def damage_line(x: dict) -> str:
+    """One readable line of a damaged stretch (see :class:`replay.ingest.stream.Damage`)."""
+    if "start" in x:
+        where = f"bytes {x['start']}-{x['end']} ({x['bytes']} bytes)"
+    elif x.get("last_line", x.get("line")) != x.get("line"):
+        where = f"lines {x['line']}-{x['last_line']}"
+    else:
+        where = f"line {x.get('line')}"
+    lost = x.get("lost", {})
+    parts = []
+    if lost.get("imu_samples"):
+        parts.append(", ".join(f"{k} {'?' if v is None else v}"
+                               for k, v in lost["imu_samples"].items()) + " IMU samples")
+    if lost.get("lines"):
+        parts.append(f"{lost['lines']} line(s)")
+    return f"{where}: {x['what']}; lost " + ("; ".join(parts) if parts else "nothing")

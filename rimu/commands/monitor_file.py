@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import logging
 
 from fdi.calfile import load_calibration
 from replay.flight import load_flight_dir
@@ -28,6 +29,11 @@ def configure(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-time-offsets", action="store_true",
                    help="do not move each IMU by the time offset its in-flight calibration "
                         "records (default: moved onto the reference's timing)")
+    p.add_argument("--no-envelope", action="store_true",
+                   help="do not mark samples out of the operating envelope (default: shocks, "
+                        "saturation, tumbles and the log's declared crash events are marked; "
+                        "the monitor excludes nothing there and restarts its windows after; "
+                        "docs/envelope.md)")
     p.add_argument("--no-effects", action="store_true",
                    help="do not compensate the calibration's effect terms (default: the "
                         "terms whose inputs the flight carries are compensated: rate sign, "
@@ -50,10 +56,15 @@ def run(args: argparse.Namespace) -> int:
     flight = load_flight_dir(args.flight)
     check_compatible(cal, flight.n, flight.raw_unit, str(args.flight), kind=flight.kind,
                      names=flight.sensor_names, cal_source=args.cal)
+    from calibration.inflight.timing import other_flight_warning
+
+    warning = other_flight_warning(cal, flight)
+    if warning:
+        logging.getLogger("rimu").warning(warning)
     chain = chain_for_flight(flight, cal, ChainOptions(
         thresholds_file=args.thresholds, calibration_file=args.cal,
         false_alarms_per_hour=args.false_alarms_per_hour, effects=not args.no_effects,
-        time_offsets=not args.no_time_offsets))
+        time_offsets=not args.no_time_offsets, envelope=not args.no_envelope))
     describe_chain(chain, flight)
     _, report = run_flight(chain, flight)
     print(format_report(report, max_events=args.max_events))

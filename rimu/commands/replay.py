@@ -44,6 +44,11 @@ def add_monitor_options(p: argparse.ArgumentParser) -> None:
                    help="do not move each IMU by the time offset its in-flight calibration "
                         "records (default: moved onto the reference's timing, the answers "
                         "held back by the largest negative offset)")
+    p.add_argument("--no-envelope", action="store_true",
+                   help="do not mark samples out of the operating envelope (default: shocks, "
+                        "saturation, tumbles and the log's declared crash events are marked; "
+                        "the monitor excludes nothing there and restarts its windows after; "
+                        "docs/envelope.md)")
 
 
 def configure(p: argparse.ArgumentParser) -> None:
@@ -71,7 +76,8 @@ def chain_options(args: argparse.Namespace, **more: Any) -> Any:
     return ChainOptions(thresholds_file=args.thresholds, calibration_file=args.cal,
                         false_alarms_per_hour=args.false_alarms_per_hour,
                         effects=not args.no_effects,
-                        time_offsets=not args.no_time_offsets, **more)
+                        time_offsets=not args.no_time_offsets,
+                        envelope=not args.no_envelope, **more)
 
 
 def describe_chain(chain: Any, flight: Any = None) -> None:

@@ -33,6 +33,8 @@ KNOBS = [
     ("cone-paper", "time_skew", 0.005, [5], {("accel", 5)}, False),
 ]
 SLOW_SEEDS = range(1, 4)
+_EFFECT_Z: list[float] = []
+"""(estimate − truth)/σ of every effect found by :func:`_check` (the knob Monte Carlo)."""
 
 
 def _check(s, truth, name, value, expect, biases, detectability=True):
@@ -52,6 +54,7 @@ def _check(s, truth, name, value, expect, biases, detectability=True):
     assert not d.unexplained, d.unexplained_detail
     for e in d.effects:
         assert abs(e["estimate"] - value) < 3 * e["estimate_sd"], e
+    _EFFECT_Z.extend((e["estimate"] - value) / e["estimate_sd"] for e in d.effects)
     for key, z in za.items():
         if key[0] == "site":
             continue
@@ -79,6 +82,23 @@ def test_knob_monte_carlo(case):
         zs += _check(s, truth, name, value, expect, biases, detectability=False)
     rms = float(np.sqrt(np.mean(np.square(zs))))
     assert 0.6 < rms < 1.5, rms
+
+
+@pytest.mark.slow
+def test_effect_sd_is_honest_over_the_knob_monte_carlo():
+    """The RMS of (estimate − truth)/σ over every knob and seed is 1 for an honest σ; its
+    sampling sd is about 1/sqrt(2n), so 1 ± 3/sqrt(2n) catches a σ doubled or halved
+    (30 effects: band 0.61-1.39, measured 1.06; a doubled σ gives ~0.53, a halved one
+    ~2.1)."""
+    _EFFECT_Z.clear()
+    for pre, name, value, sens, expect, biases in KNOBS:
+        for seed in SLOW_SEEDS:
+            s, truth = session(pre, seed, effects={name: value}, effect_sensors=sens)
+            _check(s, truth, name, value, expect, biases, detectability=False)
+    n = len(_EFFECT_Z)
+    rms = float(np.sqrt(np.mean(np.square(_EFFECT_Z))))
+    assert n >= 20
+    assert abs(rms - 1) < 3 / np.sqrt(2 * n), (rms, n)
 
 
 def test_two_effects_at_once():

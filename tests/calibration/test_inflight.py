@@ -149,9 +149,13 @@ def test_cli_simulate_calibrate_diagnose(tmp_path: Path) -> None:
     r = _rimu("simulate", "flight", "--imus", "2", "--duration", "60", "--seed", "2",
               "--time-offset-ms", "0,5", "--out", str(d))
     assert r.returncode == 0, r.stderr
-    r = _rimu("calibrate", "--in-flight", str(d), "--out", str(tmp_path / "cal.json"))
+    r = _rimu("calibrate", "--in-flight", str(d), "--out", str(tmp_path / "cal.json"),
+              "--report", str(tmp_path / "crep"))
     assert r.returncode == 0, r.stderr
     assert "time offset +5.0" in r.stdout
+    assert "sign: time offset" in r.stdout and "belongs to this flight" in r.stdout
+    for png in ("residual.png", "offset.png"):
+        assert (tmp_path / "crep" / png).stat().st_size > 1000
     r = _rimu("monitor-file", str(d), "--cal", str(tmp_path / "cal.json"), "--report",
               str(tmp_path / "rep.json"))
     assert r.returncode == 0, r.stderr
@@ -163,8 +167,24 @@ def test_cli_simulate_calibrate_diagnose(tmp_path: Path) -> None:
     assert r.returncode == 0, r.stderr
     doc = json.loads(r.stdout)
     assert json.loads((tmp_path / "rep" / "diagnosis.json").read_text()) == doc
+    assert (tmp_path / "rep" / "residual.png").stat().st_size > 1000
+    assert "residual.png" in (tmp_path / "rep" / "report.md").read_text()
+    # diagnose applies the calibration's offset exactly: nothing of the 5 ms is left
+    assert "time_skew" not in {e["name"] for e in doc["effects"]}
+    (tm,) = doc["timing"]
+    assert abs(tm["calibration_ms"] - 5.0) < 3 * tm["calibration_sd_ms"]
+    assert not tm["left"] and abs(tm["left_ms"]) < 3 * tm["left_sd_ms"]
+    assert "later than the reference" in doc["time_offset_sign"]
+    # a calibration without the offset leaves it all: diagnose finds it as time_skew
+    r = _rimu("calibrate", "--in-flight", str(d), "--no-time-offset", "--out",
+              str(tmp_path / "cal0.json"))
+    assert r.returncode == 0, r.stderr
+    r = _rimu("diagnose", str(d), "--cal", str(tmp_path / "cal0.json"), "--json")
+    assert r.returncode == 0, r.stderr
+    doc = json.loads(r.stdout)
     skew = [e for e in doc["effects"] if e["name"] == "time_skew"]
     assert len(skew) == 1 and abs(skew[0]["estimate"] - 5.0) < 3 * skew[0]["estimate_sd"]
+    assert doc["timing"][0]["left"] and doc["timing"][0]["calibration_ms"] == 0.0
 
 
 def test_cli_refuses_a_static_flight_in_one_line(tmp_path: Path) -> None:

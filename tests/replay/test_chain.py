@@ -182,8 +182,10 @@ def test_thresholds_of_another_rate_or_calibration_are_refused(lagged, tmp_path,
     with pytest.raises(ConfigError, match=r"t\.json: thresholds made for 100 Hz, the "
                                           r"calibration c\.json is at 50 Hz"):
         check_made_for(replace(thr, sample_rate_hz=100.0), cal, "t.json", "c.json")
+    check_made_for(thr, cal, "t.json", "c.json")       # /2 made for this calibration
+    old = replace(thr, calibration_fingerprint="")      # as a /1 file loads
     with caplog.at_level(logging.WARNING, logger="rimu"):
-        check_made_for(thr, cal, "t.json", "c.json")   # /1: no fingerprint, warned
+        check_made_for(old, cal, "t.json", "c.json")   # /1: no fingerprint, warned
     assert [r.getMessage() for r in caplog.records if "fingerprint" in r.getMessage()]
     # through monitor-file: one line naming both files, exit 2, no report
     folder = tmp_path / "f"
@@ -272,3 +274,55 @@ def test_an_envelope_tracker_in_the_chain_gives_its_codes_to_the_monitor(lagged)
     res, rep = run_flight(chain_for_flight(f, cal, ChainOptions(envelope=tr)), f)
     np.testing.assert_array_equal(res.envelope, want)
     assert any(e["type"] == "envelope" for e in rep["events"])
+
+
+def test_the_chain_decides_the_envelope_by_default_and_reports_it(lagged):
+    """Without options the chain marks a shock (the codes flight_envelope gives on the
+    moved flight), the report counts the excursion with its reason and the share of samples
+    out, and names what the set can isolate; --no-envelope (envelope=False) marks nothing."""
+    from fdi.envelope import SHOCK
+    from replay.envelope import flight_envelope
+
+    f, cal = lagged
+    vals = f.aux.values.copy()
+    acc = [j for j, k in enumerate(f.aux.kinds) if k == "accel"]
+    vals[300:306, acc] = 300.0
+    f = replace(f, aux=replace(f.aux, values=vals))
+    moved, _ = apply_time_offsets(f, cal)
+    want = flight_envelope(moved, cal)
+    res, rep = run_flight(chain_for_flight(f, cal), f)
+    np.testing.assert_array_equal(res.envelope, want)
+    s = rep["summary"]
+    assert len(s["envelope_periods"]) == 1 and "shock" in s["envelope_periods"][0]["reasons"]
+    assert s["envelope_out_fraction"] == pytest.approx(np.count_nonzero(want) / want.size)
+    assert s["envelope_periods"][0]["samples"] == np.count_nonzero(want & SHOCK)
+    cap = rep["isolation_capability"]
+    assert cap["capability"] == "detect" and cap["unit"] == "deg/s"
+    assert {tuple(sorted(p["names"])) for p in cap["pairs"][:3]} == {
+        ("imu1.x", "imu2.x"), ("imu1.y", "imu2.y"), ("imu1.z", "imu2.z")}
+    off, rep_off = run_flight(chain_for_flight(f, cal, ChainOptions(envelope=False)), f)
+    assert not off.envelope.any() and rep_off["summary"]["envelope_periods"] == []
+
+
+def test_report_follows_an_excursion_across_pieces():
+    """An excursion that spans two pieces is one period in the running report."""
+    from fdi.answer import BlockResult
+    from replay.report import RunningReport
+
+    def piece(t, env):
+        N = len(t)
+        return BlockResult(t=np.asarray(t, float), omega=np.zeros((N, 3)),
+                           omega_sd=np.zeros((N, 3)), healthy=np.ones((N, 6), bool),
+                           statistics=np.zeros((N, 1)), thresholds=np.ones((N, 1)),
+                           protection_level=np.ones(N), capability=np.array(["detect"] * N,
+                                                                            dtype=object),
+                           envelope=np.asarray(env), unverified=np.zeros((N, 3), bool))
+
+    rr = RunningReport()
+    rr.update(piece([0, 1, 2, 3], [0, 0, 1, 1]))
+    rr.update(piece([4, 5, 6], [4, 0, 0]))
+    rr.update(piece([7, 8], [0, 2]))
+    ps = rr._periods()
+    assert [(p["t0_s"], p["t1_s"], p["samples"], p["reasons"]) for p in ps] == [
+        (2.0, 4.0, 3, ["shock", "tumble"]), (8.0, 8.0, 1, ["saturation"])]
+    assert rr.n_out == 4

@@ -10,6 +10,7 @@ import pytest
 from test_logio import CAL, _rewrite_candump
 
 from fdi.monitor import Monitor
+from replay.chain import chain_for_map
 from replay.faults import parse_fault
 from replay.flight import simulate_flight
 from replay.live import StreamDecoder, run_live
@@ -110,8 +111,11 @@ def test_rimu_monitor_cli_on_virtual_bus(tmp_path, capsys):
     start = threading.Event()
     th = threading.Thread(target=_play, args=(p, channel, start), daemon=True)
     th.start()
-    timer = threading.Timer(0.5, start.set)
+    timer = threading.Timer(2.0, start.set)       # the command opens its bus first
     timer.start()
+    # the command runs the library chain (envelope on by default): the same chain offline
+    flight, _ = read_log(p, CAL, progress=False)
+    res = chain_for_map(CAL, resolve_map(CAL)[1]).feed_whole(flight)
     rep = tmp_path / "r.json"
     rc = main(["monitor", "--interface", "virtual", "--channel", channel, "--cal", str(cal),
                "--max-frames", str(frames["read"]), "--idle-timeout", "8",

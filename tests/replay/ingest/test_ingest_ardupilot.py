@@ -104,8 +104,15 @@ def test_corrupt_bytes_in_the_middle(two_imu_log, tmp_path, capsys):
     assert "corrupt" in str(ei.value) and str(bad) in str(ei.value)
     assert f"offset {ends[79]}" in str(ei.value)
     r = read_ardupilot(bad, salvage=True)
-    assert [s.size for s in r.streams] == [80, 80]
-    np.testing.assert_array_equal(r.streams[1].gyro, g[1][:80])
+    # row 80 is lost (its IMU message holds the zeros, its IMU2 header is zeroed); the
+    # reader resynchronises at row 81 and keeps every row after it
+    assert [s.size for s in r.streams] == [199, 199]
+    rows = np.r_[0:80, 81:200]
+    np.testing.assert_array_equal(r.streams[1].gyro, g[1][rows])
+    np.testing.assert_array_equal(r.streams[0].gyro, g[0][rows])
+    (x,) = r.damage.stretches
+    assert (x["start"], x["end"]) == (ends[79], ends[80])
+    assert x["lost"]["imu_samples"] == {"imu1": 1, "imu2": 1}
     assert main(["ingest", str(bad), "--out", str(tmp_path / "o")]) == 2
     assert "corrupt" in capsys.readouterr().err
 
@@ -198,3 +205,24 @@ def test_monitor_file_takes_the_folder(two_imu_log, tmp_path, capsys):
     assert rc == 0, capsys.readouterr()
     doc = json.loads(rep.read_text())
     assert doc["schema"] == "rimu.report/1"
+
+
+def test_declared_imu_that_logged_nothing_is_warned(tmp_path, capsys):
+    from ingest_helpers import _fmt_msg
+
+    t, g, a = small_imu_data(n=60, k=1)
+    p = tmp_path / "one.BIN"
+    write_dataflash(p, t, g, a)
+    data = p.read_bytes()
+    # the FMT of IMU2 declared (as an ArduPilot log with two IMUs does), no IMU2 sample
+    p.write_bytes(_fmt_msg(0x82, "IMU2", "Iffffff", "TimeMS,GyrX,GyrY,GyrZ,AccX,AccY,AccZ")
+                  + data)
+    r = read_ardupilot(p)
+    assert len(r.streams) == 1
+    assert r.meta["warnings"] == ["the log's format declares IMU2 but holds no IMU2 sample "
+                                  "(that IMU logged nothing)"]
+    out = tmp_path / "o"
+    assert main(["ingest", str(p), "--out", str(out)]) == 0
+    assert "warning:" in capsys.readouterr().out
+    rep = json.loads((out / "ingest_report.json").read_text())
+    assert "IMU2" in rep["meta"]["warnings"][0]

@@ -72,8 +72,11 @@ def test_csv_short_line_exit_2_and_salvage(tmp_path, capsys):
     assert main(["ingest", str(p), "--map", str(mp), "--out", str(tmp_path / "o"),
                  "--salvage"]) == 0
     f = load_flight_dir(tmp_path / "o")
-    assert f.t.shape[0] == 60
-    np.testing.assert_allclose(f.raw[:, 3:], v[:60, 7:10])
+    assert f.t.shape[0] == 99                        # the cut line dropped, the rest kept
+    np.testing.assert_allclose(f.raw[:, 3:], np.delete(v, 61 - 1, axis=0)[:, 7:10])
+    rep = json.loads((tmp_path / "o" / "ingest_report.json").read_text())
+    (x,) = rep["damage"]["stretches"]
+    assert x["line"] == 62 and x["lost"] == {"lines": 1}
 
 
 def test_csv_bad_cell_names_line_and_column(tmp_path):
@@ -86,7 +89,8 @@ def test_csv_bad_cell_names_line_and_column(tmp_path):
     with pytest.raises(FileFormatError, match=r"log.csv:12.*'x1.5' is not a number.*'ax1'"):
         read_any(p, map_path=mp)
     r = read_any(p, map_path=mp, salvage=True)
-    assert [s.size for s in r.streams] == [10, 10]
+    assert [s.size for s in r.streams] == [99, 99]
+    assert r.damage.samples_before == 2 * 10 and r.damage.samples_after == 2 * 89
 
 
 def test_map_errors_name_field_and_line(tmp_path):

@@ -1,0 +1,333 @@
+"""Calibration of several IMUs at rest against one of them (``rimu calibrate --static``).
+
+A static recording excites no rotation, so the in-flight fit (:mod:`.fit`) cannot run. What
+a set at rest does show:
+
+- **biases**: each gyro's mean (rad/s; it holds the Earth rate's projection, at most
+  7.3e-5 rad/s, which a set of MEMS gyros cannot tell from bias), sd from the scatter of
+  :data:`BLOCKS` contiguous blocks;
+- **alignment from gravity and the shared disturbances**: the mean specific force of each
+  IMU (gravity in its frame) and the direction of the motion all IMUs see together (the
+  first principal direction of all gyro axes when the correlation matrix has an
+  eigenvalue above the Marchenko–Pastur edge, :func:`replay.ingest.characterise.common_mode`)
+  give two vectors in each frame; the rotation of IMU j onto the reference is the
+  least-squares fit of the pairs (Wahba's problem, ``scipy.spatial.transform.Rotation.
+  align_vectors``), its sd from the scatter over blocks. With gravity alone the rotation
+  about gravity is not observable: the minimal rotation is used and the note says so;
+- **relative drift**: the trend of each IMU's residual ``r_j = y_j − b_j − H_j·ω̂_ref``
+  over the record (:func:`replay.ingest.characterise_flight.slow_drift`), and
+  :func:`attribute_drift`: what every IMU shares relative to the reference is the
+  reference's own drift (it cannot be told apart from all others drifting together).
+
+Scale factors are not observable at rest (taken as 1, sd 0, noted). The noise covariance
+and Allan table come from each IMU's rates with its mean removed.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+from scipy import stats
+from scipy.spatial.transform import Rotation
+
+from calibration.inflight.calfile import _sf_unit
+from calibration.residuals import allan_table
+from fdi.calfile import Calibration, SensorCal, SensorSet, tangent_basis
+from fdi.errors import CalibrationError, ConfigError
+from fdi.units import DPS
+from replay.flight_data import Flight
+
+__all__ = ["BLOCKS", "STATIC_METHOD", "attribute_drift", "calibrate_static", "static_text"]
+
+STATIC_METHOD = "static alignment to a reference IMU (calibration.inflight.static/1)"
+BLOCKS = 10
+"""Contiguous blocks whose scatter gives the sds."""
+_MOVING_RPS = 0.05
+_MIN_ANGLE_DEG = 15.0
+"""Smallest angle between gravity and the shared motion for both to fix the rotation."""
+
+
+def _groups(flight: Flight) -> dict[str, list[int]]:
+    if flight.kind != "gyro":
+        raise ConfigError(f"{flight.source}: static calibration needs gyros, the flight "
+                          f"monitors {flight.kind}")
+    g = flight.imu_groups()
+    if len(g) < 2 or any(len(v) != 3 for v in g.values()):
+        raise ConfigError(f"{flight.source}: static calibration needs two or more IMU groups "
+                          f"of three gyros (manifest 'imu')")
+    return g
+
+
+def _accel(flight: Flight, imu: str) -> np.ndarray | None:
+    if flight.aux is None:
+        return None
+    a = flight.aux.select("accel")
+    cols = [k for k, h in enumerate(a.imu) if h == imu]
+    return a.values[:, cols] if len(cols) == 3 else None
+
+
+def _shared_direction(x: np.ndarray, groups: dict[str, list[int]]) -> dict[str, np.ndarray] | None:
+    """Per IMU, the unit direction (its own frame) of the motion all IMUs see, or None."""
+    from replay.ingest.characterise import common_mode
+
+    xs = x - x.mean(axis=0)
+    if common_mode(xs)["n_common"] < 1:
+        return None
+    _, V = np.linalg.eigh(np.cov(xs.T))
+    v = V[:, -1]
+    out = {}
+    for g, idx in groups.items():
+        u = v[idx]
+        n = float(np.linalg.norm(u))
+        if n == 0:
+            return None
+        out[g] = u / n
+    return out
+
+
+def _rotations(x: np.ndarray, acc: dict[str, np.ndarray | None], groups: dict[str, list[int]],
+               ref: str) -> tuple[dict[str, Rotation], list[str], bool]:
+    """Rotation of every IMU's frame onto the reference's (``v_ref = R·v_j``)."""
+    notes: list[str] = []
+    grav = {g: (a.mean(axis=0) / np.linalg.norm(a.mean(axis=0))) if a is not None else None
+            for g, a in acc.items()}
+    shared = _shared_direction(x, groups)        # one eigenvector: one sign for all IMUs
+    full = True
+    out = {}
+    for g in groups:
+        if g == ref:
+            out[g] = Rotation.identity()
+            continue
+        a_ref, b_j, wts = [], [], []
+        if grav[g] is not None and grav[ref] is not None:
+            a_ref.append(grav[ref])
+            b_j.append(grav[g])
+            wts.append(1.0)
+        if shared is not None:
+            s_ref, s_j = shared[ref], shared[g]
+            if a_ref:
+                ang = math.degrees(math.acos(min(1.0, abs(float(
+                    np.dot(grav[ref], s_ref))))))
+                if ang >= _MIN_ANGLE_DEG:
+                    a_ref.append(s_ref)
+                    b_j.append(s_j)
+                    wts.append(0.5)
+            else:
+                a_ref.append(s_ref)
+                b_j.append(s_j)
+                wts.append(1.0)
+        if not a_ref:
+            raise CalibrationError(f"{g}: no accelerometer and no shared motion: the "
+                                   f"alignment is not observable at rest")
+        if len(a_ref) == 1:
+            full = False
+        r, _ = Rotation.align_vectors(np.array(a_ref), np.array(b_j), weights=np.array(wts))
+        out[g] = r
+    if not full:
+        notes.append("the rotation about gravity is not observable (no shared motion at an "
+                     "angle to gravity): the smallest rotation that aligns gravity is used")
+    return out, notes, full
+
+
+def attribute_drift(rel: dict[str, np.ndarray], cov: dict[str, np.ndarray], ref: str, *,
+                    alpha: float = 0.01) -> dict[str, Any]:
+    """What of the IMUs' drifts relative to the reference is the reference's own.
+
+    Parameters
+    ----------
+    rel : dict of str to ndarray (3,)
+        Drift of each non-reference IMU relative to the reference, in the reference
+        (body) frame: ``D_j − D_ref``.
+    cov : dict of str to ndarray (3, 3)
+        Their covariances.
+    ref : str
+    alpha : float
+
+    Returns
+    -------
+    dict
+        ``common`` (the weighted mean ``c = −D_ref`` estimate, body frame), ``common_sd``,
+        ``common_p`` (Wald test that c = 0), ``consistent_p`` (χ² test that every IMU's
+        relative drift equals c),
+        ``own`` (per IMU its drift relative to the reference, z per axis and the χ² p that
+        it is 0), ``statement``: which drift is whose (the reference's when every IMU
+        drifts alike; an IMU's own when it drifts from the reference and from the IMUs
+        that agree with it), and that the reference's drift cannot be told from every
+        other IMU drifting together.
+    """
+    names = list(rel)
+    W = {g: np.linalg.pinv(cov[g]) for g in names}
+    S = sum(W.values())
+    c = np.linalg.solve(S, sum(W[g] @ rel[g] for g in names))
+    C = np.linalg.inv(S)
+    chi2 = float(sum((rel[g] - c) @ W[g] @ (rel[g] - c) for g in names))
+    dof = 3 * (len(names) - 1)
+    p_cons = float(stats.chi2.sf(chi2, dof)) if dof > 0 else 1.0
+    p_c = float(stats.chi2.sf(float(c @ S @ c), 3))
+    own, moved = {}, []
+    for g in names:
+        d = rel[g]
+        sd = np.sqrt(np.clip(np.diag(cov[g]), 1e-30, None))
+        p_g = float(stats.chi2.sf(float(d @ W[g] @ d), 3))
+        own[g] = {"drift": d.tolist(), "z": (d / sd).tolist(), "p_value": p_g}
+        if p_g < alpha / len(names):
+            moved.append(g)
+    if len(names) < 2:
+        statement = (f"with one IMU besides {ref}, a relative drift cannot be attributed: "
+                     f"it is {names[0]}'s or {ref}'s")
+    elif p_c < alpha and p_cons >= alpha:
+        statement = (f"every IMU drifts alike relative to {ref}: that is {ref}'s own drift "
+                     f"(it cannot be separated from all the others drifting together)")
+    elif moved and len(moved) < len(names):
+        rest = [g for g in names if g not in moved]
+        statement = (f"{', '.join(moved)} drift{'s' if len(moved) == 1 else ''} relative to "
+                     f"{ref} and to {', '.join(rest)} (which agree with {ref}): "
+                     f"{'its' if len(moved) == 1 else 'their'} own drift")
+    elif moved:
+        statement = (f"every IMU drifts relative to {ref}, and differently from each other "
+                     f"(chi2 p={p_cons:.2g}): {ref}'s own share cannot be separated from "
+                     f"theirs; what they share, {ref}'s drift at most, is 'common'")
+    else:
+        statement = (f"no IMU drifts relative to {ref}; {ref}'s own drift, which cannot be "
+                     f"separated from all the others drifting together, is not seen")
+    return {"common": c.tolist(), "common_sd": np.sqrt(np.diag(C)).tolist(),
+            "common_p": p_c, "consistent_chi2": chi2, "consistent_dof": dof,
+            "consistent_p": p_cons, "own": own, "statement": statement,
+            "unit": "rad/s over the record (body frame of the reference)"}
+
+
+def calibrate_static(flight: Flight, *, reference: str | None = None, alpha: float = 0.01
+                     ) -> Calibration:
+    """Calibrate the IMUs of a recording at rest against the reference (module docstring).
+
+    Raises
+    ------
+    ConfigError
+        Not gyros, fewer than two IMUs, unknown reference.
+    CalibrationError
+        The set is moving, or no alignment is observable.
+    """
+    from replay.ingest.characterise_flight import slow_drift
+
+    groups = _groups(flight)
+    ref = reference or next(iter(groups))
+    if ref not in groups:
+        raise ConfigError(f"reference {ref!r} is not an IMU of {flight.source} "
+                          f"(IMUs: {', '.join(groups)})")
+    ok = flight.valid.all(axis=1) & np.all(np.isfinite(flight.raw), axis=1)
+    t, x = flight.t[ok], np.asarray(flight.raw, float)[ok]
+    if x.shape[0] < 10 * BLOCKS:
+        raise CalibrationError(f"{flight.source}: only {x.shape[0]} valid samples")
+    xs = x - x.mean(axis=0)
+    spread = float(np.median(np.linalg.norm(xs[:, groups[ref]], axis=1)))
+    if spread > _MOVING_RPS:
+        raise CalibrationError(f"{flight.source}: the set is moving (median rate deviation "
+                               f"{spread:.3g} rad/s > {_MOVING_RPS:g}); use --in-flight")
+    acc = {g: (_accel(flight, g)[ok] if _accel(flight, g) is not None else None)
+           for g in groups}
+    rots, notes, full = _rotations(x, acc, groups, ref)
+    blocks = np.array_split(np.arange(x.shape[0]), BLOCKS)
+    rot_sd = {}
+    bias_sd = np.std([x[b].mean(axis=0) for b in blocks], axis=0, ddof=1) / math.sqrt(BLOCKS)
+    for g in groups:
+        if g == ref:
+            rot_sd[g] = np.zeros(3)
+            continue
+        vs = []
+        for b in blocks:
+            try:
+                rb, _, _ = _rotations(x[b], {h: (a[b] if a is not None else None)
+                                             for h, a in acc.items()}, groups, ref)
+                vs.append((rb[g] * rots[g].inv()).as_rotvec())
+            except CalibrationError:
+                continue
+        rot_sd[g] = (np.std(vs, axis=0, ddof=1) / math.sqrt(len(vs)) if len(vs) > 2
+                     else np.full(3, np.inf))
+    b = x.mean(axis=0)
+    sensors: list[SensorCal] = []
+    n = flight.n
+    cov = np.zeros((n, n))
+    rel_drift, rel_cov, per_imu = {}, {}, {}
+    w_ref = xs[:, groups[ref]]
+    for g, idx in groups.items():
+        R = rots[g].as_matrix()                  # v_ref = R v_j; rows of H_j: R[:, k]
+        cov[np.ix_(idx, idx)] = np.cov(xs[:, idx].T)
+        for k, i in enumerate(idx):
+            h = R[:, k]
+            nom = np.zeros(3)
+            m = int(np.argmax(np.abs(h)))
+            nom[m] = np.sign(h[m])
+            E = tangent_basis(nom)
+            sd_rot = rot_sd[g]
+            ms = np.abs(E @ np.cross(sd_rot, h)) if np.all(np.isfinite(sd_rot)) else \
+                np.full(2, np.inf)
+            sensors.append(SensorCal(
+                name=flight.sensor_names[i], axis=h, axis_nominal=nom, scale_factor=1.0,
+                scale_factor_sd=0.0, bias=float(b[i]), bias_sd=float(bias_sd[i]),
+                misalignment_sd=ms, raw_unit=flight.raw_unit,
+                scale_factor_unit=_sf_unit(flight.raw_unit), bias_unit="deg/s",
+                residual_rms=float(np.std(xs[:, i]))))
+        if g == ref:
+            continue
+        r = xs[:, idx] - w_ref @ R                  # y_j − H_j·ω̂ with H_j = Rᵀ
+        dr = slow_drift(t, r)
+        d = np.asarray(dr["change"])
+        dsd = np.asarray(dr["change_sd"])
+        rel_drift[g] = R @ d                        # into the reference (body) frame
+        rel_cov[g] = R @ np.diag(dsd**2) @ R.T
+        per_imu[g] = {"rotation_deg": np.degrees(rots[g].as_rotvec()).tolist(),
+                      "rotation_deg_sd": np.degrees(rot_sd[g]).tolist(),
+                      "relative_bias_dps": ((b[idx] - R.T @ b[groups[ref]]) / DPS).tolist(),
+                      "relative_drift_dps": (d / DPS).tolist(),
+                      "relative_drift_dps_sd": (dsd / DPS).tolist(),
+                      "relative_drift_z": dr["z"], "relative_drift_p": dr["p_value"],
+                      "drift_block_s": dr["block_s"], "drift_hac_lags": dr["hac_lags"]}
+    attr = attribute_drift(rel_drift, rel_cov, ref, alpha=alpha)
+    attr_dps = {**attr, "common": (np.asarray(attr["common"]) / DPS).tolist(),
+                "common_sd": (np.asarray(attr["common_sd"]) / DPS).tolist(),
+                "own": {g: {**v, "drift": (np.asarray(v["drift"]) / DPS).tolist()}
+                        for g, v in attr["own"].items()},
+                "unit": "deg/s over the record (body frame of the reference)"}
+    notes.append("scale factors are not observable at rest: taken as 1")
+    notes.append("biases hold the Earth rate's projection (<= 0.0042 deg/s)")
+    summary = {"reference": ref, "imus": per_imu, "alignment_full": full, "notes": notes,
+               "drift_attribution": attr_dps, "alpha": alpha,
+               "bias_dps": (b / DPS).tolist(), "bias_dps_sd": (bias_sd / DPS).tolist(),
+               "samples": int(x.shape[0]), "duration_s": float(t[-1] - t[0])}
+    return Calibration(configuration=f"{len(groups)} IMUs at rest", sets={
+        "gyro": SensorSet("gyro", tuple(sensors), cov,
+                          allan=allan_table(xs, flight.sample_rate_hz))},
+        sample_rate_hz=flight.sample_rate_hz,
+        extra={"method": STATIC_METHOD, "source": flight.source, "static": summary})
+
+
+def static_text(doc: dict[str, Any]) -> str:
+    """Readable summary of the ``extra.static`` block."""
+    lines = [f"static calibration against {doc['reference']} ({doc['samples']} samples, "
+             f"{doc['duration_s']:.0f} s at rest)"]
+    for g, r in doc["imus"].items():
+        lines.append(f"  {g}: rotation onto {doc['reference']} [" + ", ".join(
+            f"{a:+.2f} ± {s:.2f}" for a, s in zip(r["rotation_deg"], r["rotation_deg_sd"],
+                                                  strict=True)) + "] deg (rotation vector)")
+        lines.append("      bias relative to the reference [" + ", ".join(
+            f"{a:+.4f}" for a in r["relative_bias_dps"]) + "] deg/s")
+        sig = [f"{a} {d:+.4f} ± {s:.4f} deg/s (z {z:+.1f}, p {p:.2g})" for a, d, s, z, p in zip(
+            "xyz", r["relative_drift_dps"], r["relative_drift_dps_sd"], r["relative_drift_z"],
+            r["relative_drift_p"], strict=True)]
+        lines.append("      drift relative to the reference over the record: " + "; ".join(sig))
+    a = doc["drift_attribution"]
+    lines.append("  drift shared by every IMU relative to the reference (= minus the "
+                 "reference's own): [" + ", ".join(
+                     f"{c:+.4f} ± {s:.4f}" for c, s in zip(a["common"], a["common_sd"],
+                                                          strict=True))
+                 + f"] deg/s, p {a['common_p']:.2g}; the IMUs differ from it with chi2 "
+                   f"p {a['consistent_p']:.2g}")
+    for g, v in a["own"].items():
+        lines.append(f"    {g} relative to the reference: [" + ", ".join(
+            f"{d:+.4f} (z {z:+.1f})" for d, z in zip(v["drift"], v["z"], strict=True))
+            + "] deg/s")
+    lines.append(f"  {a['statement']}")
+    lines.extend(f"  note: {n}" for n in doc["notes"])
+    return "\n".join(lines)

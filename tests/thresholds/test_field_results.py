@@ -1,0 +1,74 @@
+"""Issue 17's Must-hold list on measured data, recomputed from ``../shared/data``.
+
+One call (:func:`thresholds.field.field_results`, about 3 min) computes what
+``docs/field-results.md`` shows: held-out false alarms of the two ArduCopter flights and the
+4×MPU9250 static set, runs from the start of each flight, faults injected into every
+sensor of both flights. Each claim of :func:`thresholds.field.must_hold` is one test; the
+claims and their numbers come from the issue (no tolerance chosen here). Skipped when the
+data are absent (``RIMU_SHARED_DATA`` overrides the folder).
+
+Today's main does not satisfy them (issue 17 in progress): the tests are marked xfail until
+the isolation, envelope and tail-threshold work is merged.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+
+DATA = Path(os.environ.get("RIMU_SHARED_DATA",
+                           Path(__file__).parents[2] / ".." / "shared" / "data"))
+NEEDED = [DATA / "erle_pxf_dual_imu" / "pxf_copter_22-12-2014_41.BIN",
+          DATA / "erle_pxf_dual_imu" / "pxf_copter_31-3-2015_83.BIN",
+          DATA / "multi_imu_4x_mpu9250" / "imu1_raw.mat"]
+CLAIMS = (
+    "from the start of 41 and 83: no healthy sensor excluded",
+    "two-IMU set: no isolation claimed (from the start and with injected faults)",
+    "injected faults: no healthy sensor excluded",
+    "injected faults at or above the detectable size: detected within 10 s",
+    "10 deg/s step on any axis of either IMU: detected within 1 s",
+    "the faulted direction is unverified from the first alarm on",
+    "out-of-envelope periods: at most 10 % of flying time, each with a reason",
+    "held out, outside the envelope: false alarms within 3x of the target where the length "
+    "resolves it",
+    "held out at 1/h: at most one alarm over all real flights together",
+    "4x MPU9250: time in alarm at most 3x what the target implies, no exclusion",
+)
+
+pytestmark = pytest.mark.slow
+
+
+@pytest.fixture(scope="module")
+def verdicts():
+    missing = [str(p) for p in NEEDED if not p.exists()]
+    if missing:
+        pytest.skip(f"real data absent: {', '.join(missing)}")
+    from thresholds.field import field_results, must_hold
+
+    res = field_results(DATA, progress=False)
+    return res, {c: (h, d) for c, h, d in must_hold(res)}
+
+
+def test_the_evidence_covers_what_the_issue_asks(verdicts):
+    res, v = verdicts
+    assert set(v) == set(CLAIMS)
+    for k in ("41", "83"):
+        f = res["flights"][k]
+        assert len(f["injection"]["rows"]) == 6 * 4 * len(f["injection"]["onsets_s"])
+        assert len(f["injection"]["onsets_s"]) == 3
+        assert {r["target_per_hour"] for r in f["holdout"]["rows"]} == {1, 10, 100, 1000}
+        assert len(f["holdout"]["rows"]) == 8                    # both ways round
+    assert len(res["static_4x_mpu9250"]["rows"]) == 8
+    # some target must be resolved by each recording, or the rate claim tests nothing
+    for rows in [f["holdout"]["rows"] for f in res["flights"].values()] + [
+            res["static_4x_mpu9250"]["rows"]]:
+        assert any(r["resolved"] for r in rows)
+
+
+@pytest.mark.xfail(reason="issue 17 in progress", strict=False)
+@pytest.mark.parametrize("claim", CLAIMS)
+def test_must_hold(verdicts, claim):
+    holds, detail = verdicts[1][claim]
+    assert holds, f"{claim}: {detail}"
