@@ -7,6 +7,15 @@ statistic at scale w with ``f_w = 1`` is ``S_w = |Σ_window z|²/w``, z the whit
 over every window of w consecutive valid samples (a window never spans a left-out sample,
 as the monitor restarts its windows).
 
+Relative to the monitor's own threshold: the monitor widens its threshold at scale w by
+``1 + w·β + κ·Σ_w ρ`` (:mod:`fdi.windows`, with f_w = 1: the calibration's bias and
+calibration uncertainty, and the timing jitter at the current angular acceleration). Given
+the per-sample ρ of the recording and κ, β (:func:`fdi.reconstruction.inflation_terms`),
+every window statistic is divided by its window's inflation (the independent window sums
+by its square root), so that the tails describe what the thresholds do not already
+explain: a residual that is large only while the body accelerates hard, as a timing jitter
+makes it, is not taken for a heavy tail everywhere.
+
 Per scale:
 
 1. **Normality check** on the non-overlapping windows (independent for white noise): the
@@ -272,7 +281,8 @@ def fit_tail_model(residual: np.ndarray, H: np.ndarray, noise_cov: np.ndarray,
                    sample_rate_hz: float, *, scales: tuple[int, ...] = tuple(2**k
                                                                               for k in range(8)),
                    source: str = "", confidence: float = CONFIDENCE,
-                   level: float = LEVEL) -> TailModel | None:
+                   level: float = LEVEL, rho: np.ndarray | None = None, kappa: float = 0.0,
+                   beta: float = 0.0) -> TailModel | None:
     """The tail model of a calibration residual (module docstring).
 
     Parameters
@@ -289,6 +299,11 @@ def fit_tail_model(residual: np.ndarray, H: np.ndarray, noise_cov: np.ndarray,
     source : str
         What the residual is (recorded).
     confidence, level : float
+    rho : ndarray, shape (N,), optional
+        The monitor's ρ per sample (:func:`fdi.reconstruction.inflation_terms`); with
+        ``kappa`` and ``beta`` every window statistic is taken relative to the monitor's
+        inflation ``1 + w·β + κ·Σ_w ρ`` (module docstring). Omitted: no inflation.
+    kappa, beta : float
 
     Returns
     -------
@@ -304,12 +319,19 @@ def fit_tail_model(residual: np.ndarray, H: np.ndarray, noise_cov: np.ndarray,
         return None
     out: list[ScaleTail] = []
     verdict: bool | None = None
+    if rho is not None:
+        r = np.where(valid & np.isfinite(np.asarray(rho, float)), np.asarray(rho, float), 0.0)
+        cq = np.concatenate([[0.0], np.cumsum(r)])
     for w in sorted(int(x) for x in scales):
         S, end, ind = window_statistics(z, valid, w)
         if S.size < 2:
             break
         c = np.vstack([np.zeros((1, df)), np.cumsum(z, axis=0)])
         sums_ind = (c[end[ind] + 1] - c[end[ind] + 1 - w]) / math.sqrt(w)
+        if rho is not None:
+            infl = 1.0 + w * float(beta) + float(kappa) * (cq[end + 1] - cq[end + 1 - w])
+            S = S / infl
+            sums_ind = sums_ind / np.sqrt(infl[ind])[:, None]
         n_eff = int(ind.sum())
         kurt, kp, ep, ok = _normality(S, sums_ind, df, level / len(scales))
         notes = []

@@ -52,6 +52,12 @@ stream carries it) and lists the others with the reason (:mod:`fdi.effects`,
 ``h̃_i/SF_i`` scaled to unit gain: the compensated output errs by ``e_iᵀ·x`` with
 ``e_i ~ N(0, input_error_cov)``; it holds both the scale-factor and the misalignment
 uncertainty and is what makes the parity residual grow with the rate.
+
+Optional per sensor (a ``/3`` file without them loads with 0): ``timing_jitter_ms`` and
+``timing_jitter_ms_sd``, the standard deviation of the sensor's sampling-time error
+relative to the reference IMU (0 for the reference and for turntable calibrations) and its
+uncertainty. A timing error δt makes the output err by ``h_iᵀω̇·δt``, so the monitor widens
+its thresholds with ``τ_i²·(h_iᵀω̇)²`` while the body accelerates (:mod:`fdi.kernel`).
 """
 
 from __future__ import annotations
@@ -69,6 +75,7 @@ from fdi.errors import ConfigError
 from fdi.fileio import Fields, read_json_object, to_jsonable
 from fdi.tails import TailModel, tail_model_from_fields
 from fdi.units import (
+    MS,
     input_unit_factor,
     scale_factor_from_si,
     scale_factor_sd_from_si,
@@ -163,6 +170,9 @@ class SensorCal:
         Unit in which files print the bias (``"deg/h"``, ``"mg"``, ...).
     residual_rms : float
         RMS of the calibration residual (input units, SI).
+    timing_jitter, timing_jitter_sd : float
+        Standard deviation τ of the sampling-time error relative to the reference IMU (s)
+        and its uncertainty (s); 0 for the reference and for turntable calibrations.
     """
 
     name: str
@@ -178,6 +188,8 @@ class SensorCal:
     scale_factor_unit: str = "(rad/s)/raw"
     bias_unit: str = "rad/s"
     residual_rms: float = float("nan")
+    timing_jitter: float = 0.0
+    timing_jitter_sd: float = 0.0
 
     @property
     def misalignment(self) -> np.ndarray:
@@ -451,6 +463,8 @@ def _sensor_to_dict(c: SensorCal) -> dict[str, Any]:
         "input_error_cov": np.asarray(c.input_error_cov).tolist(),
         "raw_unit": c.raw_unit,
         "residual_rms": None if not math.isfinite(c.residual_rms) else c.residual_rms,
+        **({"timing_jitter_ms": c.timing_jitter / MS, "timing_jitter_ms_sd":
+            c.timing_jitter_sd / MS} if c.timing_jitter or c.timing_jitter_sd else {}),
     }
 
 
@@ -649,7 +663,9 @@ def _sensor_from(e: Fields) -> SensorCal:
         input_error_cov=e.array("input_error_cov", (3, 3), np.zeros((3, 3))),
         misalignment_sd=e.array("misalignment_mrad_sd", (2,)) * 1e-3,
         raw_unit=str(e.get("raw_unit", "raw")), scale_factor_unit=sfu, bias_unit=bu,
-        residual_rms=e.number("residual_rms", float("nan")))
+        residual_rms=e.number("residual_rms", float("nan")),
+        timing_jitter=e.number("timing_jitter_ms", 0.0, nonnegative=True) * MS,
+        timing_jitter_sd=e.number("timing_jitter_ms_sd", 0.0, nonnegative=True) * MS)
     e.finish()
     return c
 

@@ -14,10 +14,20 @@ answers). Per sample, with the constants of the current healthy set (:mod:`fdi.s
    sensors present; no parity test, infinite protection level).
 4. :func:`compensate`: y = SF·u − b − c (c: run-time correction of the effect terms),
    parity p = V·y, whitened parity z = A·p (Cov z = I),
-   ω̂ = G·y and ρ = max_i ω̂ᵀC_iω̂/Σ_ii (seed 001 Eq. 21 for the zeroed rows of H̃).
+   ω̂ = G·y and ρ = max_i [ω̂ᵀC_iω̂ + τ_i²(h_iᵀω̇̂)²]/Σ_ii (seed 001 Eq. 21 for the
+   zeroed rows of H̃; the second term is the timing jitter τ_i of sensor i against the
+   reference, with ω̇̂_t = (ω̂_t − ω̂_{t−1})·fs and ω̂_{t−1} the ω̂ of the last completed
+   sample, kept in the detector state; a non-finite ω̇̂ counts as 0).
    These depend on the row and the set only, so :func:`compensate_ahead` computes them
    (and the protection level, step 7) for up to ``BLOCK_ROWS`` rows before their health
-   checks; a row the kernel stops at or before is computed again by the next call.
+   checks; a row the kernel stops at or before is computed again by the next call. The
+   first row of a block reads ω̂_{t−1} from the state, the others the row before in the
+   block; the state's ω̂_{t−1} moves on only when a sample completes (its parity tests ran,
+   or it was incomplete), so a sample the kernel stops during is compensated again with the
+   same ω̂_{t−1}, and :meth:`~fdi.monitor.Monitor.step` and :meth:`~fdi.monitor.Monitor.run`
+   see the same one. When the monitor reconstructs a completed sample (an incomplete one,
+   or after an exclusion: :func:`reconstruct_row`) it reads the ω̂ before that sample, kept
+   beside, and its new ω̂ becomes ω̂_{t−1}.
 5. Windows (:func:`fdi.windows.window_update`) and the CUSUM bank
    (:func:`fdi.cusum.cusum_update`).
 6. Detection state machine (:func:`detection_machine`): a detection or an isolation stops
@@ -70,6 +80,7 @@ from fdi.state import (
     HEALTH_STUCK,
     HI,
     IN_SET,
+    JITTER_COEF,
     LAST_RAW,
     LAST_VALID_T,
     LO,
@@ -152,19 +163,24 @@ def set_views(kset, n):
 
 @njit(**_INLINE)
 def scratch_views(values, n):
-    """The kernel's scratch vectors y, p, z (n each) and ω̂ (3) in the detector state, and
-    the block of (z, ρ) rows, shape (BLOCK_ROWS, n + 1)."""
+    """The kernel's scratch vectors y, p, z (n each) and ω̂ (3) in the detector state, the
+    ω̂ of the last completed sample and of the one before it (3 each: ``prev``,
+    ``before``), and the block of (z, ρ) rows, shape (BLOCK_ROWS, n + 1)."""
     o = state_layout(n, 0)[1]
     return (values[o:o + n], values[o + n:o + 2 * n], values[o + 2 * n:o + 3 * n],
-            values[o + 3 * n:o + 3 * n + 3],
-            values[o + 3 * n + 3:o + 3 * n + 3 + BLOCK_ROWS * (n + 1)].reshape(BLOCK_ROWS,
+            values[o + 3 * n:o + 3 * n + 3], values[o + 3 * n + 3:o + 3 * n + 6],
+            values[o + 3 * n + 6:o + 3 * n + 9],
+            values[o + 3 * n + 9:o + 3 * n + 9 + BLOCK_ROWS * (n + 1)].reshape(BLOCK_ROWS,
                                                                               n + 1))
 
 
 @njit(**_INLINE)
-def compensate(raw, r, corr, cr, sensors, mats, df, has_omega, y, p, z, w) -> float:
+def compensate(raw, r, corr, cr, sensors, mats, df, has_omega, y, p, z, w, v0, v1,
+               v2) -> float:
     """y = SF·u − b − c, p = V·y, z = A·p, ω̂ = G·y of the sensors of the set, row r;
     returns ρ. ``sensors`` is laid out (SENSOR_COLS, n): one row per quantity.
+    (v0, v1, v2) is the ω̂ of the sample before (rad/s): the timing-jitter term of ρ reads
+    Δω̂ = ω̂ − ω̂_{t−1} (zero when not finite).
 
     ``c = corr[cr]`` is the run-time correction of the effect terms (rad/s; a non-finite entry
     counts as 0, so a bad input of an effect never reaches the parity). Sums run over the
@@ -207,11 +223,19 @@ def compensate(raw, r, corr, cr, sensors, mats, df, has_omega, y, p, z, w) -> fl
     w[2] = w2
     q0, q1, q2 = w0 * w0, w1 * w1, w2 * w2
     q3, q4, q5 = w0 * w1, w0 * w2, w1 * w2
+    d0, d1, d2 = w0 - v0, w1 - v1, w2 - v2
+    if not (math.isfinite(d0) and math.isfinite(d1) and math.isfinite(d2)):
+        d0, d1, d2 = 0.0, 0.0, 0.0
     rho = 0.0                       # a sensor outside the set gives s = 0 (or NaN): no change
     c = RHO_COEF0
     for i in range(n):
         s = (sensors[c, i] * q0 + sensors[c + 1, i] * q1 + sensors[c + 2, i] * q2
              + sensors[c + 3, i] * q3 + sensors[c + 4, i] * q4 + sensors[c + 5, i] * q5)
+        jc = sensors[JITTER_COEF, i]
+        if jc != 0.0:                   # τ = 0: exactly the calibration term (no 0·inf)
+            a = (sensors[AXIS0, i] * d0 + sensors[AXIS0 + 1, i] * d1
+                 + sensors[AXIS0 + 2, i] * d2)
+            s = s + jc * (a * a)
         if s > rho:
             rho = s
     return rho
@@ -254,7 +278,7 @@ def health_checks(t, raw, r, valid, vr, sensors, sensor, counters, stuck, stale_
 
 @njit(**_INLINE)
 def readmission_check(t, raw, r, corr, cr, valid, vr, sensors, mats, df, capability, sensor,
-                      counters, dwell_s, y, p, z, w) -> int:
+                      counters, dwell_s, y, p, z, w, prev) -> int:
     """First isolated sensor that behaved for ``dwell_s`` (−1: none).
 
     Good behaviour: valid, within the raw bounds, not repeating, and |y_i − h_iᵀω̂|² below
@@ -266,7 +290,8 @@ def readmission_check(t, raw, r, corr, cr, valid, vr, sensors, mats, df, capabil
     for i in range(n):
         if sensors[IN_SET, i] != 0.0 and not valid[vr, i]:
             return -1
-    compensate(raw, r, corr, cr, sensors, mats, df, True, y, p, z, w)
+    compensate(raw, r, corr, cr, sensors, mats, df, True, y, p, z, w, prev[0], prev[1],
+               prev[2])
     for i in range(n):
         if sensors[IN_SET, i] != 0.0:
             continue
@@ -418,7 +443,7 @@ def _advance(t, raw, corr, valid, r0, r1, kset, values, counters, out) -> int:
     sensor = values[:o_cusum].reshape(n, SENSOR_STATE_COLS)
     cusum = values[o_cusum:o_scratch].reshape(4, n)
     windows = values[o_windows:o_windows + (R + 1) * (df + 1)].reshape(R + 1, df + 1)
-    y, p, z, w, block = scratch_views(values, n)
+    y, p, z, w, prev, before, block = scratch_views(values, n)
     K = nw + (1 if has_cusum else 0)
     parity0 = STATS0 + 2 * K
     has_valid = counters[HAS_VALID] != 0
@@ -433,7 +458,7 @@ def _advance(t, raw, corr, valid, r0, r1, kset, values, counters, out) -> int:
             b0 = r
             b1 = min(r1, r + BLOCK_ROWS)
             compensate_ahead(raw, corr, b0, b1, sensors, mats, fconst, df, has_omega,
-                             has_parity, parity0, y, p, z, w, block, out)
+                             has_parity, parity0, y, p, z, w, prev, block, out)
         tr = t[r]
         vr = r if has_valid else 0
         cr = r if per_row_corr else 0
@@ -445,12 +470,13 @@ def _advance(t, raw, corr, valid, r0, r1, kset, values, counters, out) -> int:
                 return _stop(counters, r, STOP_HEALTH)
         if phase <= PHASE_READMIT and readmission:
             k = readmission_check(tr, raw, r, corr, cr, valid, vr, sensors, mats, df,
-                                  capability, sensor, counters, dwell_s, y, p, z, w)
+                                  capability, sensor, counters, dwell_s, y, p, z, w, prev)
             if k >= 0:
                 counters[READMIT_SENSOR] = k
                 return _stop(counters, r, STOP_READMIT)
         phase = PHASE_HEALTH
         if has_valid and not _complete(sensors, valid, vr):
+            _shift(prev, before)            # the monitor reconstructs the sample
             _untested_row(out, r, scales, fconst, nw, K, parity0)
             out[r, PROTECTION] = np.inf
             return _stop(counters, r, STOP_INCOMPLETE)
@@ -463,6 +489,10 @@ def _advance(t, raw, corr, valid, r0, r1, kset, values, counters, out) -> int:
                                      clear_samples, counters)
         else:
             _untested_row(out, r, scales, fconst, nw, K, parity0)
+        _shift(prev, before)                # the sample is complete: ω̂_{t−1} moves on
+        prev[0] = out[r, OMEGA0]
+        prev[1] = out[r, OMEGA0 + 1]
+        prev[2] = out[r, OMEGA0 + 2]
         if code != STOP_NONE:
             return _stop(counters, r, code)
     return _stop(counters, r1, STOP_NONE)
@@ -470,7 +500,7 @@ def _advance(t, raw, corr, valid, r0, r1, kset, values, counters, out) -> int:
 
 @njit(**_INLINE)
 def compensate_ahead(raw, corr, b0, b1, sensors, mats, fconst, df, has_omega, has_parity,
-                     parity0, y, p, z, w, block, out) -> None:
+                     parity0, y, p, z, w, prev, block, out) -> None:
     """Compensate rows b0 … b1−1 (at most BLOCK_ROWS) with the current set, before their
     health checks: ω̂, the protection level and the parity go straight into their output
     rows, z and ρ into ``block`` for the windows and the CUSUM bank.
@@ -481,12 +511,16 @@ def compensate_ahead(raw, corr, b0, b1, sensors, mats, fconst, df, has_omega, ha
     again by the next call, with the set the monitor chose; rows it never tests (health
     verdicts, incomplete samples) are overwritten, so the extra work changes no answer.
     A bad raw value only gives non-finite numbers here (no exception: error_model numpy).
+    The jitter term of row b0 reads ω̂_{t−1} from ``prev`` (the state's: the last completed
+    sample), that of each later row the ω̂ of the row before it.
     """
     n = sensors.shape[1]
     per_row_corr = corr.shape[0] > 1
+    v0, v1, v2 = prev[0], prev[1], prev[2]
     for q in range(b0, b1):
         rho = compensate(raw, q, corr, q if per_row_corr else 0, sensors, mats, df,
-                         has_omega, y, p, z, w)
+                         has_omega, y, p, z, w, v0, v1, v2)
+        v0, v1, v2 = w[0], w[1], w[2]
         out[q, OMEGA0] = w[0]
         out[q, OMEGA0 + 1] = w[1]
         out[q, OMEGA0 + 2] = w[2]
@@ -500,6 +534,15 @@ def compensate_ahead(raw, corr, b0, b1, sensors, mats, fconst, df, has_omega, ha
                 out[q, parity0 + j] = p[j]
             for j in range(parity0 + df, out.shape[1]):
                 out[q, j] = np.nan
+
+
+@njit(**_INLINE)
+def _shift(prev, before) -> None:
+    """before = prev: the ω̂ before the sample the kernel completes (what a reconstruction
+    of that sample by the monitor reads as ω̂_{t−1})."""
+    before[0] = prev[0]
+    before[1] = prev[1]
+    before[2] = prev[2]
 
 
 @njit(**_INLINE)
@@ -531,16 +574,22 @@ def _stop(counters, r, code) -> int:
 def _reconstruct_row(raw, corr, r, kset, values, row) -> None:
     """ω̂ of one sample from the sensors of a set (row[OMEGA0 …]) and its protection level
     (row[PROTECTION]); used for incomplete samples and right after an isolation. The
-    scratch vectors of the detector state ``values`` are overwritten."""
+    scratch vectors of the detector state ``values`` are overwritten. The sample is the one
+    the kernel completed last: its jitter term reads the ω̂ before it (``before``), and its
+    new ω̂ becomes the state's ω̂_{t−1}."""
     n = raw.shape[1]
     fconst, sensors, _, mats, df, _ = set_views(kset, n)
-    y, p, z, w, _ = scratch_views(values, n)
+    y, p, z, w, prev, before, _ = scratch_views(values, n)
     cr = r if corr.shape[0] > 1 else 0
     rho = compensate(raw, r, corr, cr, sensors, mats, df,
-                     kset[SET_ICONST0 + HAS_OMEGA] != 0.0, y, p, z, w)
+                     kset[SET_ICONST0 + HAS_OMEGA] != 0.0, y, p, z, w, before[0], before[1],
+                     before[2])
     row[OMEGA0] = w[0]
     row[OMEGA0 + 1] = w[1]
     row[OMEGA0 + 2] = w[2]
+    prev[0] = w[0]
+    prev[1] = w[1]
+    prev[2] = w[2]
     row[PROTECTION] = protection_level(fconst, rho)
 
 

@@ -106,10 +106,12 @@ class Monitor:
         cin = np.array([np.asarray(c.input_error_cov, float) for c in s.sensors])
         self._sigma = np.asarray(s.noise_covariance, float)
         bsd = np.array([c.bias_sd for c in s.sensors], float)
+        jit = np.array([c.timing_jitter for c in s.sensors], float)
         self.cache = SetCache(s.H, s.scale_factors, s.biases, self._sigma, cin,
                               self.thresholds, md, bsd,
                               wrong_exclusion=self.settings.wrong_exclusion,
-                              isolation_ratio=self.settings.isolation_ratio)
+                              isolation_ratio=self.settings.isolation_ratio,
+                              timing_jitter=jit)
         self.cache.precompute(max(self.n - 2, 0))        # bounded step time through two isolations
         self._limits = health_limits(self.settings, kind, s.scale_factors, s.biases)
         self._packed: dict[int, S.KernelSet] = {}

@@ -8,7 +8,9 @@ never does an SVD.
 The per-sample arithmetic (compensation, parity, whitening, reconstruction and the
 calibration-uncertainty ratio ρ) runs in the compiled monitor kernel (:mod:`fdi.kernel`),
 which reads these matrices; :meth:`SetModel.compensate` is the same arithmetic in numpy
-for whole blocks (analysis code, not the monitor).
+for whole blocks (analysis code, not the monitor). ρ holds the calibration uncertainty at
+the current rate and, with a timing jitter τ_i per sensor, the error ``h_iᵀω̇·δt`` of a
+sampling-time error δt at the current angular acceleration (:meth:`SetModel.rho`).
 """
 
 from __future__ import annotations
@@ -23,7 +25,8 @@ from fdi.isolation import pair_sines, rejection_level
 from fdi.parity import parity_matrix, reconstruction_matrix
 from fdi.settings import Thresholds
 
-__all__ = ["SetCache", "SetModel", "build_set_model", "isolation_sizes"]
+__all__ = ["SetCache", "SetModel", "build_set_model", "inflation_terms", "isolation_sizes",
+           "jitter_coefficients", "rho_series"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -76,6 +79,11 @@ class SetModel:
         Scale factors (SI per raw unit) and biases (SI): y = sf·u − bias.
     cal_coef : ndarray, shape (n, 6)
         ρ_i = ω̂ᵀC_iω̂/Σ_ii as coefficients of (ω0², ω1², ω2², ω0ω1, ω0ω2, ω1ω2).
+    jit_coef : ndarray, shape (n,)
+        τ_i²·fs²/Σ_ii: the timing-jitter share of ρ_i is ``jit_coef_i·(h_iᵀΔω̂)²`` with
+        Δω̂ = ω̂_t − ω̂_{t−1} (so h_iᵀω̇̂·τ_i with ω̇̂ = Δω̂·fs); zero without jitter.
+    axes : ndarray, shape (n, 3)
+        Calibrated axes h_i (for the jitter term).
     """
 
     mask: int
@@ -102,20 +110,25 @@ class SetModel:
     sf: np.ndarray = field(repr=False)
     bias: np.ndarray = field(repr=False)
     cal_coef: np.ndarray = field(repr=False)
+    jit_coef: np.ndarray | None = field(default=None, repr=False)
+    axes: np.ndarray | None = field(default=None, repr=False)
 
     @property
     def m(self) -> int:
         """Number of healthy sensors."""
         return len(self.idx)
 
-    def compensate(self, raw: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray,
-                                                   np.ndarray]:
+    def compensate(self, raw: np.ndarray, omega_prev: np.ndarray | None = None
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Parity, whitened parity, reconstruction and ρ of a block, in numpy.
 
         Parameters
         ----------
         raw : ndarray, shape (N, n)
             Raw outputs, every healthy sensor present.
+        omega_prev : ndarray, shape (3,), optional
+            ω̂ of the sample before the block (rad/s; the jitter term of the first row is 0
+            without it).
 
         Returns
         -------
@@ -131,10 +144,107 @@ class SetModel:
         if self.capability == "none":
             return p, z, np.full((3, y.shape[1]), np.nan), np.zeros(y.shape[1])
         w = self.G @ y
-        q = np.stack([w[0] * w[0], w[1] * w[1], w[2] * w[2], w[0] * w[1], w[0] * w[2],
-                      w[1] * w[2]])
-        rho = np.maximum((self.cal_coef[list(self.idx)] @ q).max(axis=0), 0.0)
-        return p, z, w, rho
+        return p, z, w, self.rho(w, omega_prev)
+
+    def rho(self, w: np.ndarray, omega_prev: np.ndarray | None = None) -> np.ndarray:
+        """ρ_t = max_i [ω̂ᵀC_iω̂ + τ_i²·(h_iᵀω̇̂)²]/Σ_ii of a block of ω̂ (the kernel's
+        definition, :mod:`fdi.kernel`).
+
+        Parameters
+        ----------
+        w : ndarray, shape (3, N)
+            ω̂ (rad/s).
+        omega_prev : ndarray, shape (3,), optional
+            ω̂ before the block; ω̇̂ of the first row counts as 0 without it.
+
+        Returns
+        -------
+        ndarray, shape (N,)
+        """
+        return rho_series(w, self.cal_coef, self.jit_coef, self.axes, self.idx, omega_prev)
+
+
+def rho_series(w: np.ndarray, cal_coef: np.ndarray, jit_coef: np.ndarray | None,
+               axes: np.ndarray | None, idx: tuple[int, ...],
+               omega_prev: np.ndarray | None = None) -> np.ndarray:
+    """ρ_t = max_i [ω̂ᵀC_iω̂ + τ_i²·(h_iᵀω̇̂)²]/Σ_ii over the sensors ``idx`` (≥ 0).
+
+    Parameters
+    ----------
+    w : ndarray, shape (3, N)
+        ω̂ (rad/s).
+    cal_coef : ndarray, shape (n, 6)
+    jit_coef : ndarray, shape (n,), or None
+        τ_i²·fs²/Σ_ii (:func:`jitter_coefficients`).
+    axes : ndarray, shape (n, 3), or None
+    idx : tuple of int
+    omega_prev : ndarray, shape (3,), optional
+        ω̂ before the block; a non-finite Δω̂ counts as 0.
+
+    Returns
+    -------
+    ndarray, shape (N,)
+    """
+    w = np.asarray(w, float)
+    q = np.stack([w[0] * w[0], w[1] * w[1], w[2] * w[2], w[0] * w[1], w[0] * w[2],
+                  w[1] * w[2]])
+    idx = list(idx)
+    terms = cal_coef[idx] @ q
+    if jit_coef is not None and axes is not None and np.any(jit_coef[idx]):
+        prev = np.full((3, 1), np.nan) if omega_prev is None else \
+            np.asarray(omega_prev, float).reshape(3, 1)
+        with np.errstate(invalid="ignore", over="ignore"):
+            d = np.diff(np.hstack([prev, w]), axis=1)
+            d = np.where(np.all(np.isfinite(d), axis=0), d, 0.0)
+            jc = jit_coef[idx, None]
+            terms = terms + np.where(jc != 0, jc * (axes[idx] @ d) ** 2, 0.0)
+    return np.maximum(terms.max(axis=0), 0.0)
+
+
+def inflation_terms(H: np.ndarray, sf: np.ndarray, bias: np.ndarray, noise_cov: np.ndarray,
+                    input_error_cov: np.ndarray, bias_sd: np.ndarray,
+                    timing_jitter: np.ndarray, sample_rate_hz: float, raw: np.ndarray
+                    ) -> tuple[np.ndarray, float, float]:
+    """What the monitor's thresholds of the full set do with a recording: ρ_t, κ and β.
+
+    The monitor's threshold at scale w is ``thr_w·(1 + w·β/f_w + κ/f_w·Σ_w ρ)``
+    (:mod:`fdi.windows`); a tail model measured relative to it (:mod:`calibration.tails`)
+    needs these three.
+
+    Parameters
+    ----------
+    H : ndarray, shape (n, 3)
+    sf, bias : ndarray, shape (n,)
+    noise_cov : ndarray, shape (n, n)
+    input_error_cov : ndarray, shape (n, 3, 3)
+    bias_sd, timing_jitter : ndarray, shape (n,)
+        SI and s.
+    sample_rate_hz : float
+    raw : ndarray, shape (N, n)
+        Raw outputs; ρ of a row with a non-finite value is 0.
+
+    Returns
+    -------
+    rho : ndarray, shape (N,)
+    kappa, beta : float
+    """
+    H = np.asarray(H, float)
+    n = H.shape[0]
+    healthy = np.ones(n, bool)
+    idx = tuple(range(n))
+    Sig = np.asarray(noise_cov, float)
+    V = parity_matrix(H, healthy)
+    _, _, kappa, beta = _whitening(V[:max(n - 3, 0)], Sig, idx, np.asarray(bias_sd, float))
+    G, _, _ = _reconstruction(H, healthy, Sig, idx, int(np.linalg.matrix_rank(H)) == 3)
+    with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
+        C = np.asarray(input_error_cov, float) / np.diag(Sig)[:, None, None]
+    coef = np.stack([C[:, 0, 0], C[:, 1, 1], C[:, 2, 2], 2 * C[:, 0, 1], 2 * C[:, 0, 2],
+                     2 * C[:, 1, 2]], axis=1)
+    jit = jitter_coefficients(timing_jitter, np.diag(Sig), sample_rate_hz, n)
+    y = np.asarray(raw, float) * np.asarray(sf, float) - np.asarray(bias, float)
+    w = G @ y.T
+    rho = rho_series(w, coef, jit, H, idx)
+    return np.where(np.isfinite(rho), rho, 0.0), kappa, beta
 
     def healthy_mask(self) -> np.ndarray:
         """Boolean mask of the healthy sensors, shape (n,)."""
@@ -230,7 +340,8 @@ def _capability(full: bool, df: int, detectable: np.ndarray, isolable_from: np.n
 def build_set_model(H: np.ndarray, sf: np.ndarray, bias: np.ndarray, noise_cov: np.ndarray,
                     input_error_cov: np.ndarray, mask: int, thresholds: Thresholds,
                     missed_detection: float, bias_sd: np.ndarray | None = None, *,
-                    wrong_exclusion: float = 1e-7, isolation_ratio: float = 10.0) -> SetModel:
+                    wrong_exclusion: float = 1e-7, isolation_ratio: float = 10.0,
+                    timing_jitter: np.ndarray | None = None) -> SetModel:
     """Compute (once) the model of one healthy set. See :class:`SetModel`.
 
     Parameters
@@ -252,6 +363,9 @@ def build_set_model(H: np.ndarray, sf: np.ndarray, bias: np.ndarray, noise_cov: 
         (:attr:`fdi.settings.MonitorSettings.wrong_exclusion`).
     isolation_ratio : float
         Capability rule (:func:`_capability`).
+    timing_jitter : ndarray, shape (n,), optional
+        Per sensor the sd τ_i of the sampling-time error against the reference (s); the
+        jitter term of ρ uses the thresholds' sample rate (zero when omitted).
     """
     n = H.shape[0]
     if bias_sd is None:
@@ -276,6 +390,7 @@ def build_set_model(H: np.ndarray, sf: np.ndarray, bias: np.ndarray, noise_cov: 
         C = np.asarray(input_error_cov, float) / np.diag(Sig)[:, None, None]
     coef = np.stack([C[:, 0, 0], C[:, 1, 1], C[:, 2, 2], 2 * C[:, 0, 1], 2 * C[:, 0, 2],
                      2 * C[:, 1, 2]], axis=1)
+    jit = jitter_coefficients(timing_jitter, np.diag(Sig), thresholds.sample_rate_hz, n)
     scales = thresholds.scales
     vf = thresholds.variance_factor
     thr = tuple(chi2_threshold(a, df) if df > 0 else float("inf") for a in thresholds.alpha)
@@ -290,13 +405,39 @@ def build_set_model(H: np.ndarray, sf: np.ndarray, bias: np.ndarray, noise_cov: 
                                     missed_detection)
     sf = np.array(sf, float)
     bias = np.array(bias, float)
-    for a in (V, A, U, G, cov, osd, sf, bias, coef, sines, det, iso):
+    axes = np.array(H, float)
+    for a in (V, A, U, G, cov, osd, sf, bias, coef, sines, det, iso, jit, axes):
         a.setflags(write=False)
     return SetModel(mask=mask, idx=idx, df=df, capability=cap, V=V, A=A, U=U, G=G, cov=cov,
                     omega_sd=osd, kappa=kappa, thr=thr, chi2_scale=chi2_scale,
                     rho_gain=rho_gain, beta=beta, offset_gain=offset_gain, cusum_h=h,
                     sines=sines, detectable=det, isolable_from=iso, pl=pl,
-                    sf=sf, bias=bias, cal_coef=coef)
+                    sf=sf, bias=bias, cal_coef=coef, jit_coef=jit, axes=axes)
+
+
+def jitter_coefficients(timing_jitter: np.ndarray | None, sigma_diag: np.ndarray,
+                        sample_rate_hz: float, n: int) -> np.ndarray:
+    """τ_i²·fs²/Σ_ii per sensor (0 where τ, fs or Σ_ii do not give a finite number).
+
+    Parameters
+    ----------
+    timing_jitter : ndarray, shape (n,), or None
+        τ_i (s).
+    sigma_diag : ndarray, shape (n,)
+        Σ_ii (SI²).
+    sample_rate_hz : float
+    n : int
+
+    Returns
+    -------
+    ndarray, shape (n,)
+    """
+    if timing_jitter is None:
+        return np.zeros(n)
+    tau = np.asarray(timing_jitter, float).reshape(n)
+    with np.errstate(all="ignore"):
+        c = tau**2 * float(sample_rate_hz) ** 2 / np.asarray(sigma_diag, float)
+    return np.where(np.isfinite(c) & (c > 0), c, 0.0)
 
 
 class SetCache:
@@ -305,7 +446,8 @@ class SetCache:
     def __init__(self, H: np.ndarray, sf: np.ndarray, bias: np.ndarray,
                  noise_cov: np.ndarray, input_error_cov: np.ndarray, thresholds: Thresholds,
                  missed_detection: float, bias_sd: np.ndarray | None = None, *,
-                 wrong_exclusion: float = 1e-7, isolation_ratio: float = 10.0) -> None:
+                 wrong_exclusion: float = 1e-7, isolation_ratio: float = 10.0,
+                 timing_jitter: np.ndarray | None = None) -> None:
         self.H = np.asarray(H, float)
         self.wrong_exclusion = float(wrong_exclusion)
         self.isolation_ratio = float(isolation_ratio)
@@ -317,6 +459,8 @@ class SetCache:
         self.thresholds = thresholds
         self.missed_detection = float(missed_detection)
         self.bias_sd = np.zeros(self.n) if bias_sd is None else np.asarray(bias_sd, float)
+        self.timing_jitter = (np.zeros(self.n) if timing_jitter is None
+                              else np.asarray(timing_jitter, float))
         self._models: dict[int, SetModel] = {}
 
     def get(self, mask: int) -> SetModel:
@@ -327,7 +471,8 @@ class SetCache:
                                   self.input_error_cov, mask, self.thresholds,
                                   self.missed_detection, self.bias_sd,
                                   wrong_exclusion=self.wrong_exclusion,
-                                  isolation_ratio=self.isolation_ratio)
+                                  isolation_ratio=self.isolation_ratio,
+                                  timing_jitter=self.timing_jitter)
             self._models[mask] = mdl
         return mdl
 

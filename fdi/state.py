@@ -8,8 +8,9 @@ Per healthy set (constants, :class:`KernelSet`, built once per set by :func:`pac
 
 - ``sensors`` (:data:`SENSOR_COLS`, n; one row per quantity): per sensor the compensation
   y = sf·u − bias, the raw health bounds lo < u < hi, whether it is in the set, Σ_ii,
-  h_iᵀ P h_i (P = G Σ Gᵀ, for re-admission), the calibrated axis h_i and the six
-  coefficients of ρ_i = ω̂ᵀC_iω̂/Σ_ii (zero outside the set).
+  h_iᵀ P h_i (P = G Σ Gᵀ, for re-admission), the calibrated axis h_i, the six
+  coefficients of ρ_i = ω̂ᵀC_iω̂/Σ_ii and the timing-jitter coefficient τ_i²·fs²/Σ_ii of
+  the term τ_i²(h_iᵀω̇̂)²/Σ_ii (zero outside the set).
 - ``scales`` (K_w, :data:`SCALE_COLS`): per dyadic window w the χ² threshold T_w,
   1/(w·f_w), κ/f_w, 1 + w·β/f_w and the clearing threshold (hysteresis).
 - ``mats`` (3·df + 3, n): the parity matrix V (rows 0 … df−1), the reconstruction matrix G
@@ -57,7 +58,8 @@ __all__ = [
 # ---------------------------------------------------------------- sensors (SENSOR_COLS, n)
 SF, BIAS, LO, HI, IN_SET, SIGMA_II, H_P_H, AXIS0 = range(8)
 RHO_COEF0 = AXIS0 + 3                       # six coefficients of ρ_i
-SENSOR_COLS = RHO_COEF0 + 6
+JITTER_COEF = RHO_COEF0 + 6                 # τ_i²·fs²/Σ_ii: ρ_i += it·(h_iᵀΔω̂)²
+SENSOR_COLS = JITTER_COEF + 1
 
 # ---------------------------------------------------------------- scales (K_w, SCALE_COLS)
 WINDOW, THRESHOLD, CHI2_SCALE, RHO_GAIN, OFFSET_GAIN, CLEAR_THRESHOLD = range(6)
@@ -191,7 +193,9 @@ def pack_set(model, H: np.ndarray, sigma_diag: np.ndarray, lo: tuple[float, ...]
     sensors[:, RHO_COEF0:RHO_COEF0 + 6] = model.cal_coef
     # the kernel's dense loops need zeros (+0.0) outside the set: ρ coefficients, V and G
     out_of_set = [i for i in range(n) if i not in model.idx]
-    sensors[out_of_set, RHO_COEF0:RHO_COEF0 + 6] = 0.0
+    if model.jit_coef is not None:
+        sensors[:, JITTER_COEF] = model.jit_coef
+    sensors[out_of_set, RHO_COEF0:RHO_COEF0 + 7] = 0.0
     nw = len(thresholds.scales)
     scales = np.zeros((nw, SCALE_COLS))
     scales[:, WINDOW] = thresholds.scales
@@ -254,12 +258,14 @@ BLOCK_ROWS = 32
 @register_jitable(inline="always")
 def state_layout(n: int, ring: int) -> tuple[int, int, int, int]:
     """Offsets in the detector's float state of the CUSUM bank, the kernel's scratch
-    (y, p, z: n each; ω̂: 3; then (z, ρ) of :data:`BLOCK_ROWS` rows, n + 1 each), the
+    (y, p, z: n each; ω̂: 3; the ω̂ of the last completed sample and of the one before it:
+    3 each, at 3n + 3 and 3n + 6 after the scratch start; then (z, ρ) of :data:`BLOCK_ROWS` rows,
+    n + 1 each), the
     windows and the end (``sensor`` starts at 0); the windows take (R + 1)·(n + 1) entries,
     room for any parity dimension df ≤ n."""
     o_cusum = n * SENSOR_STATE_COLS
     o_scratch = o_cusum + 4 * n
-    o_windows = o_scratch + 3 * n + 3 + BLOCK_ROWS * (n + 1)
+    o_windows = o_scratch + 3 * n + 9 + BLOCK_ROWS * (n + 1)
     return o_cusum, o_scratch, o_windows, o_windows + (ring + 1) * (n + 1)
 
 
@@ -287,6 +293,11 @@ class DetectorState:
         self.sensor[:, LAST_VALID_T] = np.nan
         self.sensor[:, GOOD_SINCE_T] = np.nan
         self.cusum = self.values[o_cusum:o_scratch].reshape(4, n)
+        o_prev = o_scratch + 3 * n + 3
+        self.omega_prev = self.values[o_prev:o_prev + 3]
+        """ω̂ of the last completed sample (rad/s; NaN before the first): the jitter term's
+        ω̇̂ = (ω̂_t − ω̂_{t−1})·fs (:mod:`fdi.kernel`)."""
+        self.values[o_prev:o_prev + 6] = np.nan       # and the ω̂ before it
         self.counters = np.zeros(HEALTH0 + n, np.int64)
         self.counters[RING_LEN] = ring
         self.new_set(0)

@@ -25,6 +25,7 @@ __all__ = [
     "G0",
     "INPUT_UNITS",
     "MG",
+    "MS",
     "RAW_UNITS",
     "TIME_UNITS",
     "input_unit_factor",
@@ -48,6 +49,8 @@ G0 = 9.80665
 """Standard gravity in m/s²."""
 MG = G0 / 1000.0
 """One milli-g in m/s²."""
+MS = 1e-3
+"""One millisecond in s."""
 
 INPUT_UNITS: dict[str, float] = {
     "rad/s": 1.0,

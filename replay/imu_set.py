@@ -123,6 +123,9 @@ class ImuSetSpec:
     seed : int
     time_offset_s : tuple of float
         Per IMU (K values, or empty: none).
+    timing_jitter_s : tuple of float
+        Per IMU the sd of a random sampling-time error, independent per sample (K values,
+        or empty: none): IMU j samples the motion at ``t + τ_j + δt``, δt ~ N(0, σ_j²).
     misalignment_sd : float
         Sd of each misalignment angle (rad).
     nonorthogonality_sd : float
@@ -149,6 +152,7 @@ class ImuSetSpec:
     sample_rate_hz: float = 50.0
     seed: int = 0
     time_offset_s: tuple[float, ...] = ()
+    timing_jitter_s: tuple[float, ...] = ()
     misalignment_sd: float = 10e-3
     nonorthogonality_sd: float = 1e-3
     scale_sd: float = 5e-3
@@ -175,6 +179,10 @@ class ImuSetSpec:
                 math.isfinite(x) and x >= 0 for x in self.noise_scale)):
             raise ConfigError(f"noise_scale: expected {self.imus} non-negative numbers, got "
                               f"{self.noise_scale}")
+        if self.timing_jitter_s and (len(self.timing_jitter_s) != self.imus or not all(
+                math.isfinite(x) and x >= 0 for x in self.timing_jitter_s)):
+            raise ConfigError(f"timing jitter: expected {self.imus} finite values ≥ 0, got "
+                              f"{self.timing_jitter_s}")
         if not all(math.isfinite(x) for x in self.time_offset_s):
             raise ConfigError(f"time offsets must be finite, got {self.time_offset_s}")
         for name in ("misalignment_sd", "nonorthogonality_sd", "scale_sd", "bias_sd",
@@ -308,6 +316,9 @@ def simulate_imu_set(spec: ImuSetSpec) -> Flight:
     T0 = 25.0
     for j, m in enumerate(imus, start=1):
         ts = t + m.tau
+        if spec.timing_jitter_s and spec.timing_jitter_s[j - 1] > 0:
+            jr = np.random.default_rng([int(spec.seed), 17, j])
+            ts = ts + spec.timing_jitter_s[j - 1] * jr.standard_normal(N)
         w = body_rates(ts, seed=spec.seed, max_rate_dps=spec.max_rate_dps)
         f = f_at(ts)
         u = w @ m.G.T + m.bias + f @ m.gsens.T
@@ -351,6 +362,11 @@ def simulate_imu_set(spec: ImuSetSpec) -> Flight:
                   source="<simulated>", kind="gyro", imu=groups, aux=aux)
 
 
+def _jitter(spec: ImuSetSpec, js: Sequence[int]) -> list[float]:
+    """The timing jitter (s) of IMUs ``js`` (1-based)."""
+    return [float(spec.timing_jitter_s[j - 1]) if spec.timing_jitter_s else 0.0 for j in js]
+
+
 def _truth(spec: ImuSetSpec, imus: Sequence[_Imu], N: int) -> dict[str, Any]:
     ref = imus[0]
     Ginv = np.linalg.inv(ref.G)
@@ -358,7 +374,8 @@ def _truth(spec: ImuSetSpec, imus: Sequence[_Imu], N: int) -> dict[str, Any]:
     for j, m in enumerate(imus[1:], start=2):
         A = m.G @ Ginv
         rel[f"imu{j}"] = {"A": A.tolist(), "c": (m.bias - A @ ref.bias).tolist(),
-                          "time_offset_s": m.tau - ref.tau}
+                          "time_offset_s": m.tau - ref.tau,
+                          "timing_jitter_s": math.hypot(*_jitter(spec, (1, j)))}
     e = spec.effects
     return {"schema": FLIGHT_TRUTH_SCHEMA, "model": IMU_SET_MODEL, "seed": int(spec.seed),
             "kind": "gyro", "sample_rate_hz": float(spec.sample_rate_hz), "samples": N,

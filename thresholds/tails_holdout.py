@@ -108,8 +108,12 @@ def _verdict(rec: dict[str, Any], target: float) -> dict[str, Any]:
 
 def flight_holdout(flight: Flight, *, targets: tuple[float, ...] = (1.0, 100.0, 1000.0),
                    fraction: float = 0.5, kinds: tuple[str, ...] = ("tune",),
-                   simulate_hours: float = 0.0) -> dict[str, Any]:
+                   simulate_hours: float = 0.0, jitter: bool = True) -> dict[str, Any]:
     """Both ways of a time split of a flight (module docstring).
+
+    ``jitter``: the in-flight calibration carries the timing jitter and its tail model is
+    relative to the monitor's threshold inflation (False: neither, as before the jitter
+    term; :func:`calibration.inflight.calfile.calibration_from_fit`).
 
     Returns
     -------
@@ -129,7 +133,7 @@ def flight_holdout(flight: Flight, *, targets: tuple[float, ...] = (1.0, 100.0, 
     for fit_name, count_name in (("first", "second"), ("second", "first")):
         fpart = slice_flight(flight, parts[fit_name])
         cpart = slice_flight(flight, parts[count_name])
-        cal = calibration_from_fit(fit_inflight(fpart), fpart)
+        cal = calibration_from_fit(fit_inflight(fpart), fpart, jitter=jitter)
         moved, _ = apply_time_offsets(cpart, cal)
         segs = find_segments(cpart)
         keep = keep_mask(cpart.t, segs)
@@ -137,6 +141,7 @@ def flight_holdout(flight: Flight, *, targets: tuple[float, ...] = (1.0, 100.0, 
             "fit": fit_name, "count": count_name,
             "left_out": [s.to_dict() for s in segs],
             "kept_s": float(keep.sum() / flight.sample_rate_hz),
+            "timing_jitter_ms": [c.timing_jitter * 1e3 for c in cal.gyro.sensors],
             "tail_model": _model_summary(cal), "results": {}}
         for how in kinds:
             res = {}

@@ -24,6 +24,7 @@ The tail of the residual's parity statistic per window scale is kept too
 from __future__ import annotations
 
 import itertools
+import math
 
 import numpy as np
 
@@ -33,7 +34,8 @@ from calibration.inflight.timing import flight_identity
 from calibration.residuals import allan_table
 from calibration.tails import fit_tail_model
 from fdi.calfile import AllanTable, Calibration, SensorCal, SensorSet, tangent_basis
-from fdi.units import DPH, DPS, RAW_UNITS
+from fdi.reconstruction import inflation_terms
+from fdi.units import DPH, DPS, MS, RAW_UNITS
 from replay.flight_data import Flight
 
 __all__ = ["INFLIGHT_METHOD", "calibration_from_fit", "noise_split", "sensor_residuals"]
@@ -111,12 +113,16 @@ def sensor_residuals(fit: InflightFit, flight: Flight) -> np.ndarray:
     return e
 
 
-def calibration_from_fit(fit: InflightFit, flight: Flight, *, tails: bool = True
-                         ) -> Calibration:
+def calibration_from_fit(fit: InflightFit, flight: Flight, *, tails: bool = True,
+                         jitter: bool = True) -> Calibration:
     """The ``rimu.calibration/3`` calibration of a flight's gyro set (module docstring).
 
     With ``tails`` the residual's tail model per window scale is fitted and kept
-    (:mod:`calibration.tails`).
+    (:mod:`calibration.tails`). With ``jitter`` (default) each IMU's timing jitter goes into
+    its sensors (``SensorCal.timing_jitter``) and the tail model is measured relative to the
+    monitor's threshold inflation (calibration uncertainty and jitter,
+    :func:`fdi.reconstruction.inflation_terms`); without it the jitter is 0 and the tails
+    are those of the bare statistic (the behaviour before the jitter term).
     """
     noise = noise_split(fit)
     groups = flight.imu_groups()
@@ -130,10 +136,14 @@ def calibration_from_fit(fit: InflightFit, flight: Flight, *, tails: bool = True
         for k, i in enumerate(idx):
             if a is None:
                 A_k, C, c, c_sd = np.eye(3)[k], np.zeros((3, 3)), 0.0, 0.0
+                jit, jit_sd = 0.0, 0.0                      # the reference
             else:
                 A_k = a.A[k]
                 C = a.A_cov[3 * k:3 * k + 3, 3 * k:3 * k + 3]
                 c, c_sd = float(a.c[k]), float(np.sqrt(a.c_cov[k, k]))
+                jit, jit_sd = _finite0(a.timing_jitter_s), _finite0(a.timing_jitter_sd_s)
+                if not jitter:
+                    jit, jit_sd = 0.0, 0.0
             g_k = float(np.linalg.norm(A_k))
             h = A_k / g_k
             nom = np.zeros(3)
@@ -148,17 +158,35 @@ def calibration_from_fit(fit: InflightFit, flight: Flight, *, tails: bool = True
                 scale_factor=1.0 / g_k, scale_factor_sd=float(np.sqrt(h @ C @ h)) / g_k**2,
                 bias=c / g_k, bias_sd=c_sd / g_k, input_error_cov=C, misalignment_sd=ms,
                 raw_unit=flight.raw_unit, scale_factor_unit=sfu, bias_unit="deg/h",
-                residual_rms=rms))
+                residual_rms=rms, timing_jitter=jit, timing_jitter_sd=jit_sd))
     H = np.array([c.axis for c in sensors])
-    model = (fit_tail_model(sensor_residuals(fit, flight), H, cov, fit.sample_rate_hz,
-                            source="in-flight alignment residual (samples the fit used)")
-             if tails else None)
+    model = None
+    if tails:
+        ctx: dict[str, object] = {}
+        src = "in-flight alignment residual (samples the fit used)"
+        if jitter:
+            rho, kappa, beta = inflation_terms(
+                H, np.array([c.scale_factor for c in sensors]),
+                np.array([c.bias for c in sensors]), cov,
+                np.array([c.input_error_cov for c in sensors]),
+                np.array([c.bias_sd for c in sensors]),
+                np.array([c.timing_jitter for c in sensors]), fit.sample_rate_hz, flight.raw)
+            ctx = {"rho": rho, "kappa": kappa, "beta": beta}
+            src += ", relative to the monitor's threshold inflation (with timing jitter)"
+        model = fit_tail_model(sensor_residuals(fit, flight), H, cov, fit.sample_rate_hz,
+                               source=src, **ctx)
     return Calibration(configuration=f"{len(groups)} IMUs in flight", sets={
         "gyro": SensorSet("gyro", tuple(sensors), cov, allan=_allan(fit, noise),
                           tails=model)},
         sample_rate_hz=fit.sample_rate_hz, extra={"method": INFLIGHT_METHOD,
                                                  "source": fit.source,
                                                  "inflight": fit_summary(fit, flight)})
+
+
+def _finite0(x: float) -> float:
+    """x when finite and ≥ 0, else 0 (no estimate: no jitter term)."""
+    x = float(x)
+    return x if math.isfinite(x) and x >= 0 else 0.0
 
 
 def fit_summary(fit: InflightFit, flight: Flight) -> dict[str, object]:
@@ -180,6 +208,8 @@ def fit_summary(fit: InflightFit, flight: Flight) -> dict[str, object]:
             "time_offset_ms": 1e3 * a.time_offset_s,
             "time_offset_ms_sd": 1e3 * a.time_offset_sd_s,
             "time_offset_check": a.offset_check,
+            "timing_jitter_ms": a.timing_jitter_s / MS,
+            "timing_jitter_ms_sd": a.timing_jitter_sd_s / MS,
             "residual_rms_dps": (np.sqrt(np.mean(r**2, axis=0)) / DPS).tolist(),
             "residual_lag1_autocorrelation": lag1,
             "hac_lags": a.lags, "samples": int(r.shape[0]),

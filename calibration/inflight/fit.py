@@ -38,6 +38,7 @@ import numpy as np
 from scipy import ndimage
 from scipy.interpolate import CubicSpline
 
+from calibration.inflight.jitter import JitterFit, fit_timing_jitter
 from calibration.inflight.offset_check import check_offset
 from calibration.inflight.regression import StackedFit, stacked_lstsq
 from calibration.inflight.segments import Segment, find_segments, keep_mask
@@ -118,6 +119,9 @@ class ImuAlignment:
     c_cov : ndarray, shape (3, 3)
     time_offset_s, time_offset_sd_s : float
         τ (NaN and 0 when not fitted).
+    timing_jitter_s, timing_jitter_sd_s : float
+        Sd of the random sampling-time error against the reference and its sd (s), from the
+        residual's growth with the angular acceleration (:mod:`calibration.inflight.jitter`).
     residual : ndarray, shape (N, 3)
         ``y_j − A·y_r(t+τ) − c`` on the samples used, NaN elsewhere (rad/s).
     lags : int
@@ -143,6 +147,8 @@ class ImuAlignment:
     excitation: Excitation
     notes: tuple[str, ...] = ()
     offset_check: dict[str, object] = field(default_factory=dict)
+    timing_jitter_s: float = 0.0
+    timing_jitter_sd_s: float = 0.0
 
     def parts(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
         """Rotation, scale and non-orthogonality of A with their sds (rad, fraction)."""
@@ -300,7 +306,7 @@ def _design(model: str, z: np.ndarray, dz: np.ndarray, A: np.ndarray, with_tau: 
 def fit_pair(t: np.ndarray, y_ref: np.ndarray, y: np.ndarray, used: np.ndarray, *,
              model: str = "full", time_offset: bool = True, label: str = "imu",
              sample_rate_hz: float | None = None, check: bool = True,
-             gain: np.ndarray | None = None) -> ImuAlignment:
+             gain: np.ndarray | None = None, jitter: bool = True) -> ImuAlignment:
     """Fit ``y = A·y_ref(t+τ) + c`` on the samples ``used`` (module docstring).
 
     Parameters
@@ -321,6 +327,9 @@ def fit_pair(t: np.ndarray, y_ref: np.ndarray, y: np.ndarray, used: np.ndarray, 
     gain : ndarray, shape (3, 3), optional
         With ``model="fixed"``: the gain A held fixed (only c and τ are fitted; used for
         the pieces of the consistency check that do not excite A on their own).
+    jitter : bool
+        Estimate the timing jitter from the residual (:mod:`calibration.inflight.jitter`;
+        the pieces of the consistency check skip it: 0).
 
     Raises
     ------
@@ -391,7 +400,8 @@ def fit_pair(t: np.ndarray, y_ref: np.ndarray, y: np.ndarray, used: np.ndarray, 
         fitted[rows] = True
 
         def piece(mask: np.ndarray) -> tuple[float, float, str]:
-            kw = dict(time_offset=True, label=label, sample_rate_hz=fs, check=False)
+            kw = dict(time_offset=True, label=label, sample_rate_hz=fs, check=False,
+                      jitter=False)
             try:
                 a = fit_pair(t, y_ref, y, mask, model=model, **kw)
             except CalibrationError as exc:
@@ -402,12 +412,16 @@ def fit_pair(t: np.ndarray, y_ref: np.ndarray, y: np.ndarray, used: np.ndarray, 
 
         chk = check_offset(t, fitted, X[inside], fit.residual, sd_tau, fs, piece)
         sd_tau = 1e-3 * float(chk["sd_ms"])
+    # timing jitter: the residual against the angular acceleration IMU j sees, A·ω̇_ref
+    jit = (fit_timing_jitter(fit.residual, dz[inside] @ A.T, lags=fit.lags) if jitter
+           else JitterFit(0.0, 0.0, 0.0, 0.0, np.zeros((3, 3)), 0))
     return ImuAlignment(imu=label, model=model, A=A, A_cov=A_cov, c=beta[ci],
                         c_cov=cov[ci, ci],
                         time_offset_s=tau if time_offset else 0.0,
                         time_offset_sd_s=sd_tau,
                         residual=residual, lags=fit.lags, excitation=exc, notes=tuple(notes),
-                        offset_check=chk)
+                        offset_check=chk, timing_jitter_s=jit.tau_s,
+                        timing_jitter_sd_s=jit.tau_sd_s)
 
 
 @functools.lru_cache(maxsize=64)

@@ -63,6 +63,10 @@ def summary_text(doc: dict) -> str:
                          f"{x:.3g}" for x in r["residual_rms_dps"]) + f"] deg/s; HAC lags "
                      f"{r['hac_lags']}")
         lines.extend(f"      {x}" for x in check_lines(r.get("time_offset_check") or {}))
+        if "timing_jitter_ms" in r:
+            lines.append(f"      timing jitter {g}: {r['timing_jitter_ms']:.2f} ± "
+                         f"{r['timing_jitter_ms_sd']:.2f} ms (thresholds widen with it while "
+                         "the body accelerates)")
         lines.extend(f"      note: {n}" for n in r["notes"])
     if doc.get("time_offset_sign"):
         lines.append(f"  sign: {doc['time_offset_sign']}")

@@ -9,7 +9,7 @@ from __future__ import annotations
 import argparse
 
 from fdi.errors import ConfigError
-from fdi.units import DPH, DPS, G0
+from fdi.units import DPH, DPS, G0, MS
 from rimu.argtypes import (
     MAX_SAMPLES,
     float_list,
@@ -22,7 +22,7 @@ MAX_IMUS = 16
 """At most this many IMUs in one simulated set."""
 MAX_TIME_OFFSET_MS = 1000.0
 """Largest time offset of one IMU (ms)."""
-IMU_ONLY = ("--time-offset-ms", "--vibration", "--effect-imus")
+IMU_ONLY = ("--time-offset-ms", "--timing-jitter-ms", "--vibration", "--effect-imus")
 """Options of ``--imus`` refused without it (their defaults are empty)."""
 
 __all__ = ["check_imu_options", "configure_options", "run"]
@@ -38,6 +38,10 @@ def configure_options(p: argparse.ArgumentParser) -> None:
                    type=float_list(-MAX_TIME_OFFSET_MS, MAX_TIME_OFFSET_MS,
                                    name="time offsets in ms"),
                    help="time offset of each IMU in ms (K values; default all 0)")
+    g.add_argument("--timing-jitter-ms", default=(), metavar="S1,S2,...",
+                   type=float_list(0.0, MAX_TIME_OFFSET_MS, name="jitters in ms"),
+                   help="sd of each IMU's random sampling-time error in ms, independent per "
+                        "sample (K values; default all 0)")
     g.add_argument("--misalignment-mrad", type=nonnegative_float(1e3), default=10.0, metavar="X",
                    help="sd of each IMU's misalignment angles (mrad, default 10)")
     g.add_argument("--scale-ppm", type=nonnegative_float(1e6), default=5000.0, metavar="X",
@@ -86,6 +90,9 @@ def check_imu_options(args: argparse.Namespace) -> None:
     if args.time_offset_ms and len(args.time_offset_ms) != args.imus:
         raise ConfigError(f"--time-offset-ms: expected {args.imus} values (one per IMU), got "
                           f"{len(args.time_offset_ms)}")
+    if args.timing_jitter_ms and len(args.timing_jitter_ms) != args.imus:
+        raise ConfigError(f"--timing-jitter-ms: expected {args.imus} values (one per IMU), "
+                          f"got {len(args.timing_jitter_ms)}")
     bad = [x for x in args.effect_imus if x != int(x) or x > args.imus]
     if bad:
         raise ConfigError(f"--effect-imus: {bad[0]:g} is not an IMU number (1 to {args.imus})")
@@ -114,6 +121,7 @@ def run(args: argparse.Namespace) -> int:
     spec = ImuSetSpec(imus=args.imus, duration_s=args.duration,
                       sample_rate_hz=fs, seed=args.seed,
                       time_offset_s=tuple(1e-3 * x for x in args.time_offset_ms),
+                      timing_jitter_s=tuple(MS * x for x in args.timing_jitter_ms),
                       misalignment_sd=1e-3 * args.misalignment_mrad,
                       scale_sd=1e-6 * args.scale_ppm, noise_sd=args.gyro_noise_dps * DPS,
                       max_rate_dps=args.max_rate if args.max_rate != 300.0 else 200.0,

@@ -231,3 +231,20 @@ def test_noise_split_three_cornered_hat_recovers_each_imus_noise() -> None:
         share_sd = np.sqrt((2 * vj**2 + vj * vk + vj * vl + vk * vl) / N)
         assert np.all(np.abs(np.diag(noise[g]) - vj) < 4 * share_sd), (g, noise[g], vj)
     assert np.all(np.diag(noise["imu2"]) > 2 * np.diag(noise["imu1"]))    # not split equally
+
+
+def test_cli_timing_jitter_simulated_and_estimated(tmp_path: Path) -> None:
+    """``--timing-jitter-ms`` on a simulated flight; ``calibrate --in-flight`` prints the
+    estimate with its sd and writes it on imu2's sensors only."""
+    d = tmp_path / "f"
+    r = _rimu("simulate", "flight", "--imus", "2", "--duration", "60", "--seed", "2",
+              "--timing-jitter-ms", "0,2", "--out", str(d))
+    assert r.returncode == 0, r.stderr
+    r = _rimu("calibrate", "--in-flight", str(d), "--out", str(tmp_path / "cal.json"))
+    assert r.returncode == 0, r.stderr
+    line = next(x for x in r.stdout.splitlines() if "timing jitter imu2:" in x)
+    est, sd = (float(v) for v in line.split(":")[1].split("ms")[0].split("±"))
+    assert abs(est - 2.0) < 3 * sd, line                 # the simulated 2 ms
+    cal = json.loads((tmp_path / "cal.json").read_text())["sensors"]["gyro"]
+    assert [c.get("timing_jitter_ms", 0.0) for c in cal][:3] == [0.0] * 3
+    assert cal[3]["timing_jitter_ms"] == pytest.approx(est, abs=0.01)

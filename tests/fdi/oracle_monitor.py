@@ -8,8 +8,10 @@ the definitions instead:
 
 - windows as direct sums over the last w complete samples (the kernel: differences of
   cumulative sums in a ring);
-- ρ as max_i ω̂ᵀC_iω̂/Σ_ii from the 3×3 input-error covariances (the kernel: six packed
-  coefficients);
+- ρ as max_i [ω̂ᵀC_iω̂ + τ_i²(h_iᵀω̇̂)²]/Σ_ii from the 3×3 input-error covariances and
+  the timing jitters, ω̇̂ = (ω̂_t − ω̂_{t−1})·fs from the ω̂ the oracle answered last (0 when
+  not finite) (the kernel: six packed coefficients, one jitter coefficient, ω̂_{t−1} in its
+  state);
 - the CUSUM as Page's recursion g = max(0, g + x) (the kernel: S − min S);
 - the health checks, the state machine and the attribution as numpy/Python;
 - the isolation decision from its definition: each single-sensor hypothesis fitted to the
@@ -59,13 +61,18 @@ class OracleMonitor:
         self.bias = np.asarray(s.biases, float)
         self.sigma = np.asarray(s.noise_covariance, float)
         self.cin = np.array([np.asarray(c.input_error_cov, float) for c in s.sensors])
+        self.tau = np.array([c.timing_jitter for c in s.sensors], float)
+        self.H = np.asarray(s.H, float)
+        self.fs = float(thresholds.sample_rate_hz)
+        self.w_prev = np.full(3, np.nan)
         self.th = thresholds
         self.settings = settings
         md = settings.missed_detection or thresholds.missed_detection
         self.cache = SetCache(s.H, self.sf, self.bias, self.sigma, self.cin, thresholds, md,
                               np.array([c.bias_sd for c in s.sensors], float),
                               wrong_exclusion=settings.wrong_exclusion,
-                              isolation_ratio=settings.isolation_ratio)
+                              isolation_ratio=settings.isolation_ratio,
+                              timing_jitter=self.tau)
         self.names = [c.name for c in s.sensors]
         self.lim = health_limits(settings, kind, self.sf, self.bias)
         self.scales = [int(w) for w in thresholds.scales]
@@ -105,17 +112,28 @@ class OracleMonitor:
         return cusum_threshold(self.th.alpha[0], self.th.cusum_drift, 2 * self.model.m)
 
     def _reconstruct(self, model, u: np.ndarray) -> tuple[np.ndarray, float]:
-        """ω̂ = G·y over the set's sensors and ρ = max_i ω̂ᵀC_iω̂/Σ_ii (≥ 0)."""
+        """ω̂ = G·y over the set's sensors and
+        ρ = max_i [ω̂ᵀC_iω̂ + τ_i²(h_iᵀω̇̂)²]/Σ_ii (≥ 0), ω̇̂ = (ω̂ − ω̂_{t−1})·fs."""
         if model.capability == "none":
             return np.full(3, np.nan), 0.0
         idx = list(model.idx)
         y = self.sf[idx] * u[idx] - self.bias[idx]
         w = model.G[:, idx] @ y
-        rho = max([0.0] + [float(w @ self.cin[i] @ w) / self.sigma[i, i] for i in idx])
+        wdot = (w - self.w_prev) * self.fs
+        if not np.all(np.isfinite(wdot)):
+            wdot = np.zeros(3)
+        rho = max([0.0] + [(float(w @ self.cin[i] @ w)
+                            + self.tau[i] ** 2 * float(self.H[i] @ wdot) ** 2)
+                           / self.sigma[i, i] for i in idx])
         return w, rho
 
     # ------------------------------------------------------------ one sample
     def step(self, t: float, u: np.ndarray, ok: np.ndarray) -> OracleSample:
+        out = self._step(t, u, ok)
+        self.w_prev = np.asarray(out.omega, float).copy()
+        return out
+
+    def _step(self, t: float, u: np.ndarray, ok: np.ndarray) -> OracleSample:
         u = np.asarray(u, float)
         ok = np.asarray(ok, bool)
         if self.lvt is None:

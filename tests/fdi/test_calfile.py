@@ -108,3 +108,40 @@ def test_unknown_keys_are_refused(tmp_path, mutate, field):
     with pytest.raises(FileFormatError) as err:
         load_calibration(p)
     assert err.value.field == field and "unknown key; did you mean" in str(err.value)
+
+
+def test_timing_jitter_round_trip_and_default(tmp_path):
+    """``timing_jitter_ms`` (and its sd) round-trips in ms; a file without it loads with 0
+    (older files), and the reference (τ = 0) writes no key."""
+    import dataclasses
+
+    cal = _cal()
+    s = list(cal.gyro.sensors)
+    s[1] = dataclasses.replace(s[1], timing_jitter=2.3e-3, timing_jitter_sd=0.25e-3)
+    cal = dataclasses.replace(cal, sets={"gyro": dataclasses.replace(cal.gyro,
+                                                                     sensors=tuple(s))})
+    p = tmp_path / "cal.json"
+    cal.save(p)
+    doc = json.loads(p.read_text())
+    assert doc["sensors"]["gyro"][1]["timing_jitter_ms"] == pytest.approx(2.3)
+    assert doc["sensors"]["gyro"][1]["timing_jitter_ms_sd"] == pytest.approx(0.25)
+    assert "timing_jitter_ms" not in doc["sensors"]["gyro"][0]
+    back = load_calibration(p)
+    assert back.gyro.sensors[1].timing_jitter == pytest.approx(2.3e-3, rel=1e-12)
+    assert back.gyro.sensors[1].timing_jitter_sd == pytest.approx(0.25e-3, rel=1e-12)
+    assert back.gyro.sensors[0].timing_jitter == 0.0
+    del doc["sensors"]["gyro"][1]["timing_jitter_ms"], doc["sensors"]["gyro"][1][
+        "timing_jitter_ms_sd"]
+    p.write_text(json.dumps(doc))
+    assert load_calibration(p).gyro.sensors[1].timing_jitter == 0.0
+
+
+@pytest.mark.parametrize("value", [-1.0, "2 ms", float("inf")])
+def test_bad_timing_jitter_is_named(tmp_path, value):
+    doc = _cal().to_dict()
+    doc["sensors"]["gyro"][2]["timing_jitter_ms"] = value
+    p = tmp_path / "bad.json"
+    p.write_text(json.dumps(doc).replace("Infinity", "1e999"))
+    with pytest.raises(FileFormatError) as err:
+        load_calibration(p)
+    assert "sensors.gyro[3].timing_jitter_ms" in str(err.value) and str(p) in str(err.value)

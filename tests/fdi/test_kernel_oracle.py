@@ -2,8 +2,9 @@
 
 Step-versus-block identity cannot catch an error both paths share; the oracle computes the
 same answers from the definitions (direct window sums, Page's CUSUM, ρ from the 3×3
-input-error covariances). Discrete outputs (health, capability, events: type, sensor,
-reason) must agree exactly; numbers to rounding (the two evaluate sums in other orders).
+input-error covariances and the timing jitters with ω̇̂ from successive answers). Discrete
+outputs (health, capability, events: type, sensor, reason) must agree exactly; numbers to
+rounding (the two evaluate sums in other orders).
 """
 
 from __future__ import annotations
@@ -28,12 +29,16 @@ EXTREME = [np.nan, np.inf, -np.inf, 1e308, -1e308, 5e-324, -5e-324, 2.2e-308]
 
 def _full_input_error(cal):
     """The calibration with a random full (correlated) input-error covariance per sensor,
-    large enough that ρ moves the thresholds (the synthetic one is isotropic, 1e-8)."""
+    large enough that ρ moves the thresholds (the synthetic one is isotropic, 1e-8), and a
+    random timing jitter on every sensor but the first (the reference), large enough that
+    its term τ_i²(h_iᵀω̇̂)²/Σ_ii moves them too."""
     rng = np.random.default_rng(7)
     sensors = []
-    for s in cal.gyro.sensors:
+    for k, s in enumerate(cal.gyro.sensors):
         L = rng.normal(size=(3, 3)) * 3e-4
-        sensors.append(dataclasses.replace(s, input_error_cov=L @ L.T + 1e-8 * np.eye(3)))
+        tau = 0.0 if k == 0 else float(rng.uniform(0.05e-3, 0.3e-3))
+        sensors.append(dataclasses.replace(s, input_error_cov=L @ L.T + 1e-8 * np.eye(3),
+                                           timing_jitter=tau))
     sets = dict(cal.sets, gyro=dataclasses.replace(cal.gyro, sensors=tuple(sensors)))
     return dataclasses.replace(cal, sets=sets)
 

@@ -3,6 +3,8 @@ magnitude, protection level. Truth comes from raw samples simulated from a true 
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
@@ -38,6 +40,17 @@ def scenario(cfg: str, N: int, faults: list[tuple[int, int, float]], seed: int =
         f[row:, s - 1] += size * sd[s - 1]
     raw = raw_samples(cal, om, seed=seed + 100, truth=draw_truth(cal, seed=seed + 7), fault=f)
     return cal, np.arange(N) / FS, raw, om
+
+
+def with_jitter(cal, seed: int = 0, lo: float = 0.2e-3, hi: float = 1e-3):
+    """The calibration with a random timing jitter τ (s) on every gyro but the first (the
+    reference): the thresholds then move with the reconstructed angular acceleration."""
+    rng = np.random.default_rng(seed)
+    sensors = tuple(dataclasses.replace(c, timing_jitter=0.0 if k == 0 else
+                                        float(rng.uniform(lo, hi)))
+                    for k, c in enumerate(cal.gyro.sensors))
+    return dataclasses.replace(cal, sets=dict(cal.sets, gyro=dataclasses.replace(
+        cal.gyro, sensors=sensors)))
 
 
 def assert_identical(answers, res) -> None:
@@ -96,9 +109,13 @@ def test_step_and_run_are_bit_identical(cfg, detector):
                           st.floats(-30.0, 30.0), st.sampled_from(["step", "nan", "miss",
                                                                     "stuck", "spike"])),
                 max_size=4),
-       st.integers(0, 10_000), st.integers(1, 97), st.sampled_from(["windows", "both"]))
-def test_step_and_run_identical_for_random_fault_scenarios(faults, seed, chunk, detector):
+       st.integers(0, 10_000), st.integers(1, 97), st.sampled_from(["windows", "both"]),
+       st.booleans())
+def test_step_and_run_identical_for_random_fault_scenarios(faults, seed, chunk, detector,
+                                                           jitter):
     cal, t, raw, _ = scenario("cone6", 400, [], seed=seed % 50)
+    if jitter:
+        cal = with_jitter(cal, seed)
     valid = np.ones(raw.shape, bool)
     sd = cal.gyro.noise_sd / cal.gyro.scale_factors
     for s, row, size, kind in faults:
@@ -258,6 +275,28 @@ def test_long_healthy_300dps_flight_raises_no_alarm(cfg):
             assert res.events == [], (cfg, k, blk, res.events[:3])
             top = max(top, float(np.nanmax(res.statistics / res.thresholds)))
     assert 0.3 < top < 1.0, top                 # the statistics are alive, and below 1
+
+
+@pytest.mark.parametrize("chunk", [1, 31, 257])
+def test_step_and_run_identical_with_timing_jitter(chunk):
+    """The jitter term reads the ω̂ of the sample before: across block and chunk boundaries,
+    missing samples, a stuck sensor and isolations, stepping and a block agree bit for bit,
+    and the term moves the thresholds (against the same flight without jitter)."""
+    cal0, t, raw, _ = scenario("cone6", 1500, [(3, 500, 14.0), (5, 1000, -16.0)], seed=4)
+    cal = with_jitter(cal0, 3)
+    valid = np.ones(raw.shape, bool)
+    valid[300, 1] = False
+    valid[700:703, 3] = False
+    raw[1300:, 0] = raw[1300, 0]
+    th = default_thresholds(cal, detector="both")
+    a = Monitor(cal, th)
+    answers = [a.step(t[i], raw[i], valid[i]) for i in range(len(t))]
+    res = Monitor(cal, th).run(t, raw, valid, parity=True, chunk=chunk)
+    assert_identical(answers, res)
+    assert any(e.type == "isolated" for e in res.events)
+    base = Monitor(cal0, th).run(t[:400], raw[:400], valid[:400])
+    grew = res.thresholds[:400] > base.thresholds
+    assert grew[50:].mean() > 0.5, grew.mean()
 
 
 @pytest.mark.parametrize("chunk", [1, 64, 8192])

@@ -195,3 +195,48 @@ def test_overbound_coverage_over_repeated_fits():
                 cases += 1
     assert cases == 180
     assert over <= stats.binom.isf(0.001, cases, 0.05), over
+
+
+def test_statistic_relative_to_the_monitors_inflation():
+    """With the calibration's ρ (calibration uncertainty and timing jitter), κ and β, the
+    statistic the tail model fits is the monitor's D_w over its inflation T_w/thr_w, sample
+    for sample, and the tail model's scales see exactly those values."""
+    from fdi.monitor import Monitor
+    from fdi.reconstruction import inflation_terms
+    from fdi.settings import MonitorSettings
+
+    rng = np.random.default_rng(4)
+    N, fs = 800, 100.0
+    t = np.arange(N) / fs
+    om = np.column_stack([2.0 * np.sin(2 * np.pi * f * t) for f in (0.7, 1.3, 2.1)])
+    y = np.hstack([om, om]) + rng.normal(0.0, 0.01, (N, 6))
+    cal = static_calibration(y - np.hstack([om, om]), fs, NAMES, allan=False)
+    s = cal.gyro
+    sensors = tuple(replace(c, input_error_cov=1e-6 * np.eye(3), bias_sd=1e-3,
+                            timing_jitter=2e-3 if k >= 3 else 0.0)
+                    for k, c in enumerate(s.sensors))
+    cal = replace(cal, sets={"gyro": replace(s, sensors=sensors)})
+    s = cal.gyro
+    thr = default_thresholds(cal, scales=(1, 2, 4, 8))
+    res = Monitor(cal, thr, settings=MonitorSettings(persistence=1 << 30)).run(t, y)
+    rho, kappa, beta = inflation_terms(
+        s.H, s.scale_factors, s.biases, s.noise_covariance,
+        np.array([c.input_error_cov for c in sensors]), np.array([c.bias_sd for c in sensors]),
+        np.array([c.timing_jitter for c in sensors]), fs, y)
+    assert beta > 0 and np.median(rho) > 0.1             # both inflations are at work
+    z, v = whitened_parity(y - s.biases, s.H, s.noise_covariance)
+    cq = np.concatenate([[0.0], np.cumsum(rho)])
+    for k, w in enumerate(thr.scales):
+        S, end, _ = window_statistics(z, v, w)
+        infl = 1.0 + w * beta + kappa * (cq[end + 1] - cq[end + 1 - w])
+        base = res.thresholds[end, k][0] / (1.0 + w * beta + kappa * (cq[end[0] + 1]
+                                                                     - cq[end[0] + 1 - w]))
+        np.testing.assert_allclose(res.thresholds[end, k] / base, infl, rtol=1e-9)
+        np.testing.assert_allclose(res.statistics[end, k], S, rtol=1e-9, atol=1e-12)
+    m0 = fit_tail_model(y - s.biases, s.H, s.noise_covariance, fs, scales=(1,))
+    m1 = fit_tail_model(y - s.biases, s.H, s.noise_covariance, fs, scales=(1,), rho=rho,
+                        kappa=kappa, beta=beta)
+    S1 = window_statistics(z, v, 1)[0]
+    assert m0.scales[0].variance_ratio == pytest.approx(np.mean(S1) / z.shape[1])
+    assert m1.scales[0].variance_ratio == pytest.approx(
+        np.mean(S1 / (1.0 + beta + kappa * rho)) / z.shape[1])

@@ -10,7 +10,11 @@ absent. What is asserted is what docs/noise-tails.md states:
   three expected alarms in the held-out time) is met within 3× (the exact Poisson 95 %
   interval of the held-out rate reaches 3 × target or below);
 - at 1 false alarm per hour, at most one alarm over both flights, both ways, together;
-- today's Gaussian thresholds do not meet 1 per hour (several alarms in minutes).
+- today's Gaussian thresholds do not meet 1 per hour (several alarms in minutes);
+- the calibrations carry the timing jitter of imu2 and their tail models are relative to
+  the monitor's inflation (:func:`calibration.inflight.calfile.calibration_from_fit`);
+  the statistic so normalised is still not Gaussian, but the jitter term explains most
+  of flight 41's kurtosis (against the bare statistic, ``jitter=False``).
 """
 
 from __future__ import annotations
@@ -34,6 +38,17 @@ def flights():
     from thresholds.tails_holdout import flight_holdout
 
     return {name: flight_holdout(read_erle(name), targets=TARGETS) for name in FLIGHTS}
+
+
+@pytest.fixture(scope="module")
+def bare_41():
+    """Flight 41 held out as before the jitter term (tails of the bare statistic), the tail
+    models only."""
+    if not (DATA / FLIGHTS["41"]).exists():
+        pytest.skip(f"real data absent: {DATA}")
+    from thresholds.tails_holdout import flight_holdout
+
+    return flight_holdout(read_erle("41"), targets=(), jitter=False)
 
 
 def _records(report):
@@ -62,11 +77,17 @@ def test_one_per_hour_at_most_one_alarm_over_all_flights(flights):
     assert before >= 5                      # today's Gaussian thresholds: far above 1/h
 
 
-def test_flight_residuals_fail_the_normality_check(flights):
+def test_flight_residuals_fail_the_normality_check(flights, bare_41):
     for rep in flights.values():
         for way in rep["ways"]:
             assert not way["tail_model"][0]["gaussian"]
-            assert way["tail_model"][0]["excess_kurtosis"] > 5
+            assert way["tail_model"][0]["excess_kurtosis"] > 1
+            assert way["timing_jitter_ms"][3] > 0.5          # imu2: about 1–2.3 ms
+            assert way["timing_jitter_ms"][0] == 0.0         # the reference
+    for way, bare in zip(flights["41"]["ways"], bare_41["ways"], strict=True):
+        k_bare = bare["tail_model"][0]["excess_kurtosis"]
+        k = way["tail_model"][0]["excess_kurtosis"]
+        assert k_bare > 5 and k < k_bare / 3, (k, k_bare)
 
 
 def test_mpu_static_set_held_out():
