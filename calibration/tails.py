@@ -308,12 +308,16 @@ def fit_tail_model(residual: np.ndarray, H: np.ndarray, noise_cov: np.ndarray,
     Returns
     -------
     TailModel or None
-        None without a parity space (n < 4) or fewer than 64 valid samples.
+        None without a parity space (n < 4), with a singular parity noise covariance (a
+        noiseless simulated set) or with fewer than 64 valid samples.
     """
     H = np.asarray(H, float)
     if H.shape[0] < 4:
         return None
-    z, valid = whitened_parity(residual, H, noise_cov)
+    try:
+        z, valid = whitened_parity(residual, H, noise_cov)
+    except np.linalg.LinAlgError:               # a noiseless (simulated) set: no tail to fit
+        return None
     df = z.shape[1]
     if int(valid.sum()) < 64:
         return None
