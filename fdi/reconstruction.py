@@ -163,6 +163,10 @@ class SetModel:
         """
         return rho_series(w, self.cal_coef, self.jit_coef, self.axes, self.idx, omega_prev)
 
+    def healthy_mask(self) -> np.ndarray:
+        """Boolean mask of the healthy sensors, shape (n,)."""
+        return np.array([(self.mask >> i) & 1 == 1 for i in range(self.V.shape[1])])
+
 
 def rho_series(w: np.ndarray, cal_coef: np.ndarray, jit_coef: np.ndarray | None,
                axes: np.ndarray | None, idx: tuple[int, ...],
@@ -245,10 +249,6 @@ def inflation_terms(H: np.ndarray, sf: np.ndarray, bias: np.ndarray, noise_cov: 
     w = G @ y.T
     rho = rho_series(w, coef, jit, H, idx)
     return np.where(np.isfinite(rho), rho, 0.0), kappa, beta
-
-    def healthy_mask(self) -> np.ndarray:
-        """Boolean mask of the healthy sensors, shape (n,)."""
-        return np.array([(self.mask >> i) & 1 == 1 for i in range(self.V.shape[1])])
 
 
 def _whitening(V: np.ndarray, Sig: np.ndarray, idx: tuple[int, ...], bias_sd: np.ndarray
