@@ -7,8 +7,8 @@ sensor of both flights. Each claim of :func:`thresholds.field.must_hold` is one 
 claims and their numbers come from the issue (no tolerance chosen here). Skipped when the
 data are absent (``RIMU_SHARED_DATA`` overrides the folder).
 
-Today's main does not satisfy them (issue 17 in progress): the tests are marked xfail until
-the isolation, envelope and tail-threshold work is merged.
+Seven of the ten hold on main (statistical isolation, envelope, tail thresholds with the
+timing-jitter term); the three that do not are strict xfails with the reason (:data:`OPEN`).
 """
 
 from __future__ import annotations
@@ -67,8 +67,21 @@ def test_the_evidence_covers_what_the_issue_asks(verdicts):
         assert any(r["resolved"] for r in rows)
 
 
-@pytest.mark.xfail(reason="issue 17 in progress", strict=False)
-@pytest.mark.parametrize("claim", CLAIMS)
+OPEN = {
+    CLAIMS[7]: "flight 41 at 100/h: alarms within about 1 s of the impacts the causal envelope "
+               "marks (before the specific force crosses 4 g, or after the hold); the static "
+               "set's slow bias drift keeps long windows in alarm",
+    CLAIMS[8]: "4 alarms on flight 41's held-out halves, all but one within 1.1 s of an "
+               "impact the envelope marks",
+    CLAIMS[9]: "the static set's slow relative bias drift (0.01-0.03 deg/s over 16 min) keeps "
+               "the long windows above their thresholds",
+}
+"""Claims that do not hold yet (issue 17 stays open on them): strict xfail, so a change that
+makes one hold fails here until it moves to the holding list."""
+
+
+@pytest.mark.parametrize("claim", [pytest.param(c, marks=pytest.mark.xfail(
+    reason=OPEN[c], strict=True)) if c in OPEN else c for c in CLAIMS])
 def test_must_hold(verdicts, claim):
     holds, detail = verdicts[1][claim]
     assert holds, f"{claim}: {detail}"
