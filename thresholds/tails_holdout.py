@@ -143,22 +143,32 @@ def flight_holdout(flight: Flight, *, targets: tuple[float, ...] = (1.0, 100.0, 
             "kept_s": float(keep.sum() / flight.sample_rate_hz),
             "timing_jitter_ms": [c.timing_jitter * 1e3 for c in cal.gyro.sensors],
             "tail_model": _model_summary(cal), "results": {}}
-        for how in kinds:
-            res = {}
-            for R in targets:
-                rec = {}
-                for label, c in (("before", without_tails(cal)), ("after", cal)):
-                    thr = thresholds_for(c, R, how, simulate_hours=simulate_hours)
-                    r = count_alarms(cal, thr, moved.t, moved.raw, moved.valid, keep,
-                                     flight.sample_rate_hz)
-                    r["variance_factor"] = list(thr.variance_factor)
-                    r["noise_model"] = thr.noise_model
-                    r.update(_detectable(cal, thr))
-                    rec[label] = _verdict(r, R)
-                res[str(R)] = rec
-            way["results"][how] = res
+        way["results"] = _before_after(cal, kinds, targets, simulate_hours, moved.t,
+                                       moved.raw, moved.valid, keep, flight.sample_rate_hz)
         out["ways"].append(way)
     return out
+
+
+def _before_after(cal: Calibration, kinds: Any, targets: Any, simulate_hours: float,
+                  t: np.ndarray, raw: np.ndarray, valid: np.ndarray, keep: np.ndarray,
+                  fs: float) -> dict[str, Any]:
+    """Per threshold kind and target: alarms counted on (t, raw) with the thresholds of the
+    calibration without its tail model ("before") and with it ("after")."""
+    results: dict[str, Any] = {}
+    for how in kinds:
+        res = {}
+        for R in targets:
+            rec = {}
+            for label, c in (("before", without_tails(cal)), ("after", cal)):
+                thr = thresholds_for(c, R, how, simulate_hours=simulate_hours)
+                r = count_alarms(cal, thr, t, raw, valid, keep, fs)
+                r["variance_factor"] = list(thr.variance_factor)
+                r["noise_model"] = thr.noise_model
+                r.update(_detectable(cal, thr))
+                rec[label] = _verdict(r, R)
+            res[str(R)] = rec
+        results[how] = res
+    return results
 
 
 def _detectable(cal: Calibration, thr: Thresholds) -> dict[str, Any]:
@@ -215,18 +225,7 @@ def static_holdout_tails(t: np.ndarray, y: np.ndarray, names: tuple[str, ...], *
         keep = np.ones(tc.size, bool)
         way: dict[str, Any] = {"fit": fit_name, "count": count_name,
                                "tail_model": _model_summary(cal), "results": {}}
-        for how in kinds:
-            res = {}
-            for R in targets:
-                rec = {}
-                for label, c in (("before", without_tails(cal)), ("after", cal)):
-                    thr = thresholds_for(c, R, how, simulate_hours=simulate_hours)
-                    r = count_alarms(cal, thr, tc - tc[0], yc, valid, keep, fs)
-                    r["variance_factor"] = list(thr.variance_factor)
-                    r["noise_model"] = thr.noise_model
-                    r.update(_detectable(cal, thr))
-                    rec[label] = _verdict(r, R)
-                res[str(R)] = rec
-            way["results"][how] = res
+        way["results"] = _before_after(cal, kinds, targets, simulate_hours, tc - tc[0], yc,
+                                       valid, keep, fs)
         out["ways"].append(way)
     return out
