@@ -48,6 +48,7 @@ __all__ = [
     "CHANGE_POINT_GRID",
     "ENTRY_POINT_GROUP",
     "LINE_MIN_CYCLES",
+    "OUTSIDE_ALIASES",
     "Candidate",
     "candidates",
     "change_point_scan",
@@ -62,6 +63,28 @@ __all__ = [
 ]
 
 ENTRY_POINT_GROUP = "rimu.effects"
+OUTSIDE_ALIASES = {
+    "g_sensitivity": "a bias that follows the table's orientation for another reason (a "
+                     "magnetic or thermal gradient)",
+    "scale_asymmetry": "a dead zone or any other gain change even in the rate",
+    "scale_nonlinearity": "a gain that varies with |rate| in another law (at one table "
+                          "rate any such law looks the same)",
+    "warmup": "any early transient of another time constant, or a curved drift",
+    "time_skew": "a low-pass lag (sensor bandwidth) at the table's accelerations",
+    "bias_drift": "a curved or late-starting drift, a slow wander (measured: a quadratic "
+                  "drift from 40 % of the session, absorbed with warmup)",
+    "no_earth_rate": "a bias that depends on the heading or the table position",
+    "temperature": "any slow drift that correlates with the temperature profile "
+                   "(warm-up, time)",
+    "bias_step": "a fast ramp, several steps, or a transient that does not recover",
+    "periodic_line": "a line whose amplitude or frequency varies, or a non-sinusoidal "
+                     "periodic signal (measured: a line whose amplitude grows 7-fold)",
+    "misalignment": "a bias or gain that changes with the mounting",
+}
+"""Effects outside the library that each built-in candidate can absorb when it is fitted
+(printed with each effect found; ``tests/calibration/test_closure_injected.py`` measured
+the two marked). The calibration's own terms alias too: a bias that follows the rate sign
+is mostly a scale factor on a sequence of one table rate."""
 BIAS_UNITS = {"gyro": ("deg/h", DPH), "accel": ("mg", MG)}
 """Display unit and its SI factor of bias-like effects, per kind."""
 

@@ -19,7 +19,13 @@ from threadpoolctl import threadpool_limits
 
 from calibration.diagnose.context import KindData, check_match, check_same_session, kind_data
 from calibration.diagnose.detect import POWER, limits
-from calibration.diagnose.library import Candidate, candidates, get_candidate, model_effects
+from calibration.diagnose.library import (
+    OUTSIDE_ALIASES,
+    Candidate,
+    candidates,
+    get_candidate,
+    model_effects,
+)
 from calibration.diagnose.metrics import error_summary
 from calibration.diagnose.refit import refit
 from calibration.diagnose.selection import Selection, noise_sets, select
@@ -46,7 +52,9 @@ class Diagnosis:
     effects : list of dict
         Claimed effects: ``{"name", "kind", "sensors" (1-based), "estimate",
         "estimate_sd", "unit", "p_value", "log10_p_value", "threshold", "aliases",
-        "params"}``.
+        "params", "could_absorb"}`` (``could_absorb``: effects outside the library this
+        term could be absorbing, :data:`.library.OUTSIDE_ALIASES`; "" for a registered one
+        without an entry).
     unexplained : bool
     unexplained_detail : list of dict
         Per failing probe: ``{"kind", "sensor", "sensor_name", "test", "p_value", "steps",
@@ -229,7 +237,8 @@ def _effects_json(sel: Selection, new: Calibration) -> list[dict[str, Any]]:
                     "log10_p_value": float(s.log_p / np.log(10)) if np.isfinite(s.log_p)
                     else None,
                     "threshold": None if not np.isfinite(s.threshold) else s.threshold,
-                    "aliases": list(s.aliases), "params": params})
+                    "aliases": list(s.aliases), "params": params,
+                    "could_absorb": OUTSIDE_ALIASES.get(t.name, "")})
     return out
 
 

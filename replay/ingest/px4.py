@@ -24,6 +24,12 @@ the log unless asked to salvage. Salvaged, a cut file keeps the samples before t
 corrupt one keeps every sample pyulog recovers after resynchronising, and reports each
 damaged stretch (the bytes pyulog skipped or re-read, from its reads) and the IMU samples
 lost there (from each stream's time steps).
+
+Declared but silent: pyulog keeps only the subscriptions that logged data, so an IMU
+instance the log subscribed to (an ``ADD_LOGGED_MSG`` for ``sensor_gyro`` or
+``vehicle_imu``) that logged no sample would vanish without a word; the reader finds the
+subscriptions in the bytes (:func:`declared_instances`) and warns about each one
+(``meta["warnings"]``, printed by ``rimu ingest``).
 """
 
 from __future__ import annotations
@@ -31,6 +37,8 @@ from __future__ import annotations
 import contextlib
 import errno
 import io
+import re
+import struct
 from pathlib import Path
 from typing import Any
 
@@ -41,8 +49,8 @@ from fdi.units import TIME_UNITS
 from replay.ingest.stream import Damage, ImuStream, LogRead
 from replay.log_events import LogEvent, flag_intervals
 
-__all__ = ["FAILURE_DETECTOR_BITS", "PX4_TOPICS", "TOPICS", "looks_like_ulog", "px4_events",
-           "read_px4"]
+__all__ = ["FAILURE_DETECTOR_BITS", "PX4_TOPICS", "TOPICS", "declared_instances",
+           "looks_like_ulog", "px4_events", "read_px4"]
 
 TOPICS = ("sensor_gyro", "sensor_accel", "vehicle_imu", "vehicle_status", "estimator_status")
 """ULog topics the reader loads."""
@@ -365,6 +373,40 @@ def _cut_time(p: str, data: bytes) -> tuple[int, float]:
     return hi, last
 
 
+_ADD_LOGGED = re.compile(rb"(..)A(.)..(sensor_gyro|vehicle_imu)", re.DOTALL)
+"""An ``ADD_LOGGED_MSG`` of an IMU topic: uint16 size, ``'A'``, uint8 multi_id, uint16
+msg_id, the topic name (ULog file format)."""
+
+
+def declared_instances(data: bytes) -> set[tuple[str, int]]:
+    """(topic, multi_id) of every IMU subscription in the bytes of a ULog file.
+
+    A match counts only when the message's size field equals 3 + the name's length (the
+    whole message is the name), so sample bytes that happen to hold the text do not.
+    """
+    out = set()
+    for m in _ADD_LOGGED.finditer(data):
+        (size,) = struct.unpack("<H", m.group(1))
+        if size == 3 + len(m.group(3)):
+            out.add((m.group(3).decode(), m.group(2)[0]))
+    return out
+
+
+def _silent_warnings(data: bytes, meta: dict[str, Any], streams: list[ImuStream]) -> None:
+    """``meta["warnings"]`` for each declared IMU instance of the topic read that logged
+    nothing."""
+    if not streams:
+        return
+    topic = streams[0].source.split("[")[0]
+    read = {s.source for s in streams}
+    empty = sorted(i for t, i in declared_instances(data)
+                   if t == topic and f"{t}[{i}]" not in read)
+    if empty:
+        meta.setdefault("warnings", []).extend(
+            f"the log subscribes to {topic}[{i}] but holds no {topic}[{i}] sample (that "
+            "IMU logged nothing)" for i in empty)
+
+
 def read_px4(path: str | Path, *, salvage: bool = False, topic: str = "auto") -> LogRead:
     """Read the IMU instances of a PX4 ULog file.
 
@@ -396,6 +438,7 @@ def read_px4(path: str | Path, *, salvage: bool = False, topic: str = "auto") ->
                                          "(corrupt format definition?)",
                               field=str(exc.args[0])) from None
     meta["topic"] = streams[0].source.split("[")[0] if streams else None
+    _silent_warnings(data, meta, streams)
     meta["start_timestamp_us"] = int(u.start_timestamp)
     meta["dropouts"] = len(u.dropouts)
     dmg = None

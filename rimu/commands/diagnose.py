@@ -75,6 +75,9 @@ def text(d) -> str:
             lines.append(f"  {e['name']:<18s} {e['kind']} {e['sensors'][0]}: "
                          f"{e['estimate']:+.4g} ± {e['estimate_sd']:.2g} {e['unit']}"
                          f"   p {_p(e)}" + (f"   [{par}]" if par else "") + alias)
+            if e.get("could_absorb"):
+                lines.append(f"    {'':<18s} could instead be absorbing (outside the "
+                             f"library): {e['could_absorb']}")
     else:
         lines.append("effects found: none")
     if d.unexplained:

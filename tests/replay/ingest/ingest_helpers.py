@@ -104,7 +104,7 @@ def write_ulog(path: Path, t_us: list[np.ndarray], gyros: list[np.ndarray],
     from pyulog import ULog
 
     u = ULog(None)
-    u._start_timestamp = int(min(t[0] for t in t_us))
+    u._start_timestamp = int(min(t[0] for t in t_us if t.size))   # an instance may be empty
     hdr = ULog._MessageHeader()
     for fmt in (_GYRO_FMT, _ACCEL_FMT):
         mf = ULog.MessageFormat(fmt.encode(), hdr)

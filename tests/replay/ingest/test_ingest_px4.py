@@ -149,3 +149,28 @@ def test_real_vehicle_imu_agrees_where_raw_sensor_gyro_does_not():
     spread_cal = np.ptp([s.gyro.mean(axis=0) for s in cal.streams], axis=0)
     # sensor_gyro is logged before PX4's calibration: 3.5 °/s apart; vehicle_imu after it
     assert spread_raw.max() > np.radians(3.0) and spread_cal.max() < np.radians(0.5)
+
+
+def test_declared_imu_that_logged_nothing_is_named(tmp_path, capsys):
+    """Issue 18: an IMU instance the log subscribes to but that logged no sample (pyulog
+    drops it) is named in a warning, at read and by rimu ingest; a full log has none."""
+    rng = np.random.default_rng(5)
+    n = 60
+    t = [np.arange(n, dtype=np.uint64) * 4000 + 1_000_000 for _ in range(2)] \
+        + [np.zeros(0, np.uint64)]
+    g = [rng.normal(0, 0.1, (m.size, 3)).astype(np.float32) for m in t]
+    down = np.array([0.0, 0.0, -9.8])
+    a = [(rng.normal(0, 0.1, (m.size, 3)) + down).astype(np.float32) for m in t]
+    temps = [np.full(m.size, 30.0, np.float32) for m in t]
+    p = tmp_path / "silent.ulg"
+    write_ulog(p, t, g, a, temps, [1, 2, 3])
+    r = read_px4(p)
+    assert [s.source for s in r.streams] == ["sensor_gyro[0]", "sensor_gyro[1]"]
+    assert r.meta["warnings"] == ["the log subscribes to sensor_gyro[2] but holds no "
+                                  "sensor_gyro[2] sample (that IMU logged nothing)"]
+    assert main(["ingest", str(p), "--out", str(tmp_path / "f")]) == 0
+    assert "sensor_gyro[2] sample (that IMU logged nothing)" in capsys.readouterr().out
+
+
+def test_full_log_has_no_silent_imu_warning(ulog):
+    assert "warnings" not in read_px4(ulog[0]).meta
