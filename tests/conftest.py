@@ -1,4 +1,5 @@
-"""Shared pytest configuration: ``--slow`` enables the Monte Carlo tests."""
+"""Shared pytest configuration: ``--slow`` enables the Monte Carlo tests, ``--campaign`` the
+few campaigns that take minutes each (not run by CI; docs/testing.md)."""
 
 import os
 
@@ -15,12 +16,19 @@ if os.environ.get("CI"):
 def pytest_addoption(parser: pytest.Parser) -> None:
     parser.addoption("--slow", action="store_true", default=False,
                      help="also run tests marked slow (Monte Carlo acceptance runs)")
+    parser.addoption("--campaign", action="store_true", default=False,
+                     help="also run tests marked campaign (Monte Carlo campaigns of several "
+                          "minutes each; implies --slow)")
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    if config.getoption("--slow"):
+    if config.getoption("--campaign"):
         return
-    skip = pytest.mark.skip(reason="slow: run with --slow")
+    slow = config.getoption("--slow")
+    skip_slow = pytest.mark.skip(reason="slow: run with --slow")
+    skip_campaign = pytest.mark.skip(reason="campaign of several minutes: run with --campaign")
     for item in items:
-        if "slow" in item.keywords:
-            item.add_marker(skip)
+        if "campaign" in item.keywords:
+            item.add_marker(skip_campaign)
+        elif "slow" in item.keywords and not slow:
+            item.add_marker(skip_slow)

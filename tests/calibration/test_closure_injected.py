@@ -22,7 +22,8 @@ weaker one, so the adequacy claim is checked against the strongest verdict the p
 could give. The Allan table and the Earth-rate fit are skipped (they feed no parameter
 the claims compare). 160 sessions, about 1-2 s each: 315-390 s wall for the file with
 ``--slow`` on the shared 2-core machine (the ~60 s aimed for would need shorter sessions
-than the presets' sequences; the presets were kept).
+than the presets' sequences; the presets were kept). Marked ``campaign``: it runs with
+``pytest --campaign`` and not in CI, whose budget it would take half of.
 """
 
 import dataclasses
@@ -267,6 +268,7 @@ def _marked(names):
 
 
 @pytest.mark.slow
+@pytest.mark.campaign
 @pytest.mark.parametrize("name", _marked(LIBRARY))
 def test_library_effect_found_on_its_sensor(name):
     _preset, kind, sensor, _ = LIBRARY[name]
@@ -290,6 +292,7 @@ def test_library_effect_found_on_its_sensor(name):
 
 
 @pytest.mark.slow
+@pytest.mark.campaign
 @pytest.mark.parametrize("name", _marked(OUTSIDE))
 def test_outside_effect_unexplained_or_refused(name):
     _preset, kind, sensor, _ = OUTSIDE[name]
