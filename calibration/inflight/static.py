@@ -39,10 +39,17 @@ from fdi.errors import CalibrationError, ConfigError
 from fdi.units import DPS
 from replay.flight_data import Flight
 
-__all__ = ["BLOCKS", "STATIC_METHOD", "attribute_drift", "calibrate_static", "static_text"]
+__all__ = ["BLOCKS", "SCALE_FACTOR_TOLERANCE", "STATIC_METHOD", "attribute_drift",
+           "calibrate_static", "static_text"]
 
 STATIC_METHOD = "static alignment to a reference IMU (calibration.inflight.static/1)"
 BLOCKS = 10
+SCALE_FACTOR_TOLERANCE = 0.03
+"""Scale-factor uncertainty stated for every gyro of a static calibration (relative): rest
+cannot observe a scale factor, so the calibration takes 1 ± this (a consumer MEMS gyro's
+sensitivity tolerance, MPU9250 datasheet ±3 %). It enters the input-error covariance, so
+the monitor's thresholds widen when the bench moves instead of taking the scale-factor
+differences for a fault."""
 """Contiguous blocks whose scatter gives the sds."""
 _MOVING_RPS = 0.05
 _MIN_ANGLE_DEG = 15.0
@@ -263,9 +270,12 @@ def calibrate_static(flight: Flight, *, reference: str | None = None, alpha: flo
             sd_rot = rot_sd[g]
             ms = np.abs(E @ np.cross(sd_rot, h)) if np.all(np.isfinite(sd_rot)) else \
                 np.full(2, np.inf)
+            tol = SCALE_FACTOR_TOLERANCE
+            across = E.T @ np.diag(np.where(np.isfinite(ms), ms, 0.0) ** 2) @ E
             sensors.append(SensorCal(
                 name=flight.sensor_names[i], axis=h, axis_nominal=nom, scale_factor=1.0,
-                scale_factor_sd=0.0, bias=float(b[i]), bias_sd=float(bias_sd[i]),
+                scale_factor_sd=tol, bias=float(b[i]), bias_sd=float(bias_sd[i]),
+                input_error_cov=tol**2 * np.outer(h, h) + across,
                 misalignment_sd=ms, raw_unit=flight.raw_unit,
                 scale_factor_unit=_sf_unit(flight.raw_unit), bias_unit="deg/s",
                 residual_rms=float(np.std(xs[:, i]))))
@@ -290,7 +300,9 @@ def calibrate_static(flight: Flight, *, reference: str | None = None, alpha: flo
                 "own": {g: {**v, "drift": (np.asarray(v["drift"]) / DPS).tolist()}
                         for g, v in attr["own"].items()},
                 "unit": "deg/s over the record (body frame of the reference)"}
-    notes.append("scale factors are not observable at rest: taken as 1")
+    notes.append(f"scale factors are not observable at rest: taken as 1 ± "
+                 f"{100 * SCALE_FACTOR_TOLERANCE:g} % (a stated tolerance, in the input-error "
+                 "covariance: the monitor's thresholds widen when the set moves)")
     notes.append("biases hold the Earth rate's projection (<= 0.0042 deg/s)")
     summary = {"reference": ref, "imus": per_imu, "alignment_full": full, "notes": notes,
                "drift_attribution": attr_dps, "alpha": alpha,
