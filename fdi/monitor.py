@@ -507,9 +507,10 @@ class Monitor:
         k = dec.exclude
         wm = self._episode_window()
         mag = magnitude(mdl.U, self._state.window_sum(wm), wm, k) if wm else None
+        others = [float(dec.residuals[j]) for j in range(mdl.m) if j != k]
         events.append(Event(t, mdl.idx[k] + 1, "isolated", f"parity scale {w}",
-                            float(dec.residuals[k]), dec.subset_threshold, w, mag,
-                            envelope=self._env))
+                            min(others) if others else _NAN, dec.rejection_level, w, mag,
+                            envelope=self._env))   # the weakest rejected alternative > c
         self._isolate(mdl.idx[k], "isolated")
         ks = self._kset
         reconstruct_row(raw, corr, r, ks.packed, self._state.values, row)

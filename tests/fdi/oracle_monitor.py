@@ -268,7 +268,9 @@ class OracleMonitor:
                     mag = (float(mdl.U[:, k] @ s) / (wm * float(mdl.U[:, k] @ mdl.U[:, k]))
                            if wm else None)
                     sensor = mdl.idx[k] + 1
-                    events.append(("isolated", sensor, f"parity scale {wd}", res[k], sub, mag))
+                    c = sstats.chi2.isf(self.settings.wrong_exclusion / (mdl.m - 1), mdl.df - 1)
+                    weakest = min(float(res[j]) for j in range(mdl.m) if j != k)
+                    events.append(("isolated", sensor, f"parity scale {wd}", weakest, c, mag))
                     self.healthy[sensor - 1] = False
                     self._new_set()
                 else:
