@@ -168,6 +168,24 @@ class Flight:
             out.setdefault(g, []).append(i)
         return out
 
+    def imu_triads(self, what: str) -> dict[str, list[int]]:
+        """:meth:`imu_groups`, checked to be two or more groups of three gyros (what
+        ``what``, e.g. "static calibration", needs).
+
+        Raises
+        ------
+        ConfigError
+            Another kind of sensor, or not two or more triads (manifest 'imu').
+        """
+        if self.kind != "gyro":
+            raise ConfigError(f"{self.source}: {what} needs gyros, the flight monitors "
+                              f"{self.kind}")
+        g = self.imu_groups()
+        if len(g) < 2 or any(len(v) != 3 for v in g.values()):
+            raise ConfigError(f"{self.source}: {what} needs two or more IMU groups of three "
+                              f"gyros (manifest 'imu')")
+        return g
+
 
 def concat_flights(pieces: Sequence[Flight]) -> Flight:
     """Join consecutive flight pieces (same sensors) into one flight."""

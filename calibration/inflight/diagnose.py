@@ -115,10 +115,7 @@ def flight_residual(flight: Flight, cal: Calibration, reference: str | None = No
     if flight.kind != "gyro" or s.n != flight.n:
         raise ConfigError(f"{flight.source}: {flight.n} {flight.kind} sensors, the "
                           f"calibration has {s.n} gyros")
-    groups = flight.imu_groups()
-    if len(groups) < 2 or any(len(v) != 3 for v in groups.values()):
-        raise ConfigError(f"{flight.source}: diagnose of a flight needs two or more IMU "
-                          f"groups of three gyros (manifest 'imu')")
+    groups = flight.imu_triads("diagnose of a flight")
     ref = reference or str(cal.extra.get("inflight", {}).get("reference", "")) \
         or str(cal.extra.get("static", {}).get("reference", "")) or next(iter(groups))
     if ref not in groups:

@@ -57,14 +57,7 @@ _MIN_ANGLE_DEG = 15.0
 
 
 def _groups(flight: Flight) -> dict[str, list[int]]:
-    if flight.kind != "gyro":
-        raise ConfigError(f"{flight.source}: static calibration needs gyros, the flight "
-                          f"monitors {flight.kind}")
-    g = flight.imu_groups()
-    if len(g) < 2 or any(len(v) != 3 for v in g.values()):
-        raise ConfigError(f"{flight.source}: static calibration needs two or more IMU groups "
-                          f"of three gyros (manifest 'imu')")
-    return g
+    return flight.imu_triads("static calibration")
 
 
 def _accel(flight: Flight, imu: str) -> np.ndarray | None:

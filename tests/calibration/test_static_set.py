@@ -154,3 +154,17 @@ def test_mpu9250_chain_names_the_drift_and_whose_it_is(tmp_path: Path, capsys) -
     drift = [e for e in doc["effects"] if e["name"] in ("bias_drift", "slow_bias_change")]
     assert drift and all(e["p_value"] < 1e-6 for e in drift)
     assert "imu1" in doc["drift_attribution"]["statement"]
+
+
+def test_static_calibration_needs_two_imu_triads():
+    """One IMU, or gyros not in triads: one error naming what is needed (Flight.imu_triads,
+    shared with the flight diagnosis)."""
+    from fdi.errors import ConfigError
+
+    N = 200
+    one = Flight(t=np.arange(N) / 50.0, raw=np.zeros((N, 3)), valid=np.ones((N, 3), bool),
+                 sensor_names=("imu1.x", "imu1.y", "imu1.z"), sample_rate_hz=50.0,
+                 source="one.csv", imu=("imu1",) * 3)
+    with pytest.raises(ConfigError, match=r"one\.csv: static calibration needs two or more "
+                                          r"IMU groups of three gyros"):
+        calibrate_static(one)
