@@ -24,11 +24,22 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["AXES", "PairCapability", "capability_report"]
+__all__ = ["AXES", "AXIS_SHARE", "PairCapability", "capability_report", "moved_axes"]
 
 AXES = ("x", "y", "z")
 """Body axes of the reconstructed rate."""
-_AXIS_SHARE = 0.1
+AXIS_SHARE = 0.1
+"""A sensor moves a body axis when its reconstruction column moves that axis by at least
+this share of the axis it moves most."""
+
+
+def moved_axes(g: np.ndarray) -> np.ndarray:
+    """Body axes a sensor's reconstruction column ``g`` (3,) moves (:data:`AXIS_SHARE`);
+    every axis when the column is not finite or zero (nothing can be ruled out)."""
+    g = np.abs(np.asarray(g, float))
+    if not (np.all(np.isfinite(g)) and g.max() > 0):
+        return np.ones(3, bool)
+    return g >= AXIS_SHARE * g.max()
 
 
 @dataclass(frozen=True)
@@ -84,7 +95,7 @@ def capability_report(model: Any, names: tuple[str, ...] | list[str], scale: flo
         movers = []
         for c, i in enumerate(idx):
             g = np.abs(G[:, i])
-            if np.all(np.isfinite(g)) and g.max() > 0 and g[k] >= _AXIS_SHARE * g.max():
+            if np.all(np.isfinite(g)) and g.max() > 0 and moved_axes(g)[k]:
                 movers.append(c)
         worst = 0.0
         for a in movers:

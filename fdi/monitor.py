@@ -35,6 +35,7 @@ from fdi import state as S
 from fdi.answer import Answer, BlockResult, Event
 from fdi.blocks import CAPABILITY_CODE, CAPABILITY_NAMES, block_from_answers
 from fdi.calfile import Calibration
+from fdi.capability import moved_axes
 from fdi.detector import chi2_threshold, default_thresholds
 from fdi.envelope import reason_names
 from fdi.errors import ConfigError
@@ -55,10 +56,6 @@ _INF = float("inf")
 _CHUNK = 1 << 16
 _NO_AXES = np.zeros(3, bool)
 _NO_AXES.setflags(write=False)
-_AXIS_SHARE = 0.1
-"""A suspected sensor's fault leaves a body axis unverified when it moves that axis by at
-least this share of the axis it moves most (or by one ω̂ standard deviation at the
-estimated fault size)."""
 
 
 class Monitor:
@@ -576,8 +573,7 @@ class Monitor:
         s_w = self._state.window_sum(w) if w else None
         for j in cols:
             g = np.abs(G[:, mdl.idx[j]])
-            top = float(g.max()) if np.isfinite(g).all() else _INF
-            axes |= ~(g < _AXIS_SHARE * top)
+            axes |= moved_axes(g)         # and where the estimated fault moves it by one sd:
             if s_w is not None:
                 f = abs(magnitude(mdl.U, s_w, w, j))
                 with np.errstate(invalid="ignore", over="ignore"):
