@@ -41,6 +41,14 @@ file loads without it; :mod:`fdi.tails`, ``docs/noise-tails.md``)::
                                  "scales": [{"scale": 1, "probability": [...],
                                              "quantile_upper": [...], "gpd": {...}}, ...]}}
 
+Version 4 adds one optional top-level key, the slow drift of the residual's whitened
+parity (:mod:`fdi.drift`, ``docs/drift.md``); a calibration without it is still written as
+``/3``, so files without a drift model read as before::
+
+     "parity_drift": {"gyro": {"method": "rimu.drift/1", "df": 9, "samples": 20835,
+                               "sample_rate_hz": 43.0, "span_s": 484.0,
+                               "tau_s": [...], "blocks": [...], "excess": [...], ...}}
+
 Each effect term adds ``estimate · g(inputs; params)`` to the sensor's output in the
 model (see :mod:`calibration.diagnose.library` for the regressors ``g``).
 The runtime monitor compensates the terms whose inputs it has at run time (rate sign,
@@ -71,6 +79,7 @@ from typing import Any
 
 import numpy as np
 
+from fdi.drift import DriftModel, drift_model_from_fields
 from fdi.errors import ConfigError
 from fdi.fileio import Fields, read_json_object, to_jsonable
 from fdi.tails import TailModel, tail_model_from_fields
@@ -86,6 +95,7 @@ from fdi.units import (
 __all__ = [
     "CALIBRATION_SCHEMA",
     "CALIBRATION_SCHEMAS",
+    "CALIBRATION_SCHEMA_DRIFT",
     "FINGERPRINT_VOLATILE",
     "FINGERPRINT_VOLATILE_EXTRA",
     "KINDS",
@@ -101,9 +111,13 @@ __all__ = [
 ]
 
 CALIBRATION_SCHEMA = "rimu.calibration/3"
-CALIBRATION_SCHEMAS = (CALIBRATION_SCHEMA, "rimu.calibration/1", "rimu.calibration/2")
+CALIBRATION_SCHEMA_DRIFT = "rimu.calibration/4"
+"""Written instead of :data:`CALIBRATION_SCHEMA` when a set carries a drift model."""
+CALIBRATION_SCHEMAS = (CALIBRATION_SCHEMA, "rimu.calibration/1", "rimu.calibration/2",
+                       CALIBRATION_SCHEMA_DRIFT)
 """Versions the loader reads, the one written first (what an error message asks for);
-``/1``: no effects, no adequacy record; ``/2``: no residual tail model."""
+``/1``: no effects, no adequacy record; ``/2``: no residual tail model; ``/3``: no drift
+model; ``/4``: with the drift model (``parity_drift``)."""
 FINGERPRINT_VOLATILE = ("schema", "parity")
 """Top-level keys left out of :meth:`Calibration.fingerprint`: the schema (a migrated file
 keeps it) and the parity matrices, which are derived from the axes (their near-zero entries,
@@ -271,6 +285,9 @@ class SensorSet:
     tails : TailModel or None
         The residual's tail per window scale (:mod:`fdi.tails`, ``rimu.calibration/3``);
         None when not measured.
+    drift : DriftModel or None
+        The slow drift of the residual's whitened parity (:mod:`fdi.drift`,
+        ``rimu.calibration/4``); None when not measured.
     """
 
     kind: str
@@ -280,6 +297,7 @@ class SensorSet:
     misalignment_matrices: tuple[np.ndarray, ...] = ()
     allan: AllanTable | None = None
     tails: TailModel | None = None
+    drift: DriftModel | None = None
 
     @property
     def n(self) -> int:
@@ -388,10 +406,13 @@ class Calibration:
         return hashlib.sha256(text.encode("utf-8")).hexdigest()[:16]
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready dictionary in the ``rimu.calibration/3`` layout."""
+        """JSON-ready dictionary in the ``rimu.calibration/3`` layout (``/4`` with drift)."""
         from fdi.parity import parity_matrix
 
-        doc: dict[str, Any] = {"schema": self.schema, "configuration": self.configuration,
+        drift = {kind: s.drift.to_dict() for kind, s in self.sets.items()
+                 if s.drift is not None}
+        schema = CALIBRATION_SCHEMA_DRIFT if drift else self.schema
+        doc: dict[str, Any] = {"schema": schema, "configuration": self.configuration,
                                "sample_rate_hz": self.sample_rate_hz, "sensors": {},
                                "noise_covariance": {"unit": {},
                                                     "sample_rate_hz": self.sample_rate_hz},
@@ -400,6 +421,8 @@ class Calibration:
                  if s.tails is not None}
         if tails:
             doc["residual_tails"] = to_jsonable(tails)
+        if drift:
+            doc["parity_drift"] = to_jsonable(drift)
         for kind, s in self.sets.items():
             doc["sensors"][kind] = [_sensor_to_dict(c) for c in s.sensors]
             doc["noise_covariance"][kind] = s.noise_covariance.tolist()
@@ -502,8 +525,10 @@ def calibration_from_dict(doc: Mapping[str, Any], path: str = "<calibration>") -
     noise.accept("unit", "sample_rate_hz")
     for sub in (noise, mm, allan):
         sub.finish(accept=sets)
-    if version == CALIBRATION_SCHEMA:
+    if version in (CALIBRATION_SCHEMA, CALIBRATION_SCHEMA_DRIFT):
         sets = _tails(r, sets)
+    if version == CALIBRATION_SCHEMA_DRIFT:
+        sets = _drift(r, sets)
     cal = Calibration(
         configuration=str(r.get("configuration", "")), sets=sets, sample_rate_hz=rate,
         earth_rate_dph=r.number("earth_rate_dph", None),
@@ -532,6 +557,27 @@ def _tails(r: Fields, sets: dict[str, SensorSet]) -> dict[str, SensorSet]:
             raise sub.error("df", f"{model.df} parity dimensions for {sets[kind].n} {kind} "
                             "sensors")
         out[kind] = replace(sets[kind], tails=model)
+    t.finish(accept=sets)
+    return out
+
+
+def _drift(r: Fields, sets: dict[str, SensorSet]) -> dict[str, SensorSet]:
+    """``parity_drift``: the drift model per kind (``/4``, optional)."""
+    from dataclasses import replace
+
+    t = r.mapping("parity_drift", None)
+    if t is None:
+        return sets
+    out = dict(sets)
+    for kind in sets:
+        sub = t.mapping(kind, None)
+        if sub is None:
+            continue
+        model = drift_model_from_fields(sub)
+        if model.df > sets[kind].n:
+            raise sub.error("df", f"{model.df} parity dimensions for {sets[kind].n} {kind} "
+                            "sensors")
+        out[kind] = replace(sets[kind], drift=model)
     t.finish(accept=sets)
     return out
 

@@ -26,6 +26,7 @@ import numpy as np
 from scipy import optimize, stats
 
 from fdi.calfile import AllanTable, Calibration
+from fdi.drift import drift_variance_factors
 from fdi.errors import ConfigError
 from fdi.settings import Thresholds
 from fdi.tails import tail_variance_factors
@@ -178,7 +179,9 @@ def default_thresholds(cal: Calibration, *, kind: str = "gyro",
 
     The variance factor of each scale is the Allan one, or where the calibration's tail
     model says the residual fails its normality check, ``max(Allan, overbound f_w(α_w))``
-    (:func:`fdi.tails.tail_variance_factors`).
+    (:func:`fdi.tails.tail_variance_factors`); where the calibration carries a drift model,
+    plus ``w·δ²`` of the drift over a horizon of the calibration's span
+    (:func:`fdi.drift.drift_variance_factors`).
 
     Parameters
     ----------
@@ -213,13 +216,16 @@ def default_thresholds(cal: Calibration, *, kind: str = "gyro",
     df = s.n - 3
     vf_allan = variance_factors(s.allan, s.noise_covariance, fs, sc)
     vf, choices = tail_variance_factors(s.tails, sc, tuple(share for _ in sc), vf_allan)
+    vf = drift_variance_factors(s.drift, sc, vf)
     thr = tuple(chi2_threshold(share, df) if df >= 1 else 1e300 for _ in sc)
     h = cusum_threshold(share, cusum_drift, 2 * s.n) if detector != "windows" else float("nan")
     notes = (f"per-sample alpha {a_tot:.3e} = {false_alarms_per_hour:g}/h at {fs:g} Hz split "
              f"equally over {n_tests} test(s) (Bonferroni, conservative for correlated "
              f"running means); chi-square with m-3 dof; variance factors from "
              f"{'the Allan table' if s.allan is not None else 'white noise (no Allan table)'}"
-             f"{tail_note(choices)}; detector {detector}")
+             f"{tail_note(choices)}"
+             f"{'' if s.drift is None else '; plus the parity drift over the calibration span'}"
+             f"; detector {detector}")
     return Thresholds(kind=kind, n=s.n, sample_rate_hz=fs,
                       false_alarms_per_hour=float(false_alarms_per_hour), scales=sc,
                       alpha=tuple(share for _ in sc), detector=detector,

@@ -258,9 +258,10 @@ def holdout_static(t: np.ndarray, y: np.ndarray, names: tuple[str, ...],
                    targets: Sequence[float] = TARGETS_PER_HOUR, *,
                    progress: Callable[[], None] | None = None) -> dict[str, Any]:
     """The static set: static calibration (:func:`thresholds.realnoise.static_calibration`,
-    with the MPU9250's datasheet tolerances for what rest cannot observe and the bias
-    uncertainty of a later stretch) of one half, thresholds tuned on it, the monitor
-    (isolation on) over the other half."""
+    with the MPU9250's datasheet tolerances for what rest cannot observe, the bias
+    uncertainty of a later stretch, the residual's tail model and its parity drift model)
+    of one half, thresholds tuned on it (the drift over the default horizon, the half's
+    own length), the monitor (isolation on) over the other half."""
     from fdi.monitor import Monitor
     from thresholds.realnoise import (
         MPU9250_CROSS_AXIS,
@@ -270,10 +271,12 @@ def holdout_static(t: np.ndarray, y: np.ndarray, names: tuple[str, ...],
 
     def calibrate(part: np.ndarray) -> Calibration:
         """At rest: scale factors and axes stated by the datasheet's tolerances, the bias
-        uncertainty of a later stretch (drift included)."""
+        uncertainty of a later stretch (drift included), the residual's tail model and
+        the drift model of its parity (``tune`` then covers the drift over a horizon of
+        the part's length: the other half)."""
         return static_calibration(part, fs, names, drift_bias_sd=True, bias_prediction=True,
                                   scale_factor_tolerance=MPU9250_SCALE_FACTOR_TOLERANCE,
-                                  cross_axis=MPU9250_CROSS_AXIS)
+                                  cross_axis=MPU9250_CROSS_AXIS, tails=True, drift=True)
 
     t = np.asarray(t, float) - float(t[0])
     fs = (t.size - 1) / float(t[-1] - t[0])

@@ -102,7 +102,8 @@ PREDICTION_BLOCKS = 8
 def static_calibration(y: np.ndarray, fs: float, names: tuple[str, ...],
                        *, allan: bool = True, drift_bias_sd: bool = False,
                        scale_factor_tolerance: float = 0.0, cross_axis: float = 0.0,
-                       bias_prediction: bool = False) -> Calibration:
+                       bias_prediction: bool = False, tails: bool = False,
+                       drift: bool = False) -> Calibration:
     """A calibration of static channels (N, n) rad/s: aligned triads, SF 1, bias = mean.
 
     ``bias_sd`` is the standard error of the mean, or with ``drift_bias_sd`` the Allan
@@ -116,6 +117,13 @@ def static_calibration(y: np.ndarray, fs: float, names: tuple[str, ...],
     uncertainty as the scatter of :data:`PREDICTION_BLOCKS` block means times
     sqrt(1 + 1/B) (the spread of the bias in a later stretch of the same length, drift
     included), at least the other choices.
+
+    ``tails`` measures the residual's tail model (:func:`calibration.tails.fit_tail_model`)
+    relative to the monitor's threshold inflation of this calibration (ρ, κ, β of
+    :func:`fdi.reconstruction.inflation_terms`), as the in-flight calibration does;
+    ``drift`` measures the slow drift of its whitened parity
+    (:func:`calibration.drift.fit_drift_model`, ``docs/drift.md``), which ``tune`` turns
+    into the drift expected over its horizon. Both come from ``y`` alone.
     """
     y = np.asarray(y, float)
     n = y.shape[1]
@@ -150,6 +158,22 @@ def static_calibration(y: np.ndarray, fs: float, names: tuple[str, ...],
     groups = tuple(tuple(range(k, k + 3)) for k in range(0, n, 3))
     gs = SensorSet("gyro", tuple(sensors), cov, groups, tuple(np.eye(3) for _ in groups),
                    table)
+    resid = y - mean
+    if tails:
+        from calibration.tails import fit_tail_model
+        from fdi.reconstruction import inflation_terms
+
+        rho, kappa, beta = inflation_terms(
+            gs.H, gs.scale_factors, gs.biases, cov,
+            np.array([c.input_error_cov for c in sensors]), bsd, np.zeros(n), fs, y)
+        gs = replace(gs, tails=fit_tail_model(
+            resid, gs.H, cov, fs, rho=rho, kappa=kappa, beta=beta,
+            source="static residual (y - mean), relative to the monitor's threshold inflation"))
+    if drift:
+        from calibration.drift import fit_drift_model
+
+        gs = replace(gs, drift=fit_drift_model(resid, gs.H, cov, fs,
+                                                source="static residual (y - mean)"))
     return Calibration("static", {"gyro": gs}, fs, extra={"source": "static recording"})
 
 

@@ -34,6 +34,15 @@ The tuning here
   :data:`MIN_SIMULATED_RATE` per hour the correction is measured at that rate and carried
   over (stated in the assumptions).
 
+Drift over the horizon
+----------------------
+Where the calibration carries a drift model of its whitened parity (:mod:`fdi.drift`,
+``docs/drift.md``), every scale's variance factor gets ``w·δ²(h)`` added after the tail
+overbound: δ²(h) is the parity offset variance the calibration's own long-τ Allan
+covariance predicts at the end of the horizon h (``drift_horizon_s``, default the span of
+the calibration data) under a random-walk extrapolation. The detectable sizes below then
+grow with it, and the tuning states the drift given up (1 σ of the offset, worst sensor).
+
 Detectable size (at rest)
 -------------------------
 A step b on sensor i moves the whitened parity by ``b·u_i``; over a full window of w
@@ -63,6 +72,7 @@ from fdi.detector import (
     tail_note,
     variance_factors,
 )
+from fdi.drift import drift_variance_factors
 from fdi.errors import ConfigError
 from fdi.fileio import to_jsonable
 from fdi.parity import parity_matrix
@@ -355,9 +365,38 @@ def _assumptions(cal: Calibration, thr: Thresholds, kind: str, df: int, beta: fl
     }
 
 
+def _drift_assumptions(cal: Calibration, kind: str, thr: Thresholds, vf_no_drift: tuple,
+                       horizon_s: float | None, u2: np.ndarray) -> dict[str, Any]:
+    """What the drift term assumes and gives up (for the tuning file and ``rimu tune``)."""
+    s = cal.kind(kind)
+    m = s.drift
+    if m is None:
+        return {"model": None, "note": "no drift model in the calibration: the thresholds "
+                                       "assume the biases stay as calibrated"}
+    d2 = m.offset_variance(horizon_s)
+    conv = DPS if kind == "gyro" else 1.0
+    # a bias b on sensor i moves the whitened parity by b·|u_i|: δ per direction is the
+    # bias δ/|u_i| on sensor i (the worst sensor: the smallest |u_i|)
+    i = int(np.argmin(u2))
+    return {"model": m.method, "source": m.source, "span_s": m.span_s,
+            "horizon_s": m.span_s if horizon_s is None else float(horizon_s),
+            "horizon_tau_s": m.horizon_tau_s(horizon_s),
+            "longest_resolved_tau_s": m.tau_s[-1] if m.tau_s else None,
+            "excess_at_longest_tau": m.excess[-1] if m.excess else None,
+            "offset_variance_whitened": d2,
+            "offset_sd_worst_sensor": math.sqrt(d2 / u2[i]),
+            "offset_sd_worst_sensor_unit_value": math.sqrt(d2 / u2[i]) / conv,
+            "unit": "deg/s" if kind == "gyro" else "m/s^2", "worst_sensor": i + 1,
+            "variance_factor_without_drift": list(vf_no_drift),
+            "variance_factor": list(thr.variance_factor),
+            "rule": "f_w + w*delta^2(h), delta^2(h) = 2*max(e(tau_L)*tau_h/tau_L, max e), "
+                    "tau_h = 1.5 h + T_c/2 (random walk beyond the longest resolved tau)"}
+
+
 def tune(cal: Calibration, *, false_alarms_per_hour: float, kind: str = "gyro",
          scales: int | tuple[int, ...] = 7, simulate_hours: float = 4.0,
-         seed: int = 0, progress: bool = False) -> Tuning:
+         seed: int = 0, progress: bool = False,
+         drift_horizon_s: float | None = None) -> Tuning:
     """Thresholds whose full-set false-alarm rate is ``false_alarms_per_hour``.
 
     Parameters
@@ -376,16 +415,23 @@ def tune(cal: Calibration, *, false_alarms_per_hour: float, kind: str = "gyro",
         Seed of the correction flights.
     progress : bool
         A tqdm bar on stderr over the simulated flight hours.
+    drift_horizon_s : float, optional
+        How long after its data the calibration must hold (s): the horizon of the drift
+        term (module docstring). Default: the span of the calibration data. Ignored when
+        the calibration has no drift model.
 
     Raises
     ------
     ConfigError
         No residual statistics, a target that is not positive and finite, an unknown scale,
-        a set without redundancy.
+        a set without redundancy, a negative or non-finite horizon.
     """
     R = float(false_alarms_per_hour)
     if not (math.isfinite(R) and R > 0):
         raise ConfigError(f"--false-alarms-per-hour must be positive and finite, got {R:g}")
+    if drift_horizon_s is not None and not (math.isfinite(float(drift_horizon_s))
+                                            and float(drift_horizon_s) >= 0):
+        raise ConfigError(f"--drift-horizon-s must be >= 0 and finite, got {drift_horizon_s}")
     s = cal.kind(kind)
     if s.allan is None:
         raise ConfigError(f"the calibration has no residual statistics for its {kind} "
@@ -399,7 +445,7 @@ def tune(cal: Calibration, *, false_alarms_per_hour: float, kind: str = "gyro",
     sc = check_scales(cal, scales, kind=kind, sample_rate_hz=fs)
     if s.n < 4:
         raise ConfigError(f"{s.n} {kind} sensors: no parity space, nothing to tune")
-    df, _, beta, _, _ = _parity_geometry(cal, kind)
+    df, u2, beta, _, _ = _parity_geometry(cal, kind)
     vf = variance_factors(s.allan, s.noise_covariance, fs, sc)
     base = {"kind": kind, "n": s.n, "sample_rate_hz": fs, "false_alarms_per_hour": R,
             "scales": sc, "variance_factor": vf, "detector": "windows"}
@@ -425,9 +471,17 @@ def tune(cal: Calibration, *, false_alarms_per_hour: float, kind: str = "gyro",
     thr = _share_thresholds(base, per_sample / len(sc) / gamma, df)
     # the simulated correction is measured on Gaussian flights with the Allan factors; the
     # measured tails then inflate the variance per scale at the alpha it ended with
-    vf_used, choices = tail_variance_factors(s.tails, sc, thr.alpha, vf)
+    vf_tail, choices = tail_variance_factors(s.tails, sc, thr.alpha, vf)
+    # then the drift expected over the horizon (fdi.drift), on top of noise and tail
+    vf_used = drift_variance_factors(s.drift, sc, vf_tail, drift_horizon_s)
+    drift_note = ""
+    if s.drift is not None:
+        h = s.drift.span_s if drift_horizon_s is None else float(drift_horizon_s)
+        drift_note = (f"; parity drift over a {h:g} s horizon: variance factor + w*"
+                      f"{s.drift.offset_variance(drift_horizon_s):.3g}")
     notes = (f"tuned for {R:g} false alarms/h: exact white-noise upcrossing rate per scale, "
-             f"equal shares, simulated correction {gamma:.3f}{tail_note(choices)} (rimu tune)")
+             f"equal shares, simulated correction {gamma:.3f}{tail_note(choices)}"
+             f"{drift_note} (rimu tune)")
     thr = Thresholds(kind=kind, n=s.n, sample_rate_hz=fs, false_alarms_per_hour=R,
                      scales=sc, alpha=thr.alpha, variance_factor=vf_used,
                      threshold=thr.threshold, detector="windows", notes=notes,
@@ -439,6 +493,7 @@ def tune(cal: Calibration, *, false_alarms_per_hour: float, kind: str = "gyro",
          "overbound_factor": c.overbound_factor, "variance_factor": c.factor,
          "excess_kurtosis": c.excess_kurtosis, "gpd_shape": c.shape,
          "gpd_shape_sd": c.shape_sd, "text": c.text()} for c in choices]
+    ass["drift"] = _drift_assumptions(cal, kind, thr, vf_tail, drift_horizon_s, u2)
     ass["method"] = "rimu tune: upcrossing shares + simulated correction"
     ass["simulation_correction"] = {
         "factor": gamma, "passes": passes,

@@ -1,0 +1,148 @@
+"""Parity drift model (fdi.drift, calibration.drift): file form, the random-walk prediction,
+and what ``tune`` does with it (variance factors and detectable sizes grow)."""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from calibration.drift import fit_drift_model
+from fdi.calfile import CALIBRATION_SCHEMA, CALIBRATION_SCHEMA_DRIFT, calibration_from_dict
+from fdi.drift import DriftModel, drift_variance_factors
+from fdi.errors import ConfigError, FileFormatError
+from thresholds.realnoise import static_calibration
+from thresholds.tails_holdout import without_tails
+from thresholds.tune import tune
+
+NAMES = tuple(f"imu{k}_{a}" for k in range(1, 5) for a in "xyz")
+FS = 50.0
+
+
+def _static(seed: int, n_samples: int = 12_000, q: float = 0.0, sensor: int = 4,
+            sd: float = 0.002) -> np.ndarray:
+    """Four aligned triads at rest: white noise of ``sd`` (rad/s) per channel, and on
+    ``sensor`` a random-walk bias with increment sd ``q`` (rad/s per sample)."""
+    rng = np.random.default_rng(seed)
+    y = rng.standard_normal((n_samples, 12)) * sd
+    if q:
+        y[:, sensor] += np.cumsum(rng.standard_normal(n_samples)) * q
+    return y
+
+
+def _cal(y: np.ndarray, drift: bool = True):
+    return static_calibration(y, FS, NAMES, drift=drift)
+
+
+def test_file_round_trip_schema_and_fingerprint():
+    y = _static(1, q=2e-5)
+    with_drift, plain = _cal(y), _cal(y, drift=False)
+    assert with_drift.gyro.drift is not None and plain.gyro.drift is None
+    doc = with_drift.to_dict()
+    assert doc["schema"] == CALIBRATION_SCHEMA_DRIFT and "gyro" in doc["parity_drift"]
+    back = calibration_from_dict(json.loads(json.dumps(doc)))
+    assert back.gyro.drift == with_drift.gyro.drift
+    assert back.fingerprint() == with_drift.fingerprint()
+    # without a drift model the file is what it was (/3, no key), and the model is in the
+    # fingerprint: it changes the thresholds
+    pd = plain.to_dict()
+    assert pd["schema"] == CALIBRATION_SCHEMA and "parity_drift" not in pd
+    assert plain.fingerprint() != with_drift.fingerprint()
+    # a /3 file with the key is refused (unknown field), a /4 file without it loads
+    bad = dict(doc, schema=CALIBRATION_SCHEMA)
+    with pytest.raises(FileFormatError, match="parity_drift"):
+        calibration_from_dict(bad)
+    assert calibration_from_dict({k: v for k, v in doc.items() if k != "parity_drift"}
+                                 ).gyro.drift is None
+
+
+@pytest.mark.parametrize(("field", "value", "msg"), [
+    ("excess", "neg", "excess"), ("tau_s", "rev", "tau_s"), ("blocks", [3], "blocks"),
+    ("method", "rimu.drift/9", "method")])
+def test_bad_drift_record_names_the_field(field, value, msg):
+    doc = _cal(_static(2, q=2e-5)).to_dict()
+    rec = doc["parity_drift"]["gyro"]
+    if value == "neg":
+        rec["excess"][-1] = -1.0
+    elif value == "rev":
+        rec["tau_s"] = rec["tau_s"][::-1]
+    else:
+        rec[field] = value
+    with pytest.raises(FileFormatError, match=f"parity_drift.gyro.{msg}"):
+        calibration_from_dict(doc)
+
+
+def test_random_walk_offset_predicted_from_the_calibration_half():
+    """A random-walk bias on one sensor: the model fitted on the first half predicts the
+    variance of the whitened parity offset at the end of a horizon of the same length
+    (K²·(h + T_c/3)·|u_i|², IEEE 952 rate random walk).
+
+    Over 60 seeds the mean prediction must match the truth within 3 standard errors of
+    the mean (from the spread of the 60 predictions)."""
+    n, q, i = 12_000, 2e-5, 4
+    half = n // 2
+    preds = []
+    for seed in range(60):
+        y = _static(100 + seed, n_samples=n, q=q, sensor=i)
+        cal = _cal(y[:half])
+        preds.append(cal.gyro.drift.offset_variance())
+    s = cal.gyro
+    from thresholds.tune import _parity_geometry
+
+    _, u2, _, _, _ = _parity_geometry(cal, "gyro")
+    truth = q * q * (half + half / 3.0) * u2[i]              # per sample: h = T_c
+    preds = np.array(preds)
+    se = preds.std(ddof=1) / math.sqrt(preds.size)
+    assert preds.mean() == pytest.approx(truth, abs=3 * se)
+    assert s.drift.span_s == pytest.approx(half / FS)
+
+
+def test_white_noise_shows_little_drift():
+    """White noise: an excess counts at 1 % per τ and three τ of the long end can set δ²
+    (2 % of 300 white fits showed a drift); 5 or more of 40 has a binomial probability
+    below 0.01 at a rate of 3 %."""
+    d2 = np.array([_cal(_static(200 + s)).gyro.drift.offset_variance() for s in range(40)])
+    assert np.sum(d2 > 0.0) <= 4
+
+
+def test_variance_factors_and_horizon():
+    m = DriftModel(df=9, samples=1000, sample_rate_hz=50.0, span_s=20.0,
+                   tau_s=(1.0, 2.0), blocks=(20, 10), excess=(0.01, 0.002))
+    # random walk from tau_L = 2 s to tau_h = 1.5 h + T_c/2; never below the long end's max
+    assert m.offset_variance() == pytest.approx(2 * 0.002 * (30 + 10) / 2.0)
+    assert m.offset_variance(0.0) == pytest.approx(2 * max(0.002 * 10 / 2.0, 0.01))
+    assert drift_variance_factors(m, (1, 8), (1.0, 2.0), 0.0) == pytest.approx(
+        (1.0 + 0.02, 2.0 + 8 * 0.02))
+    assert drift_variance_factors(None, (1, 8), (1.0, 2.0)) == (1.0, 2.0)
+
+
+def test_tune_adds_the_drift_and_states_what_it_gives_up():
+    cal = without_tails(_cal(_static(3, q=3e-5)))
+    a = tune(cal, false_alarms_per_hour=100.0, simulate_hours=0.0)
+    b = tune(cal, false_alarms_per_hour=100.0, simulate_hours=0.0, drift_horizon_s=0.0)
+    plain = tune(replace(cal, sets={"gyro": replace(cal.gyro, drift=None)}),
+                 false_alarms_per_hour=100.0, simulate_hours=0.0)
+    d2 = cal.gyro.drift.offset_variance()
+    assert d2 > 0
+    ws = a.thresholds.scales
+    assert a.thresholds.variance_factor == pytest.approx(
+        [f + w * d2 for w, f in zip(ws, plain.thresholds.variance_factor, strict=True)])
+    # a shorter horizon gives up less, and every detectable size grows with the drift
+    assert all(x <= y for x, y in zip(b.thresholds.variance_factor,
+                                      a.thresholds.variance_factor, strict=True))
+    assert all(da.size > dp.size for da, dp in zip(a.detectable, plain.detectable,
+                                                   strict=True))
+    dr = a.assumptions["drift"]
+    assert dr["horizon_s"] == pytest.approx(cal.gyro.drift.span_s)
+    assert dr["offset_variance_whitened"] == pytest.approx(d2)
+    assert plain.assumptions["drift"]["model"] is None
+    assert "parity drift" in a.thresholds.notes
+    with pytest.raises(ConfigError, match="drift-horizon"):
+        tune(cal, false_alarms_per_hour=100.0, simulate_hours=0.0, drift_horizon_s=-1.0)
+
+
+def test_fit_needs_a_parity_space():
+    assert fit_drift_model(np.zeros((100, 3)), np.eye(3), np.eye(3), FS) is None
