@@ -256,12 +256,14 @@ def holdout_flight(flight: Flight, targets: Sequence[float] = TARGETS_PER_HOUR, 
 
 def holdout_static(t: np.ndarray, y: np.ndarray, names: tuple[str, ...],
                    targets: Sequence[float] = TARGETS_PER_HOUR, *,
-                   progress: Callable[[], None] | None = None) -> dict[str, Any]:
+                   progress: Callable[[], None] | None = None, tails: bool = True,
+                   drift: bool = True) -> dict[str, Any]:
     """The static set: static calibration (:func:`thresholds.realnoise.static_calibration`,
     with the MPU9250's datasheet tolerances for what rest cannot observe, the bias
     uncertainty of a later stretch, the residual's tail model and its parity drift model)
     of one half, thresholds tuned on it (the drift over the default horizon, the half's
-    own length), the monitor (isolation on) over the other half."""
+    own length), the monitor (isolation on) over the other half. ``tails`` and ``drift``
+    False: the calibration before ``docs/drift.md`` (for the comparison there)."""
     from fdi.monitor import Monitor
     from thresholds.realnoise import (
         MPU9250_CROSS_AXIS,
@@ -276,7 +278,7 @@ def holdout_static(t: np.ndarray, y: np.ndarray, names: tuple[str, ...],
         the part's length: the other half)."""
         return static_calibration(part, fs, names, drift_bias_sd=True, bias_prediction=True,
                                   scale_factor_tolerance=MPU9250_SCALE_FACTOR_TOLERANCE,
-                                  cross_axis=MPU9250_CROSS_AXIS, tails=True, drift=True)
+                                  cross_axis=MPU9250_CROSS_AXIS, tails=tails, drift=drift)
 
     t = np.asarray(t, float) - float(t[0])
     fs = (t.size - 1) / float(t[-1] - t[0])
@@ -286,10 +288,13 @@ def holdout_static(t: np.ndarray, y: np.ndarray, names: tuple[str, ...],
                        ("tune second half, count first", slice(k, None), slice(0, k))):
         cal = calibrate(y[a])
         for R in targets:
-            thr = _tune(cal, R).thresholds
+            tu = _tune(cal, R)
+            thr = tu.thresholds
             res = Monitor(cal, thr).run(t[b], y[b])
             row = _count(res, np.zeros(t[b].size, np.int64), fs, R, thr)
             row["direction"] = name
+            row["detectable_dps"] = float(min(d.size_unit_value for d in tu.detectable))
+            row["variance_factor"] = list(thr.variance_factor)
             rows.append(row)
             if progress:
                 progress()

@@ -13,6 +13,8 @@ MAX_SCALE = 1 << 20
 """Longest window, in samples."""
 MAX_SIMULATE_HOURS = 1e4
 """Most healthy flight hours simulated per correction pass."""
+MAX_DRIFT_HORIZON_S = 1e8
+"""Longest drift horizon (about three years)."""
 
 HELP = ("tune thresholds for a false-alarm rate; print them and the detectable fault size "
         "per window scale")
@@ -47,6 +49,11 @@ def configure(p: argparse.ArgumentParser) -> None:
                         "0: analytic only)")
     p.add_argument("--seed", type=nonnegative_int(SEED_MAX), default=0,
                    help="seed of the correction flights")
+    p.add_argument("--drift-horizon-s", type=nonnegative_float(MAX_DRIFT_HORIZON_S),
+                   default=None, metavar="S",
+                   help="how long after its data the calibration must hold, for the parity "
+                        "drift term (s; default: the span of the calibration data; only "
+                        "for a calibration with a drift model)")
     p.add_argument("--out", required=True, metavar="FILE",
                    help="write the rimu.tuning/1 file here (for --thresholds)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -63,7 +70,7 @@ def run(args: argparse.Namespace) -> int:
     cal = load_calibration(args.cal)
     tu = tune(cal, false_alarms_per_hour=args.false_alarms_per_hour, kind=args.kind,
               scales=scales, simulate_hours=args.simulate_hours, seed=args.seed,
-              progress=not args.no_progress)
+              progress=not args.no_progress, drift_horizon_s=args.drift_horizon_s)
     th = tu.thresholds
     corr = tu.assumptions["simulation_correction"]
     print(f"thresholds for {th.false_alarms_per_hour:g} false alarms/h, {th.n} {th.kind} "
@@ -82,6 +89,14 @@ def run(args: argparse.Namespace) -> int:
     print(f"noise model: {th.noise_model} (residual tails of the calibration, per scale):")
     for c in tu.choices:
         print(f"  {c.text()}")
+    dr = tu.assumptions["drift"]
+    if dr["model"] is not None:
+        print(f"parity drift over {dr['horizon_s']:g} s after the calibration data "
+              f"(random walk beyond tau {dr['longest_resolved_tau_s']:.3g} s): variance "
+              f"factor + w*{dr['offset_variance_whitened']:.3g}; a drift of "
+              f"{dr['offset_sd_worst_sensor_unit_value']:.3g} {dr['unit']} (1 sd, sensor "
+              f"{dr['worst_sensor']}) is taken as healthy, and the detectable sizes above "
+              f"include it")
     with atomic_file(out) as tmp:
         tu.save(tmp)
     print(f"wrote {out}")

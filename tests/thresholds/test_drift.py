@@ -146,3 +146,23 @@ def test_tune_adds_the_drift_and_states_what_it_gives_up():
 
 def test_fit_needs_a_parity_space():
     assert fit_drift_model(np.zeros((100, 3)), np.eye(3), np.eye(3), FS) is None
+
+
+def test_tune_cli_states_the_drift_given_up(tmp_path, capsys):
+    from rimu.cli import main
+
+    cal = without_tails(_cal(_static(4, q=3e-5)))
+    path = tmp_path / "cal.json"
+    cal.save(path)
+    out = tmp_path / "t.json"
+    assert main(["tune", "--cal", str(path), "--false-alarms-per-hour", "100",
+                 "--simulate-hours", "0", "--drift-horizon-s", "60", "--out", str(out),
+                 "--no-progress"]) == 0
+    text = capsys.readouterr().out
+    assert "parity drift over 60 s" in text and "taken as healthy" in text
+    doc = json.loads(out.read_text())
+    assert doc["assumptions"]["drift"]["horizon_s"] == 60.0
+    assert main(["tune", "--cal", str(path), "--false-alarms-per-hour", "100",
+                 "--drift-horizon-s", "-5", "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--drift-horizon-s" in err[0]
