@@ -166,3 +166,16 @@ def test_tune_cli_states_the_drift_given_up(tmp_path, capsys):
                  "--drift-horizon-s", "-5", "--out", str(out)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "--drift-horizon-s" in err[0]
+
+
+def test_default_thresholds_carry_the_drift_over_the_calibration_span():
+    from fdi.detector import default_thresholds
+
+    cal = without_tails(_cal(_static(5, q=3e-5)))
+    plain = replace(cal, sets={"gyro": replace(cal.gyro, drift=None)})
+    a, b = default_thresholds(cal), default_thresholds(plain)
+    d2 = cal.gyro.drift.offset_variance()
+    assert d2 > 0
+    assert a.variance_factor == pytest.approx(
+        [f + w * d2 for w, f in zip(b.scales, b.variance_factor, strict=True)])
+    assert "parity drift" in a.notes and "parity drift" not in b.notes
