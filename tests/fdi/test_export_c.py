@@ -1,0 +1,407 @@
+"""``rimu export c``: the generated C module against :class:`fdi.monitor.Monitor`, sample for
+sample.
+
+Each module is compiled with the system compiler under ``-std=c99 -Wall -Wextra -Werror
+-pedantic -O2`` (once per calibration and settings per session), loaded with ctypes and run
+beside the Python monitor on the monitor suite's simulated scenarios (tetrad and cone6,
+every fault kind, sequential faults, bad numbers, stale and stuck sensors, missing samples,
+re-admission, timing jitter, the operating envelope, effect terms): the same events at the
+same samples, the same healthy sets, capabilities and unverified axes, and rates,
+statistics, thresholds, parity and protection levels within 1e-12 relative (float64). The
+float32 module gives the same events on the simulated scenarios and stays within the bound
+docs/export-c.md states. Breaking one table entry or one branch of the generated source
+makes the comparison fail. Flights 41 and 83 of ``../shared/data`` (``--slow``): in-flight
+calibration, the monitoring chain's own inputs (moved samples, envelope codes) fed to both.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import subprocess
+
+import numpy as np
+import pytest
+from test_isolation import flight as triad_flight
+from test_isolation import triads
+from test_monitor import scenario, with_jitter
+
+from fdi.calfile import EffectTerm
+from fdi.detector import default_thresholds
+from fdi.effects import Compensator
+from fdi.effects_monitor import CompensatedMonitor
+from fdi.errors import ConfigError, ExportError
+from fdi.export import generate_c, write_c
+from fdi.export.host import CMonitor, compile_module, find_compiler
+from fdi.monitor import Monitor
+from fdi.settings import MonitorSettings
+from thresholds.synthetic import synthetic_calibration
+
+pytestmark = pytest.mark.skipif(find_compiler() is None,
+                                reason="no C compiler (cc) on the PATH")
+
+RTOL = 1e-12
+F32_RTOL = 1e-4
+"""float32 module: documented bound on rates, statistics and thresholds relative to the
+float64 answer's scale (docs/export-c.md)."""
+FS = 100.0
+
+
+# ---------------------------------------------------------------- building modules
+@pytest.fixture(scope="session")
+def build(tmp_path_factory):
+    """``build(cal, thresholds, settings, precision)`` → CMonitor, compiled once per key."""
+    cache: dict = {}
+
+    def make(cal, th=None, settings=None, precision="float64", tag=""):
+        key = (cal.fingerprint(), repr(th), repr(settings), precision, tag)
+        if key not in cache:
+            d = tmp_path_factory.mktemp("cexport")
+            mod = generate_c(cal, th, settings=settings, precision=precision, harness=True)
+            write_c(mod, d)
+            lib = compile_module(d)
+            cache[key] = (CMonitor.load(d, lib, [c.name for c in cal.gyro.sensors]), d, mod)
+        mon, d, mod = cache[key]
+        mon.reset()
+        return mon
+    return make
+
+
+def assert_same(res, c, rtol=RTOL, events_exact=True) -> None:
+    """The C answers equal the monitor's: arrays within ``rtol`` relative (NaN and inf where
+    the monitor has them), discrete fields and events exactly."""
+    for name in ("omega", "omega_sd", "statistics", "thresholds", "protection_level"):
+        a = np.asarray(getattr(res, name), float)
+        b = np.asarray(getattr(c, name), float)
+        np.testing.assert_allclose(b, a, rtol=rtol, atol=0, equal_nan=True, err_msg=name)
+    if res.parity is not None:
+        p = res.parity
+        np.testing.assert_allclose(c.parity[:, :p.shape[1]], p, rtol=rtol, atol=0,
+                                   equal_nan=True, err_msg="parity")
+    np.testing.assert_array_equal(c.healthy, res.healthy, err_msg="healthy")
+    assert list(c.capability) == list(res.capability), "capability"
+    np.testing.assert_array_equal(c.unverified, res.unverified, err_msg="unverified")
+    np.testing.assert_array_equal(c.envelope, res.envelope, err_msg="envelope")
+    pe = [(e.t, e.sensor, e.type, e.reason, e.scale, e.sensors, e.envelope)
+          for e in res.events]
+    ce = [(e.t, e.sensor, e.type, e.reason, e.scale, e.sensors, e.envelope)
+          for e in c.events]
+    assert ce == pe, _first_difference(pe, ce)
+    if events_exact:
+        for a, b in zip(res.events, c.events, strict=True):
+            for f in ("statistic", "threshold", "magnitude"):
+                x = np.nan if getattr(a, f) is None else getattr(a, f)
+                y = np.nan if getattr(b, f) is None else getattr(b, f)
+                np.testing.assert_allclose(y, x, rtol=rtol, atol=0, equal_nan=True,
+                                           err_msg=f"{a.type} at t={a.t}: {f}")
+
+
+def _first_difference(pe, ce) -> str:
+    for k, (a, b) in enumerate(zip(pe, ce)):
+        if a != b:
+            return f"event {k}: monitor {a}, C {b}"
+    return f"{len(pe)} events from the monitor, {len(ce)} from the C module"
+
+
+def both(build, cal, th, t, raw, valid=None, *, settings=None, envelope=None,
+         precision="float64"):
+    res = Monitor(cal, th, settings=settings).run(t, raw, valid, parity=True,
+                                                  envelope=envelope)
+    c = build(cal, th, settings, precision).run(t, raw, valid, envelope=envelope)
+    return res, c
+
+
+# ---------------------------------------------------------------- the module itself
+def test_module_compiles_clean_and_needs_only_libm(build, tmp_path):
+    """-Werror build (the fixture's), and the object refers to no symbol but math
+    functions: no heap, no stdio, no library beyond <math.h> (and the block moves GCC
+    may turn copy loops into, which it requires in a freestanding build too)."""
+    cal = synthetic_calibration("cone6", seed=1)
+    mod = generate_c(cal)
+    write_c(mod, tmp_path)
+    obj = tmp_path / "m.o"
+    subprocess.run(["cc", "-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O2", "-c",
+                    str(tmp_path / "rimu_monitor.c"), "-o", str(obj)], check=True)
+    und = subprocess.run(["nm", "-u", str(obj)], capture_output=True, text=True,
+                         check=True).stdout.split()
+    names = {s for s in und if s not in ("U", "w", "v")}
+    assert names <= {"sqrt", "sqrtf", "fabs", "fabsf", "memcpy", "memmove", "memset"}, names
+    assert not names & {"malloc", "calloc", "realloc", "free"}
+    includes = [ln.strip() for ln in mod.files["rimu_monitor.c"].splitlines()
+                if ln.startswith("#include")]
+    assert includes == ["#include <math.h>", '#include "rimu_monitor.h"']
+    assert mod.files["rimu_monitor.c"].count(cal.fingerprint()) == 1
+    assert f'#define RIMU_FINGERPRINT "{cal.fingerprint()}"' in mod.files["rimu_monitor.h"]
+    mon = build(cal)
+    assert mon.state_bytes > 0 and mon.table_bytes >= mod.table_bytes * 0.9
+
+
+# ---------------------------------------------------------------- float64: sample for sample
+@pytest.mark.parametrize("detector", ["windows", "both", "cusum"])
+@pytest.mark.parametrize("cfg", ["cone6", "tetrad"])
+def test_same_answers_on_faults_missing_and_stuck(build, cfg, detector):
+    faults = [(3, 700, 8.0), (5, 1400, -10.0), (1, 2100, 12.0)] if cfg == "cone6" else \
+        [(2, 700, 9.0)]
+    cal, t, raw, _ = scenario(cfg, 3000, faults, seed=4)
+    valid = np.ones(raw.shape, bool)
+    valid[300, 1] = False
+    valid[900:903, 3] = False
+    col = 5 if cfg == "cone6" else 3
+    raw[2500:, col] = raw[2500, col]                        # stuck
+    th = default_thresholds(cal, detector=detector)
+    res, c = both(build, cal, th, t, raw, valid)
+    assert_same(res, c)
+    assert any(e.type == "detected" for e in res.events)
+    assert any(e.reason == "stuck" for e in res.events)
+
+
+def test_same_answers_sequential_isolation_down_to_reconstruction(build):
+    cal, t, raw, _ = scenario("cone6", 4000, [(3, 500, 15.0), (5, 1500, -15.0),
+                                              (1, 2500, 15.0)], seed=11)
+    raw[3200:, 0] = np.nan
+    res, c = both(build, cal, None, t, raw)
+    assert_same(res, c)
+    assert [e.sensor for e in res.events if e.type == "isolated"] == [3, 5]
+    assert set(res.capability) == {"isolate", "detect", "reconstruct"}
+
+
+BAD = [np.nan, np.inf, -np.inf, 1e300, -1e300, 0.0, 5e-324, 1e20]
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_same_answers_on_bad_numbers_and_bad_times(build, seed):
+    """Bad cells and columns, stuck values, NaN, backward, repeated and jumping times (stale
+    sensors), missing samples: as the fuzz suite makes them, from fixed seeds."""
+    rng = np.random.default_rng(seed)
+    cfg = ("cone6", "tetrad")[seed % 2]
+    cal, t, raw, _ = scenario(cfg, 600, [], seed=seed)
+    n = raw.shape[1]
+    valid = np.ones(raw.shape, bool)
+    for _ in range(6):
+        kind = rng.choice(["cell", "column", "stuck", "tnan", "tback", "tjump", "miss",
+                           "tdup"])
+        row, col = int(rng.integers(0, 600)), int(rng.integers(0, n))
+        if kind == "cell":
+            raw[row, col] = BAD[int(rng.integers(len(BAD)))]
+        elif kind == "column":
+            raw[row:, col] = BAD[int(rng.integers(len(BAD)))]
+        elif kind == "stuck":
+            raw[row:, col] = raw[row, col]
+        elif kind == "tnan":
+            t[row] = np.nan
+        elif kind == "tback":
+            t[row:] -= rng.uniform(0, 10)
+        elif kind == "tjump":
+            t[row:] += [0.5, 1.0, 100.0, np.inf][int(rng.integers(4))]
+        elif kind == "tdup":
+            t[row:] = t[row]
+        else:
+            valid[row:row + int(rng.integers(1, 50)), col] = False
+    res, c = both(build, cal, None, t, raw, valid)
+    assert_same(res, c)
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_same_answers_random_fault_scenarios(build, seed):
+    """Steps, NaN, missing runs, stuck values and spikes at random rows and sensors (the
+    monitor suite's random scenarios), half of them with timing jitter."""
+    rng = np.random.default_rng(100 + seed)
+    cal, t, raw, _ = scenario("cone6", 800, [], seed=seed)
+    if seed % 2:
+        cal = with_jitter(cal, seed)
+    valid = np.ones(raw.shape, bool)
+    sd = cal.gyro.noise_sd / cal.gyro.scale_factors
+    for _ in range(int(rng.integers(1, 5))):
+        i, row = int(rng.integers(0, 6)), int(rng.integers(0, 700))
+        size = rng.uniform(-30, 30)
+        kind = rng.choice(["step", "nan", "miss", "stuck", "spike"])
+        if kind == "step":
+            raw[row:, i] += size * sd[i]
+        elif kind == "nan":
+            raw[row, i] = np.nan
+        elif kind == "miss":
+            valid[row:row + 20, i] = False
+        elif kind == "stuck":
+            raw[row:, i] = raw[row, i]
+        else:
+            raw[row, i] += 50 * size * sd[i]
+    th = default_thresholds(cal, detector=("windows", "both")[seed % 2])
+    res, c = both(build, cal, th, t, raw, valid)
+    assert_same(res, c)
+
+
+def test_same_answers_with_readmission(build):
+    cal, t, raw, _ = scenario("cone6", 1500, [(5, 1200, 12.0)], seed=8)
+    raw[100:105, 1] = np.nan
+    valid = np.ones(raw.shape, bool)
+    valid[700:703, 3] = False
+    mset = MonitorSettings(readmission=True, readmit_dwell_s=3.0)
+    res, c = both(build, cal, None, t, raw, valid, settings=mset)
+    assert_same(res, c)
+    types = [(e.type, e.sensor) for e in res.events]
+    assert ("readmitted", 2) in types and ("isolated", 5) in types, types
+
+
+def test_same_answers_with_envelope_and_disagreeing_triads(build, tmp_path):
+    """Two IMUs on one board (detect, never isolate: 'disagree' events, unverified axes),
+    a fault during and after envelope excursions of several codes."""
+    cal = triads(tmp_path, 2, seed=2)
+    sd = cal.gyro.noise_sd[0]
+    t, raw = triad_flight(cal, 1500, [(2, 300, 20 * sd)], seed=5)
+    env = np.zeros(1500, np.int64)
+    env[250:500] = 1
+    env[480:520] = 6
+    env[900:950] = 8
+    env[1000:1010] = 70000                      # beyond 2^16: counts as inside
+    res, c = both(build, cal, None, t, raw, envelope=env)
+    assert_same(res, c)
+    types = {e.type for e in res.events}
+    assert {"envelope", "detected", "disagree"} <= types, res.events
+    assert res.unverified.any()
+
+
+def test_same_status_and_suspects_as_step(build, tmp_path):
+    """The fields only the stepped answer carries: per-sensor status and the suspects."""
+    cal = triads(tmp_path, 2, seed=2)
+    sd = cal.gyro.noise_sd[0]
+    t, raw = triad_flight(cal, 600, [(4, 200, 25 * sd)], seed=7)
+    raw[450:, 0] = np.inf
+    mon = Monitor(cal)
+    answers = [mon.step(t[r], raw[r]) for r in range(600)]
+    c = build(cal).run(t, raw)
+    status = [tuple(a.status) for a in answers]
+    assert [tuple(s) for s in c.status] == status
+    sus = [sum(1 << (i - 1) for i in a.suspects) for a in answers]
+    assert [int(s) for s in c.suspects] == sus
+    assert any("detected" in s for s in status) and any(sus)
+
+
+def _effect_cal():
+    cal = synthetic_calibration("tetrad", seed=1)
+    terms = (EffectTerm("scale_asymmetry", "gyro", 0, 5e-3, 1e-5, "fraction", ()),
+             EffectTerm("scale_nonlinearity", "gyro", 1, -2e-3, 1e-5, "fraction", (),
+                        {"table_rate_dps": 100.0}),
+             EffectTerm("g_sensitivity", "gyro", 2, 300.0, 1.0, "deg/h per g", ()),
+             EffectTerm("temperature", "gyro", 3, 0.7, 0.01, "deg/h per degC", (),
+                        {"reference_degC": 25.0}),
+             EffectTerm("scale_asymmetry", "gyro", 3, -1e-3, 1e-5, "fraction", ()),
+             EffectTerm("bias_step", "gyro", 0, 3.0, 0.1, "deg/h", (), {"time_s": 10.0}))
+    return dataclasses.replace(cal, effects=terms)
+
+
+def test_same_answers_with_effect_terms(build):
+    """Every compensable effect, with specific force and temperature inputs (NaN now and
+    then: the term adds 0), as CompensatedMonitor applies them."""
+    cal = _effect_cal()
+    N = 1500
+    _, t, raw, _ = scenario("tetrad", N, [(2, 900, 12.0)], seed=3)
+    rng = np.random.default_rng(3)
+    force = np.column_stack([rng.normal(0, 2, N), rng.normal(0, 2, N), rng.normal(9.8, 3, N)])
+    force[100:110] = np.nan
+    temp = 25 + 10 * rng.random((N, 4))
+    temp[200:205, 3] = np.nan
+    every = list(range(4))
+    comp = Compensator(cal, available={"specific_force": every, "temperature": every})
+    assert len(comp.applied) == 5
+    res = CompensatedMonitor(Monitor(cal), comp).run(t, raw, force=force, temperature=temp,
+                                                     parity=True)
+    c = build(cal).run(t, raw, force=force, temperature=temp)
+    assert_same(res, c)
+    mod = generate_c(cal)
+    assert any("bias_step" in s for s in mod.not_applied)
+
+
+# ---------------------------------------------------------------- float32
+@pytest.mark.parametrize("cfg", ["cone6", "tetrad"])
+def test_float32_same_events_within_the_bound(build, cfg):
+    faults = [(3, 700, 8.0), (5, 1400, -10.0), (1, 2100, 12.0)] if cfg == "cone6" else \
+        [(2, 700, 9.0)]
+    cal, t, raw, _ = scenario(cfg, 3000, faults, seed=4)
+    raw[2500:, 0] = raw[2500, 0]
+    th = default_thresholds(cal, detector="both")
+    res = Monitor(cal, th).run(t, raw, parity=True)
+    c = build(cal, th, None, "float32").run(t, raw)
+    pe = [(e.sensor, e.type, e.reason, e.scale) for e in res.events]
+    ce = [(e.sensor, e.type, e.reason, e.scale) for e in c.events]
+    assert ce == pe
+    np.testing.assert_allclose([e.t for e in c.events], [e.t for e in res.events],
+                               rtol=1e-6)
+    np.testing.assert_array_equal(c.healthy, res.healthy)
+    for name in ("omega", "statistics", "thresholds"):
+        a, b = np.asarray(getattr(res, name)), getattr(c, name)
+        scale = np.nanmax(np.abs(a[np.isfinite(a)]))
+        np.testing.assert_array_equal(np.isnan(b), np.isnan(a), err_msg=name)
+        ok = np.isfinite(a)
+        err = np.max(np.abs(b[ok] - a[ok])) / scale
+        assert err < F32_RTOL, (name, err)
+        assert err > 0                                  # it is a float32 build
+
+
+# ---------------------------------------------------------------- mutations are caught
+MUTATIONS = {
+    # one branch: isolate one sample later than the monitor
+    "persistence branch": ("if (ask_isolate && c[ALARM_RUN] >= persistence) {",
+                           "if (ask_isolate && c[ALARM_RUN] > persistence) {"),
+    # one branch: a window is tested one sample after it is full
+    "window full": ("if (count >= w) {", "if (count > w) {"),
+    # one branch: the stuck count
+    "stuck branch": ("if (sen[SAME_RUN] >= stuck) {", "if (sen[SAME_RUN] > stuck) {"),
+}
+
+
+def _mutate_table(text: str) -> str:
+    """One entry of the full set's parity matrix V scaled by 1 + 1e-9."""
+    head = "/* set 0x3f:"
+    k = text.index(head)
+    mats = text.index("\n", text.index("\n", text.index("\n", text.index("\n", text.index(
+        "\n", k) + 1) + 1) + 1) + 1)           # fconst, iconst, sensors, scales → mats
+    a = text.index("{{", mats) + 2
+    b = text.index(",", a)
+    v = float(text[a:b])
+    return text[:a] + repr(v * (1 + 1e-9)) + text[b:]
+
+
+@pytest.mark.parametrize("mutation", [*MUTATIONS, "table entry"])
+def test_a_broken_entry_or_branch_is_caught(tmp_path, mutation):
+    cal, t, raw, _ = scenario("cone6", 3000, [(3, 700, 8.0), (5, 1400, -10.0),
+                                              (1, 2100, 12.0)], seed=4)
+    raw[2500:, 5] = raw[2500, 5]                        # stuck (the counter's verdict)
+    mod = generate_c(cal, harness=True)
+    write_c(mod, tmp_path)
+    src = tmp_path / "rimu_monitor.c"
+    text = src.read_text()
+    if mutation == "table entry":
+        new = _mutate_table(text)
+    else:
+        old, repl = MUTATIONS[mutation]
+        assert text.count(old) == 1, mutation
+        new = text.replace(old, repl)
+    assert new != text
+    res = Monitor(cal).run(t, raw, parity=True)
+    assert any(e.reason == "stuck" for e in res.events)
+    names = [c.name for c in cal.gyro.sensors]
+    good = CMonitor.load(tmp_path, compile_module(tmp_path, tmp_path / "good.so"), names)
+    assert_same(res, good.run(t, raw))                 # the intact module passes
+    src.write_text(new)
+    bad = CMonitor.load(tmp_path, compile_module(tmp_path, tmp_path / "bad.so"), names)
+    with pytest.raises(AssertionError):
+        assert_same(res, bad.run(t, raw))
+
+
+# ---------------------------------------------------------------- refusals
+def test_refuses_what_it_cannot_carry():
+    cal = synthetic_calibration("tetrad", seed=1)
+    th = default_thresholds(cal)
+    long = dataclasses.replace(th, scales=(*th.scales[:-1], 1 << 17))
+    with pytest.raises(ExportError, match="window of 131072 samples"):
+        generate_c(cal, long)
+    g = cal.gyro
+    tiny = dataclasses.replace(g, sensors=tuple(dataclasses.replace(s, scale_factor=1e-40)
+                                                if k == 2 else s
+                                                for k, s in enumerate(g.sensors)))
+    big = dataclasses.replace(cal, sets=dict(cal.sets, gyro=tiny))
+    generate_c(big)                                     # float64 carries it
+    with pytest.raises(ExportError, match=r"float32 export: set 0x[0-9a-f]+ sensors = .* "
+                                          "beyond float32's range"):
+        generate_c(big, precision="float32")
+    with pytest.raises(ConfigError, match="thresholds are for 6"):
+        generate_c(cal, default_thresholds(synthetic_calibration("cone6", seed=1)))
