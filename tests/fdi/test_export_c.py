@@ -40,9 +40,10 @@ pytestmark = pytest.mark.skipif(find_compiler() is None,
                                 reason="no C compiler (cc) on the PATH")
 
 RTOL = 1e-12
-F32_RTOL = 1e-4
-"""float32 module: documented bound on rates, statistics and thresholds relative to the
-float64 answer's scale (docs/export-c.md)."""
+F32_OMEGA, F32_RTOL, F32_STAT = 1e-6, 1e-5, 1e-2
+"""float32 module, the bound docs/export-c.md states: ω̂ within 1e-6 of the largest rate,
+thresholds and protection levels within 1e-5 relative, statistics within 1 % of the larger
+of the statistic and its threshold."""
 FS = 100.0
 
 
@@ -311,12 +312,16 @@ def test_same_answers_with_effect_terms(build):
 
 
 # ---------------------------------------------------------------- float32
-@pytest.mark.parametrize("cfg", ["cone6", "tetrad"])
-def test_float32_same_events_within_the_bound(build, cfg):
+@pytest.mark.parametrize(("cfg", "N"), [("cone6", 3000), ("tetrad", 60000)])
+def test_float32_same_events_within_the_bound(build, cfg, N):
+    """The float32 module: the same events on the simulated scenarios, and the documented
+    bound (docs/export-c.md): ω̂ within F32_OMEGA of the largest rate, thresholds and
+    protection levels within F32_RTOL relative, statistics within F32_STAT of the larger of
+    the statistic and its threshold, however long the set runs (10 min at 100 Hz here for the tetrad)."""
     faults = [(3, 700, 8.0), (5, 1400, -10.0), (1, 2100, 12.0)] if cfg == "cone6" else \
-        [(2, 700, 9.0)]
-    cal, t, raw, _ = scenario(cfg, 3000, faults, seed=4)
-    raw[2500:, 0] = raw[2500, 0]
+        [(2, N - 2300, 9.0)]
+    cal, t, raw, _ = scenario(cfg, N, faults, seed=4)
+    raw[N - 500:, 0] = raw[N - 500, 0]
     th = default_thresholds(cal, detector="both")
     res = Monitor(cal, th).run(t, raw, parity=True)
     c = build(cal, th, None, "float32").run(t, raw)
@@ -326,14 +331,22 @@ def test_float32_same_events_within_the_bound(build, cfg):
     np.testing.assert_allclose([e.t for e in c.events], [e.t for e in res.events],
                                rtol=1e-6)
     np.testing.assert_array_equal(c.healthy, res.healthy)
-    for name in ("omega", "statistics", "thresholds"):
-        a, b = np.asarray(getattr(res, name)), getattr(c, name)
-        scale = np.nanmax(np.abs(a[np.isfinite(a)]))
+    for name in ("omega", "statistics", "thresholds", "protection_level"):
+        a = np.asarray(getattr(res, name), float)
+        b = np.asarray(getattr(c, name), float)
         np.testing.assert_array_equal(np.isnan(b), np.isnan(a), err_msg=name)
         ok = np.isfinite(a)
-        err = np.max(np.abs(b[ok] - a[ok])) / scale
-        assert err < F32_RTOL, (name, err)
-        assert err > 0                                  # it is a float32 build
+        np.testing.assert_array_equal(np.isfinite(b), ok, err_msg=name)
+        if name == "omega":
+            err = np.max(np.abs(b[ok] - a[ok])) / np.max(np.abs(a[ok]))
+            bound = F32_OMEGA
+        elif name == "statistics":
+            err = np.max(np.abs(b[ok] - a[ok]) / np.maximum(res.thresholds[ok], a[ok]))
+            bound = F32_STAT
+        else:
+            err = np.max(np.abs(b[ok] - a[ok]) / np.abs(a[ok]))
+            bound = F32_RTOL
+        assert 0 < err < bound, (name, err)              # float32, and within the bound
 
 
 # ---------------------------------------------------------------- mutations are caught
