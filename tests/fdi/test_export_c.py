@@ -418,3 +418,62 @@ def test_refuses_what_it_cannot_carry():
         generate_c(big, precision="float32")
     with pytest.raises(ConfigError, match="thresholds are for 6"):
         generate_c(cal, default_thresholds(synthetic_calibration("cone6", seed=1)))
+
+
+# ---------------------------------------------------------------- the command and the harness
+def test_cli_exports_and_the_harness_runs_a_flight_folder(tmp_path, capsys):
+    """``rimu export c --harness``: the files, the sizes printed; the harness program reads
+    a flight folder's samples.csv on stdin and gives the monitor's events at the monitor's
+    samples."""
+    from replay.flight import save_flight_dir, simulate_flight
+    from rimu.cli import main
+
+    cal = synthetic_calibration("cone6", seed=1)
+    calf = tmp_path / "cal.json"
+    cal.save(calf)
+    fl = simulate_flight(cal, 20.0, seed=3)
+    raw = fl.raw.copy()
+    sd = cal.gyro.noise_sd / cal.gyro.scale_factors
+    raw[700:, 2] += 12 * sd[2]
+    raw[1500:, 4] = np.nan
+    fl = dataclasses.replace(fl, raw=raw)
+    save_flight_dir(fl, tmp_path / "flight")
+    out = tmp_path / "mod"
+    assert main(["export", "c", "--cal", str(calf), "--out", str(out), "--harness"]) == 0
+    said = capsys.readouterr().out
+    assert cal.fingerprint() in said and "state" in said and "per step" in said
+    assert {p.name for p in out.iterdir()} == {"rimu_monitor.h", "rimu_monitor.c",
+                                               "README.md", "rimu_harness.c", "rimu_block.c"}
+    exe = tmp_path / "harness"
+    subprocess.run(["cc", "-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O2",
+                    str(out / "rimu_harness.c"), str(out / "rimu_monitor.c"), "-lm", "-o",
+                    str(exe)], check=True)
+    with open(tmp_path / "flight" / "samples.csv", "rb") as f:
+        csv = subprocess.run([str(exe)], stdin=f, capture_output=True, check=True).stdout
+    lines = csv.decode().splitlines()
+    assert lines[0].startswith("t,omega_x") and len(lines) == len(fl.t) + 1
+    got = [(float(ln.split(",")[0]), ev.split(":")[0], int(ev.split(":")[1]) or None)
+           for ln in lines[1:] for ev in ln.split(",")[-1].split(";") if ev]
+    res = Monitor(cal).run(fl.t, fl.raw, fl.valid)
+    want = [(e.t, e.type, e.sensor) for e in res.events]
+    assert got == want and any(w[1] == "isolated" for w in want), (got, want)
+    omega = np.array([[float(x) for x in ln.split(",")[1:4]] for ln in lines[1:]])
+    np.testing.assert_allclose(omega, res.omega, rtol=RTOL, atol=0, equal_nan=True)
+
+
+def test_cli_refuses_in_one_line_and_writes_nothing(tmp_path, capsys):
+    from rimu.cli import main
+
+    cal = synthetic_calibration("tetrad", seed=1)
+    calf = tmp_path / "cal.json"
+    cal.save(calf)
+    th = default_thresholds(cal)
+    long = dataclasses.replace(th, scales=(*th.scales[:-1], 1 << 17))
+    thf = tmp_path / "long.json"
+    long.save(thf)
+    out = tmp_path / "mod"
+    assert main(["export", "c", "--cal", str(calf), "--thresholds", str(thf), "--out",
+                 str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "window of 131072 samples" in err[0], err
+    assert not out.exists()
