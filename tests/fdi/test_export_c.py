@@ -477,3 +477,50 @@ def test_cli_refuses_in_one_line_and_writes_nothing(tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "window of 131072 samples" in err[0], err
     assert not out.exists()
+
+
+# ---------------------------------------------------------------- measured flights
+ERLE = {"41": "pxf_copter_22-12-2014_41.BIN", "83": "pxf_copter_31-3-2015_83.BIN"}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", sorted(ERLE))
+def test_same_answers_on_erle_flights(build, name):
+    """Flights 41 and 83 as ``rimu monitor-file`` runs them (in-flight calibration, the
+    IMUs moved by their time offsets, the envelope decided by the chain's tracker): the
+    inputs the chain gives the monitor go to the C module too."""
+    import os
+    from pathlib import Path
+
+    data = Path(os.environ.get("RIMU_SHARED_DATA",
+                               Path(__file__).resolve().parents[2] / ".." / "shared" / "data"))
+    path = data / "erle_pxf_dual_imu" / ERLE[name]
+    if not path.exists():
+        pytest.skip(f"{path} not found (set RIMU_SHARED_DATA)")
+    from replay.chain import ChainOptions, chain_for_flight
+    from thresholds.field import inflight_calibration, load_erle
+
+    flight = load_erle(path)
+    cal = inflight_calibration(flight)
+    th = default_thresholds(cal)
+    chain = chain_for_flight(flight, cal, ChainOptions(thresholds=th, report=False))
+    calls = []
+    monitor_run = chain.monitor.run
+
+    def recorded(t, raw, valid=None, **kw):
+        res = monitor_run(t, raw, valid, **kw)
+        calls.append((np.array(t), np.array(raw), None if valid is None else np.array(valid),
+                      dict(kw), res))
+        return res
+
+    chain.monitor.run = recorded
+    chain.feed_whole(flight)
+    assert calls and sum(len(c[0]) for c in calls) == len(flight.t)
+    cmod = build(cal, th)
+    envelope_seen = False
+    for t, raw, valid, kw, res in calls:
+        c = cmod.run(t, raw, valid, force=kw.get("force"), temperature=kw.get("temperature"),
+                     envelope=kw.get("envelope"))
+        assert_same(res, c)
+        envelope_seen |= bool(np.any(res.envelope))
+    assert envelope_seen                      # the envelope path is exercised
