@@ -484,11 +484,14 @@ ERLE = {"41": "pxf_copter_22-12-2014_41.BIN", "83": "pxf_copter_31-3-2015_83.BIN
 
 
 @pytest.mark.slow
+@pytest.mark.parametrize("inject", [False, True], ids=["as flown", "with a fault"])
 @pytest.mark.parametrize("name", sorted(ERLE))
-def test_same_answers_on_erle_flights(build, name):
+def test_same_answers_on_erle_flights(build, name, inject):
     """Flights 41 and 83 as ``rimu monitor-file`` runs them (in-flight calibration, the
     IMUs moved by their time offsets, the envelope decided by the chain's tracker): the
-    inputs the chain gives the monitor go to the C module too."""
+    inputs the chain gives the monitor go to the C module too; as flown, and with a
+    0.2 rad/s step on the second gyro from mid-flight (detected; the two IMUs cannot tell
+    which sensor: 'disagree')."""
     import os
     from pathlib import Path
 
@@ -503,6 +506,10 @@ def test_same_answers_on_erle_flights(build, name):
     flight = load_erle(path)
     cal = inflight_calibration(flight)
     th = default_thresholds(cal)
+    if inject:
+        raw = flight.raw.copy()
+        raw[len(raw) // 2:, 1] += 0.2 / cal.gyro.scale_factors[1]
+        flight = dataclasses.replace(flight, raw=raw)
     chain = chain_for_flight(flight, cal, ChainOptions(thresholds=th, report=False))
     calls = []
     monitor_run = chain.monitor.run
@@ -524,3 +531,5 @@ def test_same_answers_on_erle_flights(build, name):
         assert_same(res, c)
         envelope_seen |= bool(np.any(res.envelope))
     assert envelope_seen                      # the envelope path is exercised
+    types = {e.type for c in calls for e in c[4].events}
+    assert ({"detected", "disagree"} <= types) == inject, types
