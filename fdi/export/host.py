@@ -144,6 +144,16 @@ class CMonitor:
         """Back to the state after ``rimu_monitor_init``."""
         self._lib.rimu_monitor_init(self._state)
 
+    def steps(self, t: Any, raw: Any) -> float:
+        """N samples through ``rimu_monitor_step`` (aux NULL), nothing copied out: for timing
+        the step itself. Returns the sum of the finite ω̂_x."""
+        ta = np.ascontiguousarray(t, float).reshape(-1)
+        ra = np.ascontiguousarray(raw, float).reshape(ta.shape[0], self.n)
+        f = self._lib.rimu_run_steps
+        f.restype = ctypes.c_double
+        return float(f(self._state, ctypes.c_long(ta.shape[0]),
+                       ta.ctypes.data_as(ctypes.c_void_p), ra.ctypes.data_as(ctypes.c_void_p)))
+
     def run(self, t: Any, raw: Any, valid: Any = None, *, force: Any = None,
             temperature: Any = None, envelope: Any = None) -> CResult:
         """N samples through ``rimu_monitor_step``.

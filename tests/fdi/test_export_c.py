@@ -97,7 +97,7 @@ def assert_same(res, c, rtol=RTOL, events_exact=True) -> None:
 
 
 def _first_difference(pe, ce) -> str:
-    for k, (a, b) in enumerate(zip(pe, ce)):
+    for k, (a, b) in enumerate(zip(pe, ce, strict=False)):
         if a != b:
             return f"event {k}: monitor {a}, C {b}"
     return f"{len(pe)} events from the monitor, {len(ce)} from the C module"
@@ -317,7 +317,8 @@ def test_float32_same_events_within_the_bound(build, cfg, N):
     """The float32 module: the same events on the simulated scenarios, and the documented
     bound (docs/export-c.md): ω̂ within F32_OMEGA of the largest rate, thresholds and
     protection levels within F32_RTOL relative, statistics within F32_STAT of the larger of
-    the statistic and its threshold, however long the set runs (10 min at 100 Hz here for the tetrad)."""
+    the statistic and its threshold, however long the set runs (10 min at 100 Hz here for
+    the tetrad)."""
     faults = [(3, 700, 8.0), (5, 1400, -10.0), (1, 2100, 12.0)] if cfg == "cone6" else \
         [(2, N - 2300, 9.0)]
     cal, t, raw, _ = scenario(cfg, N, faults, seed=4)
