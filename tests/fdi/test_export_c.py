@@ -402,7 +402,9 @@ def test_a_broken_entry_or_branch_is_caught(tmp_path, mutation):
 
 
 # ---------------------------------------------------------------- refusals
-def test_refuses_what_it_cannot_carry():
+def test_refuses_what_it_cannot_carry(monkeypatch):
+    import fdi.export.c as export_c
+
     cal = synthetic_calibration("tetrad", seed=1)
     th = default_thresholds(cal)
     long = dataclasses.replace(th, scales=(*th.scales[:-1], 1 << 17))
@@ -419,6 +421,10 @@ def test_refuses_what_it_cannot_carry():
         generate_c(big, precision="float32")
     with pytest.raises(ConfigError, match="thresholds are for 6"):
         generate_c(cal, default_thresholds(synthetic_calibration("cone6", seed=1)))
+    monkeypatch.setattr(export_c, "MAX_TABLE_BYTES", 20_000)
+    with pytest.raises(ExportError, match=r"4 gyro sensors: the 2\^4 healthy-set tables would "
+                                          r"take 0\.0 MiB"):
+        generate_c(cal)
 
 
 # ---------------------------------------------------------------- the command and the harness
