@@ -17,6 +17,7 @@ calibration, the monitoring chain's own inputs (moved samples, envelope codes) f
 from __future__ import annotations
 
 import dataclasses
+import json
 import subprocess
 
 import numpy as np
@@ -519,6 +520,13 @@ def test_cli_exports_and_the_harness_runs_a_flight_folder(tmp_path, capsys):
     res = Monitor(cal).run(fl.t, fl.raw, fl.valid)
     want = [(e.t, e.type, e.sensor) for e in res.events]
     assert got == want and any(w[1] == "isolated" for w in want), (got, want)
+    # the diff a user makes: rimu monitor-file on the same folder, the samples as they are
+    rep = tmp_path / "report.json"
+    assert main(["monitor-file", str(tmp_path / "flight"), "--cal", str(calf),
+                 "--no-time-offsets", "--no-envelope", "--no-effects", "--report",
+                 str(rep)]) == 0
+    said = [(e["t"], e["type"], e["sensor"]) for e in json.loads(rep.read_text())["events"]]
+    assert said == got
     omega = np.array([[float(x) for x in ln.split(",")[1:4]] for ln in lines[1:]])
     np.testing.assert_allclose(omega, res.omega, rtol=RTOL, atol=0, equal_nan=True)
 
