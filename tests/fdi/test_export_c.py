@@ -350,6 +350,19 @@ def test_effect_terms_the_monitor_does_not_apply_are_listed():
     assert "bias_step on sensor 1: session-specific" in mod.files["README.md"]
 
 
+@pytest.mark.slow
+def test_same_answers_three_imus(build, tmp_path):
+    """Three IMUs on one board (9 sensors, 512 set tables, a 2.5 MB source): a verified
+    exclusion of the first fault, then a second fault the remaining set cannot attribute."""
+    cal = triads(tmp_path, 3, seed=2)
+    sd = cal.gyro.noise_sd[0]
+    t, raw = triad_flight(cal, 2000, [(1, 500, 20 * sd), (5, 1200, -25 * sd)], seed=5)
+    case = Case(cal, t, raw, expect=("isolated", "disagree"))
+    res = case.python()
+    _check_expected(case, res)
+    assert_same(res, case.c(build))
+
+
 # ---------------------------------------------------------------- float32
 F32_RANGE = float(np.finfo(np.float32).max)
 
