@@ -7,7 +7,7 @@ healthy manoeuvring flight (rates up to 300 °/s), in the same run, interleaved 
   call for the block, nothing copied out), ns per step;
 - kernel: the per-sample cost of ``Monitor.run``'s compiled numba kernel alone over the
   same N rows (``fdi.kernel.advance`` into an output written once; the anchor of issue 20:
-  the C step must cost at most 1.5× it);
+  the C step must cost at most 1.5× it), and ``Monitor.run`` as a whole per sample;
 - step: ``Monitor.step`` latency (median over ``--steps`` samples; target: the C step at
   most 1/10 of it);
 - sizes: ``sizeof(rimu_state)``, the const tables and the code (``.text``) of the module's
@@ -97,13 +97,17 @@ def bench_case(cfg: str, det: str, N: int, steps: int, repeat: int, work: Path) 
     t, raw = flight(cal, max(N, steps + 2000), seed=5)
     t, raw = t[:N], raw[:N]
     res = Monitor(cal, th).run(t, raw)
-    c_ns, k_ns, s_ns = [], [], []
+    c_ns, k_ns, s_ns, r_ns = [], [], [], []
     for _ in range(repeat):
         cmon.reset()
         a = time.perf_counter()
         cmon.steps(t, raw)
         c_ns.append((time.perf_counter() - a) / N * 1e9)
         k_ns.append(_kernel_alone(cal, th, t, raw) / N * 1e9)
+        mon = Monitor(cal, th)
+        a = time.perf_counter()
+        mon.run(t, raw)
+        r_ns.append((time.perf_counter() - a) / N * 1e9)
         s_ns.append(step_latency(cal, th, *flight(cal, steps + 2000, seed=7), steps))
     sizes = {"state_bytes": cmon.state_bytes, "table_bytes": cmon.table_bytes,
              "x86_64_O2": object_sizes(folder, "cc", STRICT_FLAGS, "size")}
@@ -120,6 +124,7 @@ def bench_case(cfg: str, det: str, N: int, steps: int, repeat: int, work: Path) 
     return {"configuration": cfg, "detector": det, "sensors": cal.gyro.n,
             "scales": len(th.scales), "samples": N, "events_on_this_flight": len(res.events),
             "c_step_ns": spread(c_ns), "numba_kernel_ns_per_sample": spread(k_ns),
+            "monitor_run_ns_per_sample": spread(r_ns),
             "monitor_step_ns": spread(s_ns),
             "c_over_kernel": spread(ck), "target_c_over_kernel_max": 1.5,
             "c_over_step": spread(cs), "target_c_over_step_max": 0.1,
@@ -143,12 +148,14 @@ def main() -> int:
             r = bench_case(cfg, det, args.block, args.steps, args.repeat, Path(tmp))
             results["cases"].append(r)
             c, k, s = r["c_step_ns"], r["numba_kernel_ns_per_sample"], r["monitor_step_ns"]
+            rn = r["monitor_run_ns_per_sample"]
             ck, cs = r["c_over_kernel"], r["c_over_step"]
             x86 = r["sizes"]["x86_64_O2"]
             arm = r["sizes"].get("cortex_m4f_float32_O2")
             print(f"{cfg:7s} {det:8s} C {c['min']:.0f}/{c['median']:.0f}/{c['max']:.0f} ns/step;"
                   f" numba kernel {k['median']:.0f} ns/sample (C ×{ck['min']:.2f}/"
-                  f"{ck['median']:.2f}/{ck['max']:.2f}, target ≤1.5); Monitor.step "
+                  f"{ck['median']:.2f}/{ck['max']:.2f}, target ≤1.5); Monitor.run "
+                  f"{rn['median']:.0f} ns/sample; Monitor.step "
                   f"{s['median'] / 1e3:.2f} µs (C ×{cs['median']:.3f}, target ≤0.1): "
                   f"{'met' if r['met'] else 'NOT met'}")
             armtxt = ("" if not arm else f"; Cortex-M4F float32: {arm['error']}" if "error" in arm
