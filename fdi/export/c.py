@@ -32,7 +32,7 @@ from fdi import state as S
 from fdi.calfile import Calibration
 from fdi.capability import AXIS_SHARE
 from fdi.detector import chi2_threshold, default_thresholds
-from fdi.effects import COMPENSABLE, Compensator
+from fdi.effects import Compensator
 from fdi.errors import ExportError
 from fdi.health import health_limits
 from fdi.isolation import rejection_level
@@ -46,7 +46,9 @@ MAX_TABLE_BYTES = 8 << 20
 """Largest set tables the export writes (8 MiB: 9 sensors take about 2 MiB in float64)."""
 MAX_RING = 1 << 16
 """Longest window (samples) the export accepts: the ring of cumulative sums is static."""
-_EFFECT_CODE = {name: k for k, name in enumerate(COMPENSABLE)}
+_EFFECT_CODE = {"scale_asymmetry": 0, "scale_nonlinearity": 1, "g_sensitivity": 2,
+                "temperature": 3}
+"""The template's EFFECT_* codes (the order of Compensator.one's branches)."""
 _F32_MAX = float(np.finfo(np.float32).max)
 
 
@@ -196,13 +198,16 @@ def _effect_tables(cal: Calibration, kind: str, num: _Numbers
     comp = Compensator(cal, kind, available={"specific_force": every, "temperature": every})
     codes, sensors, ks, extras = [], [], [], []
     for code, _name, i, k, e in comp._scalar:
+        if _EFFECT_CODE.get(_name) != code:         # the template's switch must follow
+            raise RuntimeError(f"effect {_name!r}: Compensator code {code}, the C template "
+                               f"knows {_EFFECT_CODE.get(_name)}")
         codes.append(str(code))
         sensors.append(str(i))
         ks.append(num(k, f"effect term {_name} sensor {i + 1}"))
         e3 = list(e) if isinstance(e, list) else [e, 0.0, 0.0]
         extras.append(_row(e3, num, f"effect term {_name} sensor {i + 1}"))
     m = len(codes)
-    pad = "0" if not m else None
+    pad = "0"
     text = (f"#define RIMU_N_TERMS {m}\n"
             f"static const int TERM_CODE[TERMS_DIM] = {{{', '.join(codes) or pad}}};\n"
             f"static const int TERM_SENSOR[TERMS_DIM] = {{{', '.join(sensors) or pad}}};\n"
@@ -309,7 +314,7 @@ def generate_c(cal: Calibration, thresholds: Thresholds | None = None, *, kind: 
         "PARITY_LEN": str(max(df_max, 1)), "RING": str(ring), "N_SETS": str(1 << n),
         "FLOAT32": "1" if precision == "float32" else "0",
         "THRESHOLDS_NOTE": _c_comment(thresholds_note or _describe(thresholds)),
-        "ONES": ", ".join(["1"] * n), "N_TERMS": str(n_terms), "TABLES": tables,
+        "ONES": ", ".join(["1"] * n), "TABLES": tables,
     }
     state_bytes = (8 * 4 * n + real * (4 * n + (ring + 1) * (df_max + 1) + 3 * n + 9 + n + 1)
                    + 8 * (15 + n) + 8 * 4 + 3 + 8 + 4 + n)
