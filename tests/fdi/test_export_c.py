@@ -22,6 +22,8 @@ import subprocess
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 from test_isolation import flight as triad_flight
 from test_isolation import triads
 from test_monitor import scenario, with_jitter
@@ -325,6 +327,40 @@ def test_same_answers_as_the_monitor(build, tmp_path, name):
     res = case.python()
     _check_expected(case, res)
     assert_same(res, case.c(build))
+
+
+@settings(max_examples=15, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(cfg=st.sampled_from(["cone6", "tetrad"]), seed=st.integers(0, 10_000),
+       edits=st.lists(st.tuples(st.sampled_from(["step", "cell", "column", "stuck", "miss",
+                                                 "tback", "tjump", "spike"]),
+                                st.integers(0, 399), st.integers(0, 5), st.floats(-40, 40)),
+                      max_size=5))
+def test_same_answers_on_drawn_scenarios(build, cfg, seed, edits):
+    """Faults, bad numbers and bad times drawn by hypothesis on the two default modules."""
+    cal, t, raw, _ = scenario(cfg, 400, [], seed=seed % 50)
+    n = raw.shape[1]
+    valid = np.ones(raw.shape, bool)
+    sd = cal.gyro.noise_sd / cal.gyro.scale_factors
+    for kind, row, col, x in edits:
+        col %= n
+        if kind == "step":
+            raw[row:, col] += x * sd[col]
+        elif kind == "cell":
+            raw[row, col] = BAD[int(abs(x)) % len(BAD)]
+        elif kind == "column":
+            raw[row:, col] = BAD[int(abs(x)) % len(BAD)]
+        elif kind == "stuck":
+            raw[row:, col] = raw[row, col]
+        elif kind == "miss":
+            valid[row:row + int(abs(x)) + 1, col] = False
+        elif kind == "tback":
+            t[row:] -= abs(x) / 10
+        elif kind == "tjump":
+            t[row:] += abs(x) / 20
+        else:
+            raw[row, col] += 50 * x * sd[col]
+    case = Case(cal, t, raw, valid)
+    assert_same(case.python(), case.c(build))
 
 
 def test_same_status_and_suspects_as_step(build, tmp_path):
