@@ -112,6 +112,8 @@ class CMonitor:
         self._lib.rimu_monitor_state_bytes.restype = ctypes.c_ulong
         self._lib.rimu_monitor_table_bytes.restype = ctypes.c_ulong
         self.state_bytes = int(self._lib.rimu_monitor_state_bytes())
+        self._lib.rimu_monitor_fingerprint.restype = ctypes.c_char_p
+        self.fingerprint = self._lib.rimu_monitor_fingerprint().decode("ascii")
         self.table_bytes = int(self._lib.rimu_monitor_table_bytes())
         self._state = ctypes.create_string_buffer(self.state_bytes + 64)
         self._run = self._lib.rimu_run_block

@@ -129,6 +129,7 @@ def test_module_compiles_clean_and_needs_only_libm(build, tmp_path):
     assert f'#define RIMU_FINGERPRINT "{cal.fingerprint()}"' in mod.files["rimu_monitor.h"]
     mon = build(cal)
     assert mon.state_bytes > 0 and mon.table_bytes >= mod.table_bytes * 0.9
+    assert mon.fingerprint == cal.fingerprint()
 
 
 # ---------------------------------------------------------------- the scenarios
