@@ -469,19 +469,30 @@ MUTATIONS = {
 }
 
 
-def _mutate_table(text: str) -> str:
-    """One entry of the full set's parity matrix V scaled by 1 + 1e-9."""
-    head = "/* set 0x3f:"
-    k = text.index(head)
-    mats = text.index("\n", text.index("\n", text.index("\n", text.index("\n", text.index(
-        "\n", k) + 1) + 1) + 1) + 1)           # fconst, iconst, sensors, scales → mats
-    a = text.index("{{", mats) + 2
-    b = text.index(",", a)
-    v = float(text[a:b])
-    return text[:a] + repr(v * (1 + 1e-9)) + text[b:]
+TABLE_MUTATIONS = {
+    # (line of the full set's initializer, factor): see fdi.export.c._set_initializer
+    "table entry V": (5, 1 + 1e-9),          # the first entry of the parity matrix V
+    "table entry c": (8, 2.0),               # the isolation decision's rejection level
+}
 
 
-@pytest.mark.parametrize("mutation", [*MUTATIONS, "table entry"])
+def _mutate_table(text: str, line: int, factor: float) -> str:
+    """The first non-zero number of one line of the full set's table, times ``factor``."""
+    import re
+
+    start = text.index("/* set 0x3f:")
+    for _ in range(line):
+        start = text.index("\n", start) + 1
+    end = text.index("\n", start)
+    for m in re.finditer(r"-?(?:\d+\.\d*|\d+)(?:e[+-]?\d+)?", text[start:end]):
+        v = float(m.group())
+        if v != 0:
+            a, b = start + m.start(), start + m.end()
+            return text[:a] + repr(v * factor) + text[b:]
+    raise AssertionError("no number to mutate")
+
+
+@pytest.mark.parametrize("mutation", [*MUTATIONS, *TABLE_MUTATIONS])
 def test_a_broken_entry_or_branch_is_caught(build, tmp_path, mutation):
     cal, t, raw, _ = scenario("cone6", 3000, [(3, 700, 8.0), (5, 1400, -10.0),
                                               (1, 2100, 12.0)], seed=4)
@@ -490,8 +501,8 @@ def test_a_broken_entry_or_branch_is_caught(build, tmp_path, mutation):
     write_c(mod, tmp_path)
     src = tmp_path / "rimu_monitor.c"
     text = src.read_text()
-    if mutation == "table entry":
-        new = _mutate_table(text)
+    if mutation in TABLE_MUTATIONS:
+        new = _mutate_table(text, *TABLE_MUTATIONS[mutation])
     else:
         old, repl = MUTATIONS[mutation]
         assert text.count(old) == 1, mutation
