@@ -380,6 +380,22 @@ def test_same_status_and_suspects_as_step(build, tmp_path):
     assert any("detected" in s for s in status) and any(sus)
 
 
+def test_same_answers_for_an_accelerometer_set(tmp_path):
+    """``kind="accel"``: the accelerometers' measuring range in the health bounds, the
+    accelerometer thresholds; a step and an out-of-range value."""
+    cal, t, raw, _ = scenario("cone6", 1500, [(4, 600, 12.0)], seed=6)
+    acc = dataclasses.replace(cal.gyro, kind="accel")
+    cal = dataclasses.replace(cal, sets={"accel": acc})
+    raw[1100, 2] = 170.0 / acc.scale_factors[2]                # beyond 160 m/s²
+    th = default_thresholds(cal, kind="accel")
+    write_c(generate_c(cal, th, kind="accel", harness=True), tmp_path)
+    c = CMonitor.load(tmp_path, compile_module(tmp_path), [s.name for s in acc.sensors])
+    res = Monitor(cal, th, kind="accel").run(t, raw, parity=True)
+    assert {"isolated", "range"} <= {e.type for e in res.events} | {e.reason
+                                                                    for e in res.events}
+    assert_same(res, c.run(t, raw))
+
+
 def test_effect_terms_the_monitor_does_not_apply_are_listed():
     mod = generate_c(_effect_cal())
     assert len(mod.applied_terms) == 5
