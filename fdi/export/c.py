@@ -190,12 +190,14 @@ def _set_initializer(mask: int, n: int, df_max: int, cache: SetCache, sigma: np.
             f"    }}")
 
 
-def _effect_tables(cal: Calibration, kind: str, num: _Numbers
+def _effect_tables(cal: Calibration, kind: str, num: _Numbers, effects: bool
                    ) -> tuple[str, int, tuple[str, ...], tuple[str, ...]]:
-    """The terms ``Compensator.one`` applies when every input is available."""
+    """The terms ``Compensator.one`` applies when every input is available (none with
+    ``effects`` False, as ``--no-effects``)."""
     s = cal.kind(kind)
     every = list(range(s.n))
-    comp = Compensator(cal, kind, available={"specific_force": every, "temperature": every})
+    comp = Compensator(cal, kind, available={"specific_force": every, "temperature": every},
+                       enabled=effects)
     codes, sensors, ks, extras = [], [], [], []
     for code, _name, i, k, e in comp._scalar:
         if _EFFECT_CODE.get(_name) != code:         # the template's switch must follow
@@ -240,7 +242,8 @@ def _ops_per_step(n: int, df: int, nw: int, cusum: bool, terms: int) -> int:
 
 def generate_c(cal: Calibration, thresholds: Thresholds | None = None, *, kind: str = "gyro",
                settings: MonitorSettings | None = None, precision: str = "float64",
-               harness: bool = False, thresholds_note: str = "") -> CModule:
+               harness: bool = False, thresholds_note: str = "",
+               effects: bool = True) -> CModule:
     """The C99 module of the monitor of ``cal``'s ``kind`` sensors.
 
     Parameters
@@ -257,6 +260,8 @@ def generate_c(cal: Calibration, thresholds: Thresholds | None = None, *, kind: 
         answers as CSV on stdout.
     thresholds_note : str
         Where the thresholds came from (written in the header).
+    effects : bool
+        Compensate the calibration's effect terms (False: none, as ``--no-effects``).
 
     Raises
     ------
@@ -294,9 +299,9 @@ def generate_c(cal: Calibration, thresholds: Thresholds | None = None, *, kind: 
     cache, sigma, limits = _set_tables(cal, kind, thresholds, settings)
     sets = ",\n".join(_set_initializer(mask, n, df_max, cache, sigma, limits, settings,
                                        thresholds, num) for mask in range(1 << n))
-    effects, n_terms, applied, skipped = _effect_tables(cal, kind, num)
+    effect_text, n_terms, applied, skipped = _effect_tables(cal, kind, num, effects)
     cusum = thresholds.detector != "windows"
-    tables = (f"{effects}"
+    tables = (f"{effect_text}"
               f"#define AXIS_SHARE {AXIS_SHARE!r}\n"
               f"static const rimu_time TIME_CONST[2] = "
               f"{{{_f64(settings.stale_timeout_s)}, {_f64(settings.readmit_dwell_s)}}};\n"

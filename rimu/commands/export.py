@@ -26,6 +26,9 @@ def configure(p: argparse.ArgumentParser) -> None:
     p.add_argument("--float32", action="store_true",
                    help="float32 arithmetic (microcontrollers without a double-precision "
                         "unit; bounded differences: docs/export-c.md)")
+    p.add_argument("--no-effects", action="store_true",
+                   help="do not compensate the calibration's effect terms (as rimu "
+                        "monitor-file --no-effects)")
     p.add_argument("--harness", action="store_true",
                    help="also write rimu_harness.c (samples.csv on stdin, answers as CSV on "
                         "stdout) and rimu_block.c (a block entry for ctypes)")
@@ -52,7 +55,8 @@ def run(args: argparse.Namespace) -> int:
             + f", {choice.thresholds.false_alarms_per_hour:g} false alarms per hour")
     mod = generate_c(cal, choice.thresholds, kind=args.kind,
                      precision="float32" if args.float32 else "float64",
-                     harness=args.harness, thresholds_note=note)
+                     harness=args.harness, thresholds_note=note,
+                     effects=not args.no_effects)
     with atomic_dir(final) as tmp:
         for name, text in mod.files.items():
             (tmp / name).write_text(text, encoding="utf-8")

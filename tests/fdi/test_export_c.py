@@ -401,6 +401,9 @@ def test_effect_terms_the_monitor_does_not_apply_are_listed():
     assert len(mod.applied_terms) == 5
     assert [s.split(":")[0] for s in mod.not_applied] == ["bias_step on sensor 1"]
     assert "bias_step on sensor 1: session-specific" in mod.files["README.md"]
+    off = generate_c(_effect_cal(), effects=False)        # --no-effects
+    assert off.applied_terms == () and len(off.not_applied) == 6
+    assert "#define RIMU_N_TERMS 0" in off.files["rimu_monitor.c"]
 
 
 @pytest.mark.slow
