@@ -195,11 +195,6 @@ class BlockDecoder:
         self.t_first: float | None = None
         """Earliest finite data-frame time of the first block with one (log clock)."""
 
-    @property
-    def pending_frames(self) -> int:
-        """Frames decoded but not yet handed over in a sample."""
-        return int(self._pending.t.size)
-
     def feed(self, frames: RawFrames) -> Samples:
         """Decode the next block of frames; returns the samples now complete."""
         rows = self._decode(frames)

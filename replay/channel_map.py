@@ -212,7 +212,8 @@ class ChannelMap:
         The DBC the map was written for (None: the shipped DBC).
     j1939 : bool
     time_tolerance_s : float or None
-        Assembly tolerance; None: 0.4 sample periods.
+        Assembly tolerance; None: :data:`replay.assemble.TIME_TOLERANCE_PERIODS` (0.4)
+        sample periods.
     max_counter_delta : int
         Largest rolling-counter step accepted (1 = no lost frame tolerated; frames lost
         in between make steps of 2, 3, ...).

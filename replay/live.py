@@ -73,7 +73,8 @@ class StreamDecoder:
     db : cantools Database
     cmap : ChannelMap
     sample_rate_hz : float
-        For the default time tolerance (0.4 sample periods) and gap counting.
+        For the default time tolerance (:data:`~replay.assemble.TIME_TOLERANCE_PERIODS`, 0.4
+        sample periods) and gap counting.
 
     Attributes
     ----------
