@@ -129,7 +129,6 @@ class _Rows:
                    np.concatenate([a.values, b.values]), np.concatenate([a.valid, b.valid]))
 
 
-
 class BlockDecoder:
     """Vectorised decoding of a stream of frame blocks, with state carried between blocks.
 

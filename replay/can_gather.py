@@ -88,7 +88,6 @@ class FrameGather:
                          lengths=np.array(self.lengths, dtype=np.int64), frame_type=ft)
 
 
-
 def gather_messages(it: Iterator[can.Message], g: FrameGather, bar: Any) -> None:
     """The hot path: one pass over python-can's messages, plain appends, in chunks (the
     progress bar moves between chunks)."""

@@ -167,7 +167,6 @@ def _check_blf_complete(reader: Any, p: Path, nframes: int, acct: FrameAccountin
     acct.errors.append({"where": f"after frame {nframes}", "why": why, "kind": "truncated"})
 
 
-
 CAN_READERS: dict[str, CanReader] = {".asc": read_asc, ".blf": read_blf, ".log": read_candump}
 """Log suffix → the reader that reports damage and resumes (python-can's
 ``MESSAGE_READERS`` is the model); any other suffix goes to :func:`read_other`."""

@@ -78,7 +78,6 @@ _ASC_NON_FRAME = re.compile(
     r"\d+\s+statistic|statistic))", re.IGNORECASE)
 
 
-
 def _consume_lines(it: Iterator[can.Message], g: FrameGather, lines: _Lines,
                    acct: FrameAccounting, bar: Any) -> None:
     """Text logs: as :func:`~replay.can_gather.gather_messages`, and every line python-can

@@ -17,6 +17,7 @@ import numpy as np
 __all__ = ["FRAME_DATA", "FRAME_ERROR", "FRAME_REMOTE", "RawFrames", "norm_channel"]
 
 FRAME_DATA, FRAME_ERROR, FRAME_REMOTE = 0, 1, 2
+"""Frame types (:attr:`RawFrames.frame_type`): data, error, remote (RTR)."""
 
 
 @dataclass
@@ -85,7 +86,6 @@ class RawFrames:
                    channel=ch, payload=np.frombuffer(b"".join(data), np.uint8),
                    lengths=np.array([len(d) for d in data], np.int64),
                    frame_type=np.array(ft, np.int8))
-
 
 
 _CH = re.compile(r"^v?can(\d+)$")
