@@ -25,10 +25,11 @@ import pytest
 from calibration.inflight.calfile import calibration_from_fit
 from calibration.inflight.fit import fit_inflight
 from fdi.errors import ConfigError
+from replay.can_write import write_flight_log
 from replay.chain import ChainOptions, chain_for_flight, chain_for_map, report_log, run_flight
 from replay.flight_data import concat_flights
 from replay.imu_set import ImuSetSpec, simulate_imu_set
-from replay.logio import LogStream, read_log, resolve_map, write_flight_log
+from replay.logio import LogStream, read_log, resolve_map
 from replay.time_offsets import StreamAligner, apply_time_offsets, imu_groups
 from rimu.cli import main
 from thresholds.compute import compute_thresholds
