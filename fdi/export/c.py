@@ -307,6 +307,7 @@ def generate_c(cal: Calibration, thresholds: Thresholds | None = None, *, kind: 
               f"{{{_f64(settings.stale_timeout_s)}, {_f64(settings.readmit_dwell_s)}}};\n"
               f"static const long long SCALE_W[RIMU_NW] = "
               f"{{{', '.join(str(int(w)) for w in thresholds.scales)}}};\n"
+              f"#define SCALE_W_MAX {max(int(w) for w in thresholds.scales)}LL\n"
               f"static const rimu_real VARIANCE_FACTOR[RIMU_NW] = "
               f"{_row(thresholds.variance_factor, num, 'variance_factor')};\n"
               f"static const rimu_set RIMU_SETS[RIMU_N_SETS] = {{\n{sets}\n}};\n")
