@@ -30,11 +30,12 @@ from _effects_flight import effect_calibration, flight_with_effects
 
 from replay.accounting import FrameAccounting
 from replay.assemble import decode_frames
+from replay.can_read import read_frames
+from replay.can_write import write_flight_log
 from replay.channel_map import default_channel_map
 from replay.effect_inputs import map_effect_inputs
 from replay.flight_data import AuxChannels
 from replay.frames import load_dbc
-from replay.logio import read_frames, write_flight_log
 
 
 def main() -> None:

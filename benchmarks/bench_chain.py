@@ -24,9 +24,10 @@ from _common import header, print_results, write_results
 
 from calibration.inflight.calfile import calibration_from_fit
 from calibration.inflight.fit import fit_inflight
+from replay.can_write import write_flight_log
 from replay.chain import ChainOptions, chain_for_map, report_log
 from replay.imu_set import ImuSetSpec, simulate_imu_set
-from replay.logio import LogStream, resolve_map, write_flight_log
+from replay.logio import LogStream, resolve_map
 
 
 def _replay(log: Path, cal, offsets: bool) -> tuple[float, int, int]:

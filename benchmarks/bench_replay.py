@@ -36,9 +36,11 @@ from fdi.calfile import Calibration, SensorCal, SensorSet
 from fdi.geometry import load_configuration
 from fdi.monitor import Monitor
 from fdi.units import DPH, DPS
+from replay.can_read import read_frames
+from replay.can_write import write_flight_log
 from replay.faults import parse_fault
 from replay.flight import simulate_flight
-from replay.logio import read_frames, read_log, write_flight_log
+from replay.logio import read_log
 from replay.report import build_report
 
 COMMA = ROOT / ".." / "shared" / "data" / "comma2k19_can"

@@ -31,8 +31,8 @@ from pathlib import Path
 
 from _common import ROOT, header, spread, write_results
 
+from replay.can_write import write_flight_log
 from replay.flight import simulate_flight
-from replay.logio import write_flight_log
 from thresholds.synthetic import synthetic_calibration
 
 _HWM = ("hwm = [x for x in open('/proc/self/status') if x.startswith('VmHWM')][0]\n"

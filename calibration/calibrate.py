@@ -56,19 +56,9 @@ of the record (:func:`calibration.residuals.gauss_markov_sigma_candidates`): a r
 few correlation times hardly tells τc, and the σ at the maximum-likelihood τc were a scale
 mixture, 2× too small where τ̂c came out short and 5-6× too wide where it ran long. The
 estimates do not change. ``extra["noise_model"]`` records the fit, the pair the σ used and
-the sd factor over white noise per sensor. Measured (tetrad-paper, sd(z) per parameter):
-white noise: the test keeps white in 87-90 of 100 sessions, spreads unchanged within the
-MC tolerance; 1 °/h, τc 100 s, on fresh seeds 2000-2099 after the rule was frozen on seeds
-0-99: biases 3.3-3.8 → 0.75-0.89 with 0 of 800 beyond 3σ (the maximum-likelihood pair
-gave 0.87-1.17 with 15 of 800), SF and angles 0.93-1.13
-(``tests/calibration/test_calibrate_coloured_holdout.py``); τc 30 s: biases 2.2 → 0.61-0.80
-(wider than needed); 0.5 °/h: biases ≈ 2.0 → 1.09-1.47 (the test misses the process in
-about one session in five); τc 300 s (half the record, beyond the cut): biases 5.0 → 1.7,
-slightly worse than with the maximum-likelihood pair (``extra["noise_model"][kind]
-["sigma_cut"]`` says when the likelihood allows a process slower than the cut).
-cone-paper accelerometers, 0.1 mg, τc 100 s in a 200 s record (30 seeds, pooled over
-sensors): biases 1.32, 7 of 180 beyond 3σ, SF 1.14, angles 1.15 (maximum-likelihood pair:
-1.13, 4 of 180, 1.06, 1.08): the cut at 50 s is below the true τc.
+the sd factor over white noise per sensor. How well these σ hold, measured by Monte Carlo
+on simulated sessions (white and coloured, tetrad and cone): ``docs/model.md``
+("Uncertainty"), ``tests/calibration/test_calibrate_coloured_holdout.py``.
 The Earth-rate fit still uses the white per-sample covariance.
 
 Two further checks test whiteness against the data and add a line to ``extra["warnings"]``

@@ -61,6 +61,14 @@ stream carries it) and lists the others with the reason (:mod:`fdi.effects`,
 ``e_i ~ N(0, input_error_cov)``; it holds both the scale-factor and the misalignment
 uncertainty and is what makes the parity residual grow with the rate.
 
+Optional in ``/3`` (a file without it states no range): the body rate per body axis and the
+specific force up to which the calibration's samples went (its error model and residual
+tails hold there; the monitor's envelope marks what lies beyond,
+:data:`fdi.envelope.RANGE`)::
+
+     "validated_range": {"gyro": {"rate_abs_max": [wx, wy, wz], "rate_unit": "rad/s",
+                                  "specific_force_max": f, "specific_force_unit": "m/s^2"}}
+
 Optional per sensor (a ``/3`` file without them loads with 0): ``timing_jitter_ms`` and
 ``timing_jitter_ms_sd``, the standard deviation of the sensor's sampling-time error
 relative to the reference IMU (0 for the reference and for turntable calibrations) and its
@@ -288,6 +296,13 @@ class SensorSet:
     drift : DriftModel or None
         The slow drift of the residual's whitened parity (:mod:`fdi.drift`,
         ``rimu.calibration/4``); None when not measured.
+    validated_rate : ndarray, shape (3,), or None
+        Gyros: per body axis, the largest rate (rad/s) the calibration's samples reached
+        (:func:`fdi.envelope.covered_rate`); None when the calibration states no range.
+    validated_specific_force : float or None
+        Gyros: the largest specific force (m/s², felt by every IMU,
+        :func:`fdi.envelope.covered_specific_force`) the calibration's samples reached;
+        None when not stated (no accelerometers, or no range stated).
     """
 
     kind: str
@@ -298,6 +313,8 @@ class SensorSet:
     allan: AllanTable | None = None
     tails: TailModel | None = None
     drift: DriftModel | None = None
+    validated_rate: np.ndarray | None = None
+    validated_specific_force: float | None = None
 
     @property
     def n(self) -> int:
@@ -423,6 +440,10 @@ class Calibration:
             doc["residual_tails"] = to_jsonable(tails)
         if drift:
             doc["parity_drift"] = to_jsonable(drift)
+        vr = {kind: _range_to_dict(s) for kind, s in self.sets.items()
+              if s.validated_rate is not None}
+        if vr:
+            doc["validated_range"] = vr
         for kind, s in self.sets.items():
             doc["sensors"][kind] = [_sensor_to_dict(c) for c in s.sensors]
             doc["noise_covariance"][kind] = s.noise_covariance.tolist()
@@ -527,6 +548,7 @@ def calibration_from_dict(doc: Mapping[str, Any], path: str = "<calibration>") -
         sub.finish(accept=sets)
     if version in (CALIBRATION_SCHEMA, CALIBRATION_SCHEMA_DRIFT):
         sets = _tails(r, sets)
+        sets = _validated_range(r, sets)
     if version == CALIBRATION_SCHEMA_DRIFT:
         sets = _drift(r, sets)
     cal = Calibration(
@@ -579,6 +601,43 @@ def _drift(r: Fields, sets: dict[str, SensorSet]) -> dict[str, SensorSet]:
                             "sensors")
         out[kind] = replace(sets[kind], drift=model)
     t.finish(accept=sets)
+    return out
+
+
+def _range_to_dict(s: SensorSet) -> dict[str, Any]:
+    doc: dict[str, Any] = {"rate_abs_max": np.asarray(s.validated_rate, float).tolist(),
+                           "rate_unit": "rad/s"}
+    if s.validated_specific_force is not None:
+        doc["specific_force_max"] = float(s.validated_specific_force)
+        doc["specific_force_unit"] = "m/s^2"
+    return doc
+
+
+def _validated_range(r: Fields, sets: dict[str, SensorSet]) -> dict[str, SensorSet]:
+    """``validated_range``: the rate and specific force the calibration covered (``/3``,
+    optional, gyros)."""
+    from dataclasses import replace
+
+    v = r.mapping("validated_range", None)
+    if v is None:
+        return sets
+    out = dict(sets)
+    for kind in sets:
+        sub = v.mapping(kind, None)
+        if sub is None:
+            continue
+        if kind != "gyro":
+            raise v.error(kind, "a validated range is stated for gyros only")
+        for key, unit in (("rate_unit", "rad/s"), ("specific_force_unit", "m/s^2")):
+            if sub.get(key, unit) != unit:
+                raise sub.error(key, f"expected {unit!r}, got {sub.get(key)!r}")
+        a = sub.array("rate_abs_max", (3,))
+        if np.isnan(a).any() or (a < 0).any():
+            raise sub.error("rate_abs_max", "expected three rates >= 0")
+        f = sub.number("specific_force_max", None, nonnegative=True)
+        sub.finish()
+        out[kind] = replace(sets[kind], validated_rate=a, validated_specific_force=f)
+    v.finish(accept=sets)
     return out
 
 

@@ -30,6 +30,16 @@ Codes (a bitmask, 0 = inside the envelope)
   ``disagree_baseline_s``) while every estimate sees at least ``disagree_context_rate_dps``.
 - :data:`DECLARED` (8): inside an interval the log itself declares (crash check, estimator
   variance or failsafe, flip), given as :class:`DeclaredInterval`.
+- :data:`RANGE` (16): beyond what the calibration's samples covered: the body turns faster
+  about some body axis than ``validated_rate``, or the specific force exceeds
+  ``validated_specific_force`` (both from the samples the calibration fitted its error
+  model and measured its residual tails on: :func:`covered_rate`,
+  :func:`covered_specific_force`). Beyond them the scale-factor, misalignment,
+  g-sensitivity and dynamic errors are extrapolated, and the thresholds no longer rest on
+  measured residuals. The rate is the *smallest* over the independent estimates, axis by
+  axis, and the specific force the smallest over the IMUs, so one faulty sensor reading
+  large values cannot raise them. A calibration that states no range (turntable, static
+  with stated tolerances, older files) sets no bit.
 
 Every bit stays set for ``hold_s`` after its condition ends, so that the samples the event
 disturbs (ringing, filter transients) stay marked. Offline users may also pad before.
@@ -64,6 +74,7 @@ from fdi.units import DPS, G0
 
 __all__ = [
     "DECLARED",
+    "RANGE",
     "REASONS",
     "SATURATION",
     "SHOCK",
@@ -71,6 +82,8 @@ __all__ = [
     "DeclaredInterval",
     "EnvelopeSettings",
     "EnvelopeTracker",
+    "covered_rate",
+    "covered_specific_force",
     "independent_estimates",
     "reason_names",
 ]
@@ -84,9 +97,11 @@ TUMBLE = 4
 disagreement spike during a fast rotation)."""
 DECLARED = 8
 """Inside a crash or estimator event the log declares."""
+RANGE = 16
+"""Turning faster, about some body axis, than the calibration's samples did."""
 
 REASONS: dict[int, str] = {SHOCK: "shock", SATURATION: "saturation", TUMBLE: "tumble",
-                           DECLARED: "declared"}
+                           DECLARED: "declared", RANGE: "range"}
 """Name of each code bit."""
 
 
@@ -225,11 +240,19 @@ class EnvelopeTracker:
         :func:`independent_estimates`.
     declared : sequence of DeclaredInterval
         Intervals the log declares out of the envelope.
+    validated_rate : ndarray, shape (3,), optional
+        The calibration's covered rate per body axis (rad/s, :func:`covered_rate`); None:
+        no :data:`RANGE` bit.
+    validated_specific_force : float, optional
+        The calibration's covered specific force (m/s², :func:`covered_specific_force`);
+        None: not checked.
     """
 
     def __init__(self, settings: EnvelopeSettings | None = None, *, H: np.ndarray,
                  groups: Sequence[Sequence[int]] | None = None,
-                 declared: Sequence[DeclaredInterval] = ()) -> None:
+                 declared: Sequence[DeclaredInterval] = (),
+                 validated_rate: np.ndarray | None = None,
+                 validated_specific_force: float | None = None) -> None:
         self.settings = settings if settings is not None else EnvelopeSettings()
         H = np.asarray(H, float)
         if H.ndim != 2 or H.shape[1] != 3 or H.shape[0] < 1:
@@ -238,6 +261,18 @@ class EnvelopeTracker:
         self.estimates = independent_estimates(H, groups)
         self._solvers = [np.linalg.pinv(H[list(g)]) for g in self.estimates]
         self.declared = tuple(declared)
+        self.validated_rate = None
+        if validated_rate is not None:
+            v = np.asarray(validated_rate, float).reshape(-1)
+            if v.shape != (3,) or np.isnan(v).any() or (v < 0).any():
+                raise ConfigError(f"envelope: validated_rate must be 3 rates >= 0 (rad/s), "
+                                  f"got {validated_rate!r}")
+            self.validated_rate = v
+        f = validated_specific_force
+        if f is not None and not (isinstance(f, int | float) and f >= 0):
+            raise ConfigError(f"envelope: validated_specific_force must be a number >= 0 "
+                              f"(m/s^2), got {f!r}")
+        self.validated_specific_force = None if f is None else float(f)
         self.reset()
 
     def reset(self) -> None:
@@ -298,7 +333,8 @@ class EnvelopeTracker:
         Returns
         -------
         ndarray of int64, shape (B,)
-            Bitmask of :data:`SHOCK`, :data:`SATURATION`, :data:`TUMBLE`, :data:`DECLARED`.
+            Bitmask of :data:`SHOCK`, :data:`SATURATION`, :data:`TUMBLE`, :data:`DECLARED`,
+            :data:`RANGE`.
             Never raises on bad numbers (NaN/inf count as no evidence, except that inf is
             at the range).
         """
@@ -327,6 +363,8 @@ class EnvelopeTracker:
             tum_now = self._tumble(t, w, wmin)
             tum = self._held(t, tum_now, TUMBLE)
             dec = self._declared(t)
+            rng = self._held(t, self._range(w, accel), RANGE)
+        codes |= np.where(rng, RANGE, 0)
         codes |= np.where(shock, SHOCK, 0)
         codes |= np.where(sat, SATURATION, 0)
         codes |= np.where(tum, TUMBLE, 0)
@@ -435,6 +473,18 @@ class EnvelopeTracker:
         context = wmin >= s.disagree_context_rate_dps * DPS
         return fast | (spike & context)
 
+    def _range(self, w: np.ndarray, accel: np.ndarray | None) -> np.ndarray:
+        """True where the axis floor of the rate exceeds the validated rate on some axis, or
+        the specific force every IMU feels exceeds the validated one."""
+        B = w.shape[1]
+        out = np.zeros(B, bool)
+        if self.validated_rate is not None:
+            out |= np.any(_axis_floor(w) > self.validated_rate, axis=1)
+        if self.validated_specific_force is not None and accel is not None:
+            out |= _force_floor(np.asarray(accel, float).reshape(B, -1, 3)) \
+                > self.validated_specific_force
+        return out
+
     def _declared(self, t: np.ndarray) -> np.ndarray:
         out = np.zeros(t.shape[0], bool)
         h = self.settings.hold_s
@@ -443,3 +493,73 @@ class EnvelopeTracker:
             t1 = d.t1_s if not math.isnan(d.t1_s) else math.inf
             out |= (t >= t0) & (t <= t1 + h)
         return out
+
+
+def _axis_floor(w: np.ndarray) -> np.ndarray:
+    """Per body axis, the smallest |rate| over the independent estimates: (E, B, 3) → (B, 3)
+    (rad/s); NaN counts as no evidence (0), no estimate gives 0."""
+    if w.shape[0] == 0:
+        return np.zeros(w.shape[1:])
+    with np.errstate(invalid="ignore"):
+        a = np.where(np.isfinite(w), np.abs(w), np.where(np.isnan(w), 0.0, np.inf))
+    return np.min(a, axis=0)
+
+
+def _force_floor(accel: np.ndarray) -> np.ndarray:
+    """The smallest specific-force magnitude over the IMUs: (B, k, 3) → (B,) m/s²; NaN
+    counts as 0 (no evidence), no IMU gives 0."""
+    if accel.shape[1] == 0:
+        return np.zeros(accel.shape[0])
+    with np.errstate(invalid="ignore"):
+        f = np.linalg.norm(accel, axis=2)
+    return np.min(np.where(np.isnan(f), 0.0, f), axis=1)
+
+
+def covered_specific_force(accel: np.ndarray, used: np.ndarray | None = None) -> float:
+    """The specific force a calibration covered: the largest over the samples ``used`` of
+    the smallest magnitude over the IMUs (what the :data:`RANGE` bit compares), m/s².
+
+    Parameters
+    ----------
+    accel : ndarray, shape (N, k, 3)
+        Specific force of each IMU (m/s²).
+    used : ndarray of bool, shape (N,), optional
+        The samples the calibration fitted its model on (default: all).
+    """
+    a = np.asarray(accel, float)
+    if a.ndim != 3 or a.shape[2] != 3:
+        raise ConfigError(f"covered_specific_force: accel must be (N, k, 3), got {a.shape}")
+    if used is not None:
+        a = a[np.asarray(used, bool)]
+    a = a[np.all(np.isfinite(a), axis=(1, 2))]
+    return float(np.max(_force_floor(a))) if a.shape[0] and a.shape[1] else 0.0
+
+
+def covered_rate(H: np.ndarray, groups: Sequence[Sequence[int]] | None, rates: np.ndarray,
+                 used: np.ndarray | None = None) -> np.ndarray:
+    """The rate range a calibration covered: per body axis, the largest over the samples
+    ``used`` of the smallest |rate| over the independent estimates (the quantity the
+    :data:`RANGE` bit compares), shape (3,) rad/s.
+
+    Parameters
+    ----------
+    H : ndarray, shape (n, 3)
+        Calibrated axes.
+    groups : sequence of sequence of int, optional
+        IMU groups (:func:`independent_estimates`).
+    rates : ndarray, shape (N, n)
+        Calibrated gyro outputs (rad/s); NaN = no sample.
+    used : ndarray of bool, shape (N,), optional
+        The samples the calibration fitted its model on (default: all).
+    """
+    H = np.asarray(H, float)
+    rates = np.asarray(rates, float)
+    est = independent_estimates(H, groups)
+    if used is not None:
+        rates = rates[np.asarray(used, bool)]
+    rows = np.all(np.isfinite(rates), axis=1)
+    rates = rates[rows]
+    if not est or rates.shape[0] == 0:
+        return np.zeros(3)
+    w = np.stack([rates[:, list(g)] @ np.linalg.pinv(H[list(g)]).T for g in est])
+    return np.max(_axis_floor(w), axis=0)

@@ -7,7 +7,8 @@ The streaming runtime never raises on bad *numbers*: it marks the sensor unhealt
 
 from __future__ import annotations
 
-__all__ = ["CalibrationError", "ConfigError", "FileFormatError", "ReplayError", "RimuError"]
+__all__ = ["CalibrationError", "ConfigError", "ExportError", "FileFormatError", "ReplayError",
+           "RimuError"]
 
 
 class RimuError(Exception):
@@ -59,3 +60,8 @@ class CalibrationError(RimuError):
 
 class ReplayError(RimuError):
     """A log could not be replayed (in strict mode: any corrupt frame or record)."""
+
+
+class ExportError(RimuError):
+    """A calibration or thresholds file holds something the exported C monitor cannot carry
+    faithfully (``rimu export c``); the message names it."""

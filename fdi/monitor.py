@@ -163,6 +163,7 @@ class Monitor:
         self._suspects: tuple[int, ...] = ()
         self._unverified = _NO_AXES
         self._iso_due = 0
+        self._hold_open = 0                 # window count before a detection may clear
         self._no_fit = False                # no single-sensor fault explains this detection
 
     def _healthy_array(self, mask: int) -> np.ndarray:
@@ -418,7 +419,11 @@ class Monitor:
             return stop, None
         osd = None
         if code == S.STOP_CLEARED:
-            self._clear_suspects()
+            if int(c[S.WINDOW_COUNT]) < self._hold_open:   # not every window refilled yet
+                c[S.DETECTED] = 1
+                c[S.CLEAR_RUN] = 0
+            else:
+                self._clear_suspects()
         elif code == S.STOP_INCOMPLETE:
             osd = self._on_incomplete(raw, corr, stop, valid[stop if has_valid else 0], out[stop])
         else:
@@ -606,8 +611,18 @@ class Monitor:
             return
         events.append(Event(t, None, "envelope", "in", envelope=0))
         if old:                       # back inside: what the excursion put in the windows goes
+            c = self._state.counters
+            open_ = bool(c[S.DETECTED])
             self._state.new_set(self._model.df)
-            self._clear_suspects()
+            if not open_:
+                self._clear_suspects()
+                return
+            # a detection open at re-entry stays open on the fresh windows, with its suspects
+            # and unverified axes, until every window has filled again and cleared it: an
+            # excursion must not make a persisting fault look verified
+            c[S.DETECTED] = 1
+            self._iso_due = self.settings.persistence
+            self._hold_open = max(self._scales)
 
     def _attribute(self, mdl: SetModel, fired: int) -> tuple[int, float | None, str,
                                                             int | None]:

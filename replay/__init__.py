@@ -28,12 +28,12 @@ _EXPORTS = {
     "load_flight_dir": "replay.flight_io",
     "load_scenario": "replay.scenario",
     "parse_fault": "replay.faults",
-    "read_frames": "replay.logio",
+    "read_frames": "replay.can_read",
     "read_log": "replay.logio",
     "run_live": "replay.live",
     "save_flight_dir": "replay.flight_io",
     "simulate_flight": "replay.flight_sim",
-    "write_flight_log": "replay.logio",
+    "write_flight_log": "replay.can_write",
 }
 """Public name → module defining it (imported on first use, PEP 562)."""
 __all__ = [

@@ -418,8 +418,10 @@ def default_envelope(cal: Calibration, kind: str, groups: Sequence[str],
     for i, g in enumerate(groups):
         idx.setdefault(g, []).append(i)
     grouped = len(idx) > 1 and "" not in idx
-    return EnvelopeTracker(H=cal.kind(kind).H, groups=list(idx.values()) if grouped else None,
-                           declared=tuple(declared))
+    s = cal.kind(kind)
+    return EnvelopeTracker(H=s.H, groups=list(idx.values()) if grouped else None,
+                           declared=tuple(declared), validated_rate=s.validated_rate,
+                           validated_specific_force=s.validated_specific_force)
 
 
 def _envelope(choice: Any, cal: Calibration, kind: str, groups: Sequence[str],

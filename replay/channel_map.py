@@ -41,7 +41,7 @@ that sensor i of the map really is sensor i of the calibration.
 of the calibration's effect terms (:mod:`fdi.effects`), a temperature (°C or K) or the
 specific force (m/s² or g, in the body frame). They never take part in the sample assembly
 or its loss accounting; their latest value not later than each sample is held onto it
-(:class:`replay.assemble.AuxHold`), NaN before the first and once older than ``timeout_s``
+(:class:`replay.aux_hold.AuxHold`), NaN before the first and once older than ``timeout_s``
 (default 5 s for a temperature, 0.1 s for a specific force). A specific-force entry gives
 one signal with ``axis_nominal`` (one accelerometer axis) or up to three ``signals`` with
 their ``axes`` (default x, y, z); the specific force of a sensor is the least-squares
@@ -212,7 +212,8 @@ class ChannelMap:
         The DBC the map was written for (None: the shipped DBC).
     j1939 : bool
     time_tolerance_s : float or None
-        Assembly tolerance; None: 0.4 sample periods.
+        Assembly tolerance; None: :data:`replay.assemble.TIME_TOLERANCE_PERIODS` (0.4)
+        sample periods.
     max_counter_delta : int
         Largest rolling-counter step accepted (1 = no lost frame tolerated; frames lost
         in between make steps of 2, 3, ...).
@@ -248,7 +249,7 @@ def default_channel_map(n: int, kind: str = "gyro", *,
     """The map of the shipped DBC: sensor i is ``RIMU_<KIND>_ii``, signal RAW.
 
     Counter, CRC, sample counter and status are all checked. ``auxiliary``: auxiliary
-    channels to add (e.g. those :func:`replay.logio.write_flight_log` wrote).
+    channels to add (e.g. those :func:`replay.can_write.write_flight_log` wrote).
     """
     sensors = []
     for i in range(1, n + 1):

@@ -15,7 +15,7 @@ A sample the channel lacks is NaN (the term then contributes 0 there and is coun
 
 A CAN stream (``rimu replay``, ``rimu monitor``) has the channel map's auxiliary channels
 instead (:class:`replay.channel_map.AuxChannel`, held onto the samples by
-:class:`replay.assemble.AuxHold`): :func:`map_available` says which sensors have which input
+:class:`replay.aux_hold.AuxHold`): :func:`map_available` says which sensors have which input
 (from the map alone, before any frame), :func:`map_effect_inputs` turns the held columns
 into the specific force and temperature of each sensor. A sensor's specific force is the
 least-squares solution ``f = A⁺·a`` over the accelerometer axes ``A`` (one unit body axis per
@@ -141,7 +141,7 @@ def map_reasons(cmap: ChannelMap) -> dict[str, str]:
 
 
 def _columns(cmap: ChannelMap) -> dict[int, list[int]]:
-    """Auxiliary entry → its column numbers (:func:`replay.assemble.aux_columns` order)."""
+    """Auxiliary entry → its column numbers (:func:`replay.slots.aux_columns` order)."""
     out: dict[int, list[int]] = {}
     c = 0
     for k, a in enumerate(cmap.auxiliary):
@@ -182,7 +182,7 @@ def map_effect_inputs(cmap: ChannelMap, aux: np.ndarray | None
     ----------
     cmap : ChannelMap
     aux : ndarray, shape (N, m), or None
-        ``Samples.aux``: the columns of :func:`replay.assemble.aux_columns`, °C or m/s²
+        ``Samples.aux``: the columns of :func:`replay.slots.aux_columns`, °C or m/s²
         along each signal's axis, NaN where none or stale.
 
     Returns

@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from fdi.calfile import Calibration
-from fdi.envelope import EnvelopeSettings, EnvelopeTracker, reason_names
+from fdi.envelope import REASONS, EnvelopeSettings, EnvelopeTracker, reason_names
 from fdi.errors import ConfigError
 from replay.flight_data import Flight
 from replay.log_events import DEFAULT_DECLARED, declared_intervals
@@ -88,7 +88,10 @@ def flight_envelope(flight: Flight, cal: Calibration | None = None,
     rates, H = flight_rates(flight, cal)
     groups = list(flight.imu_groups().values()) or None
     tr = EnvelopeTracker(settings, H=H, groups=groups,
-                         declared=declared_intervals(flight.events, categories))
+                         declared=declared_intervals(flight.events, categories),
+                         validated_rate=cal.gyro.validated_rate if cal is not None else None,
+                         validated_specific_force=(cal.gyro.validated_specific_force
+                                                   if cal is not None else None))
     return tr.update(flight.t, rates, flight_accel(flight))
 
 
@@ -152,8 +155,7 @@ def envelope_summary(flight: Flight, codes: np.ndarray) -> dict[str, Any]:
     fly = flying_mask(flight)
     nf = int(fly.sum())
     per = {}
-    for bit_name in ("shock", "saturation", "tumble", "declared"):
-        bit = {"shock": 1, "saturation": 2, "tumble": 4, "declared": 8}[bit_name]
+    for bit, bit_name in REASONS.items():
         m = (codes & bit) != 0
         per[bit_name] = {"samples": int(m.sum()),
                          "flying_fraction": float((m & fly).sum() / nf) if nf else 0.0}

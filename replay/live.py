@@ -32,10 +32,11 @@ import numpy as np
 from fdi.answer import Answer, BlockResult, Event
 from fdi.blocks import block_from_answers
 from replay.accounting import FrameAccounting
-from replay.assemble import BlockDecoder, RawFrames, Samples
+from replay.assemble import BlockDecoder, Samples
 from replay.channel_map import ChannelMap
 from replay.effect_inputs import row_inputs
-from replay.logio import _norm_channel, aux_channels
+from replay.logio import aux_channels
+from replay.raw_frames import RawFrames, norm_channel
 
 __all__ = ["Pacer", "StreamDecoder", "block_from_answers", "format_event", "run_live"]
 
@@ -56,7 +57,7 @@ def format_event(e: Event, names: Sequence[str] = ()) -> str:
 def _frames_of(messages: Sequence[can.Message]) -> RawFrames:
     fr = RawFrames.from_messages(list(messages))
     if len(fr):
-        fr.channel[:] = [_norm_channel(c) for c in fr.channel]
+        fr.channel[:] = [norm_channel(c) for c in fr.channel]
     return fr
 
 
@@ -72,7 +73,8 @@ class StreamDecoder:
     db : cantools Database
     cmap : ChannelMap
     sample_rate_hz : float
-        For the default time tolerance (0.4 sample periods) and gap counting.
+        For the default time tolerance (:data:`~replay.assemble.TIME_TOLERANCE_PERIODS`, 0.4
+        sample periods) and gap counting.
 
     Attributes
     ----------

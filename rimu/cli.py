@@ -28,6 +28,7 @@ COMMANDS: dict[str, str] = {
     "demo": "rimu.commands.demo",
     "diagnose": "rimu.commands.diagnose",
     "evaluate": "rimu.commands.evaluate",
+    "export": "rimu.commands.export",
     "ingest": "rimu.commands.ingest",
     "monitor": "rimu.commands.monitor",
     "monitor-file": "rimu.commands.monitor_file",

@@ -14,8 +14,8 @@ from pathlib import Path
 
 import pytest
 
+from replay.can_write import write_flight_log
 from replay.flight import save_flight_dir, simulate_flight
-from replay.logio import write_flight_log
 from thresholds.synthetic import synthetic_calibration
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -36,8 +36,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from calibration.ferraris_sim import imucal_like_truth, simulate_ferraris
+from replay.can_write import write_flight_log
 from replay.flight import save_flight_dir, simulate_flight
-from replay.logio import write_flight_log
 from rimu import argtypes
 from rimu.cli import build_parser, main
 from thresholds.synthetic import synthetic_calibration

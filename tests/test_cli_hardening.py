@@ -18,9 +18,9 @@ import pytest
 
 from fdi.calfile import check_compatible, check_plausible, load_calibration
 from fdi.errors import CalibrationError, ConfigError
+from replay.can_write import write_flight_log
 from replay.faults import parse_fault
 from replay.flight import save_flight_dir, simulate_flight
-from replay.logio import write_flight_log
 from rimu.argtypes import nonnegative_int, positive_float, positive_int
 from rimu.cli import main
 from rimu.outputs import atomic_dir, atomic_file, atomic_write_text, output_dir, output_file

@@ -356,13 +356,9 @@ def from_start(flight: Flight, cal: Calibration, thresholds: Any, label: str
 
 
 def _reasons(env: np.ndarray) -> dict[str, int]:
-    """Samples per envelope reason (names from ``fdi.envelope`` when it exists)."""
-    try:
-        from fdi.envelope import reason_names
-    except ImportError:
-        def reason_names(c: int) -> tuple[str, ...]:
-            return tuple(n for b, n in ((1, "shock"), (2, "saturation"), (4, "tumble"),
-                                        (8, "declared")) if c & b)
+    """Samples per envelope reason (:func:`fdi.envelope.reason_names`)."""
+    from fdi.envelope import reason_names
+
     out: dict[str, int] = {}
     for c in np.unique(env[env != 0]):
         for r in reason_names(int(c)):

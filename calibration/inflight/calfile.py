@@ -18,7 +18,10 @@ coloured noise. Time offsets are kept under ``extra.inflight`` with their checks
 fitted on; ``rimu monitor-file`` and ``rimu diagnose`` move each IMU by its offset
 (:mod:`.timing`).
 The tail of the residual's parity statistic per window scale is kept too
-(:func:`sensor_residuals`, :mod:`calibration.tails`).
+(:func:`sensor_residuals`, :mod:`calibration.tails`), and the body rate per axis and the
+specific force the samples the fit used reached (``SensorSet.validated_rate``,
+``validated_specific_force``): the monitor's envelope marks what lies beyond as beyond what
+this calibration has seen (:data:`fdi.envelope.RANGE`).
 """
 
 from __future__ import annotations
@@ -34,8 +37,10 @@ from calibration.inflight.timing import flight_identity
 from calibration.residuals import allan_table
 from calibration.tails import fit_tail_model
 from fdi.calfile import AllanTable, Calibration, SensorCal, SensorSet, tangent_basis
+from fdi.envelope import covered_rate, covered_specific_force
 from fdi.reconstruction import inflation_terms
 from fdi.units import DPH, DPS, MS, RAW_UNITS
+from replay.envelope import flight_accel
 from replay.flight_data import Flight
 
 __all__ = ["INFLIGHT_METHOD", "calibration_from_fit", "noise_split", "sensor_residuals"]
@@ -175,9 +180,16 @@ def calibration_from_fit(fit: InflightFit, flight: Flight, *, tails: bool = True
             src += ", relative to the monitor's threshold inflation (with timing jitter)"
         model = fit_tail_model(sensor_residuals(fit, flight), H, cov, fit.sample_rate_hz,
                                source=src, **ctx)
+    sf = np.array([c.scale_factor for c in sensors])
+    b = np.array([c.bias for c in sensors])
+    covered = covered_rate(H, list(groups.values()), np.asarray(flight.raw, float) * sf - b,
+                           fit.used)
+    acc = flight_accel(flight)
+    force = covered_specific_force(acc, fit.used) if acc is not None else None
     return Calibration(configuration=f"{len(groups)} IMUs in flight", sets={
         "gyro": SensorSet("gyro", tuple(sensors), cov, allan=_allan(fit, noise),
-                          tails=model)},
+                          tails=model, validated_rate=covered,
+                          validated_specific_force=force)},
         sample_rate_hz=fit.sample_rate_hz, extra={"method": INFLIGHT_METHOD,
                                                  "source": fit.source,
                                                  "inflight": fit_summary(fit, flight)})

@@ -77,6 +77,7 @@ def run(args: argparse.Namespace) -> int:
     """Run ``rimu calibrate --in-flight``."""
     from calibration.inflight.calfile import calibration_from_fit
     from calibration.inflight.fit import fit_inflight
+    from fdi.units import DPS, G0
     from replay.flight_io import load_flight_dir
     from rimu.outputs import atomic_file, input_path, output_file
 
@@ -104,6 +105,13 @@ def run(args: argparse.Namespace) -> int:
               + f"; w={r1.scale}: excess kurtosis {r1.excess_kurtosis:.3g}"
               + (f", GPD xi {r1.gpd.shape:.2f} +- {r1.gpd.shape_sd:.2f}" if r1.gpd else "")
               + " (rimu tune and the monitor overbound the non-Gaussian scales)")
+    g = cal.gyro
+    if g.validated_rate is not None:
+        force = (f", specific force {g.validated_specific_force / G0:.2f} g"
+                 if g.validated_specific_force is not None else "")
+        print("covered range (the monitor marks what lies beyond as out of its envelope): "
+              "rate " + " / ".join(f"{v / DPS:.0f}" for v in g.validated_rate)
+              + f" deg/s about x / y / z{force}")
     print(f"wrote {out}")
     if rep is not None:
         from calibration.inflight.report import write_flight_plots

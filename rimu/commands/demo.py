@@ -61,9 +61,10 @@ def _demo(args: argparse.Namespace, out: Path, final: Path) -> None:
     from calibration.simulate import save_simulation, simulate_session
     from fdi.calfile import load_calibration
     from fdi.monitor import Monitor
+    from replay.can_write import write_flight_log
     from replay.faults import parse_fault
     from replay.flight import simulate_flight
-    from replay.logio import read_log, write_flight_log
+    from replay.logio import read_log
     from replay.report import build_report, format_summary
     from thresholds import compute_thresholds
 

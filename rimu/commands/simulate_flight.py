@@ -19,7 +19,7 @@ from rimu.argtypes import (
 HELP = "simulate a flight (manoeuvres, true sensor model, faults) with a truth sidecar"
 
 CAN_SUFFIXES = (".asc", ".blf", ".log")
-"""``--out`` suffixes written as CAN logs (through ``replay.logio.write_flight_log``)."""
+"""``--out`` suffixes written as CAN logs (through ``replay.can_write.write_flight_log``)."""
 MAP_SUFFIX = ".map.toml"
 """The channel map written beside a CAN log ``NAME.blf``: ``NAME.map.toml``."""
 
@@ -145,10 +145,10 @@ def run(args: argparse.Namespace) -> int:
         flight = add_effects(flight, plan, seed=args.seed)
     if is_log:
         try:
-            from replay.logio import write_flight_log
+            from replay.can_write import write_flight_log
         except ImportError:
-            raise ConfigError(f"{out}: writing CAN logs needs replay.logio (not available in "
-                              f"this build); give a directory instead") from None
+            raise ConfigError(f"{out}: writing CAN logs needs replay.can_write (not available "
+                              f"in this build); give a directory instead") from None
         # the log and its truth sidecar, written together and renamed when all are done
         with atomic_dir(out.parent if str(out.parent) else Path("."), inside=True) as tmp:
             aux = write_flight_log(flight, tmp / out.name)
@@ -198,9 +198,9 @@ def _effect_plan(cal, args, fs: float):
 
 def _check_frame_budget(out: Path, n: int, plan, fs: float, kind: str) -> None:
     """Refuse before simulating when one sample's frames do not fit in one period
-    (:func:`replay.logio.frames_fit`)."""
-    from replay.logio import FRAME_GAP_S as gap
-    from replay.logio import JITTER_S, frames_fit
+    (:func:`replay.can_write.frames_fit`)."""
+    from replay.can_write import FRAME_GAP_S as gap
+    from replay.can_write import JITTER_S, frames_fit
 
     m = 0
     if plan is not None:
@@ -232,8 +232,8 @@ def _msgs(stem: str, k: int) -> str:
 
 def _say_files(out: Path, flight, args) -> None:
     """Which file is which, and the replay command."""
+    from replay.can_files import truth_path
     from replay.frames import imu_message_name
-    from replay.logio import truth_path
 
     n = flight.n
     frames = _msgs(imu_message_name(args.kind, 1)[:-3], n)

@@ -82,7 +82,7 @@ def check_imu_options(args: argparse.Namespace) -> None:
              "--kind accel": args.kind == "accel" or None}
     refuse_together("rimu simulate flight", given, "--imus",
                     ("--cal", "--fault", "--truth", "--effects-from-cal", "--kind accel"))
-    from replay.logio import LOG_SUFFIXES
+    from replay.can_write import LOG_SUFFIXES
 
     if str(args.out).lower().endswith(LOG_SUFFIXES):
         raise ConfigError(f"--out {args.out}: --imus writes a flight folder, not a CAN log; "

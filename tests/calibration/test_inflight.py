@@ -248,3 +248,32 @@ def test_cli_timing_jitter_simulated_and_estimated(tmp_path: Path) -> None:
     cal = json.loads((tmp_path / "cal.json").read_text())["sensors"]["gyro"]
     assert [c.get("timing_jitter_ms", 0.0) for c in cal][:3] == [0.0] * 3
     assert cal[3]["timing_jitter_ms"] == pytest.approx(est, abs=0.01)
+
+
+def test_calibration_states_the_range_its_samples_covered() -> None:
+    """``validated_rate``/``validated_specific_force``: what the samples the fit used
+    reached (the smallest estimate over the IMUs), and the flight's own samples are inside."""
+    from dataclasses import replace
+
+    from fdi.envelope import RANGE
+    from replay.envelope import flight_accel, flight_envelope
+
+    f = _flight(seed=5)
+    fit = fit_inflight(f)
+    cal = calibration_from_fit(fit, f)
+    s = cal.gyro
+    y = (f.raw * s.scale_factors - s.biases)[fit.used]
+    w1 = y[:, :3] @ np.linalg.pinv(s.H[:3]).T
+    w2 = y[:, 3:] @ np.linalg.pinv(s.H[3:]).T
+    np.testing.assert_allclose(s.validated_rate,
+                               np.max(np.minimum(np.abs(w1), np.abs(w2)), axis=0),
+                               rtol=1e-12, err_msg="validated_rate")
+    acc = flight_accel(f)
+    assert acc is not None
+    assert s.validated_specific_force == pytest.approx(
+        float(np.max(np.min(np.linalg.norm(acc[fit.used], axis=2), axis=1))), rel=1e-12)
+    codes = flight_envelope(f, cal)
+    assert not (codes[fit.used] & RANGE).any(), "the calibration's own samples are inside"
+    # the same flight turning 1.5x faster leaves the calibrated range
+    fast = flight_envelope(replace(f, raw=f.raw * 1.5), cal)
+    assert (fast & RANGE).any()

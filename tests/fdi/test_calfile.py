@@ -145,3 +145,48 @@ def test_bad_timing_jitter_is_named(tmp_path, value):
     with pytest.raises(FileFormatError) as err:
         load_calibration(p)
     assert "sensors.gyro[3].timing_jitter_ms" in str(err.value) and str(p) in str(err.value)
+
+
+def _ranged() -> Calibration:
+    import dataclasses
+
+    cal = _cal()
+    g = dataclasses.replace(cal.gyro, validated_rate=np.array([1.1, 2.2, 0.4]),
+                            validated_specific_force=21.5)
+    return dataclasses.replace(cal, sets={"gyro": g})
+
+
+def test_validated_range_round_trip_and_default(tmp_path):
+    """``validated_range`` (the rate per body axis and the specific force the calibration's
+    samples covered) round-trips in SI; a file without it states no range."""
+    cal = _ranged()
+    p = tmp_path / "cal.json"
+    cal.save(p)
+    doc = json.loads(p.read_text())
+    assert doc["validated_range"]["gyro"]["rate_unit"] == "rad/s"
+    back = load_calibration(p)
+    np.testing.assert_allclose(back.gyro.validated_rate, [1.1, 2.2, 0.4], rtol=1e-15,
+                               err_msg="validated_rate")
+    assert back.gyro.validated_specific_force == 21.5
+    assert back.fingerprint() == cal.fingerprint() != _cal().fingerprint()
+    del doc["validated_range"]
+    p.write_text(json.dumps(doc))
+    back = load_calibration(p)
+    assert back.gyro.validated_rate is None and back.gyro.validated_specific_force is None
+
+
+@pytest.mark.parametrize(("mutate", "field"), [
+    (lambda r: r.update(rate_abs_max=[1.0, 2.0]), "validated_range.gyro.rate_abs_max"),
+    (lambda r: r.update(rate_abs_max=[1.0, -2.0, 3.0]), "validated_range.gyro.rate_abs_max"),
+    (lambda r: r.update(rate_unit="deg/s"), "validated_range.gyro.rate_unit"),
+    (lambda r: r.update(specific_force_max=-1.0), "validated_range.gyro.specific_force_max"),
+    (lambda r: r.update(specific_force_g=2.0), "validated_range.gyro.specific_force_g"),
+])
+def test_bad_validated_range_is_named(tmp_path, mutate, field):
+    doc = _ranged().to_dict()
+    mutate(doc["validated_range"]["gyro"])
+    p = tmp_path / "bad.json"
+    p.write_text(json.dumps(doc))
+    with pytest.raises(FileFormatError) as err:
+        load_calibration(p)
+    assert field in str(err.value) and str(p) in str(err.value)

@@ -24,10 +24,11 @@ from fdi.effects import Compensator
 from fdi.effects_monitor import CompensatedMonitor
 from fdi.monitor import Monitor
 from fdi.units import DPH
+from replay.can_write import write_flight_log
 from replay.channel_map import default_channel_map, load_channel_map, write_channel_map
 from replay.effect_inputs import map_available, map_effect_inputs, map_reasons
 from replay.flight_data import AuxChannels
-from replay.logio import read_log, write_flight_log
+from replay.logio import read_log
 
 DUR = 30.0
 K_T = 20.0                    # deg/h per degC on sensor 5: up to 600 deg/h, 1.7 σ per sample

@@ -11,8 +11,8 @@ import pytest
 from _effects_flight import effect_calibration, flight_with_effects
 
 from fdi.calfile import EffectTerm, load_calibration
+from replay.can_write import write_flight_log
 from replay.flight import save_flight_dir
-from replay.logio import write_flight_log
 from rimu.cli import main
 
 

@@ -13,12 +13,15 @@ from hypothesis import strategies as st
 
 from fdi.envelope import (
     DECLARED,
+    RANGE,
     SATURATION,
     SHOCK,
     TUMBLE,
     DeclaredInterval,
     EnvelopeSettings,
     EnvelopeTracker,
+    covered_rate,
+    covered_specific_force,
     independent_estimates,
     reason_names,
 )
@@ -43,16 +46,17 @@ def _calm(n: int = 500, seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarr
     return t, rates, acc
 
 
-def _run(rates, acc, t=None, s=None, declared=(), H=H2, groups=GROUPS):
+def _run(rates, acc, t=None, s=None, declared=(), H=H2, groups=GROUPS, **kw):
     t = np.arange(rates.shape[0]) / FS if t is None else t
-    return EnvelopeTracker(s, H=H, groups=groups, declared=declared).update(t, rates, acc)
+    return EnvelopeTracker(s, H=H, groups=groups, declared=declared, **kw).update(t, rates, acc)
 
 
 def test_reason_names():
     assert reason_names(0) == ()
     assert reason_names(SHOCK | TUMBLE) == ("shock", "tumble")
     assert reason_names(DECLARED | SATURATION) == ("saturation", "declared")
-    assert reason_names(16) == ("bit4",)
+    assert reason_names(RANGE) == ("range",)
+    assert reason_names(32) == ("bit5",)
     assert reason_names("x") == ()        # never raises
 
 
@@ -162,6 +166,63 @@ def test_bad_numbers_never_raise():
     assert c.shape == (50,) and c.dtype == np.int64
 
 
+def test_range_marks_turning_beyond_the_calibrated_rate_on_any_axis_and_holds():
+    _t, r, a = _calm(400)
+    lim = np.array([30.0, 30.0, 30.0]) * DPS           # calm flight stays below 20 deg/s
+    assert not _run(r, a, validated_rate=lim).any()
+    r[200:210, 2] = r[200:210, 5] = 40 * DPS           # both IMUs: yaw at 40 deg/s
+    c = _run(r, a, validated_rate=lim)
+    hold = int(EnvelopeSettings().hold_s * FS)
+    on = np.flatnonzero(c & RANGE)
+    assert on[0] == 200 and on[-1] == 209 + hold, "range: marked from the first fast sample, held"
+    assert not (c & ~RANGE).any()
+    # a calibration that states no range marks nothing
+    assert not _run(r, a).any()
+
+
+def test_range_is_not_raised_by_one_sensor_alone():
+    _t, r, a = _calm(300)
+    r[100:200, 5] = 300 * DPS                          # imu2.z fails high
+    c = _run(r, a, validated_rate=np.full(3, 30 * DPS))
+    assert not (c & RANGE).any(), "one faulty gyro must not take the set out of the envelope"
+
+
+def test_range_on_specific_force_needs_every_imu():
+    _t, r, a = _calm(300)
+    a[100:105, 0, 2] = 3.0 * G0                        # one accelerometer alone
+    assert not _run(r, a, validated_specific_force=2.5 * G0).any()
+    a[100:105, 1, 2] = 3.0 * G0                        # both: beyond what was calibrated
+    c = _run(r, a, validated_specific_force=2.5 * G0)
+    assert (c[100:105] & RANGE).all() and not (c & SHOCK).any()
+
+
+def test_covered_range_is_what_the_used_samples_reached():
+    _t, r, a = _calm(300)
+    r[50, 0] = r[50, 3] = 80 * DPS                     # seen by both: covered
+    r[60, 1] = 200 * DPS                               # one sensor only: not covered
+    r[70, 2] = r[70, 5] = 90 * DPS                     # both, but not a used sample
+    used = np.ones(300, bool)
+    used[70] = False
+    cov = covered_rate(H2, GROUPS, r, used)
+    floor = np.min(np.abs(np.stack([r[:, :3], r[:, 3:]])), axis=0)[used]
+    np.testing.assert_allclose(cov, floor.max(axis=0), err_msg="covered rate")
+    assert cov[0] == pytest.approx(80 * DPS) and cov[1] < 20 * DPS and cov[2] < 20 * DPS
+    a[40, :, 2] = 2.2 * G0
+    a[41, 0, 2] = 5 * G0
+    f = covered_specific_force(a, used)
+    assert f == pytest.approx(float(np.min(np.linalg.norm(a[40], axis=1))))
+    # the tracker marks nothing on the samples the range came from
+    assert not (_run(r[used], a[used], validated_rate=cov,
+                     validated_specific_force=f) & RANGE).any()
+
+
+def test_range_settings_refuse_bad_values():
+    with pytest.raises(ConfigError, match="validated_rate"):
+        EnvelopeTracker(H=H2, validated_rate=[1.0, -1.0, 1.0])
+    with pytest.raises(ConfigError, match="validated_specific_force"):
+        EnvelopeTracker(H=H2, validated_specific_force=float("nan"))
+
+
 def test_leave_one_out_estimates_for_an_ungrouped_set():
     H = np.array([[1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 1]]) / np.array(
         [[1], [1], [1], [math.sqrt(3)]])
@@ -185,9 +246,12 @@ def test_blocks_of_any_size_give_identical_codes(cuts):
     r[450:455, 0] = 700 * DPS                          # clipping of one sensor (repeat)
     r[450:455, 3] = 1200 * DPS
     dec = [DeclaredInterval(9.0, 9.2, "x")]
-    whole = _run(r, a, t=t, declared=dec)
+    rng_kw = {"validated_rate": np.array([100, 100, 300]) * DPS,
+              "validated_specific_force": 2.0 * G0}
+    whole = _run(r, a, t=t, declared=dec, **rng_kw)
     assert (whole & SHOCK).any() and (whole & TUMBLE).any() and (whole & SATURATION).any()
-    tr = EnvelopeTracker(H=H2, groups=GROUPS, declared=dec)
+    assert (whole & RANGE).any()
+    tr = EnvelopeTracker(H=H2, groups=GROUPS, declared=dec, **rng_kw)
     edges = [0, *sorted(cuts), 600]
     parts = [tr.update(t[i:j], r[i:j], a[i:j]) for i, j in itertools.pairwise(edges)]
     assert np.array_equal(np.concatenate(parts), whole)
@@ -204,7 +268,8 @@ def test_any_numbers_never_raise(data, b):
     t = np.array(data.draw(st.lists(_BAD, min_size=b, max_size=b)))
     r = np.array(data.draw(st.lists(_BAD, min_size=6 * b, max_size=6 * b))).reshape(b, 6)
     a = np.array(data.draw(st.lists(_BAD, min_size=6 * b, max_size=6 * b))).reshape(b, 2, 3)
-    tr = EnvelopeTracker(H=H2, groups=GROUPS, declared=[DeclaredInterval(0.0, 1.0)])
+    tr = EnvelopeTracker(H=H2, groups=GROUPS, declared=[DeclaredInterval(0.0, 1.0)],
+                         validated_rate=np.full(3, 0.5), validated_specific_force=15.0)
     for _ in range(2):
         c = tr.update(t, r, a)
-        assert c.shape == (b,) and c.dtype == np.int64 and np.all((c >= 0) & (c < 16))
+        assert c.shape == (b,) and c.dtype == np.int64 and np.all((c >= 0) & (c < 32))

@@ -196,6 +196,32 @@ def test_out_of_envelope_no_exclusion_and_windows_restart(tmp_path):
     assert np.isinf(res.protection_level[400:900]).all()
 
 
+def test_a_detection_open_at_reentry_stays_open_until_the_windows_refill(tmp_path):
+    """Two triads (detect only): a persisting fault detected before an excursion stays
+    detected through it and after re-entry (one detection event, its axis unverified every
+    sample); a fault that ends inside the excursion clears only once every window has
+    refilled after re-entry."""
+    cal = triads(tmp_path, 2, seed=2)
+    sd = cal.gyro.noise_sd[2]
+    t, raw = flight(cal, 2000, [(3, 500, 30 * sd)], seed=5)
+    env = np.zeros(2000, np.int64)
+    env[800:850] = 16
+    mon = Monitor(cal)
+    res = mon.run(t, raw, envelope=env)
+    det = [e for e in res.events if e.type == "detected"]
+    assert len(det) == 1 and t[500] <= det[0].t < t[800], res.events
+    k0 = int(np.searchsorted(t, det[0].t))
+    assert res.unverified[k0:, 2].all(), "the faulted axis must stay unverified"
+    assert np.isinf(res.protection_level[k0:]).all()
+    # the fault ends inside the excursion
+    t, raw = flight(cal, 2000, [(3, 500, 30 * sd), (3, 820, -30 * sd)], seed=5)
+    res = Monitor(cal).run(t, raw, envelope=env)
+    longest = max(Monitor(cal).thresholds.scales)
+    still = np.flatnonzero(res.unverified[:, 2])
+    assert still.size and still[-1] >= 850 + longest - 1, (still[-1], longest)
+    assert not res.unverified[-1].any(), "cleared once the refilled windows saw no fault"
+
+
 ENV = st.lists(st.tuples(st.integers(0, 399), st.integers(1, 60), st.integers(1, 15)),
                max_size=4)
 

@@ -5,9 +5,10 @@ import numpy as np
 from can import Message
 
 from replay.accounting import FrameAccounting
-from replay.assemble import RawFrames, decode_frames
+from replay.assemble import decode_frames
 from replay.channel_map import ChannelMap, SensorChannel, default_channel_map
 from replay.frames import encode_imu_frames, imu_message_name, load_dbc
+from replay.raw_frames import RawFrames
 
 DB = load_dbc()
 

@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 
 from fdi.errors import ConfigError, FileFormatError
 from replay.accounting import FrameAccounting
-from replay.assemble import BlockDecoder, RawFrames, Samples, decode_frames
+from replay.assemble import BlockDecoder, Samples, decode_frames
 from replay.channel_map import (
     AUX_TIMEOUT_S,
     EXAMPLE_J1939_AUX_MAP,
@@ -26,6 +26,7 @@ from replay.channel_map import (
 )
 from replay.effect_inputs import map_available, map_effect_inputs
 from replay.frames import encode_imu_frames, load_dbc
+from replay.raw_frames import RawFrames
 
 # -- loader -------------------------------------------------------------------------------
 
@@ -417,9 +418,10 @@ def test_imu_set_log_gives_the_folder_inputs_one_sample_late(tmp_path):
     as a CAN log: the map ``write_flight_log`` returns gives each gyro its own IMU's specific
     force and temperature, equal (float32) to what the flight folder gives, one sample late
     (the auxiliary frames leave after their sample's first frame)."""
+    from replay.can_read import read_frames
+    from replay.can_write import write_flight_log
     from replay.effect_inputs import flight_effect_inputs
     from replay.imu_set import ImuEffects, ImuSetSpec, simulate_imu_set
-    from replay.logio import read_frames, write_flight_log
 
     fl = simulate_imu_set(ImuSetSpec(imus=3, duration_s=4.0, seed=2,
                                      effects=ImuEffects(temperature_coeff=1e-4)))
@@ -444,7 +446,7 @@ def test_imu_set_log_gives_the_folder_inputs_one_sample_late(tmp_path):
 def test_hold_with_trimming_equals_brute_force(data):
     """Any aux times and values, any increasing sample times, queried block by block with
     the history trimmed after each block (as the decoder does): the brute-force hold."""
-    from replay.assemble import AuxHold
+    from replay.aux_hold import AuxHold
 
     timeout = data.draw(st.floats(0.01, 2.0), label="timeout")
     cmap = default_channel_map(1, auxiliary=(AuxChannel(

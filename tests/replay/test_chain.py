@@ -25,10 +25,11 @@ import pytest
 from calibration.inflight.calfile import calibration_from_fit
 from calibration.inflight.fit import fit_inflight
 from fdi.errors import ConfigError
+from replay.can_write import write_flight_log
 from replay.chain import ChainOptions, chain_for_flight, chain_for_map, report_log, run_flight
 from replay.flight_data import concat_flights
 from replay.imu_set import ImuSetSpec, simulate_imu_set
-from replay.logio import LogStream, read_log, resolve_map, write_flight_log
+from replay.logio import LogStream, read_log, resolve_map
 from replay.time_offsets import StreamAligner, apply_time_offsets, imu_groups
 from rimu.cli import main
 from thresholds.compute import compute_thresholds
@@ -270,7 +271,9 @@ def test_an_envelope_tracker_in_the_chain_gives_its_codes_to_the_monitor(lagged)
     moved, _ = apply_time_offsets(f, cal)
     want = flight_envelope(moved, cal)
     assert (want & SHOCK).any()
-    tr = EnvelopeTracker(H=cal.gyro.H, groups=list(f.imu_groups().values()))
+    tr = EnvelopeTracker(H=cal.gyro.H, groups=list(f.imu_groups().values()),
+                         validated_rate=cal.gyro.validated_rate,
+                         validated_specific_force=cal.gyro.validated_specific_force)
     res, rep = run_flight(chain_for_flight(f, cal, ChainOptions(envelope=tr)), f)
     np.testing.assert_array_equal(res.envelope, want)
     assert any(e["type"] == "envelope" for e in rep["events"])

@@ -8,7 +8,7 @@ from fdi.calfile import Calibration, SensorCal, SensorSet
 from fdi.errors import ConfigError, FileFormatError
 from fdi.units import DPS
 from replay.accounting import FrameAccounting
-from replay.assemble import RawFrames, decode_frames, j1939_not_available
+from replay.assemble import decode_frames
 from replay.channel_map import (
     EXAMPLE_J1939_MAP,
     check_against_calibration,
@@ -16,6 +16,8 @@ from replay.channel_map import (
     load_channel_map,
 )
 from replay.frames import load_dbc
+from replay.raw_frames import RawFrames
+from replay.slot_checks import j1939_not_available
 
 SAS = (0x80, 0x81, 0x82)
 

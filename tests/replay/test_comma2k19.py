@@ -9,9 +9,9 @@ import pytest
 
 from replay.accounting import FrameAccounting
 from replay.assemble import decode_frames
+from replay.can_read import read_frames
 from replay.channel_map import load_channel_map
 from replay.frames import load_dbc
-from replay.logio import read_frames
 
 DATA = Path(__file__).parents[2] / ".." / "shared" / "data" / "comma2k19_can"
 LOG = DATA / "rav4_2018-08-02--08-34-47_seg40.candump.log"

@@ -27,9 +27,10 @@ from hypothesis import strategies as st
 
 from fdi.errors import FileFormatError, ReplayError
 from replay.assemble import decode_frames
+from replay.can_read import read_frames
 from replay.channel_map import load_channel_map
 from replay.frames import load_dbc
-from replay.logio import read_frames, read_log
+from replay.logio import read_log
 from rimu.cli import main
 from thresholds.synthetic import synthetic_calibration
 

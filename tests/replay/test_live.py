@@ -10,11 +10,12 @@ import pytest
 from test_logio import CAL, _rewrite_candump
 
 from fdi.monitor import Monitor
+from replay.can_write import write_flight_log
 from replay.chain import chain_for_map
 from replay.faults import parse_fault
 from replay.flight import simulate_flight
 from replay.live import StreamDecoder, run_live
-from replay.logio import read_log, resolve_map, write_flight_log
+from replay.logio import read_log, resolve_map
 
 
 def _offline(path):

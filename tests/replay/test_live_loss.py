@@ -17,9 +17,10 @@ import numpy as np
 from test_logio import CAL
 
 from fdi.monitor import Monitor
+from replay.can_write import write_flight_log
 from replay.flight import simulate_flight
 from replay.live import StreamDecoder, run_live
-from replay.logio import read_log, resolve_map, write_flight_log
+from replay.logio import read_log, resolve_map
 from replay.report import RunningReport
 
 N_SAMPLES = 300

@@ -9,10 +9,12 @@ from fdi.calfile import Calibration, SensorCal, SensorSet
 from fdi.errors import FileFormatError, ReplayError
 from fdi.geometry import load_configuration
 from fdi.units import DPH, DPS
+from replay.can_files import truth_path
+from replay.can_write import write_flight_log
 from replay.crc import crc8_j1850
 from replay.faults import Fault
 from replay.flight import simulate_flight
-from replay.logio import read_log, truth_path, write_flight_log
+from replay.logio import read_log
 
 
 def make_cal(config="cone6", *, noise_dps=0.01, sf=0.01 * DPS, err=2e-4, seed=0):

@@ -7,9 +7,9 @@ import pytest
 from test_logio import CAL
 
 from fdi.monitor import Monitor
+from replay.can_write import write_flight_log
 from replay.faults import parse_fault
 from replay.flight import simulate_flight
-from replay.logio import write_flight_log
 from rimu.cli import main
 
 

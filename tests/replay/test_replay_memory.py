@@ -25,11 +25,12 @@ import pytest
 from test_logio import CAL, _rewrite_candump
 
 from fdi.monitor import Monitor
+from replay.can_write import write_flight_log
 from replay.faults import parse_fault
 from replay.flight import simulate_flight
 from replay.frames import encode_imu_frames, imu_message_name, load_dbc
 from replay.live import StreamDecoder, run_live
-from replay.logio import LogStream, read_log, resolve_map, write_flight_log
+from replay.logio import LogStream, read_log, resolve_map
 from replay.report import RunningReport, build_report
 from replay.scenario import apply_faults
 from replay.stream import ChunkInjector

@@ -22,9 +22,10 @@ from fdi.calfile import load_calibration
 from fdi.effects import Compensator
 from fdi.errors import ConfigError
 from fdi.parity import parity_matrix
+from replay.can_files import truth_path
 from replay.channel_map import channel_map_toml, load_channel_map
 from replay.effect_inputs import map_available, map_effect_inputs
-from replay.logio import read_log, truth_path
+from replay.logio import read_log
 from rimu.cli import main
 
 DUR = 40.0

@@ -1,0 +1,71 @@
+"""``rimu export c --cal CAL --out DIR``: the calibrated monitor as a self-contained C99
+module (:mod:`fdi.export`)."""
+
+from __future__ import annotations
+
+import argparse
+
+from rimu.argtypes import positive_float
+
+HELP = ("write the monitor of a calibrated set as a self-contained C99 module (static "
+        "memory, <math.h> only) with its contract")
+
+
+def configure(p: argparse.ArgumentParser) -> None:
+    p.add_argument("target", choices=("c",), help="what to export: c (a C99 module)")
+    p.add_argument("--cal", required=True, metavar="FILE", help="calibration file")
+    p.add_argument("--thresholds", metavar="FILE",
+                   help="a rimu.thresholds or rimu.tuning file made for this calibration "
+                        "(default: computed from the calibration, as rimu monitor-file)")
+    p.add_argument("--false-alarms-per-hour", type=positive_float(1e9), metavar="X",
+                   help="false-alarm budget for computed thresholds")
+    p.add_argument("--kind", choices=("gyro", "accel"), default="gyro",
+                   help="sensor set to monitor (default gyro)")
+    p.add_argument("--out", required=True, metavar="DIR",
+                   help="folder for rimu_monitor.h, rimu_monitor.c and README.md")
+    p.add_argument("--float32", action="store_true",
+                   help="float32 arithmetic (microcontrollers without a double-precision "
+                        "unit; bounded differences: docs/export-c.md)")
+    p.add_argument("--no-effects", action="store_true",
+                   help="do not compensate the calibration's effect terms (as rimu "
+                        "monitor-file --no-effects)")
+    p.add_argument("--harness", action="store_true",
+                   help="also write rimu_harness.c (samples.csv on stdin, answers as CSV on "
+                        "stdout) and rimu_block.c (a block entry for ctypes)")
+
+
+def run(args: argparse.Namespace) -> int:
+    from fdi.calfile import load_calibration
+    from fdi.export import generate_c
+    from rimu.outputs import atomic_dir, input_path, output_dir
+    from thresholds.select import select
+
+    input_path(args.cal, "--cal")
+    if args.thresholds:
+        input_path(args.thresholds, "--thresholds")
+    ins = [args.cal] + ([args.thresholds] if args.thresholds else [])
+    final = output_dir(args.out, "--out", inputs=ins)
+    cal = load_calibration(args.cal)
+    choice = select(cal, kind=args.kind, thresholds_file=args.thresholds,
+                    false_alarms_per_hour=args.false_alarms_per_hour,
+                    calibration_file=args.cal)
+    how = choice.to_dict()
+    note = (f"{how.get('source', 'computed')}"
+            + (f" {args.thresholds}" if args.thresholds else "")
+            + f", {choice.thresholds.false_alarms_per_hour:g} false alarms per hour")
+    mod = generate_c(cal, choice.thresholds, kind=args.kind,
+                     precision="float32" if args.float32 else "float64",
+                     harness=args.harness, thresholds_note=note,
+                     effects=not args.no_effects)
+    with atomic_dir(final) as tmp:
+        for name, text in mod.files.items():
+            (tmp / name).write_text(text, encoding="utf-8")
+    print(f"wrote {final}/: {', '.join(mod.files)}")
+    print(f"calibration fingerprint {mod.fingerprint}; {mod.n} {args.kind} sensors, "
+          f"{mod.sets} healthy-set tables; {mod.precision}")
+    print(f"state {mod.state_bytes} bytes, tables {mod.table_bytes} bytes, worst case "
+          f"{mod.ops_per_step} arithmetic operations per step")
+    if mod.applied_terms or mod.not_applied:
+        print(f"effect terms compensated: {len(mod.applied_terms)}; not compensated (as in "
+              f"the Python monitor): {len(mod.not_applied)} (README.md)")
+    return 0
