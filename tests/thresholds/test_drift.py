@@ -179,3 +179,14 @@ def test_default_thresholds_carry_the_drift_over_the_calibration_span():
     assert a.variance_factor == pytest.approx(
         [f + w * d2 for w, f in zip(b.scales, b.variance_factor, strict=True)])
     assert "parity drift" in a.notes and "parity drift" not in b.notes
+
+
+def test_drift_and_validated_range_in_one_file():
+    cal = _cal(_static(6, q=2e-5))
+    g = replace(cal.gyro, validated_rate=np.array([1.0, 2.0, 3.0]),
+                validated_specific_force=12.0)
+    cal = replace(cal, sets={"gyro": g})
+    back = calibration_from_dict(json.loads(json.dumps(cal.to_dict())))
+    assert back.gyro.drift == cal.gyro.drift
+    assert back.gyro.validated_rate.tolist() == [1.0, 2.0, 3.0]
+    assert back.fingerprint() == cal.fingerprint()
