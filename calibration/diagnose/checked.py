@@ -40,6 +40,7 @@ from threadpoolctl import threadpool_limits
 from calibration.calibrate import calibrate
 from calibration.diagnose.context import KindData, kind_data
 from calibration.diagnose.detect import POWER, limits
+from calibration.diagnose.holdout import holdout
 from calibration.diagnose.library import model_effects
 from calibration.diagnose.metrics import step_chi2_dof
 from calibration.diagnose.refit import Refit, refit
@@ -48,6 +49,7 @@ from calibration.diagnose.run import (
     MONITOR_NOTE,
     adequacy_record,
     assess,
+    with_holdout,
     with_limits,
 )
 from calibration.diagnose.selection import noise_sets
@@ -92,7 +94,7 @@ def calibrate_checked(session: Session, *, alpha: float = 0.01, noise_model: str
         raise ConfigError(f"alpha must be between 0 and 1, got {alpha!r}")
     effects = [e for e in (effects or []) if e]
     white = calibrate(session, noise_model="white", **kw)
-    datas = kind_data(session, white)
+    datas = white_datas = kind_data(session, white)
     if effects:
         forced = assess(session, white, alpha=alpha, effects=effects, datas=datas)
         fit = refit(datas, white, forced.claimed, noise=noise_sets(forced))
@@ -105,6 +107,11 @@ def calibrate_checked(session: Session, *, alpha: float = 0.01, noise_model: str
         sel = assess(session, white, alpha=alpha, datas=datas)
         base = white
     rec = adequacy_record(sel, alpha)
+    if rec["verdict"] == "adequate":             # before "adequate": data it did not see
+        with threadpool_limits(limits=BLAS_THREADS, user_api="blas"):
+            rec = with_holdout(rec, holdout(white_datas if effects else datas,
+                                            forced.models if effects else sel.models,
+                                            alpha))
     rec["noise_model_requested"] = noise_model
     warnings = list(base.extra.get("warnings", []))
     if effects:
