@@ -38,6 +38,7 @@ import scipy.stats
 from threadpoolctl import threadpool_limits
 
 from calibration.calibrate import calibrate
+from calibration.diagnose.bounds import sensor_class
 from calibration.diagnose.context import KindData, kind_data
 from calibration.diagnose.detect import POWER, limits
 from calibration.diagnose.holdout import holdout
@@ -49,6 +50,7 @@ from calibration.diagnose.run import (
     MONITOR_NOTE,
     adequacy_record,
     assess,
+    bound_fields,
     with_holdout,
     with_limits,
 )
@@ -58,7 +60,8 @@ from calibration.session import Session
 from fdi.calfile import Calibration
 from fdi.errors import ConfigError
 
-__all__ = ["calibrate_checked", "format_adequacy", "limit_lines", "not_ruled_out_warning"]
+__all__ = ["calibrate_checked", "format_adequacy", "holdout_lines", "limit_lines",
+           "not_ruled_out_warning"]
 
 _MAX_LINES = 6
 """At most this many limits printed (the file holds them all)."""
@@ -222,6 +225,27 @@ def limit_lines(a: Mapping[str, Any]) -> list[str]:
     return out
 
 
+def holdout_lines(a: Mapping[str, Any]) -> list[str]:
+    """The held-out check of an adequacy record (:func:`.run.with_holdout`), one line
+    (and one per failing fold)."""
+    h = a.get("holdout")
+    if not h:
+        return []
+    w = h.get("worst")
+    worst = (f"; worst {w['kind']} {w['sensor']} fold {w['fold']} (steps "
+             f"{w['steps'][0]}-{w['steps'][-1]}): chi2 {w['chi2']:.1f} on {w['dof']} dof, "
+             f"p {w['p_value']:.2g}" if w else "")
+    out = [f"  held-out check ({h.get('folds_tested', 0)} folds x sensors, each refitted "
+           f"without its steps and predicted; limit p < {h['threshold']:.2g}): "
+           + ("passed" if h["passed"] else "FAILED, the model does not predict steps it "
+              "did not see") + worst]
+    nt = [n for n in h.get("not_tested") or [] if "fold" in n]
+    if nt:
+        out.append(f"    {len(nt)} fold(s) not tested: the other folds do not determine "
+                   "the model's columns there")
+    return out
+
+
 def format_adequacy(cal: Calibration) -> list[str]:
     """Lines ``rimu calibrate`` prints about the adequacy and the effect terms."""
     a = cal.adequacy
@@ -236,10 +260,15 @@ def format_adequacy(cal: Calibration) -> list[str]:
         if a.get("noise_model_requested") != a.get("noise_model_applied"):
             out.append(f"  noise model: {a.get('noise_model_applied')} (asked for "
                        f"{a.get('noise_model_requested')})")
+        out.extend(holdout_lines(a))
         out.extend(limit_lines(a))
+    cls = sensor_class(cal) if cal.effects else ""
     for t in cal.effects:
         out.append(f"effect {t.name} on {t.kind} {t.sensor + 1}: {t.estimate:+.4g} ± "
                    f"{t.estimate_sd:.2g} {t.unit}")
+        note = bound_fields(t.name, t.kind, t.estimate, t.unit, cls)["bound_note"]
+        if note:
+            out.append(f"  {note}")
     if cal.effects:
         out.append(f"note: {MONITOR_NOTE}")
     return out
