@@ -235,7 +235,7 @@ def holdout_lines(a: Mapping[str, Any]) -> list[str]:
     worst = (f"; worst {w['kind']} {w['sensor']} fold {w['fold']} (steps "
              f"{w['steps'][0]}-{w['steps'][-1]}): chi2 {w['chi2']:.1f} on {w['dof']} dof, "
              f"p {w['p_value']:.2g}" if w else "")
-    out = [f"  held-out check ({h.get('folds_tested', 0)} folds x sensors, each refitted "
+    out = [f"  held-out check ({h.get('folds_tested', 0)} sensor-folds, each refitted "
            f"without its steps and predicted; limit p < {h['threshold']:.2g}): "
            + ("passed" if h["passed"] else "FAILED, the model does not predict steps it "
               "did not see") + worst]
