@@ -57,7 +57,7 @@ def write_report(session: Session, cal: Calibration, diag: Diagnosis,
                   for e in diag.effects]
         notes = [f"- {e['name']} on {e['kind']} {e['sensors'][0]}: {e['bound_note']}"
                  for e in diag.effects if e.get("bound_note")]
-        lines += [""] + notes if notes else []
+        lines += ["", *notes] if notes else []
     else:
         lines.append("No effect found.")
     lines.append("")
