@@ -30,7 +30,7 @@ def configure(p: argparse.ArgumentParser) -> None:
                    help="truth sidecar (DIR/truth.json): parameter errors in sigma before "
                         "and after the refit")
     p.add_argument("--sensor-class", choices=("fog", "mems"), default=None,
-                   help="sensor class whose physical bounds label the effects found "
+                   help="sensor class whose physical bounds label the effects found on a session "
                         "(default: from the calibration's gyro noise, docs/diagnose.md)")
     p.add_argument("--out", metavar="FILE",
                    help="write the refit calibration (rimu.calibration/3, with effects)")
