@@ -63,7 +63,7 @@ import numpy as np
 import scipy.linalg
 import scipy.stats
 
-from calibration.diagnose.coloured import GlsModel, block_corr
+from calibration.diagnose.coloured import MAX_BLOCKS, GlsModel, block_corr
 from calibration.diagnose.context import KindData
 from calibration.diagnose.linmodel import LinModel
 
@@ -107,11 +107,14 @@ def folds(d: KindData, k: int = HOLDOUT_FOLDS) -> list[tuple[int, ...]]:
 
 def _pieces(d: KindData) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Block starts, counts and step of each block: every run of one step cut into
-    :data:`HOLDOUT_PIECES` contiguous pieces."""
+    :data:`HOLDOUT_PIECES` contiguous pieces (fewer when the session has so many steps
+    that the blocks would exceed :data:`.coloured.MAX_BLOCKS`: the check's cost grows as
+    the cube of the blocks)."""
     runs = np.r_[0, np.flatnonzero(np.diff(d.step)) + 1, d.N]
+    per = int(np.clip(MAX_BLOCKS // max(runs.size - 1, 1), 1, HOLDOUT_PIECES))
     starts = []
     for a, b in itertools.pairwise(runs):
-        p = int(min(HOLDOUT_PIECES, b - a))
+        p = int(min(per, b - a))
         starts.extend(np.linspace(a, b, p + 1).astype(int)[:-1])
     st = np.unique(np.asarray(starts, int))
     counts = np.diff(np.r_[st, d.N]).astype(float)
