@@ -48,9 +48,10 @@ the other folds do not determine (a bias step inside the last fold, a mounting s
 one fold only) is not tested for that sensor and is listed.
 
 A failing fold makes the verdict "effects suspected" (:func:`calibration.diagnose.run.
-with_holdout`), whatever the other tests said. The check reads what the noise model was
-fitted to as well as the data it predicts, so a Gauss-Markov term inflated by an effect
-still weakens it (``docs/diagnose.md``, "Held-out check").
+with_holdout`), whatever the other tests said. What it cannot see: structure faster than
+a step (it reads step means), an effect the model absorbs alike in every fold, and, in a
+set of one or where every sensor carries the effect, a Gauss-Markov fit inflated by it
+(``docs/diagnose.md``, "The held-out check").
 """
 
 from __future__ import annotations
