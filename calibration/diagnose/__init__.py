@@ -18,7 +18,6 @@ something else (:mod:`.bounds`). See ``docs/diagnose.md``.
 from calibration.diagnose.bounds import PHYSICAL_BOUNDS, bound_check, sensor_class
 from calibration.diagnose.checked import calibrate_checked, format_adequacy
 from calibration.diagnose.context import KindData, check_match, kind_data
-from calibration.diagnose.holdout import holdout
 from calibration.diagnose.library import (
     ENTRY_POINT_GROUP,
     Candidate,
@@ -42,7 +41,6 @@ __all__ = [
     "diagnose",
     "format_adequacy",
     "get_candidate",
-    "holdout",
     "kind_data",
     "register_effect",
     "sensor_class",
