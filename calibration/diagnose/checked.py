@@ -6,7 +6,10 @@ structure in the residual that the same fit would read as noise and hide behind 
 So: calibrate with white noise, run the adequacy check of :mod:`calibration.diagnose`
 (candidate effects and generic probes, at level α) on the residual, and
 
-- nothing suspected → calibrate with the requested noise model (the estimates do not
+- nothing suspected → the held-out check (:mod:`calibration.diagnose.holdout`: each
+  sensor's model refitted without each quarter of the steps must predict it); a failing
+  quarter makes the verdict "effects suspected" (below). Passed →
+  calibrate with the requested noise model (the estimates do not
   depend on it), then ask whether the session could have seen every library effect that
   moves a parameter of *that* calibration by 5 σ (:mod:`calibration.diagnose.detect`):
   yes → "adequate"; yes except for what the sequence itself cannot separate from the
@@ -226,8 +229,8 @@ def limit_lines(a: Mapping[str, Any]) -> list[str]:
 
 
 def holdout_lines(a: Mapping[str, Any]) -> list[str]:
-    """The held-out check of an adequacy record (:func:`.run.with_holdout`), one line
-    (and one per failing fold)."""
+    """The held-out check of an adequacy record (:func:`.run.with_holdout`): one line
+    (the failing folds themselves are in ``where``), and one for folds not tested."""
     h = a.get("holdout")
     if not h:
         return []
