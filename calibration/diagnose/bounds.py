@@ -10,12 +10,13 @@ output labels it ``"beyond the physical bound ... : absorbing something else"``
 
 Classes. The class is read from the calibration itself, the gyros' white noise
 (angle random walk, ``σ/√f_s``): below :data:`FOG_CLASS_ARW_DPSH` °/√h the set is
-"fog" (fibre-optic or other tactical/navigation-grade gyros: tactical-grade data sheets
-give 0.02-0.3 °/√h), above it "mems" (MEMS rate gyros: 0.5-3 °/√h; the ADXRS150 of the
+"fog" (fibre-optic or other tactical/navigation-grade gyros: roughly 0.01-0.3 °/√h),
+above it "mems" (MEMS rate gyros of the ADXRS class: 0.5-3 °/√h; the ADXRS150 of the
 cone preset has 0.05 °/s/√Hz = 3 °/√h). The accelerometers of a set take the gyros'
-class. ``sensor_class`` overrides it.
+class. Coarse: a high-end MEMS unit (0.15-0.4 °/√h) reads as fog; ``sensor_class``
+overrides it.
 
-Bounds (:data:`PHYSICAL_BOUNDS`). Each is about ten times the magnitude the class's data
+Bounds (:data:`PHYSICAL_BOUNDS`). Each is two to ten times the magnitude the class's data
 sheets give for the effect (so that only an estimate no sensor of the class could have is
 labelled, not one from a poor unit), in the effect's unit. Sources, order of magnitude:
 
