@@ -20,10 +20,11 @@ noise from the truth (:func:`_diagnose_sessions.clean_fast`); the detectability 
 switched off (``detectability=False``): they only turn an "adequate" verdict into a
 weaker one, so the adequacy claim is checked against the strongest verdict the product
 could give. The Allan table and the Earth-rate fit are skipped (they feed no parameter
-the claims compare). 160 sessions, about 1-2 s each: 315-390 s wall for the file with
-``--slow`` on the shared 2-core machine (the ~60 s aimed for would need shorter sessions
-than the presets' sequences; the presets were kept). Marked ``campaign``: it runs with
-``pytest --campaign`` and not in CI, whose budget it would take half of.
+the claims compare). 160 sessions, about 1-2 s each: 315-390 s wall (330-410 s with the
+held-out check) for the file with ``--slow`` on the shared 2-core machine (the ~60 s
+aimed for would need shorter sessions than the presets' sequences; the presets were
+kept). Marked ``campaign``: it runs with ``pytest --campaign`` and not in CI, whose
+budget it would take half of.
 """
 
 import dataclasses
