@@ -9,10 +9,13 @@ after. ``calibrate_checked`` is the calibration with this check in front of the
 coloured-noise model. Its verdict is "adequate" only when the session could also have seen
 every library effect that moves a parameter by 5 σ (:mod:`.detect`); "adequate within
 sequence limits" when only effects the sequence itself cannot separate from the parameters
-could hide; otherwise "effects not ruled out", with the sizes that could hide. See
-``docs/diagnose.md``.
+could hide; otherwise "effects not ruled out", with the sizes that could hide. Before any
+"adequate", every sensor's model must predict the steps it did not see (:mod:`.holdout`);
+effect estimates beyond a plausible bound of the sensor class are labelled as absorbing
+something else (:mod:`.bounds`). See ``docs/diagnose.md``.
 """
 
+from calibration.diagnose.bounds import PHYSICAL_BOUNDS, bound_check, sensor_class
 from calibration.diagnose.checked import calibrate_checked, format_adequacy
 from calibration.diagnose.context import KindData, check_match, kind_data
 from calibration.diagnose.library import (
@@ -26,10 +29,12 @@ from calibration.diagnose.run import Diagnosis, assess, diagnose
 
 __all__ = [
     "ENTRY_POINT_GROUP",
+    "PHYSICAL_BOUNDS",
     "Candidate",
     "Diagnosis",
     "KindData",
     "assess",
+    "bound_check",
     "calibrate_checked",
     "candidates",
     "check_match",
@@ -38,4 +43,5 @@ __all__ = [
     "get_candidate",
     "kind_data",
     "register_effect",
+    "sensor_class",
 ]

@@ -6,7 +6,10 @@ structure in the residual that the same fit would read as noise and hide behind 
 So: calibrate with white noise, run the adequacy check of :mod:`calibration.diagnose`
 (candidate effects and generic probes, at level α) on the residual, and
 
-- nothing suspected → calibrate with the requested noise model (the estimates do not
+- nothing suspected → the held-out check (:mod:`calibration.diagnose.holdout`: each
+  sensor's model refitted without each quarter of the steps must predict it); a failing
+  quarter makes the verdict "effects suspected" (below). Passed →
+  calibrate with the requested noise model (the estimates do not
   depend on it), then ask whether the session could have seen every library effect that
   moves a parameter of *that* calibration by 5 σ (:mod:`calibration.diagnose.detect`):
   yes → "adequate"; yes except for what the sequence itself cannot separate from the
@@ -38,8 +41,10 @@ import scipy.stats
 from threadpoolctl import threadpool_limits
 
 from calibration.calibrate import calibrate
+from calibration.diagnose.bounds import sensor_class
 from calibration.diagnose.context import KindData, kind_data
 from calibration.diagnose.detect import POWER, limits
+from calibration.diagnose.holdout import holdout
 from calibration.diagnose.library import model_effects
 from calibration.diagnose.metrics import step_chi2_dof
 from calibration.diagnose.refit import Refit, refit
@@ -48,6 +53,8 @@ from calibration.diagnose.run import (
     MONITOR_NOTE,
     adequacy_record,
     assess,
+    bound_fields,
+    with_holdout,
     with_limits,
 )
 from calibration.diagnose.selection import noise_sets
@@ -56,7 +63,8 @@ from calibration.session import Session
 from fdi.calfile import Calibration
 from fdi.errors import ConfigError
 
-__all__ = ["calibrate_checked", "format_adequacy", "limit_lines", "not_ruled_out_warning"]
+__all__ = ["calibrate_checked", "format_adequacy", "holdout_lines", "limit_lines",
+           "not_ruled_out_warning"]
 
 _MAX_LINES = 6
 """At most this many limits printed (the file holds them all)."""
@@ -92,7 +100,7 @@ def calibrate_checked(session: Session, *, alpha: float = 0.01, noise_model: str
         raise ConfigError(f"alpha must be between 0 and 1, got {alpha!r}")
     effects = [e for e in (effects or []) if e]
     white = calibrate(session, noise_model="white", **kw)
-    datas = kind_data(session, white)
+    datas = white_datas = kind_data(session, white)
     if effects:
         forced = assess(session, white, alpha=alpha, effects=effects, datas=datas)
         fit = refit(datas, white, forced.claimed, noise=noise_sets(forced))
@@ -105,6 +113,11 @@ def calibrate_checked(session: Session, *, alpha: float = 0.01, noise_model: str
         sel = assess(session, white, alpha=alpha, datas=datas)
         base = white
     rec = adequacy_record(sel, alpha)
+    if rec["verdict"] == "adequate":             # before "adequate": data it did not see
+        with threadpool_limits(limits=BLAS_THREADS, user_api="blas"):
+            rec = with_holdout(rec, holdout(white_datas if effects else datas,
+                                            forced.models if effects else sel.models,
+                                            alpha))
     rec["noise_model_requested"] = noise_model
     warnings = list(base.extra.get("warnings", []))
     if effects:
@@ -215,6 +228,27 @@ def limit_lines(a: Mapping[str, Any]) -> list[str]:
     return out
 
 
+def holdout_lines(a: Mapping[str, Any]) -> list[str]:
+    """The held-out check of an adequacy record (:func:`.run.with_holdout`): one line
+    (the failing folds themselves are in ``where``), and one for folds not tested."""
+    h = a.get("holdout")
+    if not h:
+        return []
+    w = h.get("worst")
+    worst = (f"; worst {w['kind']} {w['sensor']} fold {w['fold']} (steps "
+             f"{w['steps'][0]}-{w['steps'][-1]}): chi2 {w['chi2']:.1f} on {w['dof']} dof, "
+             f"p {w['p_value']:.2g}" if w else "")
+    out = [f"  held-out check ({h.get('folds_tested', 0)} sensor-folds, each refitted "
+           f"without its steps and predicted; limit p < {h['threshold']:.2g}): "
+           + ("passed" if h["passed"] else "FAILED, the model does not predict steps it "
+              "did not see") + worst]
+    nt = [n for n in h.get("not_tested") or [] if "fold" in n]
+    if nt:
+        out.append(f"    {len(nt)} fold(s) not tested: the other folds do not determine "
+                   "the model's columns there")
+    return out
+
+
 def format_adequacy(cal: Calibration) -> list[str]:
     """Lines ``rimu calibrate`` prints about the adequacy and the effect terms."""
     a = cal.adequacy
@@ -229,10 +263,15 @@ def format_adequacy(cal: Calibration) -> list[str]:
         if a.get("noise_model_requested") != a.get("noise_model_applied"):
             out.append(f"  noise model: {a.get('noise_model_applied')} (asked for "
                        f"{a.get('noise_model_requested')})")
+        out.extend(holdout_lines(a))
         out.extend(limit_lines(a))
+    cls = sensor_class(cal) if cal.effects else ""
     for t in cal.effects:
         out.append(f"effect {t.name} on {t.kind} {t.sensor + 1}: {t.estimate:+.4g} ± "
                    f"{t.estimate_sd:.2g} {t.unit}")
+        note = bound_fields(t.name, t.kind, t.estimate, t.unit, cls)["bound_note"]
+        if note:
+            out.append(f"  {note}")
     if cal.effects:
         out.append(f"note: {MONITOR_NOTE}")
     return out

@@ -72,13 +72,15 @@ OUTSIDE_ALIASES = {
     "warmup": "any early transient of another time constant, or a curved drift",
     "time_skew": "a low-pass lag (sensor bandwidth) at the table's accelerations",
     "bias_drift": "a curved or late-starting drift, a slow wander (measured: a quadratic "
-                  "drift from 40 % of the session, absorbed with warmup)",
+                  "drift from 40 % of the session, absorbed with warmup; the held-out "
+                  "check refuses that refit)",
     "no_earth_rate": "a bias that depends on the heading or the table position",
     "temperature": "any slow drift that correlates with the temperature profile "
                    "(warm-up, time)",
     "bias_step": "a fast ramp, several steps, or a transient that does not recover",
     "periodic_line": "a line whose amplitude or frequency varies, or a non-sinusoidal "
-                     "periodic signal (measured: a line whose amplitude grows 7-fold)",
+                     "periodic signal (measured: a line whose amplitude grows 7-fold, "
+                     "which the held-out check does not see)",
     "misalignment": "a bias or gain that changes with the mounting",
 }
 """Effects outside the library that each built-in candidate can absorb when it is fitted

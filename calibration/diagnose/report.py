@@ -55,9 +55,22 @@ def write_report(session: Session, cal: Calibration, diag: Diagnosis,
         lines += [f"| {e['name']} | {e['kind']} {e['sensors'][0]} | {e['estimate']:.4g} | "
                   f"{e['estimate_sd']:.2g} | {e['unit']} | {e['p_value']:.2g} |"
                   for e in diag.effects]
+        notes = [f"- {e['name']} on {e['kind']} {e['sensors'][0]}: {e['bound_note']}"
+                 for e in diag.effects if e.get("bound_note")]
+        lines += ["", *notes] if notes else []
     else:
         lines.append("No effect found.")
     lines.append("")
+    h = diag.holdout
+    if h:
+        w = h.get("worst")
+        lines.append(f"Held-out check (each of {h.get('folds_tested', 0)} sensor-folds refitted "
+                     f"without its steps and predicted, limit p < {h['threshold']:.2g}): "
+                     + ("passed" if h["passed"] else "failed: " + "; ".join(
+                         f"{f['kind']} {f['sensor']} fold {f['fold']} p {f['p_value']:.2g}"
+                         for f in h["failed"]))
+                     + (f" (worst p {w['p_value']:.2g})" if w and h["passed"] else "") + ".")
+        lines.append("")
     lines.append("Unexplained structure: " + ("yes, " + "; ".join(
         f"{u['kind']} {u['sensor']} ({u['test']})" for u in diag.unexplained_detail)
         if diag.unexplained else "none") + ".")

@@ -17,8 +17,11 @@ from typing import Any
 import numpy as np
 from threadpoolctl import threadpool_limits
 
+from calibration.diagnose.bounds import SENSOR_CLASSES, bound_check, bound_label
+from calibration.diagnose.bounds import sensor_class as class_of
 from calibration.diagnose.context import KindData, check_match, check_same_session, kind_data
 from calibration.diagnose.detect import POWER, limits
+from calibration.diagnose.holdout import holdout
 from calibration.diagnose.library import (
     OUTSIDE_ALIASES,
     Candidate,
@@ -34,8 +37,8 @@ from fdi.calfile import Calibration
 from fdi.errors import ConfigError
 
 __all__ = ["ADVICE", "BLAS_THREADS", "DIAGNOSIS_SCHEMA", "MONITOR_NOTE", "VERDICTS",
-           "Diagnosis", "adequacy_record", "assess", "diagnose", "public_limit",
-           "with_limits"]
+           "Diagnosis", "adequacy_record", "assess", "bound_fields", "diagnose", "holdout_where",
+           "public_limit", "with_holdout", "with_limits"]
 
 DIAGNOSIS_SCHEMA = "rimu.diagnosis/1"
 MONITOR_NOTE = ("the runtime monitor compensates the effect terms whose inputs it has at "
@@ -52,7 +55,11 @@ class Diagnosis:
     effects : list of dict
         Claimed effects: ``{"name", "kind", "sensors" (1-based), "estimate",
         "estimate_sd", "unit", "p_value", "log10_p_value", "threshold", "aliases",
-        "params", "could_absorb"}`` (``could_absorb``: effects outside the library this
+        "params", "could_absorb", "physical", "physical_bound", "bound_note"}``
+        (``physical``: False when the estimate is beyond the plausible bound of the
+        sensor class, :mod:`.bounds`, and ``bound_note`` then says it is absorbing
+        something else; None for an effect without a bound; ``could_absorb``: effects
+        outside the library this
         term could be absorbing, :data:`.library.OUTSIDE_ALIASES`; "" for a registered one
         without an entry).
     unexplained : bool
@@ -80,6 +87,10 @@ class Diagnosis:
     sequence_limits : list of dict
         The same for effects the sequence itself cannot separate at that size (hidden
         even under white noise of the session's level).
+    holdout : dict
+        The held-out check of the refit model (:func:`.holdout.holdout`; empty when it
+        did not run: something was already unexplained). A failing fold makes the verdict
+        "effects suspected".
     """
 
     effects: list[dict[str, Any]]
@@ -94,6 +105,7 @@ class Diagnosis:
     noise_null: dict[str, str] = field(default_factory=dict)
     not_ruled_out: list[dict[str, Any]] = field(default_factory=list)
     sequence_limits: list[dict[str, Any]] = field(default_factory=list)
+    holdout: dict[str, Any] = field(default_factory=dict)
 
     @property
     def adequate(self) -> bool:
@@ -112,7 +124,7 @@ class Diagnosis:
                 "unexplained_detail": self.unexplained_detail,
                 "not_testable": self.not_testable, "noise_null": self.noise_null,
                 "verdict": self.verdict, "not_ruled_out": self.not_ruled_out,
-                "sequence_limits": self.sequence_limits,
+                "sequence_limits": self.sequence_limits, "holdout": self.holdout,
                 "error_before": self.error_before, "error_after": self.error_after}
 
 
@@ -162,6 +174,29 @@ def with_limits(rec: Mapping[str, Any], lim: Iterable[Mapping[str, Any]],
     elif out["verdict"] == "adequate" and out["sequence_limits"]:
         out["verdict"] = "adequate within sequence limits"
         out["advice"] = SEQUENCE_ADVICE
+    return out
+
+
+def holdout_where(f: Mapping[str, Any]) -> str:
+    """The ``where`` entry of a failing held-out fold."""
+    steps = f["steps"]
+    span = f"steps {steps[0]}-{steps[-1]}" if len(steps) > 1 else f"step {steps[0]}"
+    return (f"{f['kind']} {f['sensor']}: held-out check (fold {f['fold']}, {span}: "
+            f"chi2 {f['chi2']:.1f} on {f['dof']} dof, p {f['p_value']:.2g})")
+
+
+def with_holdout(rec: Mapping[str, Any], ho: Mapping[str, Any]) -> dict[str, Any]:
+    """``rec`` (:func:`adequacy_record`) with the held-out check (:mod:`.holdout`): its
+    summary under ``holdout``; a failing fold makes the verdict "effects suspected", the
+    fold listed under ``where`` (a model that does not predict steps it did not see is
+    not adequate, whatever the tests on the steps it saw said)."""
+    out = dict(rec)
+    out["holdout"] = {k: ho[k] for k in ("schema", "passed", "alpha", "threshold", "failed",
+                                         "not_tested", "worst")}
+    out["holdout"]["folds_tested"] = len(ho["folds"])
+    if not ho["passed"]:
+        out["verdict"] = "effects suspected"
+        out["where"] = list(out.get("where", [])) + [holdout_where(f) for f in ho["failed"]]
     return out
 
 
@@ -225,7 +260,7 @@ def _assess(session: Session, cal: Calibration, *, alpha: float,
                   alpha, forced=forced, noise=noise)
 
 
-def _effects_json(sel: Selection, new: Calibration) -> list[dict[str, Any]]:
+def _effects_json(sel: Selection, new: Calibration, cls: str) -> list[dict[str, Any]]:
     out = []
     terms = {(t.kind, t.sensor, t.name): t for t in new.effects}
     for s in sel.claimed:
@@ -238,15 +273,27 @@ def _effects_json(sel: Selection, new: Calibration) -> list[dict[str, Any]]:
                     else None,
                     "threshold": None if not np.isfinite(s.threshold) else s.threshold,
                     "aliases": list(s.aliases), "params": params,
-                    "could_absorb": OUTSIDE_ALIASES.get(t.name, "")})
+                    "could_absorb": OUTSIDE_ALIASES.get(t.name, ""),
+                    **bound_fields(t.name, t.kind, t.estimate, t.unit, cls)})
     return out
+
+
+def bound_fields(name: str, kind: str, estimate: float, unit: str, cls: str
+                 ) -> dict[str, Any]:
+    """``physical``, ``physical_bound`` and ``bound_note`` of an effect estimate
+    (:mod:`.bounds`; ``physical`` None for an effect without a bound)."""
+    chk = bound_check(name, kind, estimate, cls)
+    if chk is None:
+        return {"physical": None, "physical_bound": None, "bound_note": ""}
+    return {"physical": chk["physical"], "physical_bound": chk,
+            "bound_note": bound_label(chk, unit)}
 
 
 def diagnose(session: Session, cal: Calibration, *, alpha: float = 0.01,
              truth: tuple[Any, ...] | None = None,
              cal_path: str = "<calibration>",
              effects: Iterable[str] | None = None,
-             detectability: bool = True) -> Diagnosis:
+             detectability: bool = True, sensor_class: str | None = None) -> Diagnosis:
     """Diagnose a session under a calibration (see the module docstring).
 
     Parameters
@@ -264,6 +311,9 @@ def diagnose(session: Session, cal: Calibration, *, alpha: float = 0.01,
         Fit exactly these (no selection).
     detectability : bool
         Add the detectability limits and the three-way verdict (:mod:`.detect`; default).
+    sensor_class : {"fog", "mems"}, optional
+        Class whose physical bounds label the effects found (:mod:`.bounds`); default:
+        from the calibration's gyro noise.
 
     Raises
     ------
@@ -273,15 +323,19 @@ def diagnose(session: Session, cal: Calibration, *, alpha: float = 0.01,
     """
     if not 0 < alpha < 1:
         raise ConfigError(f"alpha must be between 0 and 1, got {alpha!r}")
+    if sensor_class is not None and sensor_class not in SENSOR_CLASSES:
+        raise ConfigError(f"sensor class must be one of {', '.join(SENSOR_CLASSES)}, got "
+                          f"{sensor_class!r}")
     check_match(session, cal, cal_path)
+    cls = sensor_class or class_of(cal)
     with threadpool_limits(limits=BLAS_THREADS, user_api="blas"):
-        return _diagnose(session, cal, alpha, truth, effects, cal_path, detectability)
+        return _diagnose(session, cal, alpha, truth, effects, cal_path, detectability, cls)
 
 
 def _diagnose(session: Session, cal: Calibration, alpha: float,
               truth: tuple[Any, ...] | None,
               effects: Iterable[str] | None, cal_path: str,
-              detectability: bool = True) -> Diagnosis:
+              detectability: bool = True, cls: str = "mems") -> Diagnosis:
     datas = model_effects(kind_data(session, cal), cal.effects)
     check_same_session(datas, cal, session.source, cal_path)
     sel = _assess(session, cal, alpha=alpha, effects=effects, datas=datas)
@@ -289,8 +343,12 @@ def _diagnose(session: Session, cal: Calibration, alpha: float,
     if sel.claimed and not sel.unexplained:      # the refit model holds the effects found
         rec = {**rec, "verdict": "adequate", "effects_found": rec["where"], "where": [],
                "monitor": MONITOR_NOTE}
+    ho: dict[str, Any] = {}
+    if not sel.unexplained:                      # before "adequate": data it did not see
+        ho = holdout(datas, sel.models, alpha)
+        rec = with_holdout(rec, ho)
     fit = refit(datas, cal, sel.claimed, adequacy=rec, noise=noise_sets(sel))
-    if detectability and not sel.unexplained:   # nothing unexplained: what could hide
+    if detectability and rec["verdict"] != "effects suspected":   # what could hide
         lim = limits(datas, sel.models, fit.calibration, alpha, sel.family_size,
                      skip={(s.kind, s.sensor, s.candidate.name) for s in sel.claimed}
                      | {(t.kind, t.sensor, t.name) for t in fit.calibration.effects})
@@ -300,11 +358,12 @@ def _diagnose(session: Session, cal: Calibration, alpha: float,
     before = error_summary(datas, {k: d.y for k, d in datas.items()},
                            {k: np.full(d.n, 4) for k, d in datas.items()}, cal, truth)
     after = error_summary(datas, fit.residual, fit.n_params, fit.calibration, truth)
-    return Diagnosis(effects=_effects_json(sel, fit.calibration),
+    return Diagnosis(effects=_effects_json(sel, fit.calibration, cls),
                      unexplained=bool(sel.unexplained),
                      unexplained_detail=sel.unexplained, not_testable=sel.not_testable,
                      error_before=before, error_after=after, alpha=alpha,
                      calibration=fit.calibration, selection=sel,
                      noise_null=dict(sel.noise_null),
                      not_ruled_out=list(rec.get("not_ruled_out") or []),
-                     sequence_limits=list(rec.get("sequence_limits") or []))
+                     sequence_limits=list(rec.get("sequence_limits") or []),
+                     holdout=dict(rec.get("holdout") or {}))

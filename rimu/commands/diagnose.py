@@ -29,6 +29,9 @@ def configure(p: argparse.ArgumentParser) -> None:
     p.add_argument("--truth", metavar="TRUTH",
                    help="truth sidecar (DIR/truth.json): parameter errors in sigma before "
                         "and after the refit")
+    p.add_argument("--sensor-class", choices=("fog", "mems"), default=None,
+                   help="sensor class whose physical bounds label the effects found on a session "
+                        "(default: from the calibration's gyro noise, docs/diagnose.md)")
     p.add_argument("--out", metavar="FILE",
                    help="write the refit calibration (rimu.calibration/3, with effects)")
 
@@ -75,6 +78,8 @@ def text(d) -> str:
             lines.append(f"  {e['name']:<18s} {e['kind']} {e['sensors'][0]}: "
                          f"{e['estimate']:+.4g} ± {e['estimate_sd']:.2g} {e['unit']}"
                          f"   p {_p(e)}" + (f"   [{par}]" if par else "") + alias)
+            if e.get("bound_note"):
+                lines.append(f"    {'':<18s} {e['bound_note']}")
             if e.get("could_absorb"):
                 lines.append(f"    {'':<18s} could instead be absorbing (outside the "
                              f"library): {e['could_absorb']}")
@@ -87,9 +92,10 @@ def text(d) -> str:
         lines.append("unexplained structure: none")
     a = d.calibration.adequacy or {}
     if a:
-        from calibration.diagnose.checked import limit_lines
+        from calibration.diagnose.checked import holdout_lines, limit_lines
 
         lines.append(f"verdict of the refit calibration: {d.verdict}")
+        lines.extend(holdout_lines(a))
         lines.extend(limit_lines(a))
     nt = sorted({(n["name"], n["kind"], n["reason"]) for n in d.not_testable})
     for name, kind, why in nt:
@@ -159,7 +165,8 @@ def run(args: argparse.Namespace) -> int:
         from calibration.truth import load_truth
 
         truth = load_truth(args.truth)
-    d = diagnose(session, cal, alpha=args.alpha, truth=truth, cal_path=str(args.cal))
+    d = diagnose(session, cal, alpha=args.alpha, truth=truth, cal_path=str(args.cal),
+                 sensor_class=args.sensor_class)
     page = None
     if rep is not None:             # the page and its plots: all or none
         from calibration.diagnose.report import write_report
