@@ -89,6 +89,7 @@ import numpy as np
 
 from fdi.drift import DriftModel, drift_model_from_fields
 from fdi.errors import ConfigError
+from fdi.extras import CalibrationExtras, extras_from_dict
 from fdi.fileio import Fields, read_json_object, to_jsonable
 from fdi.tails import TailModel, tail_model_from_fields
 from fdi.units import (
@@ -364,7 +365,8 @@ class Calibration:
     latitude_deg : float or None
     extra : dict
         Anything else the calibration wants to keep (residual statistics per step,
-        method, source session). Written as is under ``"extra"``.
+        method, source session). Written as is under ``"extra"``; the entries code reads
+        are typed in :attr:`extras`.
     effects : tuple of EffectTerm
         Terms of the extended model (empty: the plain model).
     adequacy : dict or None
@@ -384,6 +386,17 @@ class Calibration:
     adequacy: Mapping[str, Any] | None = None
 
     schema: str = CALIBRATION_SCHEMA
+
+    @property
+    def extras(self) -> CalibrationExtras:
+        """The typed entries of :attr:`extra` (:mod:`fdi.extras`), read from it on each access.
+
+        Raises
+        ------
+        FileFormatError
+            A typed entry of the wrong type (a loaded file was checked on load).
+        """
+        return extras_from_dict(self.extra, f"calibration of {self.configuration}")
 
     @property
     def gyro(self) -> SensorSet:
@@ -559,6 +572,7 @@ def calibration_from_dict(doc: Mapping[str, Any], path: str = "<calibration>") -
         effects=_effects(r, sets) if version != "rimu.calibration/1" else (),
         adequacy=_adequacy(r) if version != "rimu.calibration/1" else None)
     r.finish(accept=_WRITTEN_ONLY)
+    extras_from_dict(cal.extra, path)
     return cal
 
 

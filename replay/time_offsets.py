@@ -55,9 +55,7 @@ second between two IMUs of one vehicle is a broken time base, not a calibration)
 def time_offsets_s(cal: Calibration) -> dict[str, float]:
     """The fitted time offset τ (s) of every IMU group an in-flight calibration records
     (empty for a turntable calibration)."""
-    imus = cal.extra.get("inflight", {}).get("imus", {})
-    return {g: 1e-3 * float(rec["time_offset_ms"]) for g, rec in imus.items()
-            if isinstance(rec, dict) and "time_offset_ms" in rec}
+    return cal.extras.time_offsets_s()
 
 
 def imu_groups(sensor_names: Sequence[str], imu: Sequence[str] = ()) -> tuple[str, ...]:

@@ -64,7 +64,8 @@ from calibration.inflight.segments import find_segments, keep_mask
 from calibration.inflight.timing import other_flight_warning
 from fdi.calfile import Calibration
 from fdi.errors import ConfigError
-from fdi.units import DPS, G0
+from fdi.extras import ImuTiming
+from fdi.units import DPS, G0, MS
 from replay.flight_data import Flight
 
 __all__ = ["DIAGNOSE_SCHEMA", "GENERIC", "LINE_FACTOR", "MAX_LINES", "RATE_LIMIT", "WARM_UP_S",
@@ -116,7 +117,8 @@ def flight_residual(flight: Flight, cal: Calibration, reference: str | None = No
         raise ConfigError(f"{flight.source}: {flight.n} {flight.kind} sensors, the "
                           f"calibration has {s.n} gyros")
     groups = flight.imu_triads("diagnose of a flight")
-    ref = reference or str(cal.extra.get("inflight", {}).get("reference", "")) \
+    inflight = cal.extras.inflight
+    ref = reference or (inflight.reference if inflight is not None else "") \
         or str(cal.extra.get("static", {}).get("reference", "")) or next(iter(groups))
     if ref not in groups:
         ref = next(iter(groups))
@@ -375,6 +377,13 @@ def _structure(e: np.ndarray, fs: float, alpha_each: float, names: list[str]) ->
     return out
 
 
+def _imu_timing(cal: Calibration, g: str) -> ImuTiming:
+    """The calibration's timing of IMU ``g`` (no offset when it records none)."""
+    inflight = cal.extras.inflight
+    none = ImuTiming(time_offset_s=None)
+    return none if inflight is None else inflight.imus.get(g, none)
+
+
 def _effect_record(c: Any, s: slice, fit: Any, g: str, sensors: list[int],
                    cal: Calibration) -> dict[str, Any]:
     """The JSON record of a selected effect (estimate and sd in the candidate's unit)."""
@@ -384,10 +393,10 @@ def _effect_record(c: Any, s: slice, fit: Any, g: str, sensors: list[int],
            "estimate": float(est[0]) if est.size == 1 else est.tolist(),
            "estimate_sd": float(sd[0]) if sd.size == 1 else sd.tolist(),
            "unit": c.unit, "p_value": wald_test(fit, np.arange(s.start, s.stop))[2]}
-    known = cal.extra.get("inflight", {}).get("imus", {}).get(g, {})
+    known = _imu_timing(cal, g)
     if c.name == "time_skew":
-        cal_txt = (f"the calibration's {known['time_offset_ms']:+.3f} ± "
-                   f"{known['time_offset_ms_sd']:.3f} ms" if "time_offset_ms" in known
+        cal_txt = (f"the calibration's {known.time_offset_s / MS:+.3f} ± "
+                   f"{known.time_offset_sd_s / MS:.3f} ms" if known.time_offset_s is not None
                    else "no calibrated offset")
         rec["detail"] = (f"time skew left after {cal_txt} for {g} (applied exactly, as the "
                          f"calibration reads it; rimu monitor-file moves {g}'s samples by "
@@ -460,10 +469,11 @@ def _timing_record(g: str, chosen: list[_Cand], sl: list[slice], fit: Any,
         f, s = stacked_lstsq(X[keep], r0[keep]), sls[-1]
     d, dsd = 1e3 * float(f.beta[s][0]), 1e3 * float(f.sd[s][0])
     p = wald_test(f, np.arange(s.start, s.stop))[2]
-    known = cal.extra.get("inflight", {}).get("imus", {}).get(g, {})
-    csd = float(known.get("time_offset_ms_sd", 0.0)) if "time_offset_ms" in known else 0.0
+    timing = _imu_timing(cal, g)
+    known = timing.time_offset_s is not None
+    csd = timing.time_offset_sd_s / MS if known else 0.0
     comb = math.hypot(csd, dsd)
-    return {"imu": g, "calibration_ms": 1e3 * tau_s if "time_offset_ms" in known else None,
+    return {"imu": g, "calibration_ms": 1e3 * tau_s if known else None,
             "calibration_sd_ms": csd,
             "left_ms": d, "left_sd_ms": dsd, "p_value": p, "left": bool(p < alpha_each),
             "total_ms": 1e3 * tau_s + d, "combined_sd_ms": comb,

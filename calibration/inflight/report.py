@@ -18,7 +18,7 @@ import numpy as np
 from calibration.inflight.offset_check import SIGN_CONVENTION
 from calibration.inflight.segments import find_segments, keep_mask
 from fdi.calfile import Calibration
-from fdi.units import DPS
+from fdi.units import DPS, MS
 from replay.flight_data import Flight
 
 __all__ = ["write_flight_plots"]
@@ -69,23 +69,23 @@ def write_flight_plots(flight: Flight, cal: Calibration, out: Path) -> list[Path
     fig.savefig(p, dpi=110)
     plt.close(fig)
     paths.append(p)
-    imus = cal.extra.get("inflight", {}).get("imus", {})
-    checks = {g: r.get("time_offset_check") for g, r in imus.items()
-              if isinstance(r, dict) and r.get("time_offset_check")}
+    inflight = cal.extras.inflight
+    imus = inflight.imus if inflight is not None else {}
+    checks = {g: r.check for g, r in imus.items() if r.check is not None}
     if checks:
         fig, axes = plt.subplots(len(checks), 1, figsize=(8, 2.8 * len(checks)),
                                  squeeze=False)
         for ax, (g, chk) in zip(axes[:, 0], checks.items(), strict=True):
-            tau, sd = imus[g]["time_offset_ms"], imus[g]["time_offset_ms_sd"]
-            good = [q for q in chk["pieces"] if q["offset_ms"] is not None]
-            mid = [(q["t0_s"] + q["t1_s"]) / 2 for q in good]
-            half = [(q["t1_s"] - q["t0_s"]) / 2 for q in good]
-            ax.errorbar(mid, [q["offset_ms"] for q in good], yerr=[q["sd_ms"] for q in good],
+            tau, sd = imus[g].time_offset_s / MS, imus[g].time_offset_sd_s / MS
+            good = [q for q in chk.pieces if q.offset_s is not None]
+            mid = [(q.t0_s + q.t1_s) / 2 for q in good]
+            half = [(q.t1_s - q.t0_s) / 2 for q in good]
+            ax.errorbar(mid, [q.offset_s / MS for q in good], yerr=[q.sd_s / MS for q in good],
                         xerr=half, fmt="o", ms=3, label="independently fitted pieces")
             ax.axhline(tau, color="k", lw=1, label=f"whole flight {tau:+.2f} ± {sd:.2f} ms")
             ax.axhspan(tau - sd, tau + sd, color="0.8", alpha=0.6)
-            c = chk.get("consistency")
-            ttl = f"{g}: time offset" + (f", chi2/dof {c['chi2_dof']:.2f} (p={c['p_value']:.2g})"
+            c = chk.consistency
+            ttl = f"{g}: time offset" + (f", chi2/dof {c.chi2_dof:.2f} (p={c.p_value:.2g})"
                                          if c else "")
             ax.set_title(ttl, fontsize=9)
             ax.set_ylabel("offset [ms]")

@@ -46,14 +46,14 @@ def other_flight_warning(cal: Calibration, flight: Flight) -> str | None:
     """A warning when ``cal``'s time offsets were fitted on another flight than ``flight``
     (None when they were fitted on this one, when the calibration has no offsets, or
     when it does not record its flight)."""
-    inflight = cal.extra.get("inflight", {})
-    known = inflight.get("flight") if isinstance(inflight, dict) else None
-    if not time_offsets_s(cal) or not isinstance(known, dict) or "fingerprint" not in known:
+    inflight = cal.extras.inflight
+    known = inflight.flight if inflight is not None else None
+    if not time_offsets_s(cal) or known is None or not known.fingerprint:
         return None
     here = flight_identity(flight)
-    if here["fingerprint"] == known["fingerprint"]:
+    if here["fingerprint"] == known.fingerprint:
         return None
     return (f"the calibration's time offsets were fitted on another flight "
-            f"({known.get('source', '?')}, {known.get('samples', '?')} samples) than this "
+            f"({known.source or '?'}, {known.samples or '?'} samples) than this "
             f"one ({here['source']}, {here['samples']} samples): an offset belongs to its "
             f"flight, so what is left here may be the difference between the two")

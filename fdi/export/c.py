@@ -38,6 +38,7 @@ from fdi.health import health_limits
 from fdi.isolation import rejection_level
 from fdi.reconstruction import SetCache
 from fdi.settings import MonitorSettings, Thresholds
+from fdi.units import MS
 
 __all__ = ["MAX_RING", "MAX_TABLE_BYTES", "PRECISIONS", "CModule", "generate_c", "write_c"]
 
@@ -378,12 +379,10 @@ def _bullets(items: tuple[str, ...], empty: str) -> str:
 
 
 def _offsets_note(cal: Calibration) -> str:
-    imus = cal.extra.get("inflight", {}).get("imus", {}) if isinstance(cal.extra, dict) else {}
-    offs = {g: rec.get("time_offset_ms") for g, rec in imus.items()
-            if isinstance(rec, dict) and "time_offset_ms" in rec}
+    offs = cal.extras.time_offsets_s()
     if not offs:
         return "The calibration records no IMU time offsets."
-    parts = ", ".join(f"{g} {float(v):+.3f} ms" for g, v in offs.items())
+    parts = ", ".join(f"{g} {v / MS:+.3f} ms" for g, v in offs.items())
     return (f"The calibration records IMU time offsets ({parts}). The module, like "
             f"`fdi.Monitor`, takes samples already on one time base: move each IMU's samples "
             f"by its offset before `rimu_monitor_step` (`rimu monitor-file` does it in its "

@@ -1,0 +1,323 @@
+"""Typed records of a calibration's ``extra`` block: the entries rimu's code reads.
+
+``Calibration.extra`` keeps what each calibration stage records (JSON under ``"extra"`` in
+``rimu.calibration/3`` and ``/4``, layout in ``docs/formats.md``). The entries code acts on
+are read here into frozen dataclasses, SI inside (names carry the unit where it is not SI),
+and :attr:`fdi.calfile.Calibration.extras` gives them:
+
+- :class:`InflightTiming` (``extra.inflight``): the reference IMU, the time offset of every
+  IMU with its sd, its checks and its timing jitter, the sign convention and the flight the
+  offsets were fitted on.
+
+The JSON layout is unchanged (the file keeps its keys and units: ``time_offset_ms`` in the
+file is :attr:`ImuTiming.time_offset_s` here), so every file written before these types
+existed loads as it did and keeps its fingerprint; :func:`extras_from_dict` checks the types
+and names the bad field (``extra.inflight.imus.imu2.time_offset_ms``). Keys the types do not
+cover stay in ``Calibration.extra`` and are not checked.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from fdi.fileio import Fields
+from fdi.units import MS
+
+__all__ = ["CalibrationExtras", "FlightIdentity", "ImuTiming", "InflightTiming",
+           "OffsetCheck", "OffsetConsistency", "OffsetPiece", "extras_from_dict"]
+
+_PREFIX = "extra"
+_TYPED = ("inflight",)
+"""Keys of ``extra`` read into types (the others are kept as they are, unchecked)."""
+
+
+def _plain(obj: Any) -> Any:
+    """Numpy arrays and scalars, tuples and mappings to plain Python types (NaN kept), so that
+    a record built in memory is checked as its JSON would be."""
+    if isinstance(obj, np.ndarray):
+        return _plain(obj.tolist())
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if isinstance(obj, Mapping):
+        return {str(k): _plain(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [_plain(v) for v in obj]
+    return obj
+
+
+def _ms(r: Fields, key: str, default: float | None) -> float | None:
+    """A time in ms read as s (null or absent: ``default``, in s)."""
+    v = r.number(key, None, finite=False)
+    return default if v is None else v * MS
+
+
+# -- in-flight timing -------------------------------------------------------------------
+@dataclass(frozen=True)
+class FlightIdentity:
+    """The flight an in-flight calibration was fitted on (``extra.inflight.flight``).
+
+    Attributes
+    ----------
+    source : str
+        File name of the source log.
+    samples : int
+        Number of samples.
+    t0_s, t1_s : float
+        First and last sample time (s).
+    fingerprint : str
+        16 hex digits of a sha256 of the times and rates (rounded to 1e-9).
+    """
+
+    source: str
+    samples: int
+    t0_s: float
+    t1_s: float
+    fingerprint: str
+
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON record."""
+        return {"source": self.source, "samples": self.samples, "t0_s": self.t0_s,
+                "t1_s": self.t1_s, "fingerprint": self.fingerprint}
+
+
+@dataclass(frozen=True)
+class OffsetPiece:
+    """The time offset fitted on one piece of the flight alone.
+
+    Attributes
+    ----------
+    t0_s, t1_s : float
+        Span of the piece (s).
+    offset_s, sd_s : float or None
+        Its offset and sd (s); None when the piece could not be fitted (``note`` says why).
+    model : str
+        The alignment model used on the piece (``""`` when not fitted).
+    note : str
+        Why the piece was left out (``""`` when fitted).
+    """
+
+    t0_s: float
+    t1_s: float
+    offset_s: float | None
+    sd_s: float | None
+    model: str = ""
+    note: str = ""
+
+
+@dataclass(frozen=True)
+class OffsetConsistency:
+    """The χ² test that the pieces' offsets are one number.
+
+    Attributes
+    ----------
+    mean_s, sd_internal_s, sd_external_s : float
+        Weighted mean of the pieces' offsets, its sd from their sds and from their scatter (s).
+    chi2, chi2_dof, p_value, alpha : float
+        The statistic, per degree of freedom, its p-value and the level it is tested at.
+    dof, pieces_used : int
+    """
+
+    mean_s: float
+    sd_internal_s: float
+    sd_external_s: float
+    chi2: float
+    dof: int
+    chi2_dof: float
+    p_value: float
+    alpha: float
+    pieces_used: int
+
+
+@dataclass(frozen=True)
+class OffsetCheck:
+    """The sds and the piece-consistency test of one IMU's time offset
+    (``extra.inflight.imus.<imu>.time_offset_check``, written by
+    :func:`calibration.inflight.offset_check.check_offset`).
+
+    Attributes
+    ----------
+    sd_s : float
+        The sd reported (s): the largest of the three below.
+    sd_hac_s, sd_bootstrap_s, sd_pieces_s : float
+        HAC, block-bootstrap and piece-scatter sds (s).
+    block_s : float
+        Bootstrap block length (s).
+    pieces : tuple of OffsetPiece
+    consistency : OffsetConsistency or None
+        None with fewer than two pieces fitted.
+    consistent, widened : bool
+        The pieces agree at ``alpha``; the sd is wider than the HAC sd.
+    sign : str
+        The sign convention of the offsets (one line).
+    """
+
+    sd_s: float
+    sd_hac_s: float
+    sd_bootstrap_s: float
+    sd_pieces_s: float
+    block_s: float
+    pieces: tuple[OffsetPiece, ...]
+    consistency: OffsetConsistency | None
+    consistent: bool
+    widened: bool
+    sign: str = ""
+
+
+@dataclass(frozen=True)
+class ImuTiming:
+    """The timing of one IMU of an in-flight calibration (``extra.inflight.imus.<imu>``).
+
+    Attributes
+    ----------
+    time_offset_s : float or None
+        The fitted offset τ (s; file: ``time_offset_ms``): the IMU's sample at t matches the
+        reference's at ``t + τ``. None when the record has none.
+    time_offset_sd_s : float
+        Its sd (s; file: ``time_offset_ms_sd``; 0 when not recorded).
+    timing_jitter_s, timing_jitter_sd_s : float
+        sd of the sampling-time error relative to the reference and its uncertainty (s;
+        file: ``timing_jitter_ms``, ``timing_jitter_ms_sd``; 0 when not recorded).
+    check : OffsetCheck or None
+        The offset's checks (file: ``time_offset_check``; None when not recorded).
+    """
+
+    time_offset_s: float | None
+    time_offset_sd_s: float = 0.0
+    timing_jitter_s: float = 0.0
+    timing_jitter_sd_s: float = 0.0
+    check: OffsetCheck | None = None
+
+
+@dataclass(frozen=True)
+class InflightTiming:
+    """What an in-flight calibration records about timing (``extra.inflight``).
+
+    Attributes
+    ----------
+    reference : str
+        The IMU the others are aligned to (``""`` when not recorded).
+    time_offset_sign : str
+        The sign convention of the offsets, one line (``""`` when not recorded).
+    flight : FlightIdentity or None
+        The flight the offsets were fitted on (None when not recorded).
+    imus : dict of str to ImuTiming
+        Per IMU group other than the reference.
+    """
+
+    reference: str = ""
+    time_offset_sign: str = ""
+    flight: FlightIdentity | None = None
+    imus: Mapping[str, ImuTiming] = field(default_factory=dict)
+
+    def time_offsets_s(self) -> dict[str, float]:
+        """``{group: τ (s)}`` of the IMUs with a fitted offset."""
+        return {g: t.time_offset_s for g, t in self.imus.items()
+                if t.time_offset_s is not None}
+
+
+def _flight(r: Fields) -> FlightIdentity | None:
+    if "flight" not in r:
+        return None
+    f = r.mapping("flight")
+    return FlightIdentity(source=f.string("source", "", nonempty=False),
+                          samples=f.integer("samples", 0, lo=0),
+                          t0_s=f.number("t0_s", 0.0, finite=False),
+                          t1_s=f.number("t1_s", 0.0, finite=False),
+                          fingerprint=f.string("fingerprint", "", nonempty=False))
+
+
+def _piece(r: Fields) -> OffsetPiece:
+    return OffsetPiece(t0_s=r.number("t0_s", finite=False), t1_s=r.number("t1_s", finite=False),
+                       offset_s=_ms(r, "offset_ms", None), sd_s=_ms(r, "sd_ms", None),
+                       model=r.string("model", "", nonempty=False),
+                       note=r.string("note", "", nonempty=False))
+
+
+def _consistency(r: Fields) -> OffsetConsistency | None:
+    if "consistency" not in r:
+        return None
+    c = r.mapping("consistency")
+    return OffsetConsistency(
+        mean_s=_ms(c, "mean_ms", np.nan), sd_internal_s=_ms(c, "sd_internal_ms", np.nan),
+        sd_external_s=_ms(c, "sd_external_ms", np.nan),
+        chi2=c.number("chi2", np.nan, finite=False), dof=c.integer("dof", 0, lo=0),
+        chi2_dof=c.number("chi2_dof", np.nan, finite=False),
+        p_value=c.number("p_value", np.nan, finite=False),
+        alpha=c.number("alpha", np.nan, finite=False),
+        pieces_used=c.integer("pieces_used", 0, lo=0))
+
+
+def _check(r: Fields) -> OffsetCheck | None:
+    if "time_offset_check" not in r or not r.get("time_offset_check"):
+        return None
+    c = r.mapping("time_offset_check")
+    return OffsetCheck(
+        sd_s=_ms(c, "sd_ms", np.nan), sd_hac_s=_ms(c, "sd_hac_ms", np.nan),
+        sd_bootstrap_s=_ms(c, "sd_bootstrap_ms", np.nan),
+        sd_pieces_s=_ms(c, "sd_pieces_ms", 0.0),
+        block_s=c.number("block_s", np.nan, finite=False),
+        pieces=tuple(_piece(p) for p in c.tables("pieces", [], nonempty=False)),
+        consistency=_consistency(c), consistent=c.boolean("consistent", True),
+        widened=c.boolean("widened", False), sign=c.string("sign", "", nonempty=False))
+
+
+def _imu_timing(r: Fields) -> ImuTiming:
+    return ImuTiming(time_offset_s=_ms(r, "time_offset_ms", None),
+                     time_offset_sd_s=_ms(r, "time_offset_ms_sd", 0.0),
+                     timing_jitter_s=_ms(r, "timing_jitter_ms", 0.0),
+                     timing_jitter_sd_s=_ms(r, "timing_jitter_ms_sd", 0.0),
+                     check=_check(r))
+
+
+def _inflight(r: Fields) -> InflightTiming | None:
+    if "inflight" not in r:
+        return None
+    f = r.mapping("inflight")
+    imus = f.mapping("imus", {})
+    return InflightTiming(
+        reference=f.string("reference", "", nonempty=False),
+        time_offset_sign=f.string("time_offset_sign", "", nonempty=False),
+        flight=_flight(f), imus={g: _imu_timing(imus.mapping(g)) for g in imus.keys()})
+
+
+# -- all of them ------------------------------------------------------------------------
+@dataclass(frozen=True)
+class CalibrationExtras:
+    """The typed entries of ``Calibration.extra`` (see the module docstring).
+
+    Attributes
+    ----------
+    inflight : InflightTiming or None
+        In-flight calibrations only.
+    """
+
+    inflight: InflightTiming | None = None
+
+    def time_offsets_s(self) -> dict[str, float]:
+        """``{IMU group: τ (s)}`` of an in-flight calibration (empty for any other)."""
+        return {} if self.inflight is None else self.inflight.time_offsets_s()
+
+
+def extras_from_dict(extra: Mapping[str, Any], path: str = "<calibration>"
+                     ) -> CalibrationExtras:
+    """Read the typed entries of an ``extra`` block (a calibration file's or one in memory).
+
+    Parameters
+    ----------
+    extra : mapping
+        The block; numpy values are read as their JSON would be.
+    path : str
+        The file, for the messages.
+
+    Raises
+    ------
+    FileFormatError
+        A typed entry of the wrong type; the message names the file and the field
+        (``extra.inflight.imus.imu2.time_offset_ms``).
+    """
+    r = Fields({k: _plain(extra[k]) for k in _TYPED if k in extra}, path, _PREFIX)
+    return CalibrationExtras(inflight=_inflight(r))

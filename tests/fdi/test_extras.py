@@ -1,0 +1,110 @@
+"""The typed entries of ``Calibration.extra`` (:mod:`fdi.extras`).
+
+The two files in ``tests/fdi/data`` were written by rimu before the types existed (commit
+3746783: a simulated tetrad turntable session through ``calibrate_checked`` with the
+default noise model, and a simulated three-IMU flight through the in-flight calibration,
+offsets 0, +5 and -3 ms; written compact). They must load as they did: same fingerprint
+(computed by that commit on the loaded file), the same ``extra`` written back, and typed
+values equal to the file's numbers in SI.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fdi.calfile import calibration_from_dict, load_calibration
+from fdi.errors import FileFormatError
+from fdi.extras import CalibrationExtras, extras_from_dict
+from fdi.units import MS
+
+DATA = Path(__file__).parent / "data"
+OLD = {"turntable": ("calibration3_turntable.json", "af2580e47e0cafa8"),
+       "inflight": ("calibration3_inflight.json", "83a1ec72fc6479a7")}
+
+
+def _doc(name: str) -> dict:
+    return json.loads((DATA / OLD[name][0]).read_text(encoding="utf-8"))
+
+
+@pytest.mark.parametrize("name", sorted(OLD))
+def test_old_file_loads_with_its_fingerprint_and_writes_the_same_extra(name, tmp_path):
+    cal = load_calibration(DATA / OLD[name][0])
+    assert cal.fingerprint() == OLD[name][1]
+    assert cal.to_dict()["extra"] == _doc(name)["extra"]
+    cal.save(tmp_path / "again.json")
+    again = load_calibration(tmp_path / "again.json")
+    assert again.fingerprint() == OLD[name][1]
+    assert again.extras == cal.extras
+
+
+def test_inflight_timing_is_the_file_in_si():
+    doc = _doc("inflight")
+    rec = doc["extra"]["inflight"]
+    inf = load_calibration(DATA / OLD["inflight"][0]).extras.inflight
+    assert inf is not None and inf.reference == rec["reference"] == "imu1"
+    assert inf.time_offset_sign == rec["time_offset_sign"]
+    assert inf.flight.to_dict() == rec["flight"]
+    assert sorted(inf.imus) == sorted(rec["imus"]) == ["imu2", "imu3"]
+    for g, t in inf.imus.items():
+        r = rec["imus"][g]
+        assert t.time_offset_s == r["time_offset_ms"] * MS
+        assert t.time_offset_sd_s == r["time_offset_ms_sd"] * MS
+        assert t.timing_jitter_s == r["timing_jitter_ms"] * MS
+        assert t.timing_jitter_sd_s == r["timing_jitter_ms_sd"] * MS
+        chk = r["time_offset_check"]
+        assert t.check.sd_s == chk["sd_ms"] * MS and t.check.block_s == chk["block_s"]
+        assert t.check.consistent is chk["consistent"]
+        assert [p.offset_s for p in t.check.pieces] == [
+            None if p["offset_ms"] is None else p["offset_ms"] * MS for p in chk["pieces"]]
+        assert t.check.consistency.p_value == chk["consistency"]["p_value"]
+    # the simulated offsets (+5 ms, -3 ms) within 5 sd of the fit: the fixture is what it says
+    offs = inf.time_offsets_s()
+    for g, true in (("imu2", 5e-3), ("imu3", -3e-3)):
+        assert abs(offs[g] - true) < 5 * inf.imus[g].time_offset_sd_s
+
+
+def test_turntable_file_has_no_inflight_timing():
+    cal = load_calibration(DATA / OLD["turntable"][0])
+    assert cal.extras.inflight is None and cal.extras.time_offsets_s() == {}
+
+
+def test_no_extra_gives_empty_extras():
+    assert extras_from_dict({}) == CalibrationExtras()
+
+
+@pytest.mark.parametrize(("where", "value", "field"), [
+    (("inflight", "imus", "imu2", "time_offset_ms"), "5",
+     "extra.inflight.imus.imu2.time_offset_ms"),
+    (("inflight", "imus", "imu2"), 3, "extra.inflight.imus.imu2"),
+    (("inflight", "imus"), [1], "extra.inflight.imus"),
+    (("inflight", "flight", "samples"), 1.5, "extra.inflight.flight.samples"),
+    (("inflight", "reference"), 1, "extra.inflight.reference"),
+    (("inflight", "imus", "imu3", "time_offset_check", "pieces"), {},
+     "extra.inflight.imus.imu3.time_offset_check.pieces"),
+    (("inflight", "imus", "imu3", "time_offset_check", "consistent"), "yes",
+     "extra.inflight.imus.imu3.time_offset_check.consistent"),
+])
+def test_loader_names_the_bad_field(where, value, field):
+    doc = copy.deepcopy(_doc("inflight"))
+    node = doc["extra"]
+    for k in where[:-1]:
+        node = node[k]
+    node[where[-1]] = value
+    with pytest.raises(FileFormatError) as err:
+        calibration_from_dict(doc, "cal.json")
+    assert err.value.field == field and err.value.path == "cal.json"
+
+
+def test_records_built_in_memory_read_as_their_json():
+    ex = {"inflight": {"reference": "imu1", "imus": {
+        "imu2": {"time_offset_ms": np.float32(2.5), "time_offset_ms_sd": np.float64(0.1)},
+        "imu3": {"timing_jitter_ms": np.array(0.2)}}}}
+    inf = extras_from_dict(ex).inflight
+    assert inf.imus["imu2"].time_offset_s == pytest.approx(2.5e-3)
+    assert inf.imus["imu3"].time_offset_s is None
+    assert inf.time_offsets_s() == {"imu2": pytest.approx(2.5e-3)}
