@@ -74,7 +74,7 @@ def write_plots(session: Session, cal: Calibration, directory: str | Path) -> li
             plt.close(fig)
             out.append(p)
     fit = outer_axis_fit(session, cal,
-                         denoise=cal.extra.get("method", {}).get("denoise", "") != "none")
+                         denoise=cal.extras.method.part("denoise") != "none")
     if fit is not None and fit.y.size:
         g = cal.gyro
         m = np.isin(session.step, fit.steps)

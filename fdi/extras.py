@@ -7,7 +7,10 @@ and :attr:`fdi.calfile.Calibration.extras` gives them:
 
 - :class:`InflightTiming` (``extra.inflight``): the reference IMU, the time offset of every
   IMU with its sd, its checks and its timing jitter, the sign convention and the flight the
-  offsets were fitted on.
+  offsets were fitted on;
+- ``warnings`` (``extra.warnings``), ``source`` (``extra.source``), :class:`Method`
+  (``extra.method``), :class:`StaticAlignment` (``extra.static``: its reference);
+- :class:`NoiseModel` (``extra.noise_model``): the coloured-noise fit per sensor set.
 
 The JSON layout is unchanged (the file keeps its keys and units: ``time_offset_ms`` in the
 file is :attr:`ImuTiming.time_offset_s` here), so every file written before these types
@@ -27,11 +30,12 @@ import numpy as np
 from fdi.fileio import Fields
 from fdi.units import MS
 
-__all__ = ["CalibrationExtras", "FlightIdentity", "ImuTiming", "InflightTiming",
-           "OffsetCheck", "OffsetConsistency", "OffsetPiece", "extras_from_dict"]
+__all__ = ["SD_FACTOR_KEYS", "CalibrationExtras", "FlightIdentity", "ImuTiming",
+           "InflightTiming", "Method", "NoiseFit", "NoiseModel", "OffsetCheck",
+           "OffsetConsistency", "OffsetPiece", "StaticAlignment", "extras_from_dict"]
 
 _PREFIX = "extra"
-_TYPED = ("inflight",)
+_TYPED = ("inflight", "method", "noise_model", "source", "static", "warnings")
 """Keys of ``extra`` read into types (the others are kept as they are, unchecked)."""
 
 
@@ -284,6 +288,150 @@ def _inflight(r: Fields) -> InflightTiming | None:
         flight=_flight(f), imus={g: _imu_timing(imus.mapping(g)) for g in imus.keys()})
 
 
+# -- provenance, warnings ---------------------------------------------------------------
+@dataclass(frozen=True)
+class Method:
+    """How the calibration was made (``extra.method``): one line, or one line per part.
+
+    Attributes
+    ----------
+    text : str
+        The file's ``method`` when it is a string (in-flight, static calibrations).
+    parts : dict of str to str
+        The file's ``method`` when it is an object (turntable: ``gyro``, ``bias``,
+        ``denoise``; Ferraris: ``gyro``, ``accel``).
+    """
+
+    text: str = ""
+    parts: Mapping[str, str] = field(default_factory=dict)
+
+    def part(self, key: str, default: str = "") -> str:
+        """The line of one part (``default`` when the file has none)."""
+        return self.parts.get(key, default)
+
+
+@dataclass(frozen=True)
+class StaticAlignment:
+    """What code reads of a static (at rest) calibration's record (``extra.static``).
+
+    Attributes
+    ----------
+    reference : str
+        The IMU the others are aligned to.
+    """
+
+    reference: str = ""
+
+
+def _method(r: Fields) -> Method:
+    v = r.get("method", "")
+    if isinstance(v, str):
+        return Method(text=v)
+    m = r.mapping("method")
+    return Method(parts={k: m.string(k, "", nonempty=False) for k in m.keys()})
+
+
+def _static(r: Fields) -> StaticAlignment | None:
+    if "static" not in r:
+        return None
+    return StaticAlignment(reference=r.mapping("static").string("reference", "",
+                                                                nonempty=False))
+
+
+def _warnings(r: Fields) -> tuple[str, ...]:
+    v = r.get("warnings", [])
+    if not isinstance(v, list):
+        raise r.error("warnings", f"expected a list of strings, got {type(v).__name__}")
+    bad = next((k for k, w in enumerate(v, start=1) if not isinstance(w, str)), None)
+    if bad is not None:
+        raise r.error(f"warnings[{bad}]", "expected a string")
+    return tuple(v)
+
+
+# -- noise model -------------------------------------------------------------------------
+SD_FACTOR_KEYS = ("bias", "scale_factor", "misalignment")
+"""The estimates whose sd the coloured noise widens (``sd_factor`` keys)."""
+
+
+@dataclass(frozen=True)
+class NoiseFit:
+    """What the noise model did to one sensor set (``extra.noise_model.<kind>``).
+
+    Attributes
+    ----------
+    applied : bool
+        The first-order Gauss-Markov bias was kept (else white noise).
+    bias_instability : float
+        σ_b of the fit (SI: rad/s or m/s²; 0 when not fitted).
+    correlation_s : float or None
+        Its correlation time (s).
+    likelihood_ratio : float or None
+        The likelihood-ratio statistic against white noise.
+    sigma_bias_instability : float or None
+        σ_b (SI) of the pair the estimates' sds were computed with (None: not applied).
+    sigma_correlation_s : float or None
+        The correlation time (s) of that pair.
+    sigma_cut : bool
+        The correlation time's profile interval was cut at a quarter of the record.
+    record_s : float or None
+        Length of the residual record the fit saw (s).
+    sd_factor : dict of str to tuple of float
+        Per :data:`SD_FACTOR_KEYS`, per sensor: sd with the model over the white-noise sd.
+    """
+
+    applied: bool = False
+    bias_instability: float = 0.0
+    correlation_s: float | None = None
+    likelihood_ratio: float | None = None
+    sigma_bias_instability: float | None = None
+    sigma_correlation_s: float | None = None
+    sigma_cut: bool = False
+    record_s: float | None = None
+    sd_factor: Mapping[str, tuple[float, ...]] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class NoiseModel:
+    """The noise model of a turntable calibration (``extra.noise_model``).
+
+    Attributes
+    ----------
+    method : str
+        What was fitted and how (one line).
+    sets : dict of str to NoiseFit
+        Per sensor kind (``"gyro"``, ``"accel"``).
+    """
+
+    method: str = ""
+    sets: Mapping[str, NoiseFit] = field(default_factory=dict)
+
+
+def _opt(r: Fields, key: str) -> float | None:
+    return r.number(key, None, finite=False)
+
+
+def _noise_fit(r: Fields) -> NoiseFit:
+    sdf = r.mapping("sd_factor", {})
+    factors = {k: tuple(float(x) for x in sdf.array(k, (None,), finite=False))
+               for k in sdf.keys()}
+    return NoiseFit(applied=r.boolean("applied", False),
+                    bias_instability=r.number("bias_instability", 0.0, finite=False),
+                    correlation_s=_opt(r, "correlation_s"),
+                    likelihood_ratio=_opt(r, "likelihood_ratio"),
+                    sigma_bias_instability=_opt(r, "sigma_bias_instability"),
+                    sigma_correlation_s=_opt(r, "sigma_correlation_s"),
+                    sigma_cut=r.boolean("sigma_cut", False), record_s=_opt(r, "record_s"),
+                    sd_factor=factors)
+
+
+def _noise_model(r: Fields) -> NoiseModel | None:
+    if "noise_model" not in r:
+        return None
+    m = r.mapping("noise_model")
+    return NoiseModel(method=m.string("method", "", nonempty=False),
+                      sets={k: _noise_fit(m.mapping(k)) for k in m.keys() if k != "method"})
+
+
 # -- all of them ------------------------------------------------------------------------
 @dataclass(frozen=True)
 class CalibrationExtras:
@@ -293,9 +441,23 @@ class CalibrationExtras:
     ----------
     inflight : InflightTiming or None
         In-flight calibrations only.
+    warnings : tuple of str
+        What the calibration warns about, one line each.
+    source : str
+        The session or flight it was made from (``""`` when not recorded).
+    method : Method
+    static : StaticAlignment or None
+        Static (at rest) calibrations only.
+    noise_model : NoiseModel or None
+        Turntable calibrations only.
     """
 
     inflight: InflightTiming | None = None
+    warnings: tuple[str, ...] = ()
+    source: str = ""
+    method: Method = field(default_factory=Method)
+    static: StaticAlignment | None = None
+    noise_model: NoiseModel | None = None
 
     def time_offsets_s(self) -> dict[str, float]:
         """``{IMU group: τ (s)}`` of an in-flight calibration (empty for any other)."""
@@ -320,4 +482,7 @@ def extras_from_dict(extra: Mapping[str, Any], path: str = "<calibration>"
         (``extra.inflight.imus.imu2.time_offset_ms``).
     """
     r = Fields({k: _plain(extra[k]) for k in _TYPED if k in extra}, path, _PREFIX)
-    return CalibrationExtras(inflight=_inflight(r))
+    return CalibrationExtras(inflight=_inflight(r), warnings=_warnings(r),
+                             source=r.string("source", "", nonempty=False),
+                             method=_method(r), static=_static(r),
+                             noise_model=_noise_model(r))

@@ -329,7 +329,7 @@ def _assumptions(cal: Calibration, thr: Thresholds, kind: str, df: int, beta: fl
         lt = np.log(np.asarray(s.allan.tau_s, float))
         la = np.log(np.asarray(s.allan.adev, float))
         adev = np.exp([np.interp(np.log(tau), lt, la[:, i]) for i in range(s.n)]).T
-    noise_rec = cal.extra.get("noise_model") if isinstance(cal.extra, dict) else None
+    noise_rec = cal.extras.noise_model
     white = all(abs(f - 1.0) < 1e-9 for f in thr.variance_factor)
     steps = cal.extra.get("residual_steps") if isinstance(cal.extra, dict) else None
     return {
@@ -337,8 +337,7 @@ def _assumptions(cal: Calibration, thr: Thresholds, kind: str, df: int, beta: fl
             "detector_assumes": "zero-mean Gaussian parity noise, white within each window "
                                 "up to the Allan variance factors f_w",
             "white": white,
-            "calibration_noise_model": noise_rec.get("method") if isinstance(noise_rec, dict)
-            else None},
+            "calibration_noise_model": noise_rec.method if noise_rec is not None else None},
         "allan_deviation": {"source": "the calibration's Allan table (allantools.oadev of "
                                       "its residuals), log-log interpolated at tau = w/fs",
                             "scale": list(thr.scales), "tau_s": tau.tolist(),

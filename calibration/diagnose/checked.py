@@ -119,7 +119,7 @@ def calibrate_checked(session: Session, *, alpha: float = 0.01, noise_model: str
                                             forced.models if effects else sel.models,
                                             alpha))
     rec["noise_model_requested"] = noise_model
-    warnings = list(base.extra.get("warnings", []))
+    warnings = list(base.extras.warnings)
     if effects:
         rec["effects_fitted"] = effects
         rec["refit_noise"] = dict(forced.noise_null)      # sandwich where Gauss-Markov
@@ -127,7 +127,7 @@ def calibrate_checked(session: Session, *, alpha: float = 0.01, noise_model: str
     if rec["verdict"] == "adequate":
         if noise_model != "white" and not effects:
             base = calibrate(session, noise_model=noise_model, **kw)
-            warnings = list(base.extra.get("warnings", []))
+            warnings = list(base.extras.warnings)
         rec["noise_model_applied"] = noise_model if not effects else "white"
         if detectability:
             with threadpool_limits(limits=BLAS_THREADS, user_api="blas"):
@@ -160,7 +160,7 @@ def _refit_warnings(fit: Refit, datas: Mapping[str, KindData]) -> list[str]:
     touched = {(t.kind, t.sensor) for t in cal.effects}
     stale = {f"{kind} {s.name}: " for kind, i in touched
              for s in (cal.sets[kind].sensors[i],)}
-    out = [w for w in cal.extra.get("warnings", [])
+    out = [w for w in cal.extras.warnings
            if not (any(w.startswith(p) for p in stale) and "white noise explains" in w)]
     for kind, d in datas.items():
         if kind not in fit.residual:

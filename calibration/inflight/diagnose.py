@@ -117,9 +117,10 @@ def flight_residual(flight: Flight, cal: Calibration, reference: str | None = No
         raise ConfigError(f"{flight.source}: {flight.n} {flight.kind} sensors, the "
                           f"calibration has {s.n} gyros")
     groups = flight.imu_triads("diagnose of a flight")
-    inflight = cal.extras.inflight
-    ref = reference or (inflight.reference if inflight is not None else "") \
-        or str(cal.extra.get("static", {}).get("reference", "")) or next(iter(groups))
+    typed = cal.extras
+    ref = reference or (typed.inflight.reference if typed.inflight is not None else "") \
+        or (typed.static.reference if typed.static is not None else "") \
+        or next(iter(groups))
     if ref not in groups:
         ref = next(iter(groups))
     y = flight.raw * s.scale_factors - s.biases
@@ -619,8 +620,8 @@ def diagnose_flight(flight: Flight, cal: Calibration, *, alpha: float = 0.01,
             "not_testable": not_testable,
             "timing": timing, "time_offset_sign": SIGN_CONVENTION, "warnings": warnings,
             "drift_attribution": _attribution(p1, groups, H, ref, alpha),
-            "calibration_kind": ("in-flight" if "inflight" in cal.extra else
-                                 "static" if "static" in cal.extra else "turntable"),
+            "calibration_kind": ("in-flight" if cal.extras.inflight is not None else
+                                 "static" if cal.extras.static is not None else "turntable"),
             "error_before": {"unit": "deg/s", "channels": chans, "rms": before},
             "error_after": {"unit": "deg/s", "channels": chans, "rms": after},
             "left_out": [s.to_dict() for s in segs],

@@ -18,6 +18,7 @@ from rimu.commands.calibrate_ferraris import ferraris_command
 
 if TYPE_CHECKING:
     from fdi.calfile import Calibration, SensorSet
+    from fdi.extras import NoiseModel
 
 BIAS_METHODS = ("model", "turns")
 """``--bias-method`` (:data:`calibration.calibrate.BIAS_METHODS`; kept here so that
@@ -91,38 +92,39 @@ def _set_summary(s: SensorSet, V_sd: object) -> list[str]:
     return out
 
 
-def _noise_lines(nm: object) -> list[str]:
+def _noise_lines(nm: NoiseModel | None) -> list[str]:
     """What the noise model did, per sensor set (``extra["noise_model"]``)."""
     from calibration.residuals import GM_LR_THRESHOLD
+    from fdi.extras import SD_FACTOR_KEYS
 
-    if not isinstance(nm, dict):
+    if nm is None:
         return []
-    out = [f"noise model: {nm.get('method', '?')}"]
+    out = [f"noise model: {nm.method or '?'}"]
     for kind in ("gyro", "accel"):
-        r = nm.get(kind)
-        if not isinstance(r, dict):
+        r = nm.sets.get(kind)
+        if r is None:
             continue
-        if not r.get("applied"):
-            lr = r.get("likelihood_ratio")
+        if not r.applied:
+            lr = r.likelihood_ratio
             why = f" (likelihood ratio {lr:.2f} <= {GM_LR_THRESHOLD})" if lr is not None else ""
             out.append(f"  {kind}: white noise kept{why}")
             continue
         unit, f = ("deg/h", input_unit_factor("deg/h")) if kind == "gyro" else \
             ("mg", input_unit_factor("mg"))
-        sdf = r.get("sd_factor", {})
-        out.append(f"  {kind}: Gauss-Markov bias {r['bias_instability'] / f:.3g} {unit}, "
-                   f"correlation {r['correlation_s']:.3g} s (likelihood ratio "
-                   f"{r['likelihood_ratio']:.1f})")
-        if r.get("sigma_correlation_s") is not None:
-            out.append(f"    sigma at correlation {r['sigma_correlation_s']:.3g} s, bias "
-                       f"{r['sigma_bias_instability'] / f:.3g} {unit} (largest bias variance "
+        out.append(f"  {kind}: Gauss-Markov bias {r.bias_instability / f:.3g} {unit}, "
+                   f"correlation {r.correlation_s:.3g} s (likelihood ratio "
+                   f"{r.likelihood_ratio:.1f})")
+        if r.sigma_correlation_s is not None:
+            out.append(f"    sigma at correlation {r.sigma_correlation_s:.3g} s, bias "
+                       f"{r.sigma_bias_instability / f:.3g} {unit} (largest bias variance "
                        "in the profile interval of the correlation time"
                        + (", cut at a quarter of the record: a slower process is not "
-                          "excluded and would need wider sigma)" if r.get("sigma_cut")
+                          "excluded and would need wider sigma)" if r.sigma_cut
                           else ")"))
         out.append("    sd factors over white noise:")
-        for name in ("bias", "scale_factor", "misalignment"):
-            out.append(f"    {name:<13s}" + " ".join(f"{x:.2f}" for x in sdf.get(name, [])))
+        for name in SD_FACTOR_KEYS:
+            out.append(f"    {name:<13s}"
+                       + " ".join(f"{x:.2f}" for x in r.sd_factor.get(name, ())))
     return out
 
 
@@ -130,8 +132,8 @@ def summary_text(cal: Calibration) -> str:
     """The readable summary ``rimu calibrate`` prints."""
     import numpy as np
 
-    ex = cal.extra
-    lines = [f"calibration of {ex.get('source', '?')} ({cal.configuration}, "
+    ex, typed = cal.extra, cal.extras
+    lines = [f"calibration of {typed.source or '?'} ({cal.configuration}, "
              f"{cal.sample_rate_hz:g} Hz, latitude {cal.latitude_deg} deg)"]
     for kind, s in cal.sets.items():
         key = "parity_calibrated_sd" if kind == "gyro" else "parity_accel_calibrated_sd"
@@ -139,7 +141,7 @@ def summary_text(cal: Calibration) -> str:
     gb = ex.get("gyro_bias", {})
     if "turns" in gb:
         lines.append(f"gyro bias, both methods ({gb['unit']}); file uses "
-                     f"'{ex.get('method', {}).get('bias', 'model')}':")
+                     f"'{typed.method.part('bias', 'model')}':")
         for i, c in enumerate(cal.gyro.sensors):
             lines.append(f"  {c.name:>4s}  model {gb['model'][i]:+.6g} ± {gb['model_sd'][i]:.2g}"
                          f"   turns {gb['turns'][i]:+.6g} ± {gb['turns_sd'][i]:.2g}"
@@ -162,7 +164,7 @@ def summary_text(cal: Calibration) -> str:
                         " deg)" if er else "")
                      + (" - not resolved at this noise level (below 3 sd)"
                         if cal.earth_rate_dph < 3 * (cal.earth_rate_dph_sd or 0.0) else ""))
-    lines.extend(_noise_lines(ex.get("noise_model")))
+    lines.extend(_noise_lines(typed.noise_model))
     from calibration.diagnose.checked import format_adequacy
 
     lines.extend(format_adequacy(cal))
@@ -267,7 +269,7 @@ def run(args: argparse.Namespace) -> int:
     with atomic_file(out) as tmp:
         cal.save(tmp)
     print(summary_text(cal))
-    for w in cal.extra.get("warnings", []):
+    for w in cal.extras.warnings:
         logging.getLogger("rimu").warning(w)
     print(f"wrote {out}")
     if compared is not None:

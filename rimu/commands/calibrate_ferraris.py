@@ -59,7 +59,7 @@ def summary_lines(cal) -> list[str]:
     from fdi.units import input_unit_factor
 
     fe = cal.extra["ferraris"]
-    out = [f"Ferraris calibration of {cal.extra['source']} ({cal.sample_rate_hz:g} Hz; "
+    out = [f"Ferraris calibration of {cal.extras.source} ({cal.sample_rate_hz:g} Hz; "
            f"rotation {fe['rotation_deg']:g} deg, position sd {fe['position_sd_deg']:g} deg, "
            f"angle sd {fe['angle_sd_deg']:g} deg, gravity {fe['gravity_m_s2']:g} m/s^2)"]
     for kind, per in (("gyro", "deg/s"), ("accel", "m/s^2")):
@@ -85,7 +85,7 @@ def summary_lines(cal) -> list[str]:
                + " ".join(f"{x:.2f}" for x in c2["accel"]) + "; gyro "
                + " ".join(f"{x:.2f}" for x in c2["gyro"])
                + "; rotations: 0 spare dof (their sd rests on --angle-sd-deg)")
-    out.extend(f"warning: {w}" for w in cal.extra.get("warnings", []))
+    out.extend(f"warning: {w}" for w in cal.extras.warnings)
     return out
 
 

@@ -108,3 +108,52 @@ def test_records_built_in_memory_read_as_their_json():
     assert inf.imus["imu2"].time_offset_s == pytest.approx(2.5e-3)
     assert inf.imus["imu3"].time_offset_s is None
     assert inf.time_offsets_s() == {"imu2": pytest.approx(2.5e-3)}
+
+
+def test_provenance_and_noise_model_are_the_file():
+    doc = _doc("turntable")["extra"]
+    ex = load_calibration(DATA / OLD["turntable"][0]).extras
+    assert ex.source == doc["source"] and ex.warnings == tuple(doc["warnings"])
+    assert ex.method.text == "" and dict(ex.method.parts) == doc["method"]
+    assert ex.method.part("bias") == "model" and ex.method.part("accel", "?") == "?"
+    nm = ex.noise_model
+    assert nm.method == doc["noise_model"]["method"] and sorted(nm.sets) == ["gyro"]
+    g, rec = nm.sets["gyro"], doc["noise_model"]["gyro"]
+    assert g.applied is rec["applied"] and g.likelihood_ratio == rec["likelihood_ratio"]
+    assert g.record_s == rec["record_s"] and g.correlation_s is rec["correlation_s"] is None
+    assert {k: list(v) for k, v in g.sd_factor.items()} == rec["sd_factor"]
+    inf = load_calibration(DATA / OLD["inflight"][0]).extras
+    assert inf.method.text.startswith("in-flight alignment") and inf.noise_model is None
+    assert inf.static is None
+
+
+def test_warnings_static_and_an_applied_noise_fit_from_a_dict():
+    ex = extras_from_dict({
+        "warnings": ("one", "two"), "static": {"reference": "imu3", "imus": {}},
+        "noise_model": {"method": "auto", "accel": {
+            "applied": np.bool_(True), "bias_instability": 2e-4, "correlation_s": 40.0,
+            "likelihood_ratio": 12.0, "sigma_bias_instability": 3e-4,
+            "sigma_correlation_s": 90.0, "sigma_cut": True, "record_s": 576.0,
+            "sd_factor": {"bias": np.array([1.5, 2.0])}}}})
+    assert ex.warnings == ("one", "two") and ex.static.reference == "imu3"
+    a = ex.noise_model.sets["accel"]
+    assert a.applied is True and a.bias_instability == 2e-4 and a.sigma_cut is True
+    assert a.sd_factor == {"bias": (1.5, 2.0)}
+
+
+@pytest.mark.parametrize(("extra", "field"), [
+    ({"warnings": "careful"}, "extra.warnings"),
+    ({"warnings": ["ok", 3]}, "extra.warnings[2]"),
+    ({"source": 5}, "extra.source"),
+    ({"method": {"bias": 1}}, "extra.method.bias"),
+    ({"method": 2}, "extra.method"),
+    ({"static": {"reference": 2}}, "extra.static.reference"),
+    ({"noise_model": {"gyro": {"applied": 1}}}, "extra.noise_model.gyro.applied"),
+    ({"noise_model": {"gyro": {"sd_factor": {"bias": ["x"]}}}},
+     "extra.noise_model.gyro.sd_factor.bias"),
+    ({"noise_model": {"method": "auto", "gyro": 1.0}}, "extra.noise_model.gyro"),
+])
+def test_typed_entries_name_the_bad_field(extra, field):
+    with pytest.raises(FileFormatError) as err:
+        extras_from_dict(extra, "cal.json")
+    assert err.value.field == field
