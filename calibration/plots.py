@@ -35,15 +35,15 @@ def write_plots(session: Session, cal: Calibration, directory: str | Path) -> li
     except OSError as exc:
         raise ConfigError(f"{d}: cannot create plot directory ({exc.strerror})") from None
     out: list[Path] = []
-    steps = cal.extra.get("residual_steps", {})
+    steps = cal.extras.residual_steps
     for kind, s in cal.sets.items():
-        rows = steps.get(kind) or []
+        rows = steps.get(kind, ())
         if not rows:
             continue
         uname, uf = _UNIT[kind]
-        k = np.array([r["step"] for r in rows])
-        mean = np.array([r["mean"] for r in rows]) / uf
-        rms = np.array([r["rms"] for r in rows]) / uf
+        k = np.array([r.step for r in rows])
+        mean = np.array([r.mean for r in rows]) / uf
+        rms = np.array([r.rms for r in rows]) / uf
         fig, ax = plt.subplots(2, 1, figsize=(9, 6), sharex=True)
         for i, c in enumerate(s.sensors):
             ax[0].plot(k, mean[:, i], "o-", ms=3, label=c.name)

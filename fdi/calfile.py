@@ -860,16 +860,13 @@ def check_plausible(cal: Calibration, source: str) -> None:
     from scipy.stats import chi2
 
     from fdi.errors import CalibrationError
-    from fdi.units import EARTH_RATE_DPH
+    from fdi.units import DPH, EARTH_RATE_DPH
 
-    er = cal.extra.get("earth_rate_fit") if isinstance(cal.extra, Mapping) else None
-    if not isinstance(er, Mapping) or cal.latitude_deg is None:
+    er = cal.extras.earth_rate_fit
+    if er is None or er.horizontal is None or cal.latitude_deg is None:
         return
-    try:
-        h = float(er["horizontal_dph"])
-        sd = max(float(er.get("horizontal_dph_sd", 0.0)), float(er.get("scatter_sd_dph", 0.0)))
-    except (KeyError, TypeError, ValueError):
-        return
+    h = er.horizontal / DPH
+    sd = max(er.horizontal_sd, er.scatter_sd) / DPH
     want = EARTH_RATE_DPH * math.cos(math.radians(float(cal.latitude_deg)))
     if not (math.isfinite(h) and math.isfinite(sd) and sd > 0):
         return

@@ -10,7 +10,12 @@ and :attr:`fdi.calfile.Calibration.extras` gives them:
   offsets were fitted on;
 - ``warnings`` (``extra.warnings``), ``source`` (``extra.source``), :class:`Method`
   (``extra.method``), :class:`StaticAlignment` (``extra.static``: its reference);
-- :class:`NoiseModel` (``extra.noise_model``): the coloured-noise fit per sensor set.
+- :class:`NoiseModel` (``extra.noise_model``): the coloured-noise fit per sensor set;
+- the turntable fit's checks: :class:`RateTest` (``extra.rate_test``), the per-step residual
+  χ²/dof (``extra.step_residual_chi2_dof``), :class:`ResidualStep` per set
+  (``extra.residual_steps``), :class:`EarthRateRecord` (``extra.earth_rate_fit``),
+  :class:`GyroBias` (``extra.gyro_bias``) and the first-order sd of the calibrated parity
+  matrix per set (``extra.parity_calibrated_sd``, ``extra.parity_accel_calibrated_sd``).
 
 The JSON layout is unchanged (the file keeps its keys and units: ``time_offset_ms`` in the
 file is :attr:`ImuTiming.time_offset_s` here), so every file written before these types
@@ -27,15 +32,19 @@ from typing import Any
 
 import numpy as np
 
+from fdi.errors import ConfigError
 from fdi.fileio import Fields
-from fdi.units import MS
+from fdi.units import DEG, DPH, MS, input_unit_factor
 
-__all__ = ["SD_FACTOR_KEYS", "CalibrationExtras", "FlightIdentity", "ImuTiming",
-           "InflightTiming", "Method", "NoiseFit", "NoiseModel", "OffsetCheck",
-           "OffsetConsistency", "OffsetPiece", "StaticAlignment", "extras_from_dict"]
+__all__ = ["SD_FACTOR_KEYS", "CalibrationExtras", "EarthRateRecord", "FlightIdentity",
+           "GyroBias", "ImuTiming", "InflightTiming", "Method", "NoiseFit", "NoiseModel",
+           "OffsetCheck", "OffsetConsistency", "OffsetPiece", "RateTest", "ResidualStep",
+           "StaticAlignment", "extras_from_dict"]
 
 _PREFIX = "extra"
-_TYPED = ("inflight", "method", "noise_model", "source", "static", "warnings")
+_TYPED = ("earth_rate_fit", "gyro_bias", "inflight", "method", "noise_model",
+          "parity_accel_calibrated_sd", "parity_calibrated_sd", "rate_test", "residual_steps",
+          "source", "static", "step_residual_chi2_dof", "warnings")
 """Keys of ``extra`` read into types (the others are kept as they are, unchecked)."""
 
 
@@ -432,6 +441,218 @@ def _noise_model(r: Fields) -> NoiseModel | None:
                       sets={k: _noise_fit(m.mapping(k)) for k in m.keys() if k != "method"})
 
 
+# -- turntable fit checks -----------------------------------------------------------------
+@dataclass(frozen=True)
+class RateTest:
+    """The rate-step pairs of a turntable calibration (``extra.rate_test``).
+
+    Attributes
+    ----------
+    pairs : tuple of (int, int)
+        1-based step numbers of each pair.
+    rates : tuple of (float, float, float)
+        The input rate of each pair (rad/s, MB frame; file: ``R_rad_s``).
+    chi2_dof : tuple of float
+        Per sensor, χ²/dof of the step differences about the fit.
+    """
+
+    pairs: tuple[tuple[int, int], ...] = ()
+    rates: tuple[tuple[float, ...], ...] = ()
+    chi2_dof: tuple[float, ...] = ()
+
+
+@dataclass(frozen=True)
+class ResidualStep:
+    """Residual (compensated output − model) statistics of one step
+    (``extra.residual_steps.<kind>[k]``).
+
+    Attributes
+    ----------
+    step : int
+        1-based step number.
+    label, kind : str
+        The step's label and kind (``"rate"``, ``"position"``).
+    n : int
+        Samples used.
+    mean, rms : tuple of float
+        Per sensor (SI: rad/s or m/s²).
+    """
+
+    step: int
+    label: str
+    kind: str
+    n: int
+    mean: tuple[float, ...]
+    rms: tuple[float, ...]
+
+
+@dataclass(frozen=True)
+class EarthRateRecord:
+    """The Earth rate recovered from the outer-axis modulation (``extra.earth_rate_fit``,
+    :meth:`calibration.earth_rate.EarthRateFit.to_dict`; deg/h and deg in the file).
+
+    Attributes
+    ----------
+    rate, rate_sd : float
+        Magnitude and sd (rad/s).
+    horizontal : float or None
+        Horizontal component (rad/s); None when not recorded.
+    horizontal_sd, scatter_sd : float
+        Its sd and the per-step scatter sd (rad/s; 0 when not recorded).
+    heading_offset, heading_offset_sd : float
+        Heading of the table's zero and its sd (rad).
+    steps : tuple of int
+        1-based outer-axis steps used.
+    per_step : tuple of float
+        Rate per step (rad/s).
+    n_samples : int
+    denoised : bool
+    """
+
+    rate: float = float("nan")
+    rate_sd: float = float("nan")
+    horizontal: float | None = None
+    horizontal_sd: float = 0.0
+    heading_offset: float = float("nan")
+    heading_offset_sd: float = float("nan")
+    steps: tuple[int, ...] = ()
+    per_step: tuple[float, ...] = ()
+    scatter_sd: float = 0.0
+    n_samples: int = 0
+    denoised: bool = False
+
+
+@dataclass(frozen=True)
+class GyroBias:
+    """The gyro biases by both methods of a turntable calibration (``extra.gyro_bias``).
+
+    Attributes
+    ----------
+    unit : str
+        The unit the file writes them in (the calibration file's bias unit).
+    model, model_sd : tuple of float
+        Per sensor, the bias of the Earth-rate model and its sd (rad/s).
+    turns, turns_sd : tuple of float or None
+        By seed 000's whole outer-axis turns (rad/s); None without whole turns.
+    turns_steps, turns_per_step : tuple of int
+        The steps with whole turns and their number of turns.
+    vertical_correction : tuple of float or None
+        The vertical Earth rate removed from the turns estimate (rad/s).
+    """
+
+    unit: str
+    model: tuple[float, ...]
+    model_sd: tuple[float, ...]
+    turns: tuple[float, ...] | None = None
+    turns_sd: tuple[float, ...] | None = None
+    turns_steps: tuple[int, ...] = ()
+    turns_per_step: tuple[int, ...] = ()
+    vertical_correction: tuple[float, ...] | None = None
+
+
+def _floats(r: Fields, key: str, default: Any = (), scale: float = 1.0) -> Any:
+    """A list of numbers (null: NaN) as a tuple of float times ``scale``."""
+    v = r.get(key, None)
+    if v is None:
+        return default
+    if not isinstance(v, list) or any(x is not None and (isinstance(x, bool) or not
+                                                         isinstance(x, int | float))
+                                      for x in v):
+        raise r.error(key, "expected a list of numbers")
+    return tuple(float("nan") if x is None else float(x) * scale for x in v)
+
+
+def _ints(r: Fields, key: str) -> tuple[int, ...]:
+    v = r.get(key, [])
+    if not isinstance(v, list) or any(isinstance(x, bool) or not isinstance(x, int)
+                                      for x in v):
+        raise r.error(key, "expected a list of integers")
+    return tuple(v)
+
+
+def _matrix(r: Fields, key: str) -> tuple[tuple[float, ...], ...]:
+    """A list of rows of numbers (null: NaN); ``[]`` gives ``()``."""
+    v = r.get(key, [])
+    if not isinstance(v, list):
+        raise r.error(key, "expected a list of rows of numbers")
+    names = [f"{r.name(key)}[{k}]" for k in range(1, len(v) + 1)]
+    rows = Fields(dict(zip(names, v, strict=True)), r.path)
+    return tuple(_floats(rows, k) for k in names)
+
+
+def _rate_test(r: Fields) -> RateTest | None:
+    if "rate_test" not in r:
+        return None
+    t = r.mapping("rate_test")
+    pairs = _matrix(t, "pairs")
+    if any(len(p) != 2 or any(not float(x).is_integer() for x in p) for p in pairs):
+        raise t.error("pairs", "expected pairs of step numbers")
+    return RateTest(pairs=tuple((int(a), int(b)) for a, b in pairs), rates=_matrix(t, "R_rad_s"),
+                    chi2_dof=_floats(t, "chi2_dof"))
+
+
+def _residual_steps(r: Fields) -> dict[str, tuple[ResidualStep, ...]]:
+    if "residual_steps" not in r:
+        return {}
+    m = r.mapping("residual_steps")
+    m.accept("unit")
+    return {k: tuple(ResidualStep(step=e.integer("step"), label=e.string("label", "",
+                                                                         nonempty=False),
+                                  kind=e.string("kind", "", nonempty=False),
+                                  n=e.integer("n", 0, lo=0), mean=_floats(e, "mean"),
+                                  rms=_floats(e, "rms"))
+                     for e in m.tables(k, [], nonempty=False))
+            for k in m.keys() if k != "unit"}
+
+
+def _earth_rate(r: Fields) -> EarthRateRecord | None:
+    if "earth_rate_fit" not in r:
+        return None
+    e = r.mapping("earth_rate_fit")
+    nan = float("nan")
+
+    def dph(key: str, default: float | None) -> float | None:
+        v = e.number(key, None, finite=False)
+        return default if v is None else v * DPH
+
+    def deg(key: str) -> float:
+        return e.number(key, nan, finite=False) * DEG
+
+    return EarthRateRecord(
+        rate=dph("rate_dph", nan), rate_sd=dph("rate_dph_sd", nan),
+        horizontal=dph("horizontal_dph", None), horizontal_sd=dph("horizontal_dph_sd", 0.0),
+        heading_offset=deg("heading_offset_deg"), heading_offset_sd=deg("heading_offset_deg_sd"),
+        steps=_ints(e, "steps"), per_step=_floats(e, "per_step_dph", scale=DPH),
+        scatter_sd=dph("scatter_sd_dph", 0.0), n_samples=e.integer("n_samples", 0, lo=0),
+        denoised=e.boolean("denoised", False))
+
+
+def _gyro_bias(r: Fields) -> GyroBias | None:
+    if "gyro_bias" not in r:
+        return None
+    g = r.mapping("gyro_bias")
+    unit = g.string("unit")
+    try:
+        f = input_unit_factor(unit)
+    except ConfigError as exc:
+        raise g.error("unit", str(exc)) from None
+    turns = _floats(g, "turns", None, f)
+    return GyroBias(unit=unit, model=_floats(g, "model", (), f),
+                    model_sd=_floats(g, "model_sd", (), f), turns=turns,
+                    turns_sd=_floats(g, "turns_sd", None, f),
+                    turns_steps=_ints(g, "turns_steps"),
+                    turns_per_step=_ints(g, "turns_per_step"),
+                    vertical_correction=_floats(g, "vertical_correction", None, f))
+
+
+def _parity_sd(r: Fields) -> dict[str, tuple[tuple[float, ...], ...]]:
+    out = {}
+    for kind, key in (("gyro", "parity_calibrated_sd"), ("accel", "parity_accel_calibrated_sd")):
+        if key in r:
+            out[kind] = _matrix(r, key)
+    return out
+
+
 # -- all of them ------------------------------------------------------------------------
 @dataclass(frozen=True)
 class CalibrationExtras:
@@ -450,6 +671,16 @@ class CalibrationExtras:
         Static (at rest) calibrations only.
     noise_model : NoiseModel or None
         Turntable calibrations only.
+    rate_test : RateTest or None
+    step_residual_chi2_dof : tuple of float
+        Per gyro, χ²/dof of the per-step residual means (expectation 1 under white noise).
+    residual_steps : dict of str to tuple of ResidualStep
+        Per sensor kind.
+    earth_rate_fit : EarthRateRecord or None
+    gyro_bias : GyroBias or None
+    parity_sd : dict of str to tuple of tuple of float
+        Per sensor kind, the first-order sd of the calibrated parity matrix, shape (n-3, n)
+        (dimensionless; ``()`` for a set of three).
     """
 
     inflight: InflightTiming | None = None
@@ -458,6 +689,12 @@ class CalibrationExtras:
     method: Method = field(default_factory=Method)
     static: StaticAlignment | None = None
     noise_model: NoiseModel | None = None
+    rate_test: RateTest | None = None
+    step_residual_chi2_dof: tuple[float, ...] = ()
+    residual_steps: Mapping[str, tuple[ResidualStep, ...]] = field(default_factory=dict)
+    earth_rate_fit: EarthRateRecord | None = None
+    gyro_bias: GyroBias | None = None
+    parity_sd: Mapping[str, tuple[tuple[float, ...], ...]] = field(default_factory=dict)
 
     def time_offsets_s(self) -> dict[str, float]:
         """``{IMU group: τ (s)}`` of an in-flight calibration (empty for any other)."""
@@ -485,4 +722,8 @@ def extras_from_dict(extra: Mapping[str, Any], path: str = "<calibration>"
     return CalibrationExtras(inflight=_inflight(r), warnings=_warnings(r),
                              source=r.string("source", "", nonempty=False),
                              method=_method(r), static=_static(r),
-                             noise_model=_noise_model(r))
+                             noise_model=_noise_model(r), rate_test=_rate_test(r),
+                             step_residual_chi2_dof=_floats(r, "step_residual_chi2_dof"),
+                             residual_steps=_residual_steps(r),
+                             earth_rate_fit=_earth_rate(r), gyro_bias=_gyro_bias(r),
+                             parity_sd=_parity_sd(r))

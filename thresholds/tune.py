@@ -331,7 +331,7 @@ def _assumptions(cal: Calibration, thr: Thresholds, kind: str, df: int, beta: fl
         adev = np.exp([np.interp(np.log(tau), lt, la[:, i]) for i in range(s.n)]).T
     noise_rec = cal.extras.noise_model
     white = all(abs(f - 1.0) < 1e-9 for f in thr.variance_factor)
-    steps = cal.extra.get("residual_steps") if isinstance(cal.extra, dict) else None
+    steps = cal.extras.residual_steps
     return {
         "noise_model": {
             "detector_assumes": "zero-mean Gaussian parity noise, white within each window "

@@ -58,7 +58,7 @@ def configure(p: argparse.ArgumentParser) -> None:
     static_options(p)
 
 
-def _set_summary(s: SensorSet, V_sd: object) -> list[str]:
+def _set_summary(s: SensorSet, V_sd: tuple[tuple[float, ...], ...] | None) -> list[str]:
     import numpy as np
 
     from fdi.parity import parity_matrix
@@ -83,7 +83,7 @@ def _set_summary(s: SensorSet, V_sd: object) -> list[str]:
         out.extend("    [" + " ".join(f"{v:+.7f}" for v in r) + "]" for r in rows)
     V, Vc = parity_matrix(s.H_nominal), parity_matrix(s.H)
     out.extend("  v   = [" + " ".join(f"{x:+.5f}" for x in r) + "]" for r in V)
-    sd = np.asarray(V_sd, float) if V_sd is not None and np.size(V_sd) else None
+    sd = np.asarray(V_sd, float) if V_sd else None
     for k, r in enumerate(Vc):
         line = "  v_c = [" + " ".join(f"{x:+.5f}" for x in r) + "]"
         if sd is not None and sd.shape == Vc.shape:
@@ -130,41 +130,41 @@ def _noise_lines(nm: NoiseModel | None) -> list[str]:
 
 def summary_text(cal: Calibration) -> str:
     """The readable summary ``rimu calibrate`` prints."""
-    import numpy as np
+    from fdi.units import DEG, DPH
 
-    ex, typed = cal.extra, cal.extras
-    lines = [f"calibration of {typed.source or '?'} ({cal.configuration}, "
+    ex = cal.extras
+    lines = [f"calibration of {ex.source or '?'} ({cal.configuration}, "
              f"{cal.sample_rate_hz:g} Hz, latitude {cal.latitude_deg} deg)"]
     for kind, s in cal.sets.items():
-        key = "parity_calibrated_sd" if kind == "gyro" else "parity_accel_calibrated_sd"
-        lines.extend(_set_summary(s, ex.get(key)))
-    gb = ex.get("gyro_bias", {})
-    if "turns" in gb:
-        lines.append(f"gyro bias, both methods ({gb['unit']}); file uses "
-                     f"'{typed.method.part('bias', 'model')}':")
+        lines.extend(_set_summary(s, ex.parity_sd.get(kind)))
+    gb = ex.gyro_bias
+    if gb is not None and gb.turns is not None:
+        f = input_unit_factor(gb.unit)
+        lines.append(f"gyro bias, both methods ({gb.unit}); file uses "
+                     f"'{ex.method.part('bias', 'model')}':")
         for i, c in enumerate(cal.gyro.sensors):
-            lines.append(f"  {c.name:>4s}  model {gb['model'][i]:+.6g} ± {gb['model_sd'][i]:.2g}"
-                         f"   turns {gb['turns'][i]:+.6g} ± {gb['turns_sd'][i]:.2g}"
-                         f"   (vertical Earth rate removed: {gb['vertical_correction'][i]:+.4g})")
-    rt = ex.get("rate_test", {})
-    if "chi2_dof" in rt:
-        lines.append("rate test: pairs " + " ".join(f"{a}/{b}" for a, b in rt["pairs"])
+            lines.append(f"  {c.name:>4s}  model {gb.model[i] / f:+.6g} ± {gb.model_sd[i] / f:.2g}"
+                         f"   turns {gb.turns[i] / f:+.6g} ± {gb.turns_sd[i] / f:.2g}"
+                         "   (vertical Earth rate removed: "
+                         f"{gb.vertical_correction[i] / f:+.4g})")
+    rt = ex.rate_test
+    if rt is not None and rt.chi2_dof:
+        lines.append("rate test: pairs " + " ".join(f"{a}/{b}" for a, b in rt.pairs)
                      + "; chi2/dof of the step differences: "
-                     + " ".join(f"{x:.2f}" for x in np.asarray(rt["chi2_dof"], float))
+                     + " ".join(f"{x:.2f}" for x in rt.chi2_dof)
                      + "; of the per-step residual means: "
-                     + " ".join(f"{x:.2f}" for x in np.asarray(
-                         ex.get("step_residual_chi2_dof", []), float)))
+                     + " ".join(f"{x:.2f}" for x in ex.step_residual_chi2_dof))
     if cal.earth_rate_dph is not None:
-        er = ex.get("earth_rate_fit", {})
+        er = ex.earth_rate_fit
         lines.append(f"Earth rate from the outer-axis modulation: {cal.earth_rate_dph:.4f} ± "
                      f"{cal.earth_rate_dph_sd:.4f} deg/h"
-                     + (f" ({len(er.get('steps', []))} steps, per-step scatter sd "
-                        f"{er['scatter_sd_dph']:.3f}, heading of table zero "
-                        f"{er['heading_offset_deg']:+.2f} ± {er['heading_offset_deg_sd']:.2f}"
-                        " deg)" if er else "")
+                     + (f" ({len(er.steps)} steps, per-step scatter sd "
+                        f"{er.scatter_sd / DPH:.3f}, heading of table zero "
+                        f"{er.heading_offset / DEG:+.2f} ± {er.heading_offset_sd / DEG:.2f}"
+                        " deg)" if er is not None else "")
                      + (" - not resolved at this noise level (below 3 sd)"
                         if cal.earth_rate_dph < 3 * (cal.earth_rate_dph_sd or 0.0) else ""))
-    lines.extend(_noise_lines(typed.noise_model))
+    lines.extend(_noise_lines(ex.noise_model))
     from calibration.diagnose.checked import format_adequacy
 
     lines.extend(format_adequacy(cal))

@@ -157,3 +157,55 @@ def test_typed_entries_name_the_bad_field(extra, field):
     with pytest.raises(FileFormatError) as err:
         extras_from_dict(extra, "cal.json")
     assert err.value.field == field
+
+
+def test_turntable_checks_are_the_file_in_si():
+    from fdi.units import DEG, DPH, input_unit_factor
+
+    doc = _doc("turntable")["extra"]
+    ex = load_calibration(DATA / OLD["turntable"][0]).extras
+    rt = doc["rate_test"]
+    assert [list(p) for p in ex.rate_test.pairs] == rt["pairs"]
+    assert [list(r) for r in ex.rate_test.rates] == rt["R_rad_s"]
+    assert list(ex.rate_test.chi2_dof) == rt["chi2_dof"]
+    assert list(ex.step_residual_chi2_dof) == doc["step_residual_chi2_dof"]
+    er, fe = ex.earth_rate_fit, doc["earth_rate_fit"]
+    assert er.horizontal == fe["horizontal_dph"] * DPH
+    assert er.scatter_sd == fe["scatter_sd_dph"] * DPH
+    assert er.heading_offset == fe["heading_offset_deg"] * DEG
+    assert list(er.steps) == fe["steps"] and er.n_samples == fe["n_samples"]
+    gb, fb = ex.gyro_bias, doc["gyro_bias"]
+    f = input_unit_factor(fb["unit"])
+    assert gb.unit == "deg/h" and list(gb.model) == [x * f for x in fb["model"]]
+    assert list(gb.turns_sd) == [x * f for x in fb["turns_sd"]]
+    assert [list(r) for r in ex.parity_sd["gyro"]] == doc["parity_calibrated_sd"]
+    rows = doc["residual_steps"]["gyro"]
+    assert len(ex.residual_steps["gyro"]) == len(rows) == 16
+    assert [(r.step, r.label, r.kind, r.n, list(r.mean), list(r.rms))
+            for r in ex.residual_steps["gyro"]] == [
+        (r["step"], r["label"], r["kind"], r["n"], r["mean"], r["rms"]) for r in rows]
+
+
+def test_a_bias_record_without_turns_and_a_set_of_three():
+    ex = extras_from_dict({"gyro_bias": {"unit": "deg/s", "model": [1.0], "model_sd": [0.5]},
+                           "parity_accel_calibrated_sd": []})
+    assert ex.gyro_bias.turns is None and ex.gyro_bias.model == (np.deg2rad(1.0),)
+    assert ex.parity_sd == {"accel": ()}
+
+
+@pytest.mark.parametrize(("extra", "field"), [
+    ({"rate_test": {"pairs": [[1, 2.5]]}}, "extra.rate_test.pairs"),
+    ({"rate_test": {"chi2_dof": ["a"]}}, "extra.rate_test.chi2_dof"),
+    ({"rate_test": {"R_rad_s": [[0.1, "x", 0]]}}, "extra.rate_test.R_rad_s[1]"),
+    ({"step_residual_chi2_dof": 1.0}, "extra.step_residual_chi2_dof"),
+    ({"earth_rate_fit": {"horizontal_dph": "15"}}, "extra.earth_rate_fit.horizontal_dph"),
+    ({"earth_rate_fit": {"steps": [1.5]}}, "extra.earth_rate_fit.steps"),
+    ({"gyro_bias": {"unit": "furlong/h", "model": []}}, "extra.gyro_bias.unit"),
+    ({"gyro_bias": {"model": [1.0]}}, "extra.gyro_bias.unit"),
+    ({"parity_calibrated_sd": [[1.0, True]]}, "extra.parity_calibrated_sd[1]"),
+    ({"residual_steps": {"gyro": [{"n": 3}]}}, "extra.residual_steps.gyro[1].step"),
+])
+def test_fit_checks_name_the_bad_field(extra, field):
+    with pytest.raises(FileFormatError) as err:
+        extras_from_dict(extra, "cal.json")
+    assert err.value.field == field
