@@ -74,6 +74,12 @@ Optional per sensor (a ``/3`` file without them loads with 0): ``timing_jitter_m
 relative to the reference IMU (0 for the reference and for turntable calibrations) and its
 uncertainty. A timing error δt makes the output err by ``h_iᵀω̇·δt``, so the monitor widens
 its thresholds with ``τ_i²·(h_iᵀω̇)²`` while the body accelerates (:mod:`fdi.kernel`).
+
+``extra`` keeps what each calibration stage recorded. The entries rimu's code reads (the
+in-flight timing, the warnings, the noise model, the turntable fit's checks, ...) are typed
+in :mod:`fdi.extras` and read through :attr:`Calibration.extras`; the loader checks them and
+names the bad field. Their JSON keys are those written before the types existed (no version
+change; ``docs/formats.md`` lists them).
 """
 
 from __future__ import annotations
