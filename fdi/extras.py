@@ -7,7 +7,8 @@ and :attr:`fdi.calfile.Calibration.extras` gives them:
 
 - :class:`InflightTiming` (``extra.inflight``): the reference IMU, the time offset of every
   IMU with its sd, its checks and its timing jitter, the sign convention and the flight the
-  offsets were fitted on;
+  offsets were fitted on; :class:`InflightAlignment` (the same block): each IMU's fitted
+  gain matrix, its parts, bias and residual, and the stretches left out;
 - ``warnings`` (``extra.warnings``), ``source`` (``extra.source``), :class:`Method`
   (``extra.method``), :class:`StaticAlignment` (``extra.static``: its reference);
 - :class:`NoiseModel` (``extra.noise_model``): the coloured-noise fit per sensor set;
@@ -34,12 +35,13 @@ import numpy as np
 
 from fdi.errors import ConfigError
 from fdi.fileio import Fields
-from fdi.units import DEG, DPH, MS, input_unit_factor
+from fdi.units import DEG, DPH, DPS, MS, input_unit_factor
 
 __all__ = ["SD_FACTOR_KEYS", "CalibrationExtras", "EarthRateRecord", "FlightIdentity",
-           "GyroBias", "ImuTiming", "InflightTiming", "Method", "NoiseFit", "NoiseModel",
-           "OffsetCheck", "OffsetConsistency", "OffsetPiece", "RateTest", "ResidualStep",
-           "StaticAlignment", "extras_from_dict"]
+           "GyroBias", "ImuAlignment", "ImuTiming", "InflightAlignment", "InflightTiming",
+           "LeftOut", "Method", "NoiseFit", "NoiseModel", "OffsetCheck", "OffsetConsistency",
+           "OffsetPiece", "RateTest", "ResidualStep", "StaticAlignment", "extras_from_dict",
+           "offset_check_from_dict"]
 
 _PREFIX = "extra"
 _TYPED = ("earth_rate_fit", "gyro_bias", "inflight", "method", "noise_model",
@@ -191,16 +193,18 @@ class ImuTiming:
         reference's at ``t + τ``. None when the record has none.
     time_offset_sd_s : float
         Its sd (s; file: ``time_offset_ms_sd``; 0 when not recorded).
-    timing_jitter_s, timing_jitter_sd_s : float
-        sd of the sampling-time error relative to the reference and its uncertainty (s;
-        file: ``timing_jitter_ms``, ``timing_jitter_ms_sd``; 0 when not recorded).
+    timing_jitter_s : float or None
+        sd of the sampling-time error relative to the reference (s; file:
+        ``timing_jitter_ms``; None when not recorded).
+    timing_jitter_sd_s : float
+        Its uncertainty (s; file: ``timing_jitter_ms_sd``; 0 when not recorded).
     check : OffsetCheck or None
         The offset's checks (file: ``time_offset_check``; None when not recorded).
     """
 
     time_offset_s: float | None
     time_offset_sd_s: float = 0.0
-    timing_jitter_s: float = 0.0
+    timing_jitter_s: float | None = None
     timing_jitter_sd_s: float = 0.0
     check: OffsetCheck | None = None
 
@@ -278,10 +282,23 @@ def _check(r: Fields) -> OffsetCheck | None:
         widened=c.boolean("widened", False), sign=c.string("sign", "", nonempty=False))
 
 
+def offset_check_from_dict(rec: Mapping[str, Any], path: str = "<offset check>"
+                           ) -> OffsetCheck | None:
+    """An :class:`OffsetCheck` from its JSON record (what
+    :func:`calibration.inflight.offset_check.check_offset` returns); None for an empty one.
+
+    Raises
+    ------
+    FileFormatError
+        A field of the wrong type, named.
+    """
+    return _check(Fields({"time_offset_check": _plain(rec)}, path))
+
+
 def _imu_timing(r: Fields) -> ImuTiming:
     return ImuTiming(time_offset_s=_ms(r, "time_offset_ms", None),
                      time_offset_sd_s=_ms(r, "time_offset_ms_sd", 0.0),
-                     timing_jitter_s=_ms(r, "timing_jitter_ms", 0.0),
+                     timing_jitter_s=_ms(r, "timing_jitter_ms", None),
                      timing_jitter_sd_s=_ms(r, "timing_jitter_ms_sd", 0.0),
                      check=_check(r))
 
@@ -295,6 +312,132 @@ def _inflight(r: Fields) -> InflightTiming | None:
         reference=f.string("reference", "", nonempty=False),
         time_offset_sign=f.string("time_offset_sign", "", nonempty=False),
         flight=_flight(f), imus={g: _imu_timing(imus.mapping(g)) for g in imus.keys()})
+
+
+@dataclass(frozen=True)
+class LeftOut:
+    """A stretch of the flight the in-flight fit left out (``extra.inflight.left_out[k]``).
+
+    Attributes
+    ----------
+    t0_s, t1_s : float
+        Its span (s).
+    reason, detail : str
+        Why (a short name and one line).
+    """
+
+    t0_s: float
+    t1_s: float
+    reason: str = ""
+    detail: str = ""
+
+
+@dataclass(frozen=True)
+class ImuAlignment:
+    """The fitted alignment of one IMU to the reference (``extra.inflight.imus.<imu>``).
+
+    The model is ``y_j(t) = A_j · y_ref(t + τ_j) + c_j``; ``A_j ≈ I + [θ]× + scale and
+    non-orthogonality`` (:func:`calibration.inflight.fit.decompose`). Vectors are x, y, z;
+    empty when the file does not record them.
+
+    Attributes
+    ----------
+    model : str
+        ``"full"``, ``"rotation"``, ...: the alignment model fitted.
+    A, A_sd : tuple of tuple of float
+        The relative gain matrix (3×3, dimensionless) and its sds.
+    rotation, rotation_sd : tuple of float
+        Small-angle rotation θ onto the reference (rad).
+    scale, scale_sd : tuple of float
+        Diagonal of ``A − I`` (fraction).
+    nonorthogonality, nonorthogonality_sd : tuple of float
+        Off-diagonal symmetric part (rad).
+    bias, bias_sd : tuple of float
+        ``c_j`` (rad/s; file: ``bias_dph``, ``bias_dph_sd``).
+    residual_rms : tuple of float
+        RMS of the fit's residual (rad/s; file: ``residual_rms_dps``).
+    residual_lag1_autocorrelation : tuple of float
+    hac_lags : int
+        Lags of the HAC covariance.
+    samples : int
+        Samples of the fit's residual.
+    notes : tuple of str
+    """
+
+    model: str = ""
+    A: tuple[tuple[float, ...], ...] = ()
+    A_sd: tuple[tuple[float, ...], ...] = ()
+    rotation: tuple[float, ...] = ()
+    rotation_sd: tuple[float, ...] = ()
+    scale: tuple[float, ...] = ()
+    scale_sd: tuple[float, ...] = ()
+    nonorthogonality: tuple[float, ...] = ()
+    nonorthogonality_sd: tuple[float, ...] = ()
+    bias: tuple[float, ...] = ()
+    bias_sd: tuple[float, ...] = ()
+    residual_rms: tuple[float, ...] = ()
+    residual_lag1_autocorrelation: tuple[float, ...] = ()
+    hac_lags: int = 0
+    samples: int = 0
+    notes: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class InflightAlignment:
+    """What an in-flight calibration records about the alignment (``extra.inflight``; its
+    timing is :class:`InflightTiming`).
+
+    Attributes
+    ----------
+    imus : dict of str to ImuAlignment
+        Per IMU group other than the reference.
+    left_out : tuple of LeftOut
+    samples_used, samples, samples_nonfinite : int
+        Samples the fit used, of the flight, and left out for a non-finite rate.
+    """
+
+    imus: Mapping[str, ImuAlignment] = field(default_factory=dict)
+    left_out: tuple[LeftOut, ...] = ()
+    samples_used: int = 0
+    samples: int = 0
+    samples_nonfinite: int = 0
+
+
+def _strings(r: Fields, key: str) -> tuple[str, ...]:
+    v = r.get(key, [])
+    if not isinstance(v, list):
+        raise r.error(key, "expected a list of strings")
+    bad = next((k for k, w in enumerate(v, start=1) if not isinstance(w, str)), None)
+    if bad is not None:
+        raise r.error(f"{key}[{bad}]", "expected a string")
+    return tuple(v)
+
+
+def _imu_alignment(r: Fields) -> ImuAlignment:
+    return ImuAlignment(
+        model=r.string("model", "", nonempty=False), A=_matrix(r, "A"), A_sd=_matrix(r, "A_sd"),
+        **{k: _floats(r, k) for k in ("rotation", "rotation_sd", "scale", "scale_sd",
+                                      "nonorthogonality", "nonorthogonality_sd",
+                                      "residual_lag1_autocorrelation")},
+        bias=_floats(r, "bias_dph", scale=DPH), bias_sd=_floats(r, "bias_dph_sd", scale=DPH),
+        residual_rms=_floats(r, "residual_rms_dps", scale=DPS),
+        hac_lags=r.integer("hac_lags", 0, lo=0), samples=r.integer("samples", 0, lo=0),
+        notes=_strings(r, "notes"))
+
+
+def _alignment(r: Fields) -> InflightAlignment | None:
+    if "inflight" not in r:
+        return None
+    f = r.mapping("inflight")
+    imus = f.mapping("imus", {})
+    left = tuple(LeftOut(t0_s=e.number("t0_s", finite=False), t1_s=e.number("t1_s", finite=False),
+                         reason=e.string("reason", "", nonempty=False),
+                         detail=e.string("detail", "", nonempty=False))
+                 for e in f.tables("left_out", [], nonempty=False))
+    return InflightAlignment(
+        imus={g: _imu_alignment(imus.mapping(g)) for g in imus.keys()}, left_out=left,
+        samples_used=f.integer("samples_used", 0, lo=0), samples=f.integer("samples", 0, lo=0),
+        samples_nonfinite=f.integer("samples_nonfinite", 0, lo=0))
 
 
 # -- provenance, warnings ---------------------------------------------------------------
@@ -345,16 +488,6 @@ def _static(r: Fields) -> StaticAlignment | None:
         return None
     return StaticAlignment(reference=r.mapping("static").string("reference", "",
                                                                 nonempty=False))
-
-
-def _warnings(r: Fields) -> tuple[str, ...]:
-    v = r.get("warnings", [])
-    if not isinstance(v, list):
-        raise r.error("warnings", f"expected a list of strings, got {type(v).__name__}")
-    bad = next((k for k, w in enumerate(v, start=1) if not isinstance(w, str)), None)
-    if bad is not None:
-        raise r.error(f"warnings[{bad}]", "expected a string")
-    return tuple(v)
 
 
 # -- noise model -------------------------------------------------------------------------
@@ -661,7 +794,9 @@ class CalibrationExtras:
     Attributes
     ----------
     inflight : InflightTiming or None
-        In-flight calibrations only.
+        In-flight calibrations only: the time offsets.
+    inflight_alignment : InflightAlignment or None
+        In-flight calibrations only: the alignment estimates.
     warnings : tuple of str
         What the calibration warns about, one line each.
     source : str
@@ -684,6 +819,7 @@ class CalibrationExtras:
     """
 
     inflight: InflightTiming | None = None
+    inflight_alignment: InflightAlignment | None = None
     warnings: tuple[str, ...] = ()
     source: str = ""
     method: Method = field(default_factory=Method)
@@ -719,7 +855,8 @@ def extras_from_dict(extra: Mapping[str, Any], path: str = "<calibration>"
         (``extra.inflight.imus.imu2.time_offset_ms``).
     """
     r = Fields({k: _plain(extra[k]) for k in _TYPED if k in extra}, path, _PREFIX)
-    return CalibrationExtras(inflight=_inflight(r), warnings=_warnings(r),
+    return CalibrationExtras(inflight=_inflight(r), inflight_alignment=_alignment(r),
+                             warnings=_strings(r, "warnings"),
                              source=r.string("source", "", nonempty=False),
                              method=_method(r), static=_static(r),
                              noise_model=_noise_model(r), rate_test=_rate_test(r),

@@ -32,10 +32,14 @@ at time t matches the reference's at ``t + τ_j``; ``τ_j < 0`` means IMU j sees
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
+from typing import Any
 
 import numpy as np
 from scipy import stats
+
+from fdi.extras import OffsetCheck, offset_check_from_dict
+from fdi.units import MS
 
 __all__ = ["BLOCK_S", "CONSISTENCY_ALPHA", "PIECES", "PIECE_MIN_S", "SIGN_CONVENTION",
            "block_bootstrap_sd", "check_lines", "check_offset", "consistency"]
@@ -189,27 +193,29 @@ def check_offset(t: np.ndarray, used: np.ndarray, X: np.ndarray, e: np.ndarray,
             "sign": SIGN_CONVENTION}
 
 
-def check_lines(chk: dict[str, object]) -> list[str]:
-    """Readable lines of :func:`check_offset`'s result."""
-    if not chk:
+def check_lines(chk: OffsetCheck | Mapping[str, Any] | None) -> list[str]:
+    """Readable lines of an offset's checks: :func:`check_offset`'s result, or the same as
+    the calibration file keeps it (:attr:`fdi.extras.ImuTiming.check`)."""
+    if isinstance(chk, Mapping):
+        chk = offset_check_from_dict(chk)
+    if chk is None:
         return []
-    lines = [f"offset sd {chk['sd_ms']:.3f} ms = max(HAC {chk['sd_hac_ms']:.3f}, block "
-             f"bootstrap {chk['sd_bootstrap_ms']:.3f} ({chk['block_s']:g}-s blocks), piece "
-             f"scatter {chk['sd_pieces_ms']:.3f})"]
-    c = chk.get("consistency")
-    good = [q for q in chk["pieces"] if q["offset_ms"] is not None]
-    if c:
-        lo = min(q["offset_ms"] for q in good)
-        hi = max(q["offset_ms"] for q in good)
-        if chk["consistent"]:
-            lines.append(f"the offset is consistent over {c['pieces_used']} pieces of the "
-                         f"flight: {lo:+.2f} to {hi:+.2f} ms, chi2/dof {c['chi2_dof']:.2f} "
-                         f"(p={c['p_value']:.2g})")
+    lines = [f"offset sd {chk.sd_s / MS:.3f} ms = max(HAC {chk.sd_hac_s / MS:.3f}, block "
+             f"bootstrap {chk.sd_bootstrap_s / MS:.3f} ({chk.block_s:g}-s blocks), piece "
+             f"scatter {chk.sd_pieces_s / MS:.3f})"]
+    c = chk.consistency
+    good = [q.offset_s / MS for q in chk.pieces if q.offset_s is not None]
+    if c is not None and good:
+        lo, hi = min(good), max(good)
+        if chk.consistent:
+            lines.append(f"the offset is consistent over {c.pieces_used} pieces of the "
+                         f"flight: {lo:+.2f} to {hi:+.2f} ms, chi2/dof {c.chi2_dof:.2f} "
+                         f"(p={c.p_value:.2g})")
         else:
             lines.append(f"the offset varies within this flight: {lo:+.2f} to {hi:+.2f} ms "
-                         f"over {c['pieces_used']} pieces, chi2/dof {c['chi2_dof']:.2f} "
-                         f"(p={c['p_value']:.2g}); the sd carries that scatter"
-                         + (" (widened)" if chk["sd_ms"] > chk["sd_hac_ms"] else ""))
+                         f"over {c.pieces_used} pieces, chi2/dof {c.chi2_dof:.2f} "
+                         f"(p={c.p_value:.2g}); the sd carries that scatter"
+                         + (" (widened)" if chk.sd_s > chk.sd_hac_s else ""))
     else:
         lines.append("piece-consistency test not possible (fewer than two pieces fitted)")
     lines.append("the offset belongs to this flight: another flight of the same airframe "

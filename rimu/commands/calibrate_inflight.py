@@ -8,6 +8,10 @@ folder to the reference IMU (:mod:`calibration.inflight.fit`), writes the
 from __future__ import annotations
 
 import argparse
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from fdi.calfile import Calibration
 
 __all__ = ["MODELS", "configure_options", "run", "summary_text"]
 
@@ -33,43 +37,49 @@ def configure_options(p: argparse.ArgumentParser) -> None:
                         "and after, the offset of each piece, the periods left out) into DIR")
 
 
-def summary_text(doc: dict) -> str:
-    """Readable summary of the ``extra.inflight`` block."""
+def summary_text(cal: Calibration) -> str:
+    """Readable summary of an in-flight calibration (its ``extra.inflight`` block)."""
     import numpy as np
 
     from calibration.inflight.offset_check import check_lines
+    from fdi.extras import ImuTiming
+    from fdi.units import DPH, DPS, MS
 
-    lines = [f"in-flight calibration against {doc['reference']} "
-             f"({doc['samples_used']} of {doc['samples']} samples used)"]
-    for s in doc["left_out"]:
-        lines.append(f"  left out {s['t0_s']:.2f}-{s['t1_s']:.2f} s: {s['reason']} "
-                     f"({s['detail']})")
-    if doc.get("samples_nonfinite"):
-        lines.append(f"  left out {doc['samples_nonfinite']} samples with a non-finite rate "
+    ex = cal.extras
+    timing, doc = ex.inflight, ex.inflight_alignment
+    if timing is None or doc is None:
+        return f"calibration of {cal.configuration}: no in-flight record"
+    lines = [f"in-flight calibration against {timing.reference} "
+             f"({doc.samples_used} of {doc.samples} samples used)"]
+    for s in doc.left_out:
+        lines.append(f"  left out {s.t0_s:.2f}-{s.t1_s:.2f} s: {s.reason} ({s.detail})")
+    if doc.samples_nonfinite:
+        lines.append(f"  left out {doc.samples_nonfinite} samples with a non-finite rate "
                      "in some IMU")
-    for g, r in doc["imus"].items():
-        th, ths = 1e3 * np.asarray(r["rotation"]), 1e3 * np.asarray(r["rotation_sd"])
-        lines.append(f"  {g} ({r['model']}): rotation [" + ", ".join(
+    for g, r in doc.imus.items():
+        t = timing.imus.get(g, ImuTiming(time_offset_s=None))
+        th, ths = 1e3 * np.asarray(r.rotation), 1e3 * np.asarray(r.rotation_sd)
+        lines.append(f"  {g} ({r.model}): rotation [" + ", ".join(
             f"{a:+.3f} ± {b:.3f}" for a, b in zip(th, ths, strict=True)) + "] mrad")
-        if r["model"] == "full":
-            sc, scs = 1e6 * np.asarray(r["scale"]), 1e6 * np.asarray(r["scale_sd"])
+        if r.model == "full":
+            sc, scs = 1e6 * np.asarray(r.scale), 1e6 * np.asarray(r.scale_sd)
             lines.append("      scale difference [" + ", ".join(
                 f"{a:+.0f} ± {b:.0f}" for a, b in zip(sc, scs, strict=True)) + "] ppm")
         lines.append("      bias [" + ", ".join(
-            f"{a:+.1f} ± {b:.1f}" for a, b in zip(r["bias_dph"], r["bias_dph_sd"],
-                                                   strict=True)) + "] deg/h")
-        lines.append(f"      time offset {r['time_offset_ms']:+.3f} ± "
-                     f"{r['time_offset_ms_sd']:.3f} ms; residual rms [" + ", ".join(
-                         f"{x:.3g}" for x in r["residual_rms_dps"]) + f"] deg/s; HAC lags "
-                     f"{r['hac_lags']}")
-        lines.extend(f"      {x}" for x in check_lines(r.get("time_offset_check") or {}))
-        if "timing_jitter_ms" in r:
-            lines.append(f"      timing jitter {g}: {r['timing_jitter_ms']:.2f} ± "
-                         f"{r['timing_jitter_ms_sd']:.2f} ms (thresholds widen with it while "
+            f"{a / DPH:+.1f} ± {b / DPH:.1f}" for a, b in zip(r.bias, r.bias_sd, strict=True))
+            + "] deg/h")
+        offset = ("not fitted" if t.time_offset_s is None else
+                  f"{t.time_offset_s / MS:+.3f} ± {t.time_offset_sd_s / MS:.3f} ms")
+        lines.append(f"      time offset {offset}; residual rms [" + ", ".join(
+            f"{x / DPS:.3g}" for x in r.residual_rms) + f"] deg/s; HAC lags {r.hac_lags}")
+        lines.extend(f"      {x}" for x in check_lines(t.check))
+        if t.timing_jitter_s is not None:
+            lines.append(f"      timing jitter {g}: {t.timing_jitter_s / MS:.2f} ± "
+                         f"{t.timing_jitter_sd_s / MS:.2f} ms (thresholds widen with it while "
                          "the body accelerates)")
-        lines.extend(f"      note: {n}" for n in r["notes"])
-    if doc.get("time_offset_sign"):
-        lines.append(f"  sign: {doc['time_offset_sign']}")
+        lines.extend(f"      note: {n}" for n in r.notes)
+    if timing.time_offset_sign:
+        lines.append(f"  sign: {timing.time_offset_sign}")
     return "\n".join(lines)
 
 
@@ -95,7 +105,7 @@ def run(args: argparse.Namespace) -> int:
     cal = calibration_from_fit(fit, flight)
     with atomic_file(out) as tmp:
         cal.save(tmp)
-    print(summary_text(cal.extra["inflight"]))
+    print(summary_text(cal))
     tails = cal.gyro.tails
     if tails is not None:
         bad = [str(r.scale) for r in tails.scales if not r.gaussian]
@@ -120,7 +130,7 @@ def run(args: argparse.Namespace) -> int:
         with atomic_dir(rep) as tmp:        # the page and its plots: all or none
             pngs = write_flight_plots(flight, cal, tmp)
             (tmp / "report.md").write_text(
-                "```\n" + summary_text(cal.extra["inflight"]) + "\n```\n\n"
+                "```\n" + summary_text(cal) + "\n```\n\n"
                 + "".join(f"![{p.stem}]({p.name})\n" for p in pngs), encoding="utf-8")
         print(f"wrote {rep / 'report.md'} and {', '.join(p.name for p in pngs)}")
     return 0

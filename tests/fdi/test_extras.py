@@ -107,6 +107,8 @@ def test_records_built_in_memory_read_as_their_json():
     inf = extras_from_dict(ex).inflight
     assert inf.imus["imu2"].time_offset_s == pytest.approx(2.5e-3)
     assert inf.imus["imu3"].time_offset_s is None
+    assert inf.imus["imu2"].timing_jitter_s is None
+    assert inf.imus["imu3"].timing_jitter_s == pytest.approx(0.2e-3)
     assert inf.time_offsets_s() == {"imu2": pytest.approx(2.5e-3)}
 
 
@@ -209,3 +211,47 @@ def test_fit_checks_name_the_bad_field(extra, field):
     with pytest.raises(FileFormatError) as err:
         extras_from_dict(extra, "cal.json")
     assert err.value.field == field
+
+
+def test_inflight_alignment_is_the_file_in_si():
+    from fdi.units import DPH, DPS
+
+    rec = _doc("inflight")["extra"]["inflight"]
+    al = load_calibration(DATA / OLD["inflight"][0]).extras.inflight_alignment
+    assert (al.samples_used, al.samples, al.samples_nonfinite, al.left_out) == (
+        rec["samples_used"], rec["samples"], rec["samples_nonfinite"], ())
+    for g, a in al.imus.items():
+        r = rec["imus"][g]
+        assert a.model == r["model"] and [list(x) for x in a.A] == r["A"]
+        assert list(a.rotation) == r["rotation"] and list(a.scale_sd) == r["scale_sd"]
+        assert list(a.bias) == [x * DPH for x in r["bias_dph"]]
+        assert list(a.residual_rms) == [x * DPS for x in r["residual_rms_dps"]]
+        assert (a.hac_lags, a.samples, a.notes) == (r["hac_lags"], r["samples"],
+                                                    tuple(r["notes"]))
+
+
+@pytest.mark.parametrize(("where", "value", "field"), [
+    (("left_out",), [{"t0_s": "a", "t1_s": 1.0}], "extra.inflight.left_out[1].t0_s"),
+    (("samples_used",), 1.5, "extra.inflight.samples_used"),
+    (("imus", "imu2", "bias_dph"), [1.0, "x", 2.0], "extra.inflight.imus.imu2.bias_dph"),
+    (("imus", "imu2", "A"), [[1.0, 0.0, 0.0], "row", [0.0, 0.0, 1.0]],
+     "extra.inflight.imus.imu2.A[2]"),
+    (("imus", "imu2", "notes"), ["fine", None], "extra.inflight.imus.imu2.notes[2]"),
+])
+def test_alignment_entries_name_the_bad_field(where, value, field):
+    doc = copy.deepcopy(_doc("inflight"))
+    node = doc["extra"]["inflight"]
+    for k in where[:-1]:
+        node = node[k]
+    node[where[-1]] = value
+    with pytest.raises(FileFormatError) as err:
+        calibration_from_dict(doc, "cal.json")
+    assert err.value.field == field
+
+
+def test_offset_check_from_its_record_equals_the_loaded_one():
+    from fdi.extras import offset_check_from_dict
+
+    rec = _doc("inflight")["extra"]["inflight"]["imus"]["imu3"]["time_offset_check"]
+    loaded = load_calibration(DATA / OLD["inflight"][0]).extras.inflight.imus["imu3"].check
+    assert offset_check_from_dict(rec) == loaded and offset_check_from_dict({}) is None
