@@ -159,7 +159,7 @@ _INLINE = dict(_KERNEL, inline="always")
 _NONE = CAPABILITY_CODE["none"]
 
 
-span = njit(**_INLINE)(_span_py)            # the state module's views, compiled inline
+_span = njit(**_INLINE)(_span_py)           # fdi.state.span, compiled inline
 
 
 @njit(**_INLINE)
@@ -174,9 +174,9 @@ def set_views(kset, n):
     scales, mats, df, nw)."""
     df = int(kset[SET_ICONST0 + DF])
     nw = int(kset[SET_ICONST0 + N_WINDOWS])
-    return (span(kset, SET_FCONST, n, nw),
-            span(kset, SET_SENSORS, n, nw).reshape(SENSOR_COLS, n),
-            span(kset, SET_SCALES, n, nw).reshape(nw, SCALE_COLS),
+    return (_span(kset, SET_FCONST, n, nw),
+            _span(kset, SET_SENSORS, n, nw).reshape(SENSOR_COLS, n),
+            _span(kset, SET_SCALES, n, nw).reshape(nw, SCALE_COLS),
             kset[offset(SET_MATS, n, nw):].reshape(3 * df + 3, n), df, nw)
 
 
@@ -186,10 +186,10 @@ def scratch_views(values, n):
     ω̂ of the last completed sample and of the one before it (3 each: ``prev``,
     ``before``), and the block of (z, ρ) rows, shape (BLOCK_ROWS, n + 1)
     (:data:`fdi.state.STATE_PARTS`)."""
-    return (span(values, SCRATCH_Y, n, 0), span(values, SCRATCH_P, n, 0),
-            span(values, SCRATCH_Z, n, 0), span(values, SCRATCH_W, n, 0),
-            span(values, SCRATCH_PREV, n, 0), span(values, SCRATCH_BEFORE, n, 0),
-            span(values, SCRATCH_BLOCK, n, 0).reshape(BLOCK_ROWS, n + 1))
+    return (_span(values, SCRATCH_Y, n, 0), _span(values, SCRATCH_P, n, 0),
+            _span(values, SCRATCH_Z, n, 0), _span(values, SCRATCH_W, n, 0),
+            _span(values, SCRATCH_PREV, n, 0), _span(values, SCRATCH_BEFORE, n, 0),
+            _span(values, SCRATCH_BLOCK, n, 0).reshape(BLOCK_ROWS, n + 1))
 
 
 @njit(**_INLINE)
@@ -459,8 +459,8 @@ def _advance(t, raw, corr, valid, r0, r1, kset, values, counters, out) -> int:
     dwell_s = fconst[READMIT_DWELL_S]
     gate = fconst[READMIT_GATE]
     R = counters[RING_LEN]
-    sensor = span(values, STATE_SENSOR, n, 0).reshape(n, SENSOR_STATE_COLS)
-    cusum = span(values, STATE_CUSUM, n, 0).reshape(CUSUM_ROWS, n)
+    sensor = _span(values, STATE_SENSOR, n, 0).reshape(n, SENSOR_STATE_COLS)
+    cusum = _span(values, STATE_CUSUM, n, 0).reshape(CUSUM_ROWS, n)
     o_windows = offset(STATE_WINDOWS, n, 0)
     windows = values[o_windows:o_windows + (R + 1) * (df + 1)].reshape(R + 1, df + 1)
     y, p, z, w, prev, before, block = scratch_views(values, n)

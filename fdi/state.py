@@ -158,8 +158,19 @@ LAYOUT = (SENSORS, SCALES, FCONST, ICONST, CUSUM, SENSOR_STATE, COUNTERS, OUT, S
           HEALTH)
 """Every table of named integers: their names are module-level ints of this module (as the
 standard library's ``re`` exports its flags) and enumerators of the generated C."""
+
+
+def _export(values: dict) -> None:
+    """Make ``values`` module-level names; a name already taken (two tables naming one slot
+    alike) is refused at import."""
+    taken = values.keys() & globals().keys()
+    if taken:
+        raise RuntimeError(f"fdi.state: {sorted(taken)} named twice")
+    globals().update(values)
+
+
 for _names in LAYOUT:
-    globals().update(_names.values)
+    _export(_names.values)
 del _names
 
 HEALTH_REASON = {HEALTH.HEALTH_RANGE: "range", HEALTH.HEALTH_NONFINITE: "nonfinite",
@@ -198,8 +209,8 @@ STATE_PARTS = _parts((("STATE_SENSOR", 0, SENSOR_STATE.SENSOR_STATE_COLS, 0),
 CUSUM bank, the kernel's scratch (y, p, z; ω̂; the ω̂ of the last completed sample and of
 the one before it; (z, ρ) of :data:`BLOCK_ROWS` rows, n + 1 each) and, last, the windows
 ((R + 1)·(n + 1) entries, room for any parity dimension df ≤ n)."""
-globals().update(SET_PARTS)                 # SET_FCONST, …, SCRATCH_Y, …: tuples of ints
-globals().update(STATE_PARTS)
+_export(SET_PARTS)                          # SET_FCONST, …, SCRATCH_Y, …: tuples of ints
+_export(STATE_PARTS)
 _SCALES, _MATS, _WINDOWS = (SET_PARTS["SET_SCALES"], SET_PARTS["SET_MATS"],
                             STATE_PARTS["STATE_WINDOWS"])
 SET_ICONST0 = SET_PARTS["SET_ICONST"][0]    # iconst slots in the packed set (as float64)
