@@ -228,7 +228,7 @@ def span(a, part, n, nw):
     """The entries of ``part`` in the flat array ``a`` (a view), for n sensors and nw window
     scales. (Plain Python: :mod:`fdi.kernel` compiles it inline, where a view may be
     returned without numba's reference counting.)"""
-    o = part[0] + part[1] * n + part[2] * nw
+    o = offset(part, n, nw)
     return a[o:o + part[3] + part[4] * n + part[5] * nw]
 
 
