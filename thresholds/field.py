@@ -10,8 +10,9 @@ line makes (``rimu ingest`` → ``rimu calibrate --in-flight`` → ``rimu tune``
   ``rimu calibrate --static``; :func:`holdout_static` is the bench calibration of
   :mod:`thresholds.realnoise` that ``docs/drift.md`` compares): split a recording in time,
   calibrate and tune on one part at several targets, count alarm episodes on the other
-  part outside the out-of-envelope periods, both ways round; per target the expected count, the observed
-  count with its exact Poisson interval, and whether the length resolves the target;
+  part outside the out-of-envelope periods, both ways round; per target the expected
+  count, the observed count with its exact Poisson interval, and whether the length
+  resolves the target;
 - :func:`from_start`: calibrate on the whole flight and monitor it from the first sample, as
   a user does: events, excluded sensors, time in alarm, protection level;
 - :func:`inject_flight`: steps and ramps injected into each sensor of a real flight
