@@ -240,8 +240,10 @@ def _markdown(doc: dict, images: list[str]) -> str:
          "Recordings: two ArduCopter flights with two IMUs on one board (41: heavy "
          "vibration, crash; 83: clean, cut at the end), read as `rimu ingest --salvage` reads "
          "them; four MPU9250 IMUs at rest for 16 min. The flights are calibrated in flight "
-         "(`rimu calibrate --in-flight`), the bench set by the static calibration of "
-         "`thresholds.realnoise`; thresholds come from `rimu tune`'s library call.", "",
+         "(`rimu calibrate --in-flight`), the bench set by `rimu calibrate --static` (its "
+         "residual's tail and drift models and the range its samples covered); the monitor "
+         "runs through `rimu monitor-file`'s chain; thresholds come from `rimu tune`'s "
+         "library call.", "",
          "## Must hold", ""]
     L += _holds_table(now, before)
     L += ["", "Definitions (module docstring of `thresholds/field.py`): an *alarm episode* "

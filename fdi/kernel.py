@@ -9,7 +9,8 @@ answers). Per sample, with the constants of the current healthy set (:mod:`fdi.s
    for ``stale_timeout_s`` (``stale``). Any verdict stops the kernel: the monitor isolates
    and resumes the same sample at re-admission.
 2. Re-admission (opt-in, :func:`readmission_check`): an isolated sensor that agrees with the
-   reconstruction (|y_i − h_iᵀω̂|² < 9 var) for ``readmit_dwell_s`` stops the kernel.
+   reconstruction (|y_i − h_iᵀω̂|² < ``readmit_gate``·var, 9: 3σ) for ``readmit_dwell_s``
+   stops the kernel.
 3. A healthy sensor without a sample stops the kernel (the monitor reconstructs from the
    sensors present; no parity test, infinite protection level).
 4. :func:`compensate`: y = SF·u − b − c (c: run-time correction of the effect terms),
@@ -57,14 +58,15 @@ from fdi.state import (
     BIAS,
     BLOCK_ROWS,
     CAPABILITY,
+    CAPABILITY_CODE,
     CLEAR_RUN,
     CLEAR_SAMPLES,
     CUSUM_CLEAR,
     CUSUM_H,
+    CUSUM_ROWS,
     DETECTED,
     DETECTED_ROWS,
     DF,
-    F_SLOTS,
     FIRED,
     GOOD_SINCE_T,
     H_P_H,
@@ -98,20 +100,34 @@ from fdi.state import (
     PROTECTION,
     READMISSION,
     READMIT_DWELL_S,
+    READMIT_GATE,
     READMIT_SENSOR,
     RETURN_DETECTED,
     RHO_COEF0,
     RING_LEN,
     SAME_RUN,
     SCALE_COLS,
+    SCRATCH_BEFORE,
+    SCRATCH_BLOCK,
+    SCRATCH_P,
+    SCRATCH_PREV,
+    SCRATCH_W,
+    SCRATCH_Y,
+    SCRATCH_Z,
     SENSOR_COLS,
     SENSOR_STATE_COLS,
+    SET_FCONST,
     SET_ICONST0,
-    SET_SENSORS0,
+    SET_MATS,
+    SET_SCALES,
+    SET_SENSORS,
     SF,
     SIGMA_II,
     STALE_TIMEOUT_S,
     STARTED,
+    STATE_CUSUM,
+    STATE_SENSOR,
+    STATE_WINDOWS,
     STATS0,
     STOP_CLEARED,
     STOP_CODE,
@@ -124,9 +140,9 @@ from fdi.state import (
     STOP_ROW,
     STUCK_COUNT,
     THRESHOLD,
-    set_layout,
-    state_layout,
+    offset,
 )
+from fdi.state import span as _span_py
 from fdi.windows import window_update
 
 __all__ = ["advance", "compensate", "reconstruct_row"]
@@ -140,7 +156,10 @@ __all__ = ["advance", "compensate", "reconstruct_row"]
 _KERNEL = dict(error_model="numpy", _nrt=False)
 _INLINE = dict(_KERNEL, inline="always")
 
-_NONE = 3                                   # CAPABILITY_CODE["none"]
+_NONE = CAPABILITY_CODE["none"]
+
+
+_span = njit(**_INLINE)(_span_py)           # fdi.state.span, compiled inline
 
 
 @njit(**_INLINE)
@@ -155,23 +174,22 @@ def set_views(kset, n):
     scales, mats, df, nw)."""
     df = int(kset[SET_ICONST0 + DF])
     nw = int(kset[SET_ICONST0 + N_WINDOWS])
-    o_scales, o_mats, end = set_layout(n, df, nw)
-    return (kset[:F_SLOTS], kset[SET_SENSORS0:o_scales].reshape(SENSOR_COLS, n),
-            kset[o_scales:o_mats].reshape(nw, SCALE_COLS),
-            kset[o_mats:end].reshape(3 * df + 3, n), df, nw)
+    return (_span(kset, SET_FCONST, n, nw),
+            _span(kset, SET_SENSORS, n, nw).reshape(SENSOR_COLS, n),
+            _span(kset, SET_SCALES, n, nw).reshape(nw, SCALE_COLS),
+            kset[offset(SET_MATS, n, nw):].reshape(3 * df + 3, n), df, nw)
 
 
 @njit(**_INLINE)
 def scratch_views(values, n):
     """The kernel's scratch vectors y, p, z (n each) and ω̂ (3) in the detector state, the
     ω̂ of the last completed sample and of the one before it (3 each: ``prev``,
-    ``before``), and the block of (z, ρ) rows, shape (BLOCK_ROWS, n + 1)."""
-    o = state_layout(n, 0)[1]
-    return (values[o:o + n], values[o + n:o + 2 * n], values[o + 2 * n:o + 3 * n],
-            values[o + 3 * n:o + 3 * n + 3], values[o + 3 * n + 3:o + 3 * n + 6],
-            values[o + 3 * n + 6:o + 3 * n + 9],
-            values[o + 3 * n + 9:o + 3 * n + 9 + BLOCK_ROWS * (n + 1)].reshape(BLOCK_ROWS,
-                                                                              n + 1))
+    ``before``), and the block of (z, ρ) rows, shape (BLOCK_ROWS, n + 1)
+    (:data:`fdi.state.STATE_PARTS`)."""
+    return (_span(values, SCRATCH_Y, n, 0), _span(values, SCRATCH_P, n, 0),
+            _span(values, SCRATCH_Z, n, 0), _span(values, SCRATCH_W, n, 0),
+            _span(values, SCRATCH_PREV, n, 0), _span(values, SCRATCH_BEFORE, n, 0),
+            _span(values, SCRATCH_BLOCK, n, 0).reshape(BLOCK_ROWS, n + 1))
 
 
 @njit(**_INLINE)
@@ -278,11 +296,12 @@ def health_checks(t, raw, r, valid, vr, sensors, sensor, counters, stuck, stale_
 
 @njit(**_INLINE)
 def readmission_check(t, raw, r, corr, cr, valid, vr, sensors, mats, df, capability, sensor,
-                      counters, dwell_s, y, p, z, w, prev) -> int:
+                      counters, dwell_s, gate, y, p, z, w, prev) -> int:
     """First isolated sensor that behaved for ``dwell_s`` (−1: none).
 
     Good behaviour: valid, within the raw bounds, not repeating, and |y_i − h_iᵀω̂|² below
-    9·(Σ_ii + h_iᵀPh_i) with ω̂ from the healthy set.
+    gate·(Σ_ii + h_iᵀPh_i) with ω̂ from the healthy set (``gate``: the squared standardised
+    residual, :attr:`fdi.settings.MonitorSettings.readmit_gate`; 9 is 3σ).
     """
     if capability == _NONE or counters[DETECTED] != 0:
         return -1
@@ -303,7 +322,7 @@ def readmission_check(t, raw, r, corr, cr, valid, vr, sensors, mats, df, capabil
             hw = (sensors[AXIS0, i] * w[0] + sensors[AXIS0 + 1, i] * w[1]
                   + sensors[AXIS0 + 2, i] * w[2])
             var = sensors[SIGMA_II, i] + sensors[H_P_H, i]
-            good = (yi - hw) ** 2 < 9.0 * var
+            good = (yi - hw) ** 2 < gate * var
         sensor[i, LAST_RAW] = v
         since = sensor[i, GOOD_SINCE_T]
         if not good:
@@ -438,10 +457,11 @@ def _advance(t, raw, corr, valid, r0, r1, kset, values, counters, out) -> int:
     clear_samples = int(kset[ic + CLEAR_SAMPLES])
     stale_s = fconst[STALE_TIMEOUT_S]
     dwell_s = fconst[READMIT_DWELL_S]
+    gate = fconst[READMIT_GATE]
     R = counters[RING_LEN]
-    o_cusum, o_scratch, o_windows, _ = state_layout(n, R)
-    sensor = values[:o_cusum].reshape(n, SENSOR_STATE_COLS)
-    cusum = values[o_cusum:o_scratch].reshape(4, n)
+    sensor = _span(values, STATE_SENSOR, n, 0).reshape(n, SENSOR_STATE_COLS)
+    cusum = _span(values, STATE_CUSUM, n, 0).reshape(CUSUM_ROWS, n)
+    o_windows = offset(STATE_WINDOWS, n, 0)
     windows = values[o_windows:o_windows + (R + 1) * (df + 1)].reshape(R + 1, df + 1)
     y, p, z, w, prev, before, block = scratch_views(values, n)
     K = nw + (1 if has_cusum else 0)
@@ -470,7 +490,8 @@ def _advance(t, raw, corr, valid, r0, r1, kset, values, counters, out) -> int:
                 return _stop(counters, r, STOP_HEALTH)
         if phase <= PHASE_READMIT and readmission:
             k = readmission_check(tr, raw, r, corr, cr, valid, vr, sensors, mats, df,
-                                  capability, sensor, counters, dwell_s, y, p, z, w, prev)
+                                  capability, sensor, counters, dwell_s, gate, y, p, z, w,
+                                  prev)
             if k >= 0:
                 counters[READMIT_SENSOR] = k
                 return _stop(counters, r, STOP_READMIT)

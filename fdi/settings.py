@@ -235,6 +235,12 @@ class MonitorSettings:
         default: isolated sensors stay isolated.
     readmit_dwell_s : float
         Minimum time (s) of good behaviour before re-admission.
+    readmit_gate : float
+        Re-admission gate on the squared standardised residual (dimensionless, in units of
+        σ²): an isolated sensor behaves well at a sample only while
+        (y_i − h_iᵀω̂)² < ``readmit_gate``·(Σ_ii + h_iᵀPh_i), its residual against the
+        reconstruction of the healthy set over the residual's variance (its noise plus the
+        reconstruction's, P = GΣGᵀ). 9 is a 3σ gate.
     stale_timeout_s : float
         A sensor without a valid sample for longer than this is isolated ("stale").
     stuck_count : int
@@ -264,6 +270,7 @@ class MonitorSettings:
     clear_samples: int = 100
     readmission: bool = False
     readmit_dwell_s: float = 10.0
+    readmit_gate: float = 9.0
     stale_timeout_s: float = 0.1
     stuck_count: int = 100
     raw_range: tuple[float, float] | None = None
@@ -289,5 +296,7 @@ class MonitorSettings:
             raise ConfigError("stuck_count must be >= 2")
         if self.readmit_dwell_s < 0:
             raise ConfigError("readmit_dwell_s must be >= 0")
+        if not (self.readmit_gate > 0 and math.isfinite(self.readmit_gate)):
+            raise ConfigError("readmit_gate must be positive and finite")
         if self.raw_range is not None and not self.raw_range[0] < self.raw_range[1]:
             raise ConfigError("raw_range must be (low, high) with low < high")

@@ -16,7 +16,8 @@ Per healthy set (constants, :class:`KernelSet`, built once per set by :func:`pac
 - ``mats`` (3·df + 3, n): the parity matrix V (rows 0 … df−1), the reconstruction matrix G
   (rows df … df+2), the lower-triangular whitening A (rows df+3 …, first df columns) and the
   unit whitened parity columns u_i/|u_i| (rows 2·df+3 …, column i for sensor i).
-- ``fconst``, ``iconst``: scalars (κ, β, ν, h, the protection-level constants, limits).
+- ``fconst``, ``iconst``: scalars (κ, β, ν, h, the protection-level constants, limits,
+  the re-admission dwell and gate).
 
 Detector state (:class:`DetectorState`):
 
@@ -33,7 +34,18 @@ Detector state (:class:`DetectorState`):
 The kernel takes each group whole as one flat array (the set's constants: ``KernelSet.packed``;
 the float state: ``DetectorState.values``, which also holds the kernel's scratch vectors),
 because numba's dispatch costs about 45 ns per array argument and :meth:`Monitor.step` pays
-it on every sample; the named 2-D arrays above are views of them.
+it on every sample; the named 2-D arrays above are views of them, and the kernel's
+scratch vectors y, p, z (n each), ω̂, the ω̂ of the last completed sample and of the one
+before it (3 each) and the block of (z, ρ) rows compensated ahead (:data:`BLOCK_ROWS` rows of
+n + 1) are further parts of ``DetectorState.values``.
+
+Everything is named in one place: :data:`LAYOUT` holds the slots of every axis (and the
+codes the kernel hands the monitor), :data:`SET_PARTS` and :data:`STATE_PARTS` the parts of
+the two flat arrays. The module-level names (``SF``, ``KAPPA``, ``SCRATCH_Y``, …) are
+derived from these tables, so are :func:`set_layout`, the views of :class:`KernelSet` and
+:class:`DetectorState`, the kernel's views (:func:`span`) and the enumerators of the
+generated C (:func:`c_enums`): a slot or a scratch vector is added by adding it to its
+table.
 """
 
 from __future__ import annotations
@@ -46,66 +58,208 @@ from numba.extending import register_jitable
 from fdi.blocks import CAPABILITY_CODE as _CAPABILITY_CODE
 
 __all__ = [
+    "BLOCK_ROWS",
     "CAPABILITY_CODE",
+    "LAYOUT",
+    "SET_PARTS",
+    "STATE_PARTS",
     "DetectorState",
     "KernelSet",
+    "Names",
     "OutLayout",
+    "c_enums",
+    "offset",
     "pack_set",
     "set_layout",
-    "state_layout",
+    "span",
+    "state_size",
 ]
 
-# ---------------------------------------------------------------- sensors (SENSOR_COLS, n)
-SF, BIAS, LO, HI, IN_SET, SIGMA_II, H_P_H, AXIS0 = range(8)
-RHO_COEF0 = AXIS0 + 3                       # six coefficients of ρ_i
-JITTER_COEF = RHO_COEF0 + 6                 # τ_i²·fs²/Σ_ii: ρ_i += it·(h_iᵀΔω̂)²
-SENSOR_COLS = JITTER_COEF + 1
 
-# ---------------------------------------------------------------- scales (K_w, SCALE_COLS)
-WINDOW, THRESHOLD, CHI2_SCALE, RHO_GAIN, OFFSET_GAIN, CLEAR_THRESHOLD = range(6)
-SCALE_COLS = 6
+class Names:
+    """Named integers of one kind, in order: the slots along one axis of a kernel array, or
+    a set of codes.
 
-# ---------------------------------------------------------------- fconst
-(KAPPA, BETA, NU, CUSUM_H, CUSUM_CLEAR, PL_A, PL_B, PL_C, PL_D, PL_E, STALE_TIMEOUT_S,
- READMIT_DWELL_S) = range(12)
-F_SLOTS = 12
+    Every name becomes a module-level int of :mod:`fdi.state` (``from fdi.state import SF``;
+    numba reads module-level ints as compile-time constants) and an enumerator of the
+    generated C (:func:`c_enums`), so a slot is added in one place: its table in
+    :data:`LAYOUT`.
 
-# ---------------------------------------------------------------- iconst
-DF, N_WINDOWS, HAS_CUSUM, CAPABILITY, HAS_OMEGA, STUCK_COUNT, PERSISTENCE, CLEAR_SAMPLES, \
-    READMISSION, N_SENSORS, ASK_ISOLATE = range(11)
-I_SLOTS = 11
+    Parameters
+    ----------
+    title : str
+        What the names are (a comment in the C).
+    values : dict of str to int
+    """
+
+    def __init__(self, title: str, values: dict[str, int]) -> None:
+        self.title = title
+        self.values = dict(values)
+
+    @classmethod
+    def slots(cls, title: str, spec: str, end: str | None = None) -> Names:
+        """Consecutive slots from 0: ``spec`` lists the names in order, ``NAME*k`` a slot k
+        entries wide (the name is its first); ``end`` names the count."""
+        values, at = {}, 0
+        for item in spec.split():
+            name, _, width = item.partition("*")
+            values[name] = at
+            at += int(width or 1)
+        if end:
+            values[end] = at
+        return cls(title, values)
+
+    def __getattr__(self, name: str) -> int:
+        try:
+            return self.__dict__["values"][name]
+        except KeyError:
+            raise AttributeError(name) from None
+
+
+# ---------------------------------------------------------------------------- the table
+BLOCK_ROWS = 32
+"""Rows the kernel compensates ahead (independent of the detector state; see fdi.kernel)."""
+
+SENSORS = Names.slots("sensors (SENSOR_COLS, n): one row per quantity",
+                      "SF BIAS LO HI IN_SET SIGMA_II H_P_H AXIS0*3 RHO_COEF0*6 JITTER_COEF",
+                      "SENSOR_COLS")
+"""y = SF·u − BIAS; raw bounds; in the set; Σ_ii; h_iᵀPh_i; h_i; ρ_i's six coefficients;
+τ_i²·fs²/Σ_ii (ρ_i += JITTER_COEF·(h_iᵀΔω̂)²)."""
+SCALES = Names.slots("scales (K_w, SCALE_COLS)",
+                     "WINDOW THRESHOLD CHI2_SCALE RHO_GAIN OFFSET_GAIN CLEAR_THRESHOLD",
+                     "SCALE_COLS")
+FCONST = Names.slots("fconst", "KAPPA BETA NU CUSUM_H CUSUM_CLEAR PL_A PL_B PL_C PL_D PL_E "
+                     "STALE_TIMEOUT_S READMIT_DWELL_S READMIT_GATE", "F_SLOTS")
+ICONST = Names.slots("iconst", "DF N_WINDOWS HAS_CUSUM CAPABILITY HAS_OMEGA STUCK_COUNT "
+                     "PERSISTENCE CLEAR_SAMPLES READMISSION N_SENSORS ASK_ISOLATE", "I_SLOTS")
+CUSUM = Names.slots("cusum (CUSUM_ROWS, n)", "S_UP MIN_UP S_DOWN MIN_DOWN", "CUSUM_ROWS")
+SENSOR_STATE = Names.slots("sensor state (n, SENSOR_STATE_COLS)",
+                           "LAST_RAW LAST_VALID_T GOOD_SINCE_T SAME_RUN", "SENSOR_STATE_COLS")
+COUNTERS = Names.slots("counters (HEALTH0 + n)",
+                       "STARTED RING_POS WINDOW_COUNT DETECTED DETECTED_ROWS ALARM_RUN "
+                       "CLEAR_RUN STOP_ROW STOP_CODE FIRED READMIT_SENSOR PHASE HAS_VALID "
+                       "HAS_PARITY RING_LEN HEALTH0")
+"""HEALTH0 + i: the health verdict of sensor i this sample (the last n counters)."""
+OUT = Names.slots("output row", "OMEGA0*3 PROTECTION STATS0")
+"""ω̂ (3), the protection level, then K statistics, K thresholds, the parity
+(:class:`OutLayout`)."""
+STOP = Names("stop codes", dict(STOP_NONE=0, STOP_HEALTH=1, STOP_READMIT=2,
+                                STOP_INCOMPLETE=3, STOP_DETECTED=4, STOP_ISOLATE=8,
+                                STOP_CLEARED=16, STOP_MASK=31, RETURN_DETECTED=32))
+"""Where the kernel stops (``counters[STOP_CODE]``) and hands a sample to the monitor:
+STOP_DETECTED | STOP_ISOLATE stop after the sample, STOP_CLEARED after a detection cleared;
+:func:`fdi.kernel.advance` returns the stop code (STOP_MASK) plus RETURN_DETECTED while a
+detection is active."""
+PHASES = Names.slots("phase: where the kernel resumes a stopped sample",
+                     "PHASE_HEALTH PHASE_READMIT PHASE_PARITY")
+HEALTH = Names.slots("health verdicts",
+                     "HEALTH_OK HEALTH_RANGE HEALTH_NONFINITE HEALTH_STUCK HEALTH_STALE")
+LAYOUT = (SENSORS, SCALES, FCONST, ICONST, CUSUM, SENSOR_STATE, COUNTERS, OUT, STOP, PHASES,
+          HEALTH)
+"""Every table of named integers: their names are module-level ints of this module (as the
+standard library's ``re`` exports its flags) and enumerators of the generated C."""
+
+
+def _export(values: dict) -> None:
+    """Make ``values`` module-level names; a name already taken (two tables naming one slot
+    alike) is refused at import."""
+    taken = values.keys() & globals().keys()
+    if taken:
+        raise RuntimeError(f"fdi.state: {sorted(taken)} named twice")
+    globals().update(values)
+
+
+for _names in LAYOUT:
+    _export(_names.values)
+del _names
+
+HEALTH_REASON = {HEALTH.HEALTH_RANGE: "range", HEALTH.HEALTH_NONFINITE: "nonfinite",
+                 HEALTH.HEALTH_STUCK: "stuck", HEALTH.HEALTH_STALE: "stale"}
 CAPABILITY_CODE = _CAPABILITY_CODE
 """Capability name → code: :data:`fdi.blocks.CAPABILITY_CODE` (positions in the one table,
 :data:`fdi.answer.CAPABILITIES`)."""
 
-# ---------------------------------------------------------------- cusum (4, n)
-S_UP, MIN_UP, S_DOWN, MIN_DOWN = range(4)
 
-# ---------------------------------------------------------------- sensor state (n, 4)
-LAST_RAW, LAST_VALID_T, GOOD_SINCE_T, SAME_RUN = range(4)
+def _parts(spec: tuple[tuple[str, int, int, int], ...], last: str) -> dict[str, tuple]:
+    """Consecutive parts of a flat array: ``(name, entries, per sensor, per scale)`` each,
+    sizes linear in n and nw; ``last`` takes the rest (its size depends on more than n, nw).
+    Each part becomes ``(at, at per sensor, at per scale, size, size per sensor, size per
+    scale)``: the form :func:`span` reads."""
+    out, at = {}, (0, 0, 0)
+    for name, *size in spec:
+        out[name] = (*at, *size)
+        at = tuple(a + s for a, s in zip(at, size, strict=True))
+    out[last] = (*at, 0, 0, 0)
+    return out
 
-# ---------------------------------------------------------------- counters
-(STARTED, RING_POS, WINDOW_COUNT, DETECTED, DETECTED_ROWS, ALARM_RUN, CLEAR_RUN, STOP_ROW,
- STOP_CODE, FIRED, READMIT_SENSOR, PHASE, HAS_VALID, HAS_PARITY, RING_LEN) = range(15)
-HEALTH0 = 15                                # + i: health verdict of sensor i this sample
 
-# where the kernel stops (STOP_CODE) and hands a sample to the monitor
-STOP_NONE, STOP_HEALTH, STOP_READMIT, STOP_INCOMPLETE, STOP_DETECTED, STOP_ISOLATE = \
-    0, 1, 2, 3, 4, 8
-STOP_CLEARED = 16                           # a detection cleared (after its sample)
-# added to the stop code that fdi.kernel.advance returns while a detection is active
-RETURN_DETECTED = 32
-STOP_MASK = 31                              # the stop code in advance's return value
-# PHASE: where the kernel resumes a stopped sample
-PHASE_HEALTH, PHASE_READMIT, PHASE_PARITY = 0, 1, 2
-# health verdicts
-HEALTH_OK, HEALTH_RANGE, HEALTH_NONFINITE, HEALTH_STUCK, HEALTH_STALE = range(5)
-HEALTH_REASON = {HEALTH_RANGE: "range", HEALTH_NONFINITE: "nonfinite", HEALTH_STUCK: "stuck",
-                 HEALTH_STALE: "stale"}
+SET_PARTS = _parts((("SET_FCONST", FCONST.F_SLOTS, 0, 0),
+                    ("SET_ICONST", ICONST.I_SLOTS, 0, 0),
+                    ("SET_SENSORS", 0, SENSORS.SENSOR_COLS, 0),
+                    ("SET_SCALES", 0, 0, SCALES.SCALE_COLS)), "SET_MATS")
+"""Parts of the packed constants of a set (:attr:`KernelSet.packed`); ``SET_MATS``, last,
+holds (3·df + 3)·n entries."""
+STATE_PARTS = _parts((("STATE_SENSOR", 0, SENSOR_STATE.SENSOR_STATE_COLS, 0),
+                      ("STATE_CUSUM", 0, CUSUM.CUSUM_ROWS, 0),
+                      ("SCRATCH_Y", 0, 1, 0), ("SCRATCH_P", 0, 1, 0), ("SCRATCH_Z", 0, 1, 0),
+                      ("SCRATCH_W", 3, 0, 0), ("SCRATCH_PREV", 3, 0, 0),
+                      ("SCRATCH_BEFORE", 3, 0, 0),
+                      ("SCRATCH_BLOCK", BLOCK_ROWS, BLOCK_ROWS, 0)), "STATE_WINDOWS")
+"""Parts of the float detector state (:attr:`DetectorState.values`): the sensor history, the
+CUSUM bank, the kernel's scratch (y, p, z; ω̂; the ω̂ of the last completed sample and of
+the one before it; (z, ρ) of :data:`BLOCK_ROWS` rows, n + 1 each) and, last, the windows
+((R + 1)·(n + 1) entries, room for any parity dimension df ≤ n)."""
+_export(SET_PARTS)                          # SET_FCONST, …, SCRATCH_Y, …: tuples of ints
+_export(STATE_PARTS)
+_SCALES, _MATS, _WINDOWS = (SET_PARTS["SET_SCALES"], SET_PARTS["SET_MATS"],
+                            STATE_PARTS["STATE_WINDOWS"])
+SET_ICONST0 = SET_PARTS["SET_ICONST"][0]    # iconst slots in the packed set (as float64)
+SET_SENSORS0 = SET_PARTS["SET_SENSORS"][0]  # first entry of ``sensors`` in the packed set
 
-# ---------------------------------------------------------------- output row
-OMEGA0, PROTECTION = 0, 3
-STATS0 = 4
+
+@register_jitable(inline="always")
+def offset(part, n, nw):
+    """Where ``part`` (an entry of :data:`SET_PARTS` or :data:`STATE_PARTS`) starts, for n
+    sensors and nw window scales."""
+    return part[0] + part[1] * n + part[2] * nw
+
+
+def span(a, part, n, nw):
+    """The entries of ``part`` in the flat array ``a`` (a view), for n sensors and nw window
+    scales. (Plain Python: :mod:`fdi.kernel` compiles it inline, where a view may be
+    returned without numba's reference counting.)"""
+    o = offset(part, n, nw)
+    return a[o:o + part[3] + part[4] * n + part[5] * nw]
+
+
+@register_jitable(inline="always")
+def set_layout(n: int, df: int, nw: int) -> tuple[int, int, int]:
+    """Offsets of ``scales``, ``mats`` and the end in the packed set of n sensors, parity
+    dimension df and nw window scales (``sensors`` starts at :data:`SET_SENSORS0`)."""
+    o_mats = offset(_MATS, n, nw)
+    return offset(_SCALES, n, nw), o_mats, o_mats + (3 * df + 3) * n
+
+
+@register_jitable(inline="always")
+def state_size(n: int, ring: int) -> int:
+    """Entries of the float detector state of n sensors and a ring of R cumulative sums."""
+    return offset(_WINDOWS, n, 0) + (ring + 1) * (n + 1)
+
+
+def c_enums() -> str:
+    """The tables of :data:`LAYOUT` as C enumerations (the exported module's slot names)."""
+    lines = []
+    for names in LAYOUT:
+        lines.append(f"/* {names.title} */")
+        line = "enum {"
+        for k, v in names.values.items():
+            item = f" {k} = {v},"
+            if len(line) + len(item) > 96:
+                lines.append(line)
+                line = "      "
+            line += item
+        lines.append(line.removesuffix(",") + " };")
+    return "\n".join(lines)
 
 
 @dataclass(frozen=True)
@@ -119,12 +273,12 @@ class OutLayout:
     @property
     def thresholds0(self) -> int:
         """First threshold column."""
-        return STATS0 + self.K
+        return OUT.STATS0 + self.K
 
     @property
     def parity0(self) -> int:
         """First parity column."""
-        return STATS0 + 2 * self.K
+        return OUT.STATS0 + 2 * self.K
 
     def width(self, parity: bool) -> int:
         """Columns of a row with or without the parity vector."""
@@ -137,7 +291,7 @@ class KernelSet:
 
     ``packed`` is the one array the kernel reads (fewer arguments per call: numba's dispatch
     costs ~45 ns per array); the other fields are views of it, in the order of
-    :func:`set_layout`: ``fconst`` | ``iconst`` (as float64) | ``sensors`` | ``scales`` |
+    :data:`SET_PARTS`: ``fconst`` | ``iconst`` (as float64) | ``sensors`` | ``scales`` |
     ``mats``.
     """
 
@@ -147,19 +301,6 @@ class KernelSet:
     mats: np.ndarray
     fconst: np.ndarray
     iconst: np.ndarray
-
-
-SET_ICONST0 = F_SLOTS                       # iconst slots in the packed set (as float64)
-SET_SENSORS0 = F_SLOTS + I_SLOTS            # first entry of ``sensors`` in the packed set
-
-
-@register_jitable(inline="always")
-def set_layout(n: int, df: int, nw: int) -> tuple[int, int, int]:
-    """Offsets of ``scales``, ``mats`` and the end in the packed set of n sensors, parity
-    dimension df and nw window scales (``sensors`` starts at :data:`SET_SENSORS0`)."""
-    o_scales = SET_SENSORS0 + n * SENSOR_COLS
-    o_mats = o_scales + nw * SCALE_COLS
-    return o_scales, o_mats, o_mats + (3 * df + 3) * n
 
 
 def pack_set(model, H: np.ndarray, sigma_diag: np.ndarray, lo: tuple[float, ...],
@@ -180,31 +321,36 @@ def pack_set(model, H: np.ndarray, sigma_diag: np.ndarray, lo: tuple[float, ...]
     """
     n = H.shape[0]
     df = model.df
-    sensors = np.zeros((n, SENSOR_COLS))
-    sensors[:, SF] = model.sf
-    sensors[:, BIAS] = model.bias
-    sensors[:, LO] = lo
-    sensors[:, HI] = hi
-    sensors[list(model.idx), IN_SET] = 1.0
-    sensors[:, SIGMA_II] = sigma_diag
+    nw = len(thresholds.scales)
+    o_scales, o_mats, end = set_layout(n, df, nw)
+    packed = np.zeros(end)
+    fconst = span(packed, SET_PARTS["SET_FCONST"], n, nw)
+    sensors = span(packed, SET_PARTS["SET_SENSORS"], n, nw).reshape(SENSORS.SENSOR_COLS, n)
+    scales = packed[o_scales:o_mats].reshape(nw, SCALES.SCALE_COLS)
+    mats = packed[o_mats:end].reshape(3 * df + 3, n)
+    c = SENSORS
+    sensors[c.SF] = model.sf
+    sensors[c.BIAS] = model.bias
+    sensors[c.LO] = lo
+    sensors[c.HI] = hi
+    sensors[c.IN_SET, list(model.idx)] = 1.0
+    sensors[c.SIGMA_II] = sigma_diag
     cov = np.nan_to_num(np.asarray(model.cov, float))
-    sensors[:, H_P_H] = np.einsum("ia,ab,ib->i", H, cov, H)
-    sensors[:, AXIS0:AXIS0 + 3] = H
-    sensors[:, RHO_COEF0:RHO_COEF0 + 6] = model.cal_coef
+    sensors[c.H_P_H] = np.einsum("ia,ab,ib->i", H, cov, H)
+    sensors[c.AXIS0:c.AXIS0 + 3] = H.T
+    sensors[c.RHO_COEF0:c.RHO_COEF0 + 6] = np.asarray(model.cal_coef).T
     # the kernel's dense loops need zeros (+0.0) outside the set: ρ coefficients, V and G
     out_of_set = [i for i in range(n) if i not in model.idx]
     if model.jit_coef is not None:
-        sensors[:, JITTER_COEF] = model.jit_coef
-    sensors[out_of_set, RHO_COEF0:RHO_COEF0 + 7] = 0.0
-    nw = len(thresholds.scales)
-    scales = np.zeros((nw, SCALE_COLS))
-    scales[:, WINDOW] = thresholds.scales
-    scales[:, THRESHOLD] = model.thr
-    scales[:, CHI2_SCALE] = model.chi2_scale
-    scales[:, RHO_GAIN] = model.rho_gain
-    scales[:, OFFSET_GAIN] = model.offset_gain
-    scales[:, CLEAR_THRESHOLD] = [settings.clear_ratio * t for t in model.thr]
-    mats = np.zeros((3 * df + 3, n))
+        sensors[c.JITTER_COEF] = model.jit_coef
+    sensors[c.RHO_COEF0:c.JITTER_COEF + 1, out_of_set] = 0.0
+    s = SCALES
+    scales[:, s.WINDOW] = thresholds.scales
+    scales[:, s.THRESHOLD] = model.thr
+    scales[:, s.CHI2_SCALE] = model.chi2_scale
+    scales[:, s.RHO_GAIN] = model.rho_gain
+    scales[:, s.OFFSET_GAIN] = model.offset_gain
+    scales[:, s.CLEAR_THRESHOLD] = [settings.clear_ratio * t for t in model.thr]
     mats[:df] = model.V
     mats[df:df + 3] = model.G
     mats[df + 3:2 * df + 3, :df] = model.A
@@ -213,67 +359,42 @@ def pack_set(model, H: np.ndarray, sigma_diag: np.ndarray, lo: tuple[float, ...]
         unit = np.where(norms > 0, model.U / np.where(norms > 0, norms, 1.0), 0.0)
         mats[2 * df + 3:, list(model.idx)] = unit
     mats[:df + 3, out_of_set] = 0.0
-    fconst = np.zeros(F_SLOTS)
-    fconst[KAPPA] = model.kappa
-    fconst[BETA] = model.beta
-    fconst[NU] = thresholds.cusum_drift
-    fconst[CUSUM_H] = model.cusum_h
-    fconst[CUSUM_CLEAR] = settings.clear_ratio * model.cusum_h
+    f = FCONST
+    fconst[f.KAPPA] = model.kappa
+    fconst[f.BETA] = model.beta
+    fconst[f.NU] = thresholds.cusum_drift
+    fconst[f.CUSUM_H] = model.cusum_h
+    fconst[f.CUSUM_CLEAR] = settings.clear_ratio * model.cusum_h
     pl = model.pl
-    fconst[[PL_A, PL_B, PL_C, PL_D, PL_E]] = pl.a, pl.b, pl.c, pl.d, pl.e
-    fconst[STALE_TIMEOUT_S] = settings.stale_timeout_s
-    iconst = np.zeros(I_SLOTS, np.int64)
-    iconst[DF] = df
-    iconst[N_WINDOWS] = nw
-    iconst[HAS_CUSUM] = thresholds.detector != "windows"
-    iconst[CAPABILITY] = CAPABILITY_CODE[model.capability]
-    iconst[HAS_OMEGA] = model.capability != "none"
-    iconst[STUCK_COUNT] = settings.stuck_count
-    iconst[PERSISTENCE] = settings.persistence
-    iconst[CLEAR_SAMPLES] = settings.clear_samples
-    iconst[READMISSION] = bool(settings.readmission)
-    iconst[N_SENSORS] = n
+    fconst[[f.PL_A, f.PL_B, f.PL_C, f.PL_D, f.PL_E]] = pl.a, pl.b, pl.c, pl.d, pl.e
+    fconst[f.STALE_TIMEOUT_S] = settings.stale_timeout_s
+    fconst[f.READMIT_DWELL_S] = settings.readmit_dwell_s
+    fconst[f.READMIT_GATE] = settings.readmit_gate
+    i = ICONST
+    iconst = np.zeros(i.I_SLOTS, np.int64)
+    iconst[i.DF] = df
+    iconst[i.N_WINDOWS] = nw
+    iconst[i.HAS_CUSUM] = thresholds.detector != "windows"
+    iconst[i.CAPABILITY] = CAPABILITY_CODE[model.capability]
+    iconst[i.HAS_OMEGA] = model.capability != "none"
+    iconst[i.STUCK_COUNT] = settings.stuck_count
+    iconst[i.PERSISTENCE] = settings.persistence
+    iconst[i.CLEAR_SAMPLES] = settings.clear_samples
+    iconst[i.READMISSION] = bool(settings.readmission)
+    iconst[i.N_SENSORS] = n
     # persistent alarms go to the monitor's isolation test wherever it can tell hypotheses
     # apart at all (df ≥ 2): a set that isolates may exclude, one that only detects narrows
     # its suspects (fdi.monitor)
-    iconst[ASK_ISOLATE] = df >= 2 and model.capability in ("isolate", "detect")
-    fconst[READMIT_DWELL_S] = settings.readmit_dwell_s
-    o_scales, o_mats, end = set_layout(n, df, nw)
-    packed = np.zeros(end)
-    packed[:F_SLOTS] = fconst
-    packed[SET_ICONST0:SET_SENSORS0] = iconst
-    packed[SET_SENSORS0:o_scales] = sensors.T.ravel()      # one row per quantity
-    packed[o_scales:o_mats] = scales.ravel()
-    packed[o_mats:end] = mats.ravel()
-    return KernelSet(packed, packed[SET_SENSORS0:o_scales].reshape(SENSOR_COLS, n),
-                     packed[o_scales:o_mats].reshape(nw, SCALE_COLS),
-                     packed[o_mats:end].reshape(3 * df + 3, n), packed[:F_SLOTS], iconst)
-
-
-SENSOR_STATE_COLS = 4
-# rows the kernel compensates ahead (independent of the detector state; see fdi.kernel)
-BLOCK_ROWS = 32
-
-
-@register_jitable(inline="always")
-def state_layout(n: int, ring: int) -> tuple[int, int, int, int]:
-    """Offsets in the detector's float state of the CUSUM bank, the kernel's scratch
-    (y, p, z: n each; ω̂: 3; the ω̂ of the last completed sample and of the one before it:
-    3 each, at 3n + 3 and 3n + 6 after the scratch start; then (z, ρ) of :data:`BLOCK_ROWS` rows,
-    n + 1 each), the
-    windows and the end (``sensor`` starts at 0); the windows take (R + 1)·(n + 1) entries,
-    room for any parity dimension df ≤ n."""
-    o_cusum = n * SENSOR_STATE_COLS
-    o_scratch = o_cusum + 4 * n
-    o_windows = o_scratch + 3 * n + 9 + BLOCK_ROWS * (n + 1)
-    return o_cusum, o_scratch, o_windows, o_windows + (ring + 1) * (n + 1)
+    iconst[i.ASK_ISOLATE] = df >= 2 and model.capability in ("isolate", "detect")
+    span(packed, SET_PARTS["SET_ICONST"], n, nw)[:] = iconst
+    return KernelSet(packed, sensors, scales, mats, fconst, iconst)
 
 
 class DetectorState:
     """Mutable state of the recursion (see the module docstring for the layout).
 
     The float state is one array, ``values`` (the kernel takes it whole); ``sensor``,
-    ``cusum`` and ``windows`` are views of it, laid out by :func:`state_layout`.
+    ``cusum`` and ``windows`` are views of it, its parts in :data:`STATE_PARTS`.
 
     Parameters
     ----------
@@ -286,20 +407,22 @@ class DetectorState:
     def __init__(self, n: int, ring: int) -> None:
         self.n = n
         self.ring = ring
-        o_cusum, o_scratch, self._o_windows, end = state_layout(n, ring)
-        self.values = np.zeros(end)
-        self.sensor = self.values[:o_cusum].reshape(n, SENSOR_STATE_COLS)
-        self.sensor[:, LAST_RAW] = np.nan
-        self.sensor[:, LAST_VALID_T] = np.nan
-        self.sensor[:, GOOD_SINCE_T] = np.nan
-        self.cusum = self.values[o_cusum:o_scratch].reshape(4, n)
-        o_prev = o_scratch + 3 * n + 3
-        self.omega_prev = self.values[o_prev:o_prev + 3]
+        self.values = np.zeros(state_size(n, ring))
+        part = STATE_PARTS
+        self._o_windows = offset(part["STATE_WINDOWS"], n, 0)
+        self.sensor = span(self.values, part["STATE_SENSOR"], n, 0).reshape(
+            n, SENSOR_STATE.SENSOR_STATE_COLS)
+        self.sensor[:, SENSOR_STATE.LAST_RAW] = np.nan
+        self.sensor[:, SENSOR_STATE.LAST_VALID_T] = np.nan
+        self.sensor[:, SENSOR_STATE.GOOD_SINCE_T] = np.nan
+        self.cusum = span(self.values, part["STATE_CUSUM"], n, 0).reshape(CUSUM.CUSUM_ROWS, n)
+        self.omega_prev = span(self.values, part["SCRATCH_PREV"], n, 0)
         """ω̂ of the last completed sample (rad/s; NaN before the first): the jitter term's
         ω̇̂ = (ω̂_t − ω̂_{t−1})·fs (:mod:`fdi.kernel`)."""
-        self.values[o_prev:o_prev + 6] = np.nan       # and the ω̂ before it
-        self.counters = np.zeros(HEALTH0 + n, np.int64)
-        self.counters[RING_LEN] = ring
+        self.omega_prev[:] = np.nan
+        span(self.values, part["SCRATCH_BEFORE"], n, 0)[:] = np.nan   # and the ω̂ before it
+        self.counters = np.zeros(COUNTERS.HEALTH0 + n, np.int64)
+        self.counters[COUNTERS.RING_LEN] = ring
         self.new_set(0)
 
     def new_set(self, df: int) -> None:
@@ -309,8 +432,9 @@ class DetectorState:
         self.windows = self.values[o:o + (self.ring + 1) * (df + 1)].reshape(self.ring + 1,
                                                                              df + 1)
         self.cusum[:] = 0.0
-        c = self.counters
-        c[[RING_POS, WINDOW_COUNT, DETECTED, DETECTED_ROWS, ALARM_RUN, CLEAR_RUN]] = 0
+        c = COUNTERS
+        self.counters[[c.RING_POS, c.WINDOW_COUNT, c.DETECTED, c.DETECTED_ROWS, c.ALARM_RUN,
+                       c.CLEAR_RUN]] = 0
 
     @property
     def cumulative(self) -> np.ndarray:
@@ -319,7 +443,7 @@ class DetectorState:
 
     def window_sum(self, w: int) -> np.ndarray:
         """Σ z over the last ``w`` complete samples, shape (df,)."""
-        pos = int(self.counters[RING_POS]) - w
+        pos = int(self.counters[COUNTERS.RING_POS]) - w
         old = self.windows[pos % self.ring]
         cur = self.windows[self.ring]
         return cur[:-1] - old[:-1]
@@ -327,4 +451,4 @@ class DetectorState:
     def cusum_scores(self, m_idx: tuple[int, ...]) -> np.ndarray:
         """CUSUM statistic max(S⁺ − min S⁺, S⁻ − min S⁻) per healthy sensor."""
         c = self.cusum[:, list(m_idx)]
-        return np.maximum(c[S_UP] - c[MIN_UP], c[S_DOWN] - c[MIN_DOWN])
+        return np.maximum(c[CUSUM.S_UP] - c[CUSUM.MIN_UP], c[CUSUM.S_DOWN] - c[CUSUM.MIN_DOWN])

@@ -6,10 +6,13 @@ line makes (``rimu ingest`` → ``rimu calibrate --in-flight`` → ``rimu tune``
 ``docs/field-results.md`` (``docs/make_field_results.py``) and the slow test
 ``tests/thresholds/test_field_results.py``:
 
-- :func:`holdout_flight`, :func:`holdout_static`: split a recording in time, calibrate and
-  tune on one part at several targets, count alarm episodes on the other part outside the
-  out-of-envelope periods, both ways round; per target the expected count, the observed
-  count with its exact Poisson interval, and whether the length resolves the target;
+- :func:`holdout_flight`, :func:`holdout_static_set` (the static set through
+  ``rimu calibrate --static``; :func:`holdout_static` is the bench calibration of
+  :mod:`thresholds.realnoise` that ``docs/drift.md`` compares): split a recording in time,
+  calibrate and tune on one part at several targets, count alarm episodes on the other
+  part outside the out-of-envelope periods, both ways round; per target the expected
+  count, the observed count with its exact Poisson interval, and whether the length
+  resolves the target;
 - :func:`from_start`: calibrate on the whole flight and monitor it from the first sample, as
   a user does: events, excluded sensors, time in alarm, protection level;
 - :func:`inject_flight`: steps and ramps injected into each sensor of a real flight
@@ -51,10 +54,29 @@ from fdi.units import DPS
 from replay.faults import Fault
 from replay.flight_data import Flight
 
-__all__ = ["ALARM_EVENTS", "FIELD_SCHEMA", "FLIGHTS", "RESOLVE_EXPECTED", "TARGETS_PER_HOUR",
-           "alarm_episodes", "envelope_codes", "field_results", "flying_mask",
-           "from_start", "holdout_flight", "holdout_static", "inflight_calibration",
-           "inject_flight", "load_erle", "must_hold", "rate_row", "run_monitor", "split_flight"]
+__all__ = [
+    "ALARM_EVENTS",
+    "FIELD_SCHEMA",
+    "FLIGHTS",
+    "RESOLVE_EXPECTED",
+    "TARGETS_PER_HOUR",
+    "alarm_episodes",
+    "envelope_codes",
+    "field_results",
+    "flying_mask",
+    "from_start",
+    "holdout_flight",
+    "holdout_static",
+    "holdout_static_set",
+    "inflight_calibration",
+    "inject_flight",
+    "load_erle",
+    "load_static_set",
+    "must_hold",
+    "rate_row",
+    "run_monitor",
+    "split_flight",
+]
 
 FIELD_SCHEMA = "rimu.field-results/1"
 TARGETS_PER_HOUR = (1.0, 10.0, 100.0, 1000.0)
@@ -307,6 +329,56 @@ def holdout_static(t: np.ndarray, y: np.ndarray, names: tuple[str, ...],
             "envelope_source": "none (static bench recording)"}
 
 
+def load_static_set(folder: str | Path) -> Flight:
+    """The 4×MPU9250 recording as ``rimu ingest imu1_raw.mat … imu4_raw.mat`` makes it (gyro
+    and accelerometer triads of each IMU, one time base; no folder written)."""
+    from replay.ingest import align_streams, read_any
+    from replay.ingest.readers import merge_reads
+
+    folder = Path(folder)
+    read = merge_reads([read_any(folder / f"imu{k}_raw.mat", "auto", salvage=False)
+                        for k in range(1, 5)])
+    flight, _ = align_streams(read)
+    return flight
+
+
+def holdout_static_set(flight: Flight, targets: Sequence[float] = TARGETS_PER_HOUR, *,
+                       progress: Callable[[], None] | None = None) -> dict[str, Any]:
+    """The static set through the product's chain: ``rimu calibrate --static`` of one half
+    (:func:`calibration.inflight.static.calibrate_static`: alignment from gravity and the
+    shared motion, the residual's tail and parity drift models, the range its samples
+    covered), thresholds tuned on it, ``rimu monitor-file`` (:func:`run_monitor`: the
+    envelope decided online, isolation on) over the other half, both ways round; then the
+    whole record calibrated on itself at 1/h."""
+    from calibration.inflight.static import calibrate_static
+
+    first, second = split_flight(flight)
+    fs = flight.sample_rate_hz
+    rows = []
+    for name, fit_part, test_part in (("tune first half, count second", first, second),
+                                      ("tune second half, count first", second, first)):
+        cal = calibrate_static(fit_part)
+        for R in targets:
+            tu = _tune(cal, R)
+            thr = tu.thresholds
+            res = run_monitor(test_part, cal, thr)
+            row = _count(res, np.zeros(test_part.t.size, np.int64), fs, R, thr)
+            row["direction"] = name
+            row["detectable_dps"] = float(min(d.size_unit_value for d in tu.detectable))
+            row["variance_factor"] = list(thr.variance_factor)
+            rows.append(row)
+            if progress:
+                progress()
+    cal = calibrate_static(flight)
+    thr = _tune(cal, 1.0).thresholds
+    res = run_monitor(flight, cal, thr)
+    whole = _count(res, np.zeros(flight.t.size, np.int64), fs, 1.0, thr)
+    return {"rows": rows, "whole_record_1_per_hour": whole, "sample_rate_hz": fs,
+            "samples": int(flight.t.size), "duration_s": float(flight.t[-1] - flight.t[0]),
+            "calibration": "rimu calibrate --static (calibration.inflight.static)",
+            "envelope_source": "the monitoring chain (replay.chain), online"}
+
+
 # --------------------------------------------------------------------------- from start
 def _pl_median_dps(result: Any) -> float | None:
     pl = np.asarray(result.protection_level, float)
@@ -515,7 +587,6 @@ def field_results(data: str | Path, *, targets: Sequence[float] = TARGETS_PER_HO
     """
     from tqdm.auto import tqdm
 
-    from thresholds.realnoise import load_mpu9250_static
     from thresholds.select import select
 
     data = Path(data)
@@ -554,8 +625,8 @@ def field_results(data: str | Path, *, targets: Sequence[float] = TARGETS_PER_HO
         out["flights"][name] = rec
     t0 = time.perf_counter()
     mpu = data / "multi_imu_4x_mpu9250"
-    t, y, names = load_mpu9250_static(mpu)
-    out["static_4x_mpu9250"] = holdout_static(t, y, names, targets, progress=tick)
+    out["static_4x_mpu9250"] = holdout_static_set(load_static_set(mpu), targets,
+                                                  progress=tick)
     out["timing_s"]["4x mpu9250"] = time.perf_counter() - t0
     bar.close()
     out["summary"] = summarise(out)

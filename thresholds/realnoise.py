@@ -159,21 +159,11 @@ def static_calibration(y: np.ndarray, fs: float, names: tuple[str, ...],
     gs = SensorSet("gyro", tuple(sensors), cov, groups, tuple(np.eye(3) for _ in groups),
                    table)
     resid = y - mean
-    if tails:
-        from calibration.tails import fit_tail_model
-        from fdi.reconstruction import inflation_terms
+    if tails or drift:
+        from calibration.residual_models import with_residual_models
 
-        rho, kappa, beta = inflation_terms(
-            gs.H, gs.scale_factors, gs.biases, cov,
-            np.array([c.input_error_cov for c in sensors]), bsd, np.zeros(n), fs, y)
-        gs = replace(gs, tails=fit_tail_model(
-            resid, gs.H, cov, fs, rho=rho, kappa=kappa, beta=beta,
-            source="static residual (y - mean), relative to the monitor's threshold inflation"))
-    if drift:
-        from calibration.drift import fit_drift_model
-
-        gs = replace(gs, drift=fit_drift_model(resid, gs.H, cov, fs,
-                                                source="static residual (y - mean)"))
+        gs = with_residual_models(gs, resid, y, fs, tails=tails, drift=drift,
+                                  source="static residual (y - mean)")
     return Calibration("static", {"gyro": gs}, fs, extra={"source": "static recording"})
 
 

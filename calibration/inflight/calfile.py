@@ -34,11 +34,10 @@ import numpy as np
 from calibration.inflight.fit import InflightFit, decompose
 from calibration.inflight.offset_check import SIGN_CONVENTION
 from calibration.inflight.timing import flight_identity
+from calibration.residual_models import with_residual_models
 from calibration.residuals import allan_table
-from calibration.tails import fit_tail_model
 from fdi.calfile import AllanTable, Calibration, SensorCal, SensorSet, tangent_basis
 from fdi.envelope import covered_rate, covered_specific_force
-from fdi.reconstruction import inflation_terms
 from fdi.units import DPH, DPS, MS, RAW_UNITS
 from replay.envelope import flight_accel
 from replay.flight_data import Flight
@@ -119,7 +118,7 @@ def sensor_residuals(fit: InflightFit, flight: Flight) -> np.ndarray:
 
 
 def calibration_from_fit(fit: InflightFit, flight: Flight, *, tails: bool = True,
-                         jitter: bool = True) -> Calibration:
+                         jitter: bool = True, drift_model: bool = False) -> Calibration:
     """The ``rimu.calibration/3`` calibration of a flight's gyro set (module docstring).
 
     With ``tails`` the residual's tail model per window scale is fitted and kept
@@ -127,7 +126,11 @@ def calibration_from_fit(fit: InflightFit, flight: Flight, *, tails: bool = True
     its sensors (``SensorCal.timing_jitter``) and the tail model is measured relative to the
     monitor's threshold inflation (calibration uncertainty and jitter,
     :func:`fdi.reconstruction.inflation_terms`); without it the jitter is 0 and the tails
-    are those of the bare statistic (the behaviour before the jitter term).
+    are those of the bare statistic (the behaviour before the jitter term). With
+    ``drift_model`` the slow drift of the residual's whitened parity is kept too
+    (:mod:`calibration.drift`; ``rimu calibrate --in-flight --drift-model``): ``tune`` then
+    covers the drift expected over its horizon, at a price in detectable size
+    (``docs/drift.md``).
     """
     noise = noise_split(fit)
     groups = flight.imu_groups()
@@ -165,31 +168,20 @@ def calibration_from_fit(fit: InflightFit, flight: Flight, *, tails: bool = True
                 raw_unit=flight.raw_unit, scale_factor_unit=sfu, bias_unit="deg/h",
                 residual_rms=rms, timing_jitter=jit, timing_jitter_sd=jit_sd))
     H = np.array([c.axis for c in sensors])
-    model = None
-    if tails:
-        ctx: dict[str, object] = {}
-        src = "in-flight alignment residual (samples the fit used)"
-        if jitter:
-            rho, kappa, beta = inflation_terms(
-                H, np.array([c.scale_factor for c in sensors]),
-                np.array([c.bias for c in sensors]), cov,
-                np.array([c.input_error_cov for c in sensors]),
-                np.array([c.bias_sd for c in sensors]),
-                np.array([c.timing_jitter for c in sensors]), fit.sample_rate_hz, flight.raw)
-            ctx = {"rho": rho, "kappa": kappa, "beta": beta}
-            src += ", relative to the monitor's threshold inflation (with timing jitter)"
-        model = fit_tail_model(sensor_residuals(fit, flight), H, cov, fit.sample_rate_hz,
-                               source=src, **ctx)
     sf = np.array([c.scale_factor for c in sensors])
     b = np.array([c.bias for c in sensors])
     covered = covered_rate(H, list(groups.values()), np.asarray(flight.raw, float) * sf - b,
                            fit.used)
     acc = flight_accel(flight)
     force = covered_specific_force(acc, fit.used) if acc is not None else None
-    return Calibration(configuration=f"{len(groups)} IMUs in flight", sets={
-        "gyro": SensorSet("gyro", tuple(sensors), cov, allan=_allan(fit, noise),
-                          tails=model, validated_rate=covered,
-                          validated_specific_force=force)},
+    gs = SensorSet("gyro", tuple(sensors), cov, allan=_allan(fit, noise),
+                   validated_rate=covered, validated_specific_force=force)
+    if tails or drift_model:
+        gs = with_residual_models(gs, sensor_residuals(fit, flight), flight.raw,
+                                  fit.sample_rate_hz, tails=tails, drift=drift_model,
+                                  inflation=jitter,
+                                  source="in-flight alignment residual (samples the fit used)")
+    return Calibration(configuration=f"{len(groups)} IMUs in flight", sets={"gyro": gs},
         sample_rate_hz=fit.sample_rate_hz, extra={"method": INFLIGHT_METHOD,
                                                  "source": fit.source,
                                                  "inflight": fit_summary(fit, flight)})

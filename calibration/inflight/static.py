@@ -33,10 +33,13 @@ from scipy import stats
 from scipy.spatial.transform import Rotation
 
 from calibration.inflight.calfile import _sf_unit
+from calibration.residual_models import with_residual_models
 from calibration.residuals import allan_table
 from fdi.calfile import Calibration, SensorCal, SensorSet, tangent_basis
+from fdi.envelope import covered_rate, covered_specific_force
 from fdi.errors import CalibrationError, ConfigError
 from fdi.units import DPS
+from replay.envelope import flight_accel
 from replay.flight_data import Flight
 
 __all__ = ["BLOCKS", "SCALE_FACTOR_TOLERANCE", "STATIC_METHOD", "attribute_drift",
@@ -301,9 +304,15 @@ def calibrate_static(flight: Flight, *, reference: str | None = None, alpha: flo
                "drift_attribution": attr_dps, "alpha": alpha,
                "bias_dps": (b / DPS).tolist(), "bias_dps_sd": (bias_sd / DPS).tolist(),
                "samples": int(x.shape[0]), "duration_s": float(t[-1] - t[0])}
-    return Calibration(configuration=f"{len(groups)} IMUs at rest", sets={
-        "gyro": SensorSet("gyro", tuple(sensors), cov,
-                          allan=allan_table(xs, flight.sample_rate_hz))},
+    H = np.array([c.axis for c in sensors])
+    acc_all = flight_accel(flight)
+    gs = with_residual_models(
+        SensorSet("gyro", tuple(sensors), cov, allan=allan_table(xs, flight.sample_rate_hz),
+                  validated_rate=covered_rate(H, list(groups.values()), x - b),
+                  validated_specific_force=(covered_specific_force(acc_all[ok])
+                                            if acc_all is not None else None)),
+        xs, x, flight.sample_rate_hz, source="static residual (raw - mean)")
+    return Calibration(configuration=f"{len(groups)} IMUs at rest", sets={"gyro": gs},
         sample_rate_hz=flight.sample_rate_hz,
         extra={"method": STATIC_METHOD, "source": flight.source, "static": summary})
 

@@ -321,10 +321,11 @@ def generate_c(cal: Calibration, thresholds: Thresholds | None = None, *, kind: 
         "PARITY_LEN": str(max(df_max, 1)), "RING": str(ring), "N_SETS": str(1 << n),
         "FLOAT32": "1" if precision == "float32" else "0",
         "THRESHOLDS_NOTE": _c_comment(thresholds_note or _describe(thresholds)),
-        "ONES": ", ".join(["1"] * n), "TABLES": tables,
+        "ONES": ", ".join(["1"] * n), "TABLES": tables, "SLOTS": S.c_enums(),
+        "COUNTERS": str(S.HEALTH0 + n),
     }
     state_bytes = (8 * 4 * n + real * (4 * n + (ring + 1) * (df_max + 1) + 3 * n + 9 + n + 1)
-                   + 8 * (15 + n) + 8 * 4 + 3 + 8 + 4 + n)
+                   + 8 * (S.HEALTH0 + n) + 8 * 4 + 3 + 8 + 4 + n)
     ops = _ops_per_step(n, df_max, nw, cusum, n_terms)
     files = {"rimu_monitor.h": _fill(_template("rimu_monitor.h.in"), values),
              "rimu_monitor.c": _fill(_template("rimu_monitor.c.in"), values)}
@@ -395,6 +396,7 @@ def _settings_table(st: MonitorSettings, th: Thresholds) -> str:
             ("sample rate the thresholds assume", f"{th.sample_rate_hz:g} Hz"),
             ("persistence", st.persistence), ("clear_ratio", st.clear_ratio),
             ("clear_samples", st.clear_samples), ("readmission", st.readmission),
-            ("readmit_dwell_s", st.readmit_dwell_s), ("stale_timeout_s", st.stale_timeout_s),
+            ("readmit_dwell_s", st.readmit_dwell_s), ("readmit_gate", st.readmit_gate),
+            ("stale_timeout_s", st.stale_timeout_s),
             ("stuck_count", st.stuck_count), ("wrong_exclusion", st.wrong_exclusion)]
     return "\n".join(f"| {k} | {v} |" for k, v in rows)

@@ -183,6 +183,7 @@ def _check_modes(args: argparse.Namespace) -> None:
              "--sample-rate-hz": args.sample_rate_hz,
              "--reference": getattr(args, "reference", None),
              "--no-time-offset": getattr(args, "no_time_offset", False) or None,
+             "--drift-model": getattr(args, "drift_model", False) or None,
              "--model": None if getattr(args, "model", "auto") == "auto" else args.model,
              "--effects": getattr(args, "effects", None),
              "--no-denoise": args.no_denoise or None,
@@ -195,11 +196,11 @@ def _check_modes(args: argparse.Namespace) -> None:
                      *session_only))
     refuse_together("rimu calibrate", given, "--static",
                     ("SESSION", "--ferraris", "--sections", "--sample-rate-hz", "--model",
-                     "--no-time-offset", *session_only))
+                     "--no-time-offset", "--drift-model", *session_only))
     refuse_together("rimu calibrate", given, "--ferraris", ("SESSION", *session_only))
     if given["--reference"] is not None and not (given["--in-flight"] or given["--static"]):
         raise ConfigError("rimu calibrate: --reference applies to --in-flight and --static only")
-    for opt in ("--no-time-offset", "--model", "--report"):
+    for opt in ("--no-time-offset", "--model", "--report", "--drift-model"):
         if given[opt] is not None and not given["--in-flight"]:
             raise ConfigError(f"rimu calibrate: {opt} applies to --in-flight only")
     for opt in ("--sections", "--sample-rate-hz"):

@@ -32,6 +32,10 @@ def configure_options(p: argparse.ArgumentParser) -> None:
                         "'rotation', or 'auto' (full when the motion excites it; default)")
     p.add_argument("--no-time-offset", action="store_true",
                    help="with --in-flight: do not fit the time offsets")
+    p.add_argument("--drift-model", action="store_true",
+                   help="with --in-flight: also measure the slow drift of the residual's "
+                        "parity; rimu tune then covers the drift over its horizon (fewer "
+                        "alarms on a drifting set, larger detectable sizes: docs/drift.md)")
     p.add_argument("--report", metavar="DIR",
                    help="with --in-flight: write report.md and PNG plots (residual before "
                         "and after, the offset of each piece, the periods left out) into DIR")
@@ -102,7 +106,8 @@ def run(args: argparse.Namespace) -> int:
     fit = fit_inflight(flight, reference=getattr(args, "reference", None),
                        model=getattr(args, "model", "auto"),
                        time_offset=not getattr(args, "no_time_offset", False))
-    cal = calibration_from_fit(fit, flight)
+    cal = calibration_from_fit(fit, flight,
+                               drift_model=bool(getattr(args, "drift_model", False)))
     with atomic_file(out) as tmp:
         cal.save(tmp)
     print(summary_text(cal))

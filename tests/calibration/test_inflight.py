@@ -277,3 +277,30 @@ def test_calibration_states_the_range_its_samples_covered() -> None:
     # the same flight turning 1.5x faster leaves the calibrated range
     fast = flight_envelope(replace(f, raw=f.raw * 1.5), cal)
     assert (fast & RANGE).any()
+
+
+def test_drift_model_is_measured_on_request_and_costs_nothing_on_a_white_flight(tmp_path):
+    """``drift_model=True`` (``--drift-model``) keeps the parity drift model of the fit's
+    residual (rimu.calibration/4); on a simulated flight with white noise it finds no
+    excess, so ``tune`` states the same detectable sizes as without it."""
+    from fdi.calfile import load_calibration
+    from thresholds.tune import tune
+
+    f = _flight(seed=5)
+    fit = fit_inflight(f)
+    plain = calibration_from_fit(fit, f)
+    cal = calibration_from_fit(fit, f, drift_model=True)
+    assert plain.gyro.drift is None
+    d = cal.gyro.drift
+    from calibration.inflight.calfile import sensor_residuals
+
+    used = int(np.all(np.isfinite(sensor_residuals(fit, f)), axis=1).sum())
+    assert d is not None and d.df == 3 and d.samples == used
+    assert not any(d.excess), f"white flight: excess {d.excess}"
+    cal.save(tmp_path / "c.json")
+    assert '"rimu.calibration/4"' in (tmp_path / "c.json").read_text()
+    back = load_calibration(tmp_path / "c.json")
+    np.testing.assert_allclose(back.gyro.drift.excess, d.excess, err_msg="drift excess")
+    a = [x.size_unit_value for x in tune(plain, false_alarms_per_hour=10.0).detectable]
+    b = [x.size_unit_value for x in tune(cal, false_alarms_per_hour=10.0).detectable]
+    np.testing.assert_allclose(b, a, rtol=1e-9, err_msg="detectable sizes")

@@ -683,3 +683,18 @@ def test_same_answers_on_erle_flights(build, name, inject):
     assert envelope_seen                      # the envelope path is exercised
     types = {e.type for c in calls for e in c[4].events}
     assert ({"detected", "disagree"} <= types) == inject, types
+
+
+@pytest.mark.parametrize("gate", [9.0, 100.0])
+def test_readmit_gate_follows_the_setting(build, gate):
+    """The re-admission gate is a table constant of the module (fconst[READMIT_GATE]): with a
+    wide gate the biased sensor of test_monitor's gate case is re-admitted, with the
+    default it is not, and the C decides as the monitor does either way."""
+    from test_monitor import gate_case
+
+    cal, t, raw = gate_case()
+    case = Case(cal, t, raw, settings=MonitorSettings(readmission=True, readmit_dwell_s=3.0,
+                                                      readmit_gate=gate))
+    res = case.python()
+    assert any(e.type == "readmitted" for e in res.events) == (gate > 9.0)
+    assert_same(res, case.c(build))

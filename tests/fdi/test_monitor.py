@@ -11,6 +11,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from fdi.detector import default_thresholds
+from fdi.errors import ConfigError
 from fdi.monitor import Monitor
 from fdi.settings import MonitorSettings
 from thresholds.synthetic import draw_truth, raw_samples, synthetic_calibration
@@ -315,3 +316,37 @@ def test_step_and_run_identical_with_readmission(chunk):
     assert_identical(answers, res)
     types = [(e.type, e.sensor) for e in res.events]
     assert ("readmitted", 2) in types and ("isolated", 5) in types, types
+
+
+def gate_case():
+    """Sensor 2: a NaN at row 100 isolates it, and from then on it carries a 6σ bias (about
+    4.9 standard deviations of its residual against the reconstruction, whose variance is
+    Σ_ii + h_iᵀPh_i ≈ 1.5 Σ_ii on the cone)."""
+    cal, t, raw, _ = scenario("cone6", 1500, [(2, 100, 6.0)], seed=8)
+    raw[100, 1] = np.nan
+    return cal, t, raw
+
+
+@pytest.mark.parametrize("gate, readmitted", [(9.0, False), (100.0, True)])
+def test_readmit_gate_decides_readmission(gate, readmitted):
+    """The re-admission gate is the setting's: at the default 9 (3σ) the biased sensor never
+    behaves for the 3 s dwell (a sample passes with probability ~3 %), at 100 (10σ) it
+    nearly always does (a sample fails with probability ~1e-6) and is re-admitted; stepping
+    and the block agree."""
+    cal, t, raw = gate_case()
+    mset = MonitorSettings(readmission=True, readmit_dwell_s=3.0, readmit_gate=gate)
+    res = Monitor(cal, settings=mset).run(t, raw, parity=True)
+    a = Monitor(cal, settings=mset)
+    assert_identical([a.step(t[i], raw[i]) for i in range(len(t))], res)
+    types = [(e.type, e.sensor) for e in res.events]
+    assert ("health", 2) in types, types
+    assert (("readmitted", 2) in types) == readmitted, types
+
+
+def test_readmit_gate_default_and_checks():
+    """Default 9: a 3σ gate on the squared standardised residual; it must be positive and
+    finite."""
+    assert MonitorSettings().readmit_gate == 9.0
+    for bad in (0.0, -1.0, float("nan"), float("inf")):
+        with pytest.raises(ConfigError, match="readmit_gate"):
+            MonitorSettings(readmit_gate=bad)
