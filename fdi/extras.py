@@ -16,7 +16,8 @@ and :attr:`fdi.calfile.Calibration.extras` gives them:
   χ²/dof (``extra.step_residual_chi2_dof``), :class:`ResidualStep` per set
   (``extra.residual_steps``), :class:`EarthRateRecord` (``extra.earth_rate_fit``),
   :class:`GyroBias` (``extra.gyro_bias``) and the first-order sd of the calibrated parity
-  matrix per set (``extra.parity_calibrated_sd``, ``extra.parity_accel_calibrated_sd``).
+  matrix per set (``extra.parity_calibrated_sd``, ``extra.parity_accel_calibrated_sd``);
+- :class:`FerrarisRecord` (``extra.ferraris``): a Ferraris calibration's settings and fits.
 
 The JSON layout is unchanged (the file keeps its keys and units: ``time_offset_ms`` in the
 file is :attr:`ImuTiming.time_offset_s` here), so every file written before these types
@@ -37,14 +38,14 @@ from fdi.errors import ConfigError
 from fdi.fileio import Fields
 from fdi.units import DEG, DPH, DPS, MS, input_unit_factor
 
-__all__ = ["SD_FACTOR_KEYS", "CalibrationExtras", "EarthRateRecord", "FlightIdentity",
-           "GyroBias", "ImuAlignment", "ImuTiming", "InflightAlignment", "InflightTiming",
-           "LeftOut", "Method", "NoiseFit", "NoiseModel", "OffsetCheck", "OffsetConsistency",
-           "OffsetPiece", "RateTest", "ResidualStep", "StaticAlignment", "extras_from_dict",
-           "offset_check_from_dict"]
+__all__ = ["SD_FACTOR_KEYS", "CalibrationExtras", "EarthRateRecord", "FerrarisRecord",
+           "FlightIdentity", "GyroBias", "ImuAlignment", "ImuTiming", "InflightAlignment",
+           "InflightTiming", "LeftOut", "Method", "NoiseFit", "NoiseModel", "OffsetCheck",
+           "OffsetConsistency", "OffsetPiece", "RateTest", "ResidualStep", "StaticAlignment",
+           "extras_from_dict", "offset_check_from_dict"]
 
 _PREFIX = "extra"
-_TYPED = ("earth_rate_fit", "gyro_bias", "inflight", "method", "noise_model",
+_TYPED = ("earth_rate_fit", "ferraris", "gyro_bias", "inflight", "method", "noise_model",
           "parity_accel_calibrated_sd", "parity_calibrated_sd", "rate_test", "residual_steps",
           "source", "static", "step_residual_chi2_dof", "warnings")
 """Keys of ``extra`` read into types (the others are kept as they are, unchecked)."""
@@ -786,6 +787,65 @@ def _parity_sd(r: Fields) -> dict[str, tuple[tuple[float, ...], ...]]:
     return out
 
 
+# -- Ferraris ---------------------------------------------------------------------------
+@dataclass(frozen=True)
+class FerrarisRecord:
+    """The settings and checks of a Ferraris calibration (``extra.ferraris``, degrees in the
+    file).
+
+    Attributes
+    ----------
+    rotation : float
+        Nominal rotation about each axis (rad; imucal's −2π: clockwise seen from above).
+    gravity : float
+        Local gravity (m/s²).
+    position_sd, angle_sd : float
+        Stated sd of the static positions and of the rotation angles (rad).
+    earth_rate_in_sd : bool
+        The Earth rate is counted as an uncertainty of the gyro means.
+    latitude : float or None
+        Latitude (rad) whose vertical Earth rate was removed (None: not removed).
+    g_sensitivity_raw_per_m_s2, g_sensitivity_raw_per_m_s2_sd : tuple of tuple of float
+        Gyro g-sensitivity per sensor, raw units per m/s² (shape (n, 3)), and its sd.
+    chi2_dof : dict of str to tuple of float
+        Per sensor kind, χ²/dof of the static fits.
+    chi2_dof_dof : int
+        Their degrees of freedom per sensor.
+    rotation_dof : int
+        Spare degrees of freedom of the rotations.
+    """
+
+    rotation: float
+    gravity: float
+    position_sd: float
+    angle_sd: float
+    earth_rate_in_sd: bool = True
+    latitude: float | None = None
+    g_sensitivity_raw_per_m_s2: tuple[tuple[float, ...], ...] = ()
+    g_sensitivity_raw_per_m_s2_sd: tuple[tuple[float, ...], ...] = ()
+    chi2_dof: Mapping[str, tuple[float, ...]] = field(default_factory=dict)
+    chi2_dof_dof: int = 0
+    rotation_dof: int = 0
+
+
+def _ferraris(r: Fields) -> FerrarisRecord | None:
+    if "ferraris" not in r:
+        return None
+    f = r.mapping("ferraris")
+    lat = f.number("latitude_deg", None)
+    c = f.mapping("chi2_dof", {})
+    return FerrarisRecord(
+        rotation=f.number("rotation_deg") * DEG, gravity=f.number("gravity_m_s2", positive=True),
+        position_sd=f.number("position_sd_deg", nonnegative=True) * DEG,
+        angle_sd=f.number("angle_sd_deg", nonnegative=True) * DEG,
+        earth_rate_in_sd=f.boolean("earth_rate_in_sd", True),
+        latitude=None if lat is None else lat * DEG,
+        g_sensitivity_raw_per_m_s2=_matrix(f, "g_sensitivity_raw_per_m_s2"),
+        g_sensitivity_raw_per_m_s2_sd=_matrix(f, "g_sensitivity_raw_per_m_s2_sd"),
+        chi2_dof={k: _floats(c, k) for k in c.keys() if k != "dof"},
+        chi2_dof_dof=c.integer("dof", 0, lo=0), rotation_dof=f.integer("rotation_dof", 0, lo=0))
+
+
 # -- all of them ------------------------------------------------------------------------
 @dataclass(frozen=True)
 class CalibrationExtras:
@@ -816,6 +876,8 @@ class CalibrationExtras:
     parity_sd : dict of str to tuple of tuple of float
         Per sensor kind, the first-order sd of the calibrated parity matrix, shape (n-3, n)
         (dimensionless; ``()`` for a set of three).
+    ferraris : FerrarisRecord or None
+        Ferraris calibrations only.
     """
 
     inflight: InflightTiming | None = None
@@ -831,6 +893,7 @@ class CalibrationExtras:
     earth_rate_fit: EarthRateRecord | None = None
     gyro_bias: GyroBias | None = None
     parity_sd: Mapping[str, tuple[tuple[float, ...], ...]] = field(default_factory=dict)
+    ferraris: FerrarisRecord | None = None
 
     def time_offsets_s(self) -> dict[str, float]:
         """``{IMU group: τ (s)}`` of an in-flight calibration (empty for any other)."""
@@ -863,4 +926,4 @@ def extras_from_dict(extra: Mapping[str, Any], path: str = "<calibration>"
                              step_residual_chi2_dof=_floats(r, "step_residual_chi2_dof"),
                              residual_steps=_residual_steps(r),
                              earth_rate_fit=_earth_rate(r), gyro_bias=_gyro_bias(r),
-                             parity_sd=_parity_sd(r))
+                             parity_sd=_parity_sd(r), ferraris=_ferraris(r))

@@ -56,12 +56,13 @@ def summary_lines(cal) -> list[str]:
     """Readable result: per sensor SF, bias, axis with sds, imucal's matrices."""
     import numpy as np
 
-    from fdi.units import input_unit_factor
+    from fdi.units import DEG, input_unit_factor
 
-    fe = cal.extra["ferraris"]
-    out = [f"Ferraris calibration of {cal.extras.source} ({cal.sample_rate_hz:g} Hz; "
-           f"rotation {fe['rotation_deg']:g} deg, position sd {fe['position_sd_deg']:g} deg, "
-           f"angle sd {fe['angle_sd_deg']:g} deg, gravity {fe['gravity_m_s2']:g} m/s^2)"]
+    ex = cal.extras
+    fe = ex.ferraris
+    out = [f"Ferraris calibration of {ex.source} ({cal.sample_rate_hz:g} Hz; "
+           f"rotation {fe.rotation / DEG:g} deg, position sd {fe.position_sd / DEG:g} deg, "
+           f"angle sd {fe.angle_sd / DEG:g} deg, gravity {fe.gravity:g} m/s^2)"]
     for kind, per in (("gyro", "deg/s"), ("accel", "m/s^2")):
         s = cal.sets[kind]
         f = input_unit_factor(per) if kind == "gyro" else 1.0
@@ -75,17 +76,16 @@ def summary_lines(cal) -> list[str]:
                 f"   b {c.bias / c.scale_factor:+.5g} ± {c.bias_sd / c.scale_factor:.2g}"
                 f"   axis [{' '.join(f'{x:+.5f}' for x in c.axis)}]"
                 f"   misalignment ({m[0]:+.2f} ± {msd[0]:.2f}, {m[1]:+.2f} ± {msd[1]:.2f})")
-    k, ksd = (np.asarray(fe[x]) for x in ("g_sensitivity_raw_per_m_s2",
-                                           "g_sensitivity_raw_per_m_s2_sd"))
+    k, ksd = fe.g_sensitivity_raw_per_m_s2, fe.g_sensitivity_raw_per_m_s2_sd
     out.append("gyro g-sensitivity, counts per m/s^2 (imucal K_ga):")
     out.extend("  " + "  ".join(f"{v:+.5f} ± {e:.5f}" for v, e in zip(r, re, strict=True))
                for r, re in zip(k, ksd, strict=True))
-    c2 = fe["chi2_dof"]
-    out.append("static fits, chi2/dof (2 dof per sensor): accel "
-               + " ".join(f"{x:.2f}" for x in c2["accel"]) + "; gyro "
-               + " ".join(f"{x:.2f}" for x in c2["gyro"])
+    c2 = fe.chi2_dof
+    out.append(f"static fits, chi2/dof ({fe.chi2_dof_dof} dof per sensor): accel "
+               + " ".join(f"{x:.2f}" for x in c2.get("accel", ())) + "; gyro "
+               + " ".join(f"{x:.2f}" for x in c2.get("gyro", ()))
                + "; rotations: 0 spare dof (their sd rests on --angle-sd-deg)")
-    out.extend(f"warning: {w}" for w in cal.extras.warnings)
+    out.extend(f"warning: {w}" for w in ex.warnings)
     return out
 
 

@@ -255,3 +255,25 @@ def test_offset_check_from_its_record_equals_the_loaded_one():
     rec = _doc("inflight")["extra"]["inflight"]["imus"]["imu3"]["time_offset_check"]
     loaded = load_calibration(DATA / OLD["inflight"][0]).extras.inflight.imus["imu3"].check
     assert offset_check_from_dict(rec) == loaded and offset_check_from_dict({}) is None
+
+
+def test_ferraris_record_in_si_and_its_bad_fields():
+    from fdi.units import DEG
+
+    rec = {"rotation_deg": -360.0, "gravity_m_s2": 9.81, "position_sd_deg": 1.0,
+           "angle_sd_deg": 0.5, "earth_rate_in_sd": True, "latitude_deg": 49.6,
+           "g_sensitivity_raw_per_m_s2": [[0.1, 0.2, 0.3]],
+           "g_sensitivity_raw_per_m_s2_sd": [[0.01, 0.02, 0.03]],
+           "chi2_dof": {"accel": [1.1], "gyro": [0.9], "dof": 2},
+           "imucal": {"gyro": {}, "accel": {}}, "rotation_dof": 0}
+    fe = extras_from_dict({"ferraris": rec}).ferraris
+    assert fe.rotation == -360.0 * DEG and fe.angle_sd == 0.5 * DEG
+    assert fe.latitude == 49.6 * DEG and fe.gravity == 9.81
+    assert fe.g_sensitivity_raw_per_m_s2 == ((0.1, 0.2, 0.3),)
+    assert fe.chi2_dof == {"accel": (1.1,), "gyro": (0.9,)} and fe.chi2_dof_dof == 2
+    for key, bad, field in (("gravity_m_s2", -1.0, "extra.ferraris.gravity_m_s2"),
+                            ("rotation_deg", None, "extra.ferraris.rotation_deg"),
+                            ("chi2_dof", {"dof": 1.5}, "extra.ferraris.chi2_dof.dof")):
+        with pytest.raises(FileFormatError) as err:
+            extras_from_dict({"ferraris": {**rec, key: bad}}, "cal.json")
+        assert err.value.field == field
