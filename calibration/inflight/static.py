@@ -26,6 +26,7 @@ and Allan table come from each IMU's rates with its mean removed.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
@@ -38,7 +39,8 @@ from calibration.residuals import allan_table
 from fdi.calfile import Calibration, SensorCal, SensorSet, tangent_basis
 from fdi.envelope import covered_rate, covered_specific_force
 from fdi.errors import CalibrationError, ConfigError
-from fdi.units import DPS
+from fdi.extras import StaticAlignment, extras_from_dict
+from fdi.units import DEG, DPS
 from replay.envelope import flight_accel
 from replay.flight_data import Flight
 
@@ -317,31 +319,36 @@ def calibrate_static(flight: Flight, *, reference: str | None = None, alpha: flo
         extra={"method": STATIC_METHOD, "source": flight.source, "static": summary})
 
 
-def static_text(doc: dict[str, Any]) -> str:
-    """Readable summary of the ``extra.static`` block."""
-    lines = [f"static calibration against {doc['reference']} ({doc['samples']} samples, "
-             f"{doc['duration_s']:.0f} s at rest)"]
-    for g, r in doc["imus"].items():
-        lines.append(f"  {g}: rotation onto {doc['reference']} [" + ", ".join(
-            f"{a:+.2f} ± {s:.2f}" for a, s in zip(r["rotation_deg"], r["rotation_deg_sd"],
-                                                  strict=True)) + "] deg (rotation vector)")
+def static_text(doc: StaticAlignment | Mapping[str, Any]) -> str:
+    """Readable summary of a static calibration's record (:attr:`fdi.extras.
+    CalibrationExtras.static`, or the ``extra.static`` block as written)."""
+    if isinstance(doc, Mapping):
+        doc = extras_from_dict({"static": doc}).static
+    lines = [f"static calibration against {doc.reference} ({doc.samples} samples, "
+             f"{doc.duration_s:.0f} s at rest)"]
+    for g, r in doc.imus.items():
+        lines.append(f"  {g}: rotation onto {doc.reference} [" + ", ".join(
+            f"{a / DEG:+.2f} ± {s / DEG:.2f}" for a, s in zip(r.rotation, r.rotation_sd,
+                                                              strict=True))
+            + "] deg (rotation vector)")
         lines.append("      bias relative to the reference [" + ", ".join(
-            f"{a:+.4f}" for a in r["relative_bias_dps"]) + "] deg/s")
-        sig = [f"{a} {d:+.4f} ± {s:.4f} deg/s (z {z:+.1f}, p {p:.2g})" for a, d, s, z, p in zip(
-            "xyz", r["relative_drift_dps"], r["relative_drift_dps_sd"], r["relative_drift_z"],
-            r["relative_drift_p"], strict=True)]
+            f"{a / DPS:+.4f}" for a in r.relative_bias) + "] deg/s")
+        sig = [f"{a} {d / DPS:+.4f} ± {s / DPS:.4f} deg/s (z {z:+.1f}, p {p:.2g})"
+               for a, d, s, z, p in zip("xyz", r.relative_drift, r.relative_drift_sd,
+                                        r.relative_drift_z, r.relative_drift_p, strict=True)]
         lines.append("      drift relative to the reference over the record: " + "; ".join(sig))
-    a = doc["drift_attribution"]
-    lines.append("  drift shared by every IMU relative to the reference (= minus the "
-                 "reference's own): [" + ", ".join(
-                     f"{c:+.4f} ± {s:.4f}" for c, s in zip(a["common"], a["common_sd"],
-                                                          strict=True))
-                 + f"] deg/s, p {a['common_p']:.2g}; the IMUs differ from it with chi2 "
-                   f"p {a['consistent_p']:.2g}")
-    for g, v in a["own"].items():
-        lines.append(f"    {g} relative to the reference: [" + ", ".join(
-            f"{d:+.4f} (z {z:+.1f})" for d, z in zip(v["drift"], v["z"], strict=True))
-            + "] deg/s")
-    lines.append(f"  {a['statement']}")
-    lines.extend(f"  note: {n}" for n in doc["notes"])
+    a = doc.drift_attribution
+    if a is not None:
+        lines.append("  drift shared by every IMU relative to the reference (= minus the "
+                     "reference's own): [" + ", ".join(
+                         f"{c / DPS:+.4f} ± {s / DPS:.4f}"
+                         for c, s in zip(a.common, a.common_sd, strict=True))
+                     + f"] deg/s, p {a.common_p:.2g}; the IMUs differ from it with chi2 "
+                       f"p {a.consistent_p:.2g}")
+        for g, v in a.own.items():
+            lines.append(f"    {g} relative to the reference: [" + ", ".join(
+                f"{d / DPS:+.4f} (z {z:+.1f})" for d, z in zip(v.drift, v.z, strict=True))
+                + "] deg/s")
+        lines.append(f"  {a.statement}")
+    lines.extend(f"  note: {n}" for n in doc.notes)
     return "\n".join(lines)

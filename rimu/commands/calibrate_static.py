@@ -33,6 +33,6 @@ def run(args: argparse.Namespace) -> int:
     cal = calibrate_static(flight, reference=getattr(args, "reference", None))
     with atomic_file(out) as tmp:
         cal.save(tmp)
-    print(static_text(cal.extra["static"]))
+    print(static_text(cal.extras.static))
     print(f"wrote {out}")
     return 0

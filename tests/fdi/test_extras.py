@@ -277,3 +277,40 @@ def test_ferraris_record_in_si_and_its_bad_fields():
         with pytest.raises(FileFormatError) as err:
             extras_from_dict({"ferraris": {**rec, key: bad}}, "cal.json")
         assert err.value.field == field
+
+
+def test_static_record_in_si_and_its_bad_fields():
+    from fdi.units import DEG, DPS
+
+    rec = {"reference": "imu1", "imus": {"imu2": {
+        "rotation_deg": [1.0, 2.0, 3.0], "rotation_deg_sd": [0.1, 0.1, 0.1],
+        "relative_bias_dps": [0.5, 0.0, -0.5], "relative_drift_dps": [0.01, 0.0, 0.0],
+        "relative_drift_dps_sd": [0.003, 0.003, 0.003], "relative_drift_z": [3.3, 0.0, 0.0],
+        "relative_drift_p": [0.001, 1.0, 1.0], "drift_block_s": 10.0, "drift_hac_lags": 4}},
+        "alignment_full": True, "notes": ["n"], "alpha": 0.01,
+        "drift_attribution": {"common": [0.01, 0, 0], "common_sd": [0.003, 0.003, 0.003],
+                              "common_p": 0.01, "consistent_chi2": 0.0, "consistent_dof": 0,
+                              "consistent_p": 1.0, "statement": "s", "unit": "deg/s",
+                              "own": {"imu2": {"drift": [0.01, 0, 0], "z": [3.3, 0, 0],
+                                               "p_value": 0.01}}},
+        "bias_dps": [0.0] * 9, "bias_dps_sd": [0.001] * 9, "samples": 100, "duration_s": 1.0}
+    st = extras_from_dict({"static": rec}).static
+    imu = st.imus["imu2"]
+    assert imu.rotation == (1.0 * DEG, 2.0 * DEG, 3.0 * DEG)
+    assert imu.relative_bias == (0.5 * DPS, 0.0, -0.5 * DPS)
+    assert imu.relative_drift_p == (0.001, 1.0, 1.0) and imu.drift_hac_lags == 4
+    assert st.drift_attribution.own["imu2"].drift == (0.01 * DPS, 0.0, 0.0)
+    assert st.drift_attribution.statement == "s" and st.samples == 100
+    for path, bad, field in ((("imus", "imu2", "relative_drift_z"), "x",
+                              "extra.static.imus.imu2.relative_drift_z"),
+                             (("drift_attribution", "own", "imu2"), [],
+                              "extra.static.drift_attribution.own.imu2"),
+                             (("samples",), -1, "extra.static.samples")):
+        doc = copy.deepcopy(rec)
+        node = doc
+        for k in path[:-1]:
+            node = node[k]
+        node[path[-1]] = bad
+        with pytest.raises(FileFormatError) as err:
+            extras_from_dict({"static": doc}, "cal.json")
+        assert err.value.field == field
