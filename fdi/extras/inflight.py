@@ -1,0 +1,383 @@
+"""Typed records of an in-flight calibration (``extra.inflight``): the time offsets with their
+checks and the flight they belong to (:class:`InflightTiming`), and the alignment of each IMU
+to the reference (:class:`InflightAlignment`). Times in s (``_ms`` in the file), angles in
+rad, rates in rad/s (``_dph``, ``_dps`` in the file)."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from fdi.extras.read import floats, matrix, ms_field, plain, strings
+from fdi.fileio import Fields
+from fdi.units import DPH, DPS
+
+__all__ = ["FlightIdentity", "ImuAlignment", "ImuTiming", "InflightAlignment", "InflightTiming",
+           "LeftOut", "OffsetCheck", "OffsetConsistency", "OffsetPiece",
+           "offset_check_from_dict", "read_inflight_alignment", "read_inflight_timing"]
+
+
+# -- in-flight timing -------------------------------------------------------------------
+@dataclass(frozen=True)
+class FlightIdentity:
+    """The flight an in-flight calibration was fitted on (``extra.inflight.flight``).
+
+    Attributes
+    ----------
+    source : str
+        File name of the source log.
+    samples : int
+        Number of samples.
+    t0_s, t1_s : float
+        First and last sample time (s).
+    fingerprint : str
+        16 hex digits of a sha256 of the times and rates (rounded to 1e-9).
+    """
+
+    source: str
+    samples: int
+    t0_s: float
+    t1_s: float
+    fingerprint: str
+
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON record."""
+        return {"source": self.source, "samples": self.samples, "t0_s": self.t0_s,
+                "t1_s": self.t1_s, "fingerprint": self.fingerprint}
+
+
+@dataclass(frozen=True)
+class OffsetPiece:
+    """The time offset fitted on one piece of the flight alone.
+
+    Attributes
+    ----------
+    t0_s, t1_s : float
+        Span of the piece (s).
+    offset_s, sd_s : float or None
+        Its offset and sd (s); None when the piece could not be fitted (``note`` says why).
+    model : str
+        The alignment model used on the piece (``""`` when not fitted).
+    note : str
+        Why the piece was left out (``""`` when fitted).
+    """
+
+    t0_s: float
+    t1_s: float
+    offset_s: float | None
+    sd_s: float | None
+    model: str = ""
+    note: str = ""
+
+
+@dataclass(frozen=True)
+class OffsetConsistency:
+    """The χ² test that the pieces' offsets are one number.
+
+    Attributes
+    ----------
+    mean_s, sd_internal_s, sd_external_s : float
+        Weighted mean of the pieces' offsets, its sd from their sds and from their scatter (s).
+    chi2, chi2_dof, p_value, alpha : float
+        The statistic, per degree of freedom, its p-value and the level it is tested at.
+    dof, pieces_used : int
+    """
+
+    mean_s: float
+    sd_internal_s: float
+    sd_external_s: float
+    chi2: float
+    dof: int
+    chi2_dof: float
+    p_value: float
+    alpha: float
+    pieces_used: int
+
+
+@dataclass(frozen=True)
+class OffsetCheck:
+    """The sds and the piece-consistency test of one IMU's time offset
+    (``extra.inflight.imus.<imu>.time_offset_check``, written by
+    :func:`calibration.inflight.offset_check.check_offset`).
+
+    Attributes
+    ----------
+    sd_s : float
+        The sd reported (s): the largest of the three below.
+    sd_hac_s, sd_bootstrap_s, sd_pieces_s : float
+        HAC, block-bootstrap and piece-scatter sds (s).
+    block_s : float
+        Bootstrap block length (s).
+    pieces : tuple of OffsetPiece
+    consistency : OffsetConsistency or None
+        None with fewer than two pieces fitted.
+    consistent, widened : bool
+        The pieces agree at ``alpha``; the sd is wider than the HAC sd.
+    sign : str
+        The sign convention of the offsets (one line).
+    """
+
+    sd_s: float
+    sd_hac_s: float
+    sd_bootstrap_s: float
+    sd_pieces_s: float
+    block_s: float
+    pieces: tuple[OffsetPiece, ...]
+    consistency: OffsetConsistency | None
+    consistent: bool
+    widened: bool
+    sign: str = ""
+
+
+@dataclass(frozen=True)
+class ImuTiming:
+    """The timing of one IMU of an in-flight calibration (``extra.inflight.imus.<imu>``).
+
+    Attributes
+    ----------
+    time_offset_s : float or None
+        The fitted offset τ (s; file: ``time_offset_ms``): the IMU's sample at t matches the
+        reference's at ``t + τ``. None when the record has none.
+    time_offset_sd_s : float
+        Its sd (s; file: ``time_offset_ms_sd``; 0 when not recorded).
+    timing_jitter_s : float or None
+        sd of the sampling-time error relative to the reference (s; file:
+        ``timing_jitter_ms``; None when not recorded).
+    timing_jitter_sd_s : float
+        Its uncertainty (s; file: ``timing_jitter_ms_sd``; 0 when not recorded).
+    check : OffsetCheck or None
+        The offset's checks (file: ``time_offset_check``; None when not recorded).
+    """
+
+    time_offset_s: float | None
+    time_offset_sd_s: float = 0.0
+    timing_jitter_s: float | None = None
+    timing_jitter_sd_s: float = 0.0
+    check: OffsetCheck | None = None
+
+
+@dataclass(frozen=True)
+class InflightTiming:
+    """What an in-flight calibration records about timing (``extra.inflight``).
+
+    Attributes
+    ----------
+    reference : str
+        The IMU the others are aligned to (``""`` when not recorded).
+    time_offset_sign : str
+        The sign convention of the offsets, one line (``""`` when not recorded).
+    flight : FlightIdentity or None
+        The flight the offsets were fitted on (None when not recorded).
+    imus : dict of str to ImuTiming
+        Per IMU group other than the reference.
+    """
+
+    reference: str = ""
+    time_offset_sign: str = ""
+    flight: FlightIdentity | None = None
+    imus: Mapping[str, ImuTiming] = field(default_factory=dict)
+
+    def time_offsets_s(self) -> dict[str, float]:
+        """``{group: τ (s)}`` of the IMUs with a fitted offset."""
+        return {g: t.time_offset_s for g, t in self.imus.items()
+                if t.time_offset_s is not None}
+
+
+def _flight(r: Fields) -> FlightIdentity | None:
+    if "flight" not in r:
+        return None
+    f = r.mapping("flight")
+    return FlightIdentity(source=f.string("source", "", nonempty=False),
+                          samples=f.integer("samples", 0, lo=0),
+                          t0_s=f.number("t0_s", 0.0, finite=False),
+                          t1_s=f.number("t1_s", 0.0, finite=False),
+                          fingerprint=f.string("fingerprint", "", nonempty=False))
+
+
+def _piece(r: Fields) -> OffsetPiece:
+    return OffsetPiece(t0_s=r.number("t0_s", finite=False), t1_s=r.number("t1_s", finite=False),
+                       offset_s=ms_field(r, "offset_ms", None), sd_s=ms_field(r, "sd_ms", None),
+                       model=r.string("model", "", nonempty=False),
+                       note=r.string("note", "", nonempty=False))
+
+
+def _consistency(r: Fields) -> OffsetConsistency | None:
+    if "consistency" not in r:
+        return None
+    c = r.mapping("consistency")
+    return OffsetConsistency(
+        mean_s=ms_field(c, "mean_ms", np.nan), sd_internal_s=ms_field(c, "sd_internal_ms", np.nan),
+        sd_external_s=ms_field(c, "sd_external_ms", np.nan),
+        chi2=c.number("chi2", np.nan, finite=False), dof=c.integer("dof", 0, lo=0),
+        chi2_dof=c.number("chi2_dof", np.nan, finite=False),
+        p_value=c.number("p_value", np.nan, finite=False),
+        alpha=c.number("alpha", np.nan, finite=False),
+        pieces_used=c.integer("pieces_used", 0, lo=0))
+
+
+def _check(r: Fields) -> OffsetCheck | None:
+    if "time_offset_check" not in r or not r.get("time_offset_check"):
+        return None
+    c = r.mapping("time_offset_check")
+    return OffsetCheck(
+        sd_s=ms_field(c, "sd_ms", np.nan), sd_hac_s=ms_field(c, "sd_hac_ms", np.nan),
+        sd_bootstrap_s=ms_field(c, "sd_bootstrap_ms", np.nan),
+        sd_pieces_s=ms_field(c, "sd_pieces_ms", 0.0),
+        block_s=c.number("block_s", np.nan, finite=False),
+        pieces=tuple(_piece(p) for p in c.tables("pieces", [], nonempty=False)),
+        consistency=_consistency(c), consistent=c.boolean("consistent", True),
+        widened=c.boolean("widened", False), sign=c.string("sign", "", nonempty=False))
+
+
+def offset_check_from_dict(rec: Mapping[str, Any], path: str = "<offset check>"
+                           ) -> OffsetCheck | None:
+    """An :class:`OffsetCheck` from its JSON record (what
+    :func:`calibration.inflight.offset_check.check_offset` returns); None for an empty one.
+
+    Raises
+    ------
+    FileFormatError
+        A field of the wrong type, named.
+    """
+    return _check(Fields({"time_offset_check": plain(rec)}, path))
+
+
+def _imu_timing(r: Fields) -> ImuTiming:
+    return ImuTiming(time_offset_s=ms_field(r, "time_offset_ms", None),
+                     time_offset_sd_s=ms_field(r, "time_offset_ms_sd", 0.0),
+                     timing_jitter_s=ms_field(r, "timing_jitter_ms", None),
+                     timing_jitter_sd_s=ms_field(r, "timing_jitter_ms_sd", 0.0),
+                     check=_check(r))
+
+
+def read_inflight_timing(r: Fields) -> InflightTiming | None:
+    """The timing part of ``extra.inflight`` (None when absent)."""
+    if "inflight" not in r:
+        return None
+    f = r.mapping("inflight")
+    imus = f.mapping("imus", {})
+    return InflightTiming(
+        reference=f.string("reference", "", nonempty=False),
+        time_offset_sign=f.string("time_offset_sign", "", nonempty=False),
+        flight=_flight(f), imus={g: _imu_timing(imus.mapping(g)) for g in imus.keys()})
+
+
+@dataclass(frozen=True)
+class LeftOut:
+    """A stretch of the flight the in-flight fit left out (``extra.inflight.left_out[k]``).
+
+    Attributes
+    ----------
+    t0_s, t1_s : float
+        Its span (s).
+    reason, detail : str
+        Why (a short name and one line).
+    """
+
+    t0_s: float
+    t1_s: float
+    reason: str = ""
+    detail: str = ""
+
+
+@dataclass(frozen=True)
+class ImuAlignment:
+    """The fitted alignment of one IMU to the reference (``extra.inflight.imus.<imu>``).
+
+    The model is ``y_j(t) = A_j · y_ref(t + τ_j) + c_j``; ``A_j ≈ I + [θ]× + scale and
+    non-orthogonality`` (:func:`calibration.inflight.fit.decompose`). Vectors are x, y, z;
+    empty when the file does not record them.
+
+    Attributes
+    ----------
+    model : str
+        ``"full"``, ``"rotation"``, ...: the alignment model fitted.
+    A, A_sd : tuple of tuple of float
+        The relative gain matrix (3×3, dimensionless) and its sds.
+    rotation, rotation_sd : tuple of float
+        Small-angle rotation θ onto the reference (rad).
+    scale, scale_sd : tuple of float
+        Diagonal of ``A − I`` (fraction).
+    nonorthogonality, nonorthogonality_sd : tuple of float
+        Off-diagonal symmetric part (rad).
+    bias, bias_sd : tuple of float
+        ``c_j`` (rad/s; file: ``bias_dph``, ``bias_dph_sd``).
+    residual_rms : tuple of float
+        RMS of the fit's residual (rad/s; file: ``residual_rms_dps``).
+    residual_lag1_autocorrelation : tuple of float
+    hac_lags : int
+        Lags of the HAC covariance.
+    samples : int
+        Samples of the fit's residual.
+    notes : tuple of str
+    """
+
+    model: str = ""
+    A: tuple[tuple[float, ...], ...] = ()
+    A_sd: tuple[tuple[float, ...], ...] = ()
+    rotation: tuple[float, ...] = ()
+    rotation_sd: tuple[float, ...] = ()
+    scale: tuple[float, ...] = ()
+    scale_sd: tuple[float, ...] = ()
+    nonorthogonality: tuple[float, ...] = ()
+    nonorthogonality_sd: tuple[float, ...] = ()
+    bias: tuple[float, ...] = ()
+    bias_sd: tuple[float, ...] = ()
+    residual_rms: tuple[float, ...] = ()
+    residual_lag1_autocorrelation: tuple[float, ...] = ()
+    hac_lags: int = 0
+    samples: int = 0
+    notes: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class InflightAlignment:
+    """What an in-flight calibration records about the alignment (``extra.inflight``; its
+    timing is :class:`InflightTiming`).
+
+    Attributes
+    ----------
+    imus : dict of str to ImuAlignment
+        Per IMU group other than the reference.
+    left_out : tuple of LeftOut
+    samples_used, samples, samples_nonfinite : int
+        Samples the fit used, of the flight, and left out for a non-finite rate.
+    """
+
+    imus: Mapping[str, ImuAlignment] = field(default_factory=dict)
+    left_out: tuple[LeftOut, ...] = ()
+    samples_used: int = 0
+    samples: int = 0
+    samples_nonfinite: int = 0
+
+
+def _imu_alignment(r: Fields) -> ImuAlignment:
+    return ImuAlignment(
+        model=r.string("model", "", nonempty=False), A=matrix(r, "A"), A_sd=matrix(r, "A_sd"),
+        **{k: floats(r, k) for k in ("rotation", "rotation_sd", "scale", "scale_sd",
+                                      "nonorthogonality", "nonorthogonality_sd",
+                                      "residual_lag1_autocorrelation")},
+        bias=floats(r, "bias_dph", scale=DPH), bias_sd=floats(r, "bias_dph_sd", scale=DPH),
+        residual_rms=floats(r, "residual_rms_dps", scale=DPS),
+        hac_lags=r.integer("hac_lags", 0, lo=0), samples=r.integer("samples", 0, lo=0),
+        notes=strings(r, "notes"))
+
+
+def read_inflight_alignment(r: Fields) -> InflightAlignment | None:
+    """The alignment part of ``extra.inflight`` (None when absent)."""
+    if "inflight" not in r:
+        return None
+    f = r.mapping("inflight")
+    imus = f.mapping("imus", {})
+    left = tuple(LeftOut(t0_s=e.number("t0_s", finite=False), t1_s=e.number("t1_s", finite=False),
+                         reason=e.string("reason", "", nonempty=False),
+                         detail=e.string("detail", "", nonempty=False))
+                 for e in f.tables("left_out", [], nonempty=False))
+    return InflightAlignment(
+        imus={g: _imu_alignment(imus.mapping(g)) for g in imus.keys()}, left_out=left,
+        samples_used=f.integer("samples_used", 0, lo=0), samples=f.integer("samples", 0, lo=0),
+        samples_nonfinite=f.integer("samples_nonfinite", 0, lo=0))
+
