@@ -265,6 +265,7 @@ def read_inflight_timing(r: Fields) -> InflightTiming | None:
         flight=_flight(f), imus={g: _imu_timing(imus.mapping(g)) for g in imus.keys()})
 
 
+# -- in-flight alignment ----------------------------------------------------------------
 @dataclass(frozen=True)
 class LeftOut:
     """A stretch of the flight the in-flight fit left out (``extra.inflight.left_out[k]``).

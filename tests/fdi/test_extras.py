@@ -314,3 +314,17 @@ def test_static_record_in_si_and_its_bad_fields():
         with pytest.raises(FileFormatError) as err:
             extras_from_dict({"static": doc}, "cal.json")
         assert err.value.field == field
+
+
+def test_cli_refuses_a_bad_typed_entry_in_one_line(tmp_path, capsys):
+    from rimu.cli import main
+
+    doc = copy.deepcopy(_doc("inflight"))
+    doc["extra"]["inflight"]["imus"]["imu2"]["time_offset_ms"] = "4.99"
+    bad = tmp_path / "cal.json"
+    bad.write_text(json.dumps(doc), encoding="utf-8")
+    capsys.readouterr()
+    assert main(["parity", "cone6", "--misalignment", str(bad)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "extra.inflight.imus.imu2.time_offset_ms" in err[0], err
+    assert str(bad) in err[0] and "Traceback" not in err[0]
