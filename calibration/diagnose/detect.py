@@ -36,7 +36,7 @@ line frequencies, mountings), under the session's fitted null noise:
     ``a5²·⟨z⊥, z⊥⟩_V/σ_w²`` at the fitted (ρ, τ) does not.
 
 A pair whose power is below :data:`POWER` is a *limit* of the session: the verdict cannot
-be "adequate" (``"effects not ruled out"``, :func:`calibration.diagnose.run.adequacy_record`).
+be "adequate" (``"effects not ruled out"``, :func:`calibration.diagnose.adequacy.decide`).
 Each limit names the effect, the sensor, the size that could hide (``a5``, in the effect's
 unit), the parameter it would move by 5 σ, the power there, and the size from which the
 test finds it with probability :data:`POWER`.
