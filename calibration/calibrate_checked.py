@@ -176,32 +176,3 @@ def _refit_warnings(fit: Refit, datas: Mapping[str, KindData]) -> list[str]:
                            f"white noise explains (chi2/dof {chi[i]:.2f}, 0.1 % limit "
                            f"{lim:.2f}): run rimu diagnose")
     return out
-
-
-def _refit_warnings(fit: Refit, datas: Mapping[str, KindData]) -> list[str]:
-    """The warnings of a calibration refit with effects.
-
-    The white-noise fit's whiteness warnings (:func:`calibration.fit_residuals.
-    whiteness_warnings`) describe the model without the effects; for the sensors the refit
-    changed they are stale and are replaced by the step-mean check on the refit residual
-    (:func:`calibration.diagnose.metrics.step_chi2_dof`, at the same 0.1 % level).
-    """
-    cal = fit.calibration
-    touched = {(t.kind, t.sensor) for t in cal.effects}
-    stale = {f"{kind} {s.name}: " for kind, i in touched
-             for s in (cal.sets[kind].sensors[i],)}
-    out = [w for w in cal.extra.get("warnings", [])
-           if not (any(w.startswith(p) for p in stale) and "white noise explains" in w)]
-    for kind, d in datas.items():
-        if kind not in fit.residual:
-            continue
-        chi = step_chi2_dof(d, fit.residual[kind], fit.n_params[kind])
-        for i in sorted(i for k, i in touched if k == kind):
-            dof = max(len(d.steps) - int(fit.n_params[kind][i]), 1)
-            lim = float(scipy.stats.chi2.isf(WARN_ALPHA, dof)) / dof
-            if chi[i] > lim:
-                out.append(f"{kind} {cal.sets[kind].sensors[i].name}: with the effect terms "
-                           "fitted, the step means of the residuals still scatter more than "
-                           f"white noise explains (chi2/dof {chi[i]:.2f}, 0.1 % limit "
-                           f"{lim:.2f}): run rimu diagnose")
-    return out
