@@ -31,8 +31,7 @@ effects and no adequacy record; it is migrated on the next save)::
      "effects": [{"name": "bias_drift", "kind": "gyro", "sensor": 2,      # 1-based in files
                   "estimate": 3.1, "estimate_sd": 0.4, "unit": "deg/h",
                   "inputs": ["time"], "params": {...}}, ...],
-     "adequacy": {"verdict": "adequate" | "adequate within sequence limits" |
-                             "effects not ruled out" | "effects suspected", ...details}
+     "adequacy": {"verdict": one of fdi.adequacy.VERDICTS, ...details}
 
 Version 3 adds one optional top-level key, the residual's tail per window scale (a ``/2``
 file loads without it; :mod:`fdi.tails`, ``docs/noise-tails.md``)::
@@ -87,6 +86,7 @@ from typing import Any
 
 import numpy as np
 
+from fdi.adequacy import VERDICTS
 from fdi.drift import DriftModel, drift_model_from_fields
 from fdi.errors import ConfigError
 from fdi.fileio import Fields, read_json_object, to_jsonable
@@ -368,9 +368,8 @@ class Calibration:
     effects : tuple of EffectTerm
         Terms of the extended model (empty: the plain model).
     adequacy : dict or None
-        The model-adequacy verdict (``{"verdict": "adequate" | "adequate within sequence
-        limits" | "effects not ruled out" | "effects suspected", ...}``), None when not
-        assessed.
+        The model-adequacy verdict (``{"verdict": ..., ...}``, one of
+        :data:`fdi.adequacy.VERDICTS`), None when not assessed.
     """
 
     configuration: str
@@ -669,8 +668,7 @@ def _adequacy(r: Fields) -> dict[str, Any] | None:
     a = r.mapping("adequacy", None)
     if a is None:
         return None
-    a.choice("verdict", ("adequate", "adequate within sequence limits",
-                         "effects not ruled out", "effects suspected"))
+    a.choice("verdict", VERDICTS)
     doc = dict(a.doc)
     a.accept(*doc)
     a.finish()
