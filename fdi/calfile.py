@@ -563,30 +563,21 @@ def calibration_from_dict(doc: Mapping[str, Any], path: str = "<calibration>") -
 
 def _tails(r: Fields, sets: dict[str, SensorSet]) -> dict[str, SensorSet]:
     """``residual_tails``: the tail model per kind (``/3``, optional)."""
-    from dataclasses import replace
-
-    t = r.mapping("residual_tails", None)
-    if t is None:
-        return sets
-    out = dict(sets)
-    for kind in sets:
-        sub = t.mapping(kind, None)
-        if sub is None:
-            continue
-        model = tail_model_from_fields(sub)
-        if model.df > sets[kind].n:
-            raise sub.error("df", f"{model.df} parity dimensions for {sets[kind].n} {kind} "
-                            "sensors")
-        out[kind] = replace(sets[kind], tails=model)
-    t.finish(accept=sets)
-    return out
+    return _parity_models(r, sets, "residual_tails", tail_model_from_fields, "tails")
 
 
 def _drift(r: Fields, sets: dict[str, SensorSet]) -> dict[str, SensorSet]:
     """``parity_drift``: the drift model per kind (``/4``, optional)."""
+    return _parity_models(r, sets, "parity_drift", drift_model_from_fields, "drift")
+
+
+def _parity_models(r: Fields, sets: dict[str, SensorSet], key: str,
+                   parse: Any, attr: str) -> dict[str, SensorSet]:
+    """A per-kind model of the parity (``df`` dimensions) under ``key``, parsed by
+    ``parse`` into ``SensorSet.<attr>``."""
     from dataclasses import replace
 
-    t = r.mapping("parity_drift", None)
+    t = r.mapping(key, None)
     if t is None:
         return sets
     out = dict(sets)
@@ -594,11 +585,11 @@ def _drift(r: Fields, sets: dict[str, SensorSet]) -> dict[str, SensorSet]:
         sub = t.mapping(kind, None)
         if sub is None:
             continue
-        model = drift_model_from_fields(sub)
+        model = parse(sub)
         if model.df > sets[kind].n:
             raise sub.error("df", f"{model.df} parity dimensions for {sets[kind].n} {kind} "
                             "sensors")
-        out[kind] = replace(sets[kind], drift=model)
+        out[kind] = replace(sets[kind], **{attr: model})
     t.finish(accept=sets)
     return out
 
