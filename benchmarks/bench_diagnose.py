@@ -22,7 +22,8 @@ import dataclasses
 from _common import RESULTS, header, spread, timings, write_results
 
 from calibration.calibrate import calibrate
-from calibration.diagnose import assess, calibrate_checked, diagnose
+from calibration.calibrate_checked import calibrate_checked
+from calibration.diagnose import assess, diagnose
 from calibration.presets import preset
 from calibration.simulate import simulate_session
 from fdi.units import DPH

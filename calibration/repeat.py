@@ -320,7 +320,7 @@ def repeat_sessions(sessions: Sequence[Session], *, alpha: float = 0.01,
         sessions must stack (ConfigError naming the session and field otherwise); False:
         no stacking.
     detectability : bool
-        Passed to :func:`calibration.diagnose.calibrate_checked` (False: no "effects not
+        Passed to :func:`calibration.calibrate_checked.calibrate_checked` (False: no "effects not
         ruled out" limits; faster).
     calibrations : sequence of Calibration, optional
         The sessions' calibrations when already made (otherwise ``calibrate_checked``).
@@ -335,7 +335,7 @@ def repeat_sessions(sessions: Sequence[Session], *, alpha: float = 0.01,
         Fewer than two sessions, sessions of different configurations, or ``stack=True``
         with sessions of different sequences.
     """
-    from calibration.diagnose.checked import calibrate_checked
+    from calibration.calibrate_checked import calibrate_checked
 
     if len(sessions) < 2:
         raise ConfigError("rimu repeat: give at least two sessions to compare, got "

@@ -21,7 +21,7 @@ gain vector's), and whose noise ``n̄`` is the mean of independent noises:
 - a repeating effect ``e(t)`` → ``e(t)``; one whose size varies between runs → its mean.
 
 So the stacked noise is inside the family the adequacy check of
-:func:`calibration.diagnose.calibrate_checked` fits (white + Gauss-Markov, levels and τc
+:func:`calibration.calibrate_checked.calibrate_checked` fits (white + Gauss-Markov, levels and τc
 re-estimated), its tests keep their level on the stack, and the non-centrality of a
 repeating effect grows N-fold (both noise variances /N, the effect unchanged). A
 run-to-run difference of bias, scale factor or misalignment is not an effect: it only moves

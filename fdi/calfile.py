@@ -31,8 +31,7 @@ effects and no adequacy record; it is migrated on the next save)::
      "effects": [{"name": "bias_drift", "kind": "gyro", "sensor": 2,      # 1-based in files
                   "estimate": 3.1, "estimate_sd": 0.4, "unit": "deg/h",
                   "inputs": ["time"], "params": {...}}, ...],
-     "adequacy": {"verdict": "adequate" | "adequate within sequence limits" |
-                             "effects not ruled out" | "effects suspected", ...details}
+     "adequacy": {"verdict": one of fdi.adequacy.VERDICTS, ...details}
 
 Version 3 adds one optional top-level key, the residual's tail per window scale (a ``/2``
 file loads without it; :mod:`fdi.tails`, ``docs/noise-tails.md``)::
@@ -93,6 +92,7 @@ from typing import Any
 
 import numpy as np
 
+from fdi.adequacy import VERDICTS
 from fdi.drift import DriftModel, drift_model_from_fields
 from fdi.errors import ConfigError
 from fdi.extras import CalibrationExtras, extras_from_dict
@@ -376,9 +376,8 @@ class Calibration:
     effects : tuple of EffectTerm
         Terms of the extended model (empty: the plain model).
     adequacy : dict or None
-        The model-adequacy verdict (``{"verdict": "adequate" | "adequate within sequence
-        limits" | "effects not ruled out" | "effects suspected", ...}``), None when not
-        assessed.
+        The model-adequacy verdict (``{"verdict": ..., ...}``, one of
+        :data:`fdi.adequacy.VERDICTS`), None when not assessed.
     """
 
     configuration: str
@@ -584,30 +583,21 @@ def calibration_from_dict(doc: Mapping[str, Any], path: str = "<calibration>") -
 
 def _tails(r: Fields, sets: dict[str, SensorSet]) -> dict[str, SensorSet]:
     """``residual_tails``: the tail model per kind (``/3``, optional)."""
-    from dataclasses import replace
-
-    t = r.mapping("residual_tails", None)
-    if t is None:
-        return sets
-    out = dict(sets)
-    for kind in sets:
-        sub = t.mapping(kind, None)
-        if sub is None:
-            continue
-        model = tail_model_from_fields(sub)
-        if model.df > sets[kind].n:
-            raise sub.error("df", f"{model.df} parity dimensions for {sets[kind].n} {kind} "
-                            "sensors")
-        out[kind] = replace(sets[kind], tails=model)
-    t.finish(accept=sets)
-    return out
+    return _parity_models(r, sets, "residual_tails", tail_model_from_fields, "tails")
 
 
 def _drift(r: Fields, sets: dict[str, SensorSet]) -> dict[str, SensorSet]:
     """``parity_drift``: the drift model per kind (``/4``, optional)."""
+    return _parity_models(r, sets, "parity_drift", drift_model_from_fields, "drift")
+
+
+def _parity_models(r: Fields, sets: dict[str, SensorSet], key: str,
+                   parse: Any, attr: str) -> dict[str, SensorSet]:
+    """A per-kind model of the parity (``df`` dimensions) under ``key``, parsed by
+    ``parse`` into ``SensorSet.<attr>``."""
     from dataclasses import replace
 
-    t = r.mapping("parity_drift", None)
+    t = r.mapping(key, None)
     if t is None:
         return sets
     out = dict(sets)
@@ -615,11 +605,11 @@ def _drift(r: Fields, sets: dict[str, SensorSet]) -> dict[str, SensorSet]:
         sub = t.mapping(kind, None)
         if sub is None:
             continue
-        model = drift_model_from_fields(sub)
+        model = parse(sub)
         if model.df > sets[kind].n:
             raise sub.error("df", f"{model.df} parity dimensions for {sets[kind].n} {kind} "
                             "sensors")
-        out[kind] = replace(sets[kind], drift=model)
+        out[kind] = replace(sets[kind], **{attr: model})
     t.finish(accept=sets)
     return out
 
@@ -689,8 +679,7 @@ def _adequacy(r: Fields) -> dict[str, Any] | None:
     a = r.mapping("adequacy", None)
     if a is None:
         return None
-    a.choice("verdict", ("adequate", "adequate within sequence limits",
-                         "effects not ruled out", "effects suspected"))
+    a.choice("verdict", VERDICTS)
     doc = dict(a.doc)
     a.accept(*doc)
     a.finish()

@@ -276,6 +276,26 @@ def holdout_flight(flight: Flight, targets: Sequence[float] = TARGETS_PER_HOUR, 
             "split_at_s": float(second.t[0]), "samples": int(flight.t.shape[0])}
 
 
+def _static_rows(cal: Calibration, targets: Sequence[float], direction: str, fs: float,
+                 n: int, progress: Callable[[], None] | None,
+                 monitor: Callable[[Calibration, Any], Any]) -> list[dict[str, Any]]:
+    """One held-out row per target: thresholds tuned on ``cal``, ``monitor(cal, thr)`` over
+    the other part (``n`` samples), alarms counted with the detectable size and variance
+    factors beside."""
+    rows = []
+    for R in targets:
+        tu = _tune(cal, R)
+        thr = tu.thresholds
+        row = _count(monitor(cal, thr), np.zeros(n, np.int64), fs, R, thr)
+        row["direction"] = direction
+        row["detectable_dps"] = float(min(d.size_unit_value for d in tu.detectable))
+        row["variance_factor"] = list(thr.variance_factor)
+        rows.append(row)
+        if progress:
+            progress()
+    return rows
+
+
 def holdout_static(t: np.ndarray, y: np.ndarray, names: tuple[str, ...],
                    targets: Sequence[float] = TARGETS_PER_HOUR, *,
                    progress: Callable[[], None] | None = None, tails: bool = True,
@@ -309,17 +329,8 @@ def holdout_static(t: np.ndarray, y: np.ndarray, names: tuple[str, ...],
     for name, a, b in (("tune first half, count second", slice(0, k), slice(k, None)),
                        ("tune second half, count first", slice(k, None), slice(0, k))):
         cal = calibrate(y[a])
-        for R in targets:
-            tu = _tune(cal, R)
-            thr = tu.thresholds
-            res = Monitor(cal, thr).run(t[b], y[b])
-            row = _count(res, np.zeros(t[b].size, np.int64), fs, R, thr)
-            row["direction"] = name
-            row["detectable_dps"] = float(min(d.size_unit_value for d in tu.detectable))
-            row["variance_factor"] = list(thr.variance_factor)
-            rows.append(row)
-            if progress:
-                progress()
+        rows += _static_rows(cal, targets, name, fs, t[b].size, progress,
+                             lambda c, thr, b=b: Monitor(c, thr).run(t[b], y[b]))
     cal = calibrate(y)
     thr = _tune(cal, 1.0).thresholds
     res = Monitor(cal, thr).run(t, y)
@@ -358,17 +369,8 @@ def holdout_static_set(flight: Flight, targets: Sequence[float] = TARGETS_PER_HO
     for name, fit_part, test_part in (("tune first half, count second", first, second),
                                       ("tune second half, count first", second, first)):
         cal = calibrate_static(fit_part)
-        for R in targets:
-            tu = _tune(cal, R)
-            thr = tu.thresholds
-            res = run_monitor(test_part, cal, thr)
-            row = _count(res, np.zeros(test_part.t.size, np.int64), fs, R, thr)
-            row["direction"] = name
-            row["detectable_dps"] = float(min(d.size_unit_value for d in tu.detectable))
-            row["variance_factor"] = list(thr.variance_factor)
-            rows.append(row)
-            if progress:
-                progress()
+        rows += _static_rows(cal, targets, name, fs, test_part.t.size, progress,
+                             lambda c, thr, p=test_part: run_monitor(p, c, thr))
     cal = calibrate_static(flight)
     thr = _tune(cal, 1.0).thresholds
     res = run_monitor(flight, cal, thr)

@@ -4,9 +4,10 @@ Why the per-sample budget of :func:`thresholds.compute_thresholds` is conservati
 -------------------------------------------------------------------------------------
 It charges every window scale ``alpha = rate/(3600·fs·K)`` *per sample*. A false alarm,
 though, is an *episode*: the monitor emits one event when a statistic first crosses its
-threshold and stays in the detection state until every statistic has been below half its
-threshold for 100 samples (or isolates). Three things make episodes rarer than
-exceedance samples:
+threshold and stays in the detection state until every statistic has been below
+``clear_ratio`` times its threshold for ``clear_samples`` samples (or isolates; the
+hysteresis of :class:`fdi.settings.MonitorSettings`, whose defaults the correction flights
+below run with). Three things make episodes rarer than exceedance samples:
 
 1. a w-sample running mean that exceeds its threshold tends to stay above it for many
    samples: the share of exceedance samples that start an upcrossing is 0.26 at w = 128

@@ -36,7 +36,7 @@ line frequencies, mountings), under the session's fitted null noise:
     ``a5²·⟨z⊥, z⊥⟩_V/σ_w²`` at the fitted (ρ, τ) does not.
 
 A pair whose power is below :data:`POWER` is a *limit* of the session: the verdict cannot
-be "adequate" (``"effects not ruled out"``, :func:`calibration.diagnose.run.adequacy_record`).
+be "adequate" (``"effects not ruled out"``, :func:`calibration.diagnose.adequacy.decide`).
 Each limit names the effect, the sensor, the size that could hide (``a5``, in the effect's
 unit), the parameter it would move by 5 σ, the power there, and the size from which the
 test finds it with probability :data:`POWER`.
@@ -59,10 +59,14 @@ import scipy.stats
 from calibration.diagnose.coloured import DetectGrids, GlsModel, grid_min
 from calibration.diagnose.context import KindData
 from calibration.diagnose.library import (
-    CHANGE_POINT_GRID,
     LINE_MIN_CYCLES,
     Candidate,
     candidates,
+    line_search,
+    mount_search,
+    step_grid,
+    step_range,
+    step_search,
     testable,
 )
 from calibration.diagnose.linmodel import LinModel
@@ -114,26 +118,42 @@ def parameter_shift(d: KindData, i: int, Z: np.ndarray, cal: Calibration,
     return out
 
 
+def _step_points(d: KindData) -> tuple[list[dict[str, Any]], int]:
+    """Bias-step times checked (:data:`STEP_TIMES`, equally spaced in the scanned range)
+    and the scan's multiplicity (:func:`.library.step_grid`, as the test counts it)."""
+    lo, hi = step_range(d.N)
+    idx = np.linspace(lo, hi, STEP_TIMES + 2).astype(int)[1:-1]
+    return [{"time_s": float(d.t[k])} for k in idx], int(step_grid(d).size)
+
+
+def _line_points(d: KindData) -> tuple[list[dict[str, Any]], int]:
+    """Line frequencies checked (:data:`LINE_CYCLES` below Nyquist) and the Fourier
+    frequencies :func:`.library.line_search` scans."""
+    spec_bins = d.N // 2 + 1
+    mult = max(spec_bins - 1 - int(np.ceil(LINE_MIN_CYCLES)), 1)
+    T = d.duration_s
+    return [{"frequency_hz": k / T} for k in LINE_CYCLES if k / T < d.sample_rate_hz / 2], mult
+
+
+def _mount_points(d: KindData) -> tuple[list[dict[str, Any]], int]:
+    """Every mounting after the first (:func:`.library.mount_search` tries each)."""
+    n = int(d.mount.max())
+    return [{"mount": m} for m in range(1, n + 1)], max(n, 1)
+
+
+_SEARCH_POINTS = {step_search: _step_points, line_search: _line_points,
+                  mount_search: _mount_points}
+"""The parameter values checked for each library search (any candidate that uses it),
+with the search's multiplicity."""
+
+
 def nuisance_grid(c: Candidate, d: KindData, i: int,
                   model: LinModel | GlsModel) -> tuple[list[dict[str, Any]], int]:
-    """The parameter values of ``c`` to check and the test's scan multiplicity."""
-    if c.name == "bias_step" and c.search is not None:
-        N = d.N
-        lo, hi = max(int(0.01 * N), 10), N - max(int(0.01 * N), 10)
-        grid = np.unique(np.r_[np.linspace(lo, hi, CHANGE_POINT_GRID).astype(int),
-                               np.flatnonzero(np.diff(d.step)) + 1])
-        mult = int(np.sum((grid >= lo) & (grid <= hi)))
-        idx = np.linspace(lo, hi, STEP_TIMES + 2).astype(int)[1:-1]
-        return [{"time_s": float(d.t[k])} for k in idx], mult
-    if c.name == "periodic_line" and c.search is not None:
-        spec_bins = d.N // 2 + 1
-        mult = max(spec_bins - 1 - int(np.ceil(LINE_MIN_CYCLES)), 1)
-        T = d.duration_s
-        return [{"frequency_hz": k / T} for k in LINE_CYCLES if k / T < d.sample_rate_hz / 2], \
-            mult
-    if c.name == "misalignment" and c.search is not None:
-        n = int(d.mount.max())
-        return [{"mount": m} for m in range(1, n + 1)], max(n, 1)
+    """The parameter values of ``c`` to check and the test's scan multiplicity: a grid
+    for a library search (:data:`_SEARCH_POINTS`), a user search's own best point, or the
+    candidate's fixed parameters."""
+    if c.search in _SEARCH_POINTS:
+        return _SEARCH_POINTS[c.search](d)
     if c.search is not None:                        # a user search: its own best point
         params, mult = c.search(d, i, model.Q, model.e)
         return [params], int(mult)
@@ -143,7 +163,7 @@ def nuisance_grid(c: Candidate, d: KindData, i: int,
 def _reference(c: Candidate, d: KindData, Z: np.ndarray, params: Mapping[str, Any]
                ) -> np.ndarray:
     """``Z`` shifted to its reference for the parameter shift (module docstring)."""
-    if c.name == "bias_step" and "time_s" in params:
+    if c.search is step_search and "time_s" in params:
         after = float(np.mean(d.t >= float(params["time_s"])))
         if after > 0.5:                             # the later bias holds longer
             return Z - Z[-1:]

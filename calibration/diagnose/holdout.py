@@ -47,9 +47,9 @@ complete model with probability at most 2α). A fold whose held-out steps need a
 the other folds do not determine (a bias step inside the last fold, a mounting seen in
 one fold only) is not tested for that sensor and is listed.
 
-A failing fold makes the verdict "effects suspected" (:func:`calibration.diagnose.run.
-with_holdout`), whatever the other tests said. What it cannot see: structure faster than
-a step (it reads step means), an effect the model absorbs alike in every fold, and, in a
+A failing fold makes the verdict "effects suspected" (:func:`calibration.diagnose.adequacy.
+decide`), whatever the other tests said. What it cannot see: structure faster than a step
+(it reads step means), an effect the model absorbs alike in every fold, and, in a
 set of one or where every sensor carries the effect, a Gauss-Markov fit inflated by it
 (``docs/diagnose.md``, "The held-out check").
 """

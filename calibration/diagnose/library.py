@@ -57,6 +57,8 @@ __all__ = [
     "model_effects",
     "mount_search",
     "register_effect",
+    "step_grid",
+    "step_range",
     "step_search",
     "temperature_reference",
     "testable",
@@ -224,14 +226,31 @@ def change_point_scan(e: np.ndarray, Q: np.ndarray, idx: np.ndarray) -> np.ndarr
     return np.where(den > 1e-9 * e.size, num / np.maximum(den, 1e-300), 0.0)
 
 
-def step_search(data: KindData, sensor: int, Q: np.ndarray,
-                 e: np.ndarray) -> tuple[dict[str, Any], int]:
-    """The time of the best bias step for ``e``; multiplicity: the grid scanned."""
-    N = data.N
-    lo, hi = max(int(0.01 * N), 10), N - max(int(0.01 * N), 10)
+def step_range(n_samples: int) -> tuple[int, int]:
+    """First and last sample index a bias step is searched at (1 % of the session, at
+    least 10 samples, kept off each end)."""
+    margin = max(int(0.01 * n_samples), 10)
+    return margin, n_samples - margin
+
+
+def step_grid(data: KindData) -> np.ndarray:
+    """Sample indices a bias step is scanned at, shape (M,): :data:`CHANGE_POINT_GRID`
+    equally spaced ones and every step boundary, inside :func:`step_range`. Its size is the
+    scan's multiplicity (:func:`step_search`, and the detectability check of
+    :mod:`.detect`)."""
+    lo, hi = step_range(data.N)
     grid = np.unique(np.r_[np.linspace(lo, hi, CHANGE_POINT_GRID).astype(int),
                            np.flatnonzero(np.diff(data.step)) + 1])
-    grid = grid[(grid >= lo) & (grid <= hi)]
+    return grid[(grid >= lo) & (grid <= hi)]
+
+
+def step_search(data: KindData, sensor: int, Q: np.ndarray,
+                 e: np.ndarray) -> tuple[dict[str, Any], int]:
+    """The time of the best bias step for ``e``; multiplicity: the grid scanned
+    (:func:`step_grid`)."""
+    N = data.N
+    lo, hi = step_range(N)
+    grid = step_grid(data)
     k = grid[int(np.argmax(change_point_scan(e, Q, grid)))]
     # refine inside the grid cell (estimation only; the test counts the grid)
     cell = max(N // CHANGE_POINT_GRID, 1)

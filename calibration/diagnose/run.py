@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 from threadpoolctl import threadpool_limits
 
+from calibration.diagnose.adequacy import adequacy_record, with_holdout, with_limits
 from calibration.diagnose.bounds import SENSOR_CLASSES, bound_check, bound_label
 from calibration.diagnose.bounds import sensor_class as class_of
 from calibration.diagnose.context import KindData, check_match, check_same_session, kind_data
@@ -24,7 +25,6 @@ from calibration.diagnose.detect import POWER, limits
 from calibration.diagnose.holdout import holdout
 from calibration.diagnose.library import (
     OUTSIDE_ALIASES,
-    Candidate,
     candidates,
     get_candidate,
     model_effects,
@@ -33,17 +33,14 @@ from calibration.diagnose.metrics import error_summary
 from calibration.diagnose.refit import refit
 from calibration.diagnose.selection import Selection, noise_sets, select
 from calibration.session import Session
+from fdi.adequacy import ADEQUATE, SUSPECTED
 from fdi.calfile import Calibration
 from fdi.errors import ConfigError
 
-__all__ = ["ADVICE", "BLAS_THREADS", "DIAGNOSIS_SCHEMA", "MONITOR_NOTE", "VERDICTS",
-           "Diagnosis", "adequacy_record", "assess", "bound_fields", "diagnose", "holdout_where",
-           "public_limit", "with_holdout", "with_limits"]
+__all__ = ["BLAS_THREADS", "DIAGNOSIS_SCHEMA", "Diagnosis", "assess", "bound_fields",
+           "diagnose"]
 
 DIAGNOSIS_SCHEMA = "rimu.diagnosis/1"
-MONITOR_NOTE = ("the runtime monitor compensates the effect terms whose inputs it has at "
-                "run time (rate sign, rate squared, specific force, temperature) and lists "
-                "the others with the reason (docs/effects-runtime.md)")
 
 
 @dataclass(frozen=True)
@@ -114,8 +111,8 @@ class Diagnosis:
 
     @property
     def verdict(self) -> str:
-        """The refit calibration's adequacy verdict (:data:`VERDICTS`)."""
-        return str((self.calibration.adequacy or {}).get("verdict", "adequate"))
+        """The refit calibration's adequacy verdict (:data:`fdi.adequacy.VERDICTS`)."""
+        return str((self.calibration.adequacy or {}).get("verdict", ADEQUATE))
 
     def to_json(self) -> dict[str, Any]:
         """The ``rimu diagnose --json`` document."""
@@ -126,102 +123,6 @@ class Diagnosis:
                 "verdict": self.verdict, "not_ruled_out": self.not_ruled_out,
                 "sequence_limits": self.sequence_limits, "holdout": self.holdout,
                 "error_before": self.error_before, "error_after": self.error_after}
-
-
-VERDICTS = ("adequate", "adequate within sequence limits", "effects not ruled out",
-            "effects suspected")
-"""The adequacy verdicts: nothing found and every library effect that would move a
-parameter by 5 σ would have been found (:mod:`.detect`); nothing found and every such
-effect would have been found except those the sequence itself cannot separate from the
-parameters (hidden even under white noise of the session's level: listed); nothing found
-but this session's noise could hide such an effect; effects or unexplained structure
-found."""
-ADVICE = ("repeat the session and compare (a warm-up repeats at every switch-on, at the same "
-          "time after it; a Gauss-Markov wander does not), or record a longer session so "
-          "that the wander and a slow effect separate; the sizes listed could hide in this "
-          "one")
-SEQUENCE_ADVICE = ("no repetition of this sequence can see the effects listed (its noise and "
-                   "the sigma shrink together, so the power at 5 sigma stays); another "
-                   "sequence may: the limits depend on the sequence alone, so simulate a "
-                   "candidate (rimu simulate calibration) and calibrate it to read its "
-                   "limits before using it on the table")
-
-
-def public_limit(rec: Mapping[str, Any]) -> dict[str, Any]:
-    """A limit of :func:`.detect.limits` for files and JSON (plain numbers)."""
-    keys = ("name", "kind", "sensor", "sensor_name", "size", "unit", "parameter",
-            "shift_sigma", "power", "power_white", "size_for_power", "shift_sigma_for_power",
-            "params")
-    return {k: rec[k] for k in keys if k in rec}
-
-
-def with_limits(rec: Mapping[str, Any], lim: Iterable[Mapping[str, Any]],
-                power: float) -> dict[str, Any]:
-    """``rec`` (:func:`adequacy_record`) with the detectability limits: the verdict becomes
-    "effects not ruled out" when nothing was found but this session's noise could hide a
-    library effect that moves a parameter by 5 σ (``not_ruled_out``); limits of the
-    sequence itself (hidden even under white noise of the session's level) are listed as
-    ``sequence_limits`` and make an "adequate" verdict "adequate within sequence limits"
-    (the session saw all it could, but what the sequence cannot separate could hide)."""
-    lim = list(lim)
-    out = dict(rec)
-    out["not_ruled_out"] = [public_limit(r) for r in lim if r["limit"] == "session"]
-    out["sequence_limits"] = [public_limit(r) for r in lim if r["limit"] == "sequence"]
-    out["detection_power"] = power
-    if out["verdict"] == "adequate" and out["not_ruled_out"]:
-        out["verdict"] = "effects not ruled out"
-        out["advice"] = ADVICE
-    elif out["verdict"] == "adequate" and out["sequence_limits"]:
-        out["verdict"] = "adequate within sequence limits"
-        out["advice"] = SEQUENCE_ADVICE
-    return out
-
-
-def holdout_where(f: Mapping[str, Any]) -> str:
-    """The ``where`` entry of a failing held-out fold."""
-    steps = f["steps"]
-    span = f"steps {steps[0]}-{steps[-1]}" if len(steps) > 1 else f"step {steps[0]}"
-    return (f"{f['kind']} {f['sensor']}: held-out check (fold {f['fold']}, {span}: "
-            f"chi2 {f['chi2']:.1f} on {f['dof']} dof, p {f['p_value']:.2g})")
-
-
-def with_holdout(rec: Mapping[str, Any], ho: Mapping[str, Any]) -> dict[str, Any]:
-    """``rec`` (:func:`adequacy_record`) with the held-out check (:mod:`.holdout`): its
-    summary under ``holdout``; a failing fold makes the verdict "effects suspected", the
-    fold listed under ``where`` (a model that does not predict steps it did not see is
-    not adequate, whatever the tests on the steps it saw said)."""
-    out = dict(rec)
-    out["holdout"] = {k: ho[k] for k in ("schema", "passed", "alpha", "threshold", "failed",
-                                         "not_tested", "worst")}
-    out["holdout"]["folds_tested"] = len(ho["folds"])
-    if not ho["passed"]:
-        out["verdict"] = "effects suspected"
-        out["where"] = list(out.get("where", [])) + [holdout_where(f) for f in ho["failed"]]
-    return out
-
-
-def adequacy_record(sel: Selection, alpha: float) -> dict[str, Any]:
-    """The ``adequacy`` entry of a calibration file from a selection (verdict "adequate"
-    or "effects suspected"; :func:`with_limits` adds the detectability)."""
-    where = [f"{s.kind} {s.sensor + 1}: {s.candidate.name}" for s in sel.claimed]
-    where += [f"{u['kind']} {u['sensor']}: unexplained ({u['test']}"
-              + (f", steps {', '.join(map(str, u['steps']))}" if u.get("steps") else "")
-              + (f", {u['band_hz'][0]:.3g}-{u['band_hz'][1]:.3g} Hz" if u.get("band_hz")
-                 else "") + ")" for u in sel.unexplained]
-    return {"verdict": "effects suspected" if where else "adequate", "alpha": alpha,
-            "where": where, "noise_null": dict(sel.noise_null),
-            "method": "forward selection over the rimu.diagnose candidate library and "
-                      "adequacy probes (per-step means, slow trend, change point, spectral "
-                      "line, input correlation), nested-model F-tests (white noise) or "
-                      "profile-likelihood ratio tests against white + Gauss-Markov noise "
-                      "(where the noise-model selection keeps a Gauss-Markov term), "
-                      "Holm/Bonferroni at alpha over candidates x sensors"}
-
-
-def _candidates(names: Iterable[str] | None) -> list[Candidate]:
-    if names is None:
-        return candidates()
-    return [get_candidate(n) for n in names]
 
 
 BLAS_THREADS = 1
@@ -339,16 +240,11 @@ def _diagnose(session: Session, cal: Calibration, alpha: float,
     datas = model_effects(kind_data(session, cal), cal.effects)
     check_same_session(datas, cal, session.source, cal_path)
     sel = _assess(session, cal, alpha=alpha, effects=effects, datas=datas)
-    rec = adequacy_record(sel, alpha)
-    if sel.claimed and not sel.unexplained:      # the refit model holds the effects found
-        rec = {**rec, "verdict": "adequate", "effects_found": rec["where"], "where": [],
-               "monitor": MONITOR_NOTE}
-    ho: dict[str, Any] = {}
-    if not sel.unexplained:                      # before "adequate": data it did not see
-        ho = holdout(datas, sel.models, alpha)
-        rec = with_holdout(rec, ho)
+    rec = adequacy_record(sel, alpha, effects_refit=True)
+    if rec["verdict"] != SUSPECTED:              # before "adequate": data it did not see
+        rec = with_holdout(rec, holdout(datas, sel.models, alpha))
     fit = refit(datas, cal, sel.claimed, adequacy=rec, noise=noise_sets(sel))
-    if detectability and rec["verdict"] != "effects suspected":   # what could hide
+    if detectability and rec["verdict"] != SUSPECTED:   # what could hide
         lim = limits(datas, sel.models, fit.calibration, alpha, sel.family_size,
                      skip={(s.kind, s.sensor, s.candidate.name) for s in sel.claimed}
                      | {(t.kind, t.sensor, t.name) for t in fit.calibration.effects})

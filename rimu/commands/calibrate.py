@@ -165,7 +165,7 @@ def summary_text(cal: Calibration) -> str:
                      + (" - not resolved at this noise level (below 3 sd)"
                         if cal.earth_rate_dph < 3 * (cal.earth_rate_dph_sd or 0.0) else ""))
     lines.extend(_noise_lines(ex.noise_model))
-    from calibration.diagnose.checked import format_adequacy
+    from calibration.diagnose.adequacy_text import format_adequacy
 
     lines.extend(format_adequacy(cal))
     return "\n".join(lines)

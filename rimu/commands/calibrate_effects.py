@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 from typing import TYPE_CHECKING, Any
 
+from fdi.adequacy import ADEQUATE, NOT_RULED_OUT, SUSPECTED, WITHIN_SEQUENCE_LIMITS
 from rimu.argtypes import probability
 
 if TYPE_CHECKING:
@@ -31,17 +32,17 @@ def add_calibrate_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--alpha", type=probability(), default=0.01, metavar="A",
                    help="level of the model-adequacy check run before the noise model "
                         "(default 0.01); a suspected effect withholds the Gauss-Markov "
-                        "widening. Verdicts: adequate; adequate within sequence limits (nothing "
+                        f"widening. Verdicts: {ADEQUATE}; {WITHIN_SEQUENCE_LIMITS} (nothing "
                         "found; what the sequence itself cannot separate from the parameters "
-                        "at 5 sigma is listed); effects not ruled out (nothing found, "
+                        f"at 5 sigma is listed); {NOT_RULED_OUT} (nothing found, "
                         "but this session's noise could hide an effect that moves a "
-                        "parameter by 5 sigma: the sizes are listed); effects suspected")
+                        f"parameter by 5 sigma: the sizes are listed); {SUSPECTED}")
 
 
 def calibrate_with_check(session: Session, args: argparse.Namespace,
                          **kw: Any) -> Calibration:
     """``calibrate_checked`` with the command's ``--effects`` and ``--alpha``."""
-    from calibration.diagnose.checked import calibrate_checked
+    from calibration.calibrate_checked import calibrate_checked
 
     names = [x.strip() for x in (getattr(args, "effects", None) or "").split(",") if x.strip()]
     return calibrate_checked(session, alpha=getattr(args, "alpha", 0.01), effects=names, **kw)

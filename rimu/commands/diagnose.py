@@ -92,7 +92,7 @@ def text(d) -> str:
         lines.append("unexplained structure: none")
     a = d.calibration.adequacy or {}
     if a:
-        from calibration.diagnose.checked import holdout_lines, limit_lines
+        from calibration.diagnose.adequacy_text import holdout_lines, limit_lines
 
         lines.append(f"verdict of the refit calibration: {d.verdict}")
         lines.extend(holdout_lines(a))

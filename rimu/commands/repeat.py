@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import json
 
+from fdi.adequacy import SUSPECTED
 from rimu.argtypes import probability
 
 HELP = ("compare repeated calibration sessions (run-to-run repeatability) and stack them "
@@ -70,7 +71,7 @@ def repeat_text(res) -> str:
     else:
         lines.append(f"  all {len(rep.parameters)} parameters repeatable within their sigma")
     sus = [str(k) for k, c in enumerate(res.calibrations, 1)
-           if (c.adequacy or {}).get("verdict") == "effects suspected"]
+           if (c.adequacy or {}).get("verdict") == SUSPECTED]
     if sus:
         lines.append(f"  note: session{'s' if len(sus) > 1 else ''} {', '.join(sus)} "
                      "had effects suspected: their sigma are the white-noise sigma (the "
@@ -83,13 +84,13 @@ def repeat_text(res) -> str:
                       " (stacking needs identical sequences: same configuration, steps, "
                       "sample times and table motion)"))
     else:
-        from calibration.diagnose.checked import format_adequacy
+        from calibration.diagnose.adequacy_text import format_adequacy
 
         lines.append(f"stack of {res.stack.n_sessions} sessions (sample-by-sample mean: an "
                      "effect that repeats at the same time after switch-on keeps its size, "
                      f"independent noise drops by sqrt({res.stack.n_sessions})):")
         lines.extend("  " + ln for ln in format_adequacy(res.stack.calibration))
-        if (res.stack.adequacy or {}).get("verdict") == "effects suspected":
+        if (res.stack.adequacy or {}).get("verdict") == SUSPECTED:
             lines.append("  the effects repeat at every switch-on: size them with rimu "
                          "diagnose on the stacked session (--out DIR writes it and its "
                          "calibration)")

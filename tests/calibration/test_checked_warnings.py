@@ -10,7 +10,7 @@ recomputed warning names g2.
 
 import pytest
 
-from calibration.diagnose.checked import calibrate_checked
+from calibration.calibrate_checked import calibrate_checked
 from calibration.presets import preset
 from calibration.simulate import simulate_session
 

@@ -34,7 +34,8 @@ import pytest
 from _diagnose_sessions import add_signal, clean_fast
 from threadpoolctl import threadpool_limits
 
-from calibration.diagnose import calibrate_checked, diagnose
+from calibration.calibrate_checked import calibrate_checked
+from calibration.diagnose import diagnose
 from calibration.effects import WARMUP_TAU_S
 from fdi.units import DPH, DPS, G0
 

@@ -10,8 +10,8 @@ too: against b₀ as it stands it would be off by far more than 3σ.
 import numpy as np
 import pytest
 
+from calibration.calibrate_checked import calibrate_checked
 from calibration.compare import compare
-from calibration.diagnose.checked import calibrate_checked
 from calibration.presets import preset
 from calibration.simulate import simulate_session, truth_of_session
 

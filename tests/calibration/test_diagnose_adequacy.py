@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from _diagnose_sessions import add_signal, calibrate_fast, clean_fast, session
 
+from calibration.calibrate_checked import calibrate_checked
 from calibration.compare import compare
-from calibration.diagnose import calibrate_checked
 from fdi.units import DPH
 
 CASES = [

@@ -32,8 +32,9 @@ from scipy.signal import lfilter
 from threadpoolctl import threadpool_limits
 
 from calibration.calibrate import calibrate
+from calibration.calibrate_checked import calibrate_checked
 from calibration.compare import compare
-from calibration.diagnose import assess, calibrate_checked, diagnose
+from calibration.diagnose import assess, diagnose
 from calibration.diagnose.coloured import GlsModel, NoiseSet, block_corr, block_noise
 from calibration.presets import preset
 from calibration.residuals import gauss_markov_segment_corr

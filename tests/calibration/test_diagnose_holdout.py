@@ -23,7 +23,9 @@ from test_diagnose_coloured import _coloured
 from threadpoolctl import threadpool_limits
 
 from calibration.calibrate import calibrate
-from calibration.diagnose import assess, calibrate_checked, format_adequacy, kind_data
+from calibration.calibrate_checked import calibrate_checked
+from calibration.diagnose import assess, format_adequacy, kind_data
+from calibration.diagnose.adequacy import with_holdout
 from calibration.diagnose.bounds import (
     FOG_CLASS_ARW_DPSH,
     bound_check,
@@ -33,7 +35,7 @@ from calibration.diagnose.bounds import (
 from calibration.diagnose.context import KindData
 from calibration.diagnose.holdout import HOLDOUT_FOLDS, folds, holdout
 from calibration.diagnose.linmodel import LinModel
-from calibration.diagnose.run import bound_fields, with_holdout
+from calibration.diagnose.run import bound_fields
 from calibration.presets import preset
 from fdi.calfile import EffectTerm
 from fdi.units import DPH, DPS

@@ -32,8 +32,9 @@ from test_diagnose_coloured import _coloured
 from threadpoolctl import threadpool_limits
 
 from calibration.calibrate import calibrate
+from calibration.calibrate_checked import calibrate_checked
 from calibration.compare import compare
-from calibration.diagnose import calibrate_checked, format_adequacy
+from calibration.diagnose import format_adequacy
 from calibration.diagnose.coloured import GlsModel, NoiseSet, block_noise
 from calibration.diagnose.detect import POWER, asimov_lr, power_at, size_for_power
 from fdi.calfile import load_calibration

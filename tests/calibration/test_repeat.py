@@ -16,7 +16,7 @@ from _diagnose_sessions import add_signal, clean_fast, session
 from threadpoolctl import threadpool_limits
 
 from calibration.calibrate import calibrate
-from calibration.diagnose import calibrate_checked
+from calibration.calibrate_checked import calibrate_checked
 from calibration.presets import preset
 from calibration.repeat import repeat_sessions, repeatability, run_to_run_sd
 from calibration.simulate import NoiseModel, simulate_session

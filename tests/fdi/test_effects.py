@@ -232,7 +232,7 @@ def test_compensation_removes_the_parity_bias_and_the_alarms(effect_cal, seed):
 # -- end to end with fitted terms (rimu calibrate --effects on a simulated session) --------
 @pytest.fixture(scope="module")
 def fitted_tetrad():
-    from calibration.diagnose.checked import calibrate_checked
+    from calibration.calibrate_checked import calibrate_checked
 
     seq, truth, noise = preset("tetrad-paper")
     s = simulate_session(None, seq, truth, seed=7, noise=noise,

@@ -1,4 +1,5 @@
-"""``calibrate_checked``: calibrate, check the model's adequacy, only then model coloured noise.
+"""``calibrate_checked``, the entry point of ``rimu calibrate``: calibrate, check the model's
+adequacy, only then model coloured noise.
 
 The coloured-noise model (``noise_model="auto"``, a Gauss-Markov bias fitted to the residual
 spectrum) widens the uncertainties for correlated *noise*. An unmodelled effect leaves
@@ -29,6 +30,10 @@ explain as well still makes the session "effects suspected".
 With ``effects`` given (``rimu calibrate --effects``) those effects are fitted jointly with
 the calibration (:mod:`calibration.diagnose.refit`) and the adequacy is checked on the
 extended model.
+
+The verdict is decided by :func:`calibration.diagnose.adequacy.decide`, the function
+``rimu diagnose`` uses too; this module only decides what follows from it (which noise
+model is applied, which warning is written).
 """
 
 from __future__ import annotations
@@ -41,33 +46,28 @@ import scipy.stats
 from threadpoolctl import threadpool_limits
 
 from calibration.calibrate import calibrate
-from calibration.diagnose.bounds import sensor_class
+from calibration.diagnose.adequacy import (
+    MONITOR_NOTE,
+    adequacy_record,
+    with_holdout,
+    with_limits,
+)
+from calibration.diagnose.adequacy_text import not_ruled_out_warning
 from calibration.diagnose.context import KindData, kind_data
 from calibration.diagnose.detect import POWER, limits
 from calibration.diagnose.holdout import holdout
 from calibration.diagnose.library import model_effects
 from calibration.diagnose.metrics import step_chi2_dof
 from calibration.diagnose.refit import Refit, refit
-from calibration.diagnose.run import (
-    BLAS_THREADS,
-    MONITOR_NOTE,
-    adequacy_record,
-    assess,
-    bound_fields,
-    with_holdout,
-    with_limits,
-)
+from calibration.diagnose.run import BLAS_THREADS, assess
 from calibration.diagnose.selection import noise_sets
 from calibration.fit_residuals import WARN_ALPHA
 from calibration.session import Session
+from fdi.adequacy import ADEQUATE, NOT_RULED_OUT, SUSPECTED
 from fdi.calfile import Calibration
 from fdi.errors import ConfigError
 
-__all__ = ["calibrate_checked", "format_adequacy", "holdout_lines", "limit_lines",
-           "not_ruled_out_warning"]
-
-_MAX_LINES = 6
-"""At most this many limits printed (the file holds them all)."""
+__all__ = ["calibrate_checked"]
 
 
 def calibrate_checked(session: Session, *, alpha: float = 0.01, noise_model: str = "auto",
@@ -86,8 +86,9 @@ def calibrate_checked(session: Session, *, alpha: float = 0.01, noise_model: str
         Effects to fit jointly (no selection among them).
     detectability : bool
         Ask whether the session could have seen every library effect that moves a
-        parameter by 5 σ (:mod:`.detect`; default). False: the verdict is "adequate" or
-        "effects suspected" from the tests alone (Monte Carlo runs that only count flags).
+        parameter by 5 σ (:mod:`calibration.diagnose.detect`; default). False: the
+        verdict is "adequate" or "effects suspected" from the tests alone (Monte Carlo
+        runs that only count flags).
     **kw
         Passed to :func:`calibration.calibrate.calibrate` (``bias_method``, ``denoise``, ...).
 
@@ -113,7 +114,7 @@ def calibrate_checked(session: Session, *, alpha: float = 0.01, noise_model: str
         sel = assess(session, white, alpha=alpha, datas=datas)
         base = white
     rec = adequacy_record(sel, alpha)
-    if rec["verdict"] == "adequate":             # before "adequate": data it did not see
+    if rec["verdict"] == ADEQUATE:               # before "adequate": data it did not see
         with threadpool_limits(limits=BLAS_THREADS, user_api="blas"):
             rec = with_holdout(rec, holdout(white_datas if effects else datas,
                                             forced.models if effects else sel.models,
@@ -124,7 +125,7 @@ def calibrate_checked(session: Session, *, alpha: float = 0.01, noise_model: str
         rec["effects_fitted"] = effects
         rec["refit_noise"] = dict(forced.noise_null)      # sandwich where Gauss-Markov
         rec["monitor"] = MONITOR_NOTE
-    if rec["verdict"] == "adequate":
+    if rec["verdict"] == ADEQUATE:
         if noise_model != "white" and not effects:
             base = calibrate(session, noise_model=noise_model, **kw)
             warnings = list(base.extras.warnings)
@@ -135,11 +136,11 @@ def calibrate_checked(session: Session, *, alpha: float = 0.01, noise_model: str
                              skip={(s.kind, s.sensor, s.candidate.name) for s in sel.claimed}
                              | {(t.kind, t.sensor, t.name) for t in base.effects})
             rec = with_limits(rec, lim, POWER)
-        if rec["verdict"] == "effects not ruled out":
+        if rec["verdict"] == NOT_RULED_OUT:
             warnings.append(not_ruled_out_warning(rec))
     else:
         rec["noise_model_applied"] = "white"
-        warnings.append("model adequacy: effects suspected (" + "; ".join(rec["where"])
+        warnings.append(f"model adequacy: {SUSPECTED} (" + "; ".join(rec["where"])
                         + "); " + ("the Gauss-Markov noise widening is withheld (it would "
                                    "hide them): run rimu diagnose"
                                    if noise_model != "white" else "run rimu diagnose"))
@@ -174,104 +175,4 @@ def _refit_warnings(fit: Refit, datas: Mapping[str, KindData]) -> list[str]:
                            "fitted, the step means of the residuals still scatter more than "
                            f"white noise explains (chi2/dof {chi[i]:.2f}, 0.1 % limit "
                            f"{lim:.2f}): run rimu diagnose")
-    return out
-
-
-def _limit_line(r: Mapping[str, Any]) -> str:
-    p = r.get("params") or {}
-    at = (f" at {p['time_s']:.0f} s" if "time_s" in p else
-          f" at {p['frequency_hz']:.3g} Hz" if "frequency_hz" in p else "")
-    return (f"{r['name']}{at} on {r['kind']} {r['sensor']}: {r['size']:.3g} {r['unit']} "
-            f"moves its {str(r['parameter']).replace('_', ' ')} by "
-            f"{r['shift_sigma']:.0f} sigma, found with probability {r['power']:.2f} "
-            f"(0.99 from {r['size_for_power']:.3g} {r['unit']}, "
-            f"{r['shift_sigma_for_power']:.1f} sigma)")
-
-
-def _worst_per_effect(recs: Iterable[Mapping[str, Any]]) -> list[Mapping[str, Any]]:
-    """The least detectable sensor of each effect, least detectable first."""
-    best: dict[str, Mapping[str, Any]] = {}
-    for r in recs:
-        if r["name"] not in best or r["power"] < best[r["name"]]["power"]:
-            best[r["name"]] = r
-    return sorted(best.values(), key=lambda r: r["power"])
-
-
-def not_ruled_out_warning(rec: Mapping[str, Any]) -> str:
-    """The calibration warning of an "effects not ruled out" verdict."""
-    names = ", ".join(r["name"] for r in _worst_per_effect(rec["not_ruled_out"]))
-    applied = rec.get("noise_model_applied")
-    return ("model adequacy: effects not ruled out (" + names + "): nothing was found, but "
-            "this session's noise could hide them at sizes that move a parameter by 5 "
-            "sigma" + ("; the Gauss-Markov widening is applied (no effect is suspected)"
-                       if applied == "auto" else "") + ". " + str(rec.get("advice", "")))
-
-
-def limit_lines(a: Mapping[str, Any]) -> list[str]:
-    """The detectability limits of an adequacy record (:func:`.run.with_limits`), least
-    detectable sensor of each effect, with the advice."""
-    out = []
-    nro = _worst_per_effect(a.get("not_ruled_out") or [])
-    if nro:
-        out.append("  not ruled out (this session's noise could hide them; least "
-                   "detectable sensor of each):")
-        out.extend("    " + _limit_line(r) for r in nro[:_MAX_LINES])
-        if a.get("advice"):
-            out.append(f"  what to do: {a['advice']}")
-    seq = _worst_per_effect(a.get("sequence_limits") or [])
-    if seq:
-        out.append("  limits of the sequence (hidden even under white noise of this "
-                   "level):")
-        out.extend("    " + _limit_line(r) for r in seq[:_MAX_LINES])
-        if not nro and a.get("advice"):
-            out.append(f"  what to do: {a['advice']}")
-    return out
-
-
-def holdout_lines(a: Mapping[str, Any]) -> list[str]:
-    """The held-out check of an adequacy record (:func:`.run.with_holdout`): one line
-    (the failing folds themselves are in ``where``), and one for folds not tested."""
-    h = a.get("holdout")
-    if not h:
-        return []
-    w = h.get("worst")
-    worst = (f"; worst {w['kind']} {w['sensor']} fold {w['fold']} (steps "
-             f"{w['steps'][0]}-{w['steps'][-1]}): chi2 {w['chi2']:.1f} on {w['dof']} dof, "
-             f"p {w['p_value']:.2g}" if w else "")
-    out = [f"  held-out check ({h.get('folds_tested', 0)} sensor-folds, each refitted "
-           f"without its steps and predicted; limit p < {h['threshold']:.2g}): "
-           + ("passed" if h["passed"] else "FAILED, the model does not predict steps it "
-              "did not see") + worst]
-    nt = [n for n in h.get("not_tested") or [] if "fold" in n]
-    if nt:
-        out.append(f"    {len(nt)} fold(s) not tested: the other folds do not determine "
-                   "the model's columns there")
-    return out
-
-
-def format_adequacy(cal: Calibration) -> list[str]:
-    """Lines ``rimu calibrate`` prints about the adequacy and the effect terms."""
-    a = cal.adequacy
-    out = []
-    if a is not None:
-        out.append(f"model adequacy (alpha {a.get('alpha')}): {a['verdict']}"
-                   + (": " + "; ".join(a.get("where", [])) if a.get("where") else ""))
-        coloured = [k for k, v in (a.get("noise_null") or {}).items() if v != "white"]
-        if coloured:
-            out.append(f"  tested against white + Gauss-Markov noise ({', '.join(coloured)}: "
-                       "the residual reads as coloured)")
-        if a.get("noise_model_requested") != a.get("noise_model_applied"):
-            out.append(f"  noise model: {a.get('noise_model_applied')} (asked for "
-                       f"{a.get('noise_model_requested')})")
-        out.extend(holdout_lines(a))
-        out.extend(limit_lines(a))
-    cls = sensor_class(cal) if cal.effects else ""
-    for t in cal.effects:
-        out.append(f"effect {t.name} on {t.kind} {t.sensor + 1}: {t.estimate:+.4g} ± "
-                   f"{t.estimate_sd:.2g} {t.unit}")
-        note = bound_fields(t.name, t.kind, t.estimate, t.unit, cls)["bound_note"]
-        if note:
-            out.append(f"  {note}")
-    if cal.effects:
-        out.append(f"note: {MONITOR_NOTE}")
     return out
