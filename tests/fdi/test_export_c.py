@@ -26,7 +26,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from test_isolation import flight as triad_flight
 from test_isolation import triads
-from test_monitor import scenario, with_jitter
+from test_monitor import apply_random_faults, scenario, with_jitter
 
 from fdi.calfile import EffectTerm
 from fdi.detector import default_thresholds
@@ -229,22 +229,13 @@ def random_faults_case(seed):
     cal, t, raw, _ = scenario("cone6", 800, [], seed=seed)
     if seed % 2:
         cal = with_jitter(cal, 3)                       # one jittered calibration: one build
-    valid = np.ones(raw.shape, bool)
-    sd = cal.gyro.noise_sd / cal.gyro.scale_factors
+    faults = []
     for _ in range(int(rng.integers(1, 5))):
         i, row = int(rng.integers(0, 6)), int(rng.integers(0, 700))
         size = rng.uniform(-30, 30)
-        kind = rng.choice(["step", "nan", "miss", "stuck", "spike"])
-        if kind == "step":
-            raw[row:, i] += size * sd[i]
-        elif kind == "nan":
-            raw[row, i] = np.nan
-        elif kind == "miss":
-            valid[row:row + 20, i] = False
-        elif kind == "stuck":
-            raw[row:, i] = raw[row, i]
-        else:
-            raw[row, i] += 50 * size * sd[i]
+        faults.append((i + 1, row, size, str(rng.choice(["step", "nan", "miss", "stuck",
+                                                          "spike"]))))
+    valid = apply_random_faults(cal, raw, faults)
     return Case(cal, t, raw, valid,
                 th=default_thresholds(cal, detector=("windows", "both")[seed % 2]))
 

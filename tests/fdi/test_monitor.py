@@ -105,18 +105,10 @@ def test_step_and_run_are_bit_identical(cfg, detector):
     assert any(e.type == "detected" for e in res.events)
 
 
-@settings(max_examples=20, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-@given(st.lists(st.tuples(st.integers(1, 6), st.integers(0, 399),
-                          st.floats(-30.0, 30.0), st.sampled_from(["step", "nan", "miss",
-                                                                    "stuck", "spike"])),
-                max_size=4),
-       st.integers(0, 10_000), st.integers(1, 97), st.sampled_from(["windows", "both"]),
-       st.booleans())
-def test_step_and_run_identical_for_random_fault_scenarios(faults, seed, chunk, detector,
-                                                           jitter):
-    cal, t, raw, _ = scenario("cone6", 400, [], seed=seed % 50)
-    if jitter:
-        cal = with_jitter(cal, seed)
+def apply_random_faults(cal, raw, faults):
+    """Apply ``faults`` [(sensor 1-based, row, size in noise sd, kind)] to ``raw`` in place
+    (kinds: step, nan, miss (20 samples invalid), stuck, spike (50 × size)); returns the
+    validity mask."""
     valid = np.ones(raw.shape, bool)
     sd = cal.gyro.noise_sd / cal.gyro.scale_factors
     for s, row, size, kind in faults:
@@ -131,6 +123,22 @@ def test_step_and_run_identical_for_random_fault_scenarios(faults, seed, chunk, 
             raw[row:, i] = raw[row, i]
         else:
             raw[row, i] += 50 * size * sd[i]
+    return valid
+
+
+@settings(max_examples=20, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.lists(st.tuples(st.integers(1, 6), st.integers(0, 399),
+                          st.floats(-30.0, 30.0), st.sampled_from(["step", "nan", "miss",
+                                                                    "stuck", "spike"])),
+                max_size=4),
+       st.integers(0, 10_000), st.integers(1, 97), st.sampled_from(["windows", "both"]),
+       st.booleans())
+def test_step_and_run_identical_for_random_fault_scenarios(faults, seed, chunk, detector,
+                                                           jitter):
+    cal, t, raw, _ = scenario("cone6", 400, [], seed=seed % 50)
+    if jitter:
+        cal = with_jitter(cal, seed)
+    valid = apply_random_faults(cal, raw, faults)
     th = default_thresholds(cal, detector=detector)
     a = Monitor(cal, th)
     answers = [a.step(t[i], raw[i], valid[i]) for i in range(len(t))]
