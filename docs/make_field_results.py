@@ -269,11 +269,11 @@ def _markdown(doc: dict, images: list[str]) -> str:
           "the other outside the out-of-envelope periods, both ways round.", ""]
     for k, f in sorted(now["flights"].items()):
         L += [f"**flight {k}** ({runs[-1][0]}; cut at {f['holdout']['split_at_s']:.1f} s)", ""]
-        L += [*_holdout_table(f["holdout"]["rows"]), ""]
+        L += [*_holdout_table(f["holdout"]["rows"]), *_refused(f["holdout"]), ""]
     st = now["static_4x_mpu9250"]
     L += [f"**4× MPU9250 at rest** ({runs[-1][0]}; {st['duration_s']:.0f} s at "
           f"{st['sample_rate_hz']:.1f} Hz, isolation on)", ""]
-    L += [*_holdout_table(st["rows"]), ""]
+    L += [*_holdout_table(st["rows"]), *_refused(st), ""]
     w = st["whole_record_1_per_hour"]
     L += [f"Whole record, calibrated on itself, 1/h: {w['observed']} episodes, excluded "
           f"{w['excluded'] or 'none'}, time in alarm {w['time_in_alarm']:.2e} (implied "
@@ -337,6 +337,13 @@ def _markdown(doc: dict, images: list[str]) -> str:
             L.append(f"- {k}: {v:.1f} s")
     L.append("")
     return "\n".join(L)
+
+
+def _refused(rec: dict[str, Any]) -> list[str]:
+    """One line per target ``rimu tune`` refused for the recording (alarms would merge)."""
+    return ["", *(f"Not counted: {x['target_per_hour']:g}/h, {x['reason']} (at most "
+                  f"{x['max_per_hour']:.3g}/h)." for x in rec.get("refused", []))] \
+        if rec.get("refused") else []
 
 
 def main(argv: list[str] | None = None) -> int:

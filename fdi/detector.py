@@ -34,6 +34,7 @@ from fdi.tails import tail_variance_factors
 __all__ = [
     "alpha_per_sample",
     "chi2_threshold",
+    "clear_thresholds",
     "cusum_threshold",
     "default_scales",
     "default_thresholds",
@@ -67,6 +68,31 @@ def chi2_threshold(alpha: float, df: int) -> float:
     if df < 1:
         return float("inf")
     return float(stats.chi2.isf(alpha, df))
+
+
+def clear_thresholds(thr, df: int, settings) -> list[float]:
+    """Per scale, the level every statistic must stay below for a detection to clear.
+
+    ``min(T_w, max(clear_ratio·T_w, q))`` with q the χ²(df) level exceeded with probability
+    ``clear_miss / (clear_samples · K)`` (K scales): by the union bound healthy white noise
+    stays below q for ``clear_samples`` samples on every scale with probability at least
+    ``1 − clear_miss``. Half a far-tail threshold is above q (the hysteresis as set); half a
+    threshold in the bulk of the statistic is not, and without the floor a detection at a
+    high target would never clear.
+
+    Parameters
+    ----------
+    thr : sequence of float, shape (K,)
+        Base thresholds T_w (χ² units).
+    df : int
+        Parity dimension of the set.
+    settings : MonitorSettings
+    """
+    thr = [float(t) for t in thr]
+    if df < 1 or not thr:
+        return [settings.clear_ratio * t for t in thr]
+    q = chi2_threshold(settings.clear_miss / (settings.clear_samples * len(thr)), df)
+    return [min(t, max(settings.clear_ratio * t, q)) for t in thr]
 
 
 def variance_factors(allan: AllanTable | None, noise_cov: np.ndarray, sample_rate_hz: float,
@@ -180,7 +206,7 @@ def default_thresholds(cal: Calibration, *, kind: str = "gyro",
     The variance factor of each scale is the Allan one, or where the calibration's tail
     model says the residual fails its normality check, ``max(Allan, overbound f_w(α_w))``
     (:func:`fdi.tails.tail_variance_factors`); where the calibration carries a drift model,
-    plus ``w·δ²`` of the drift over a horizon of the calibration's span
+    raised to cover the drift over a horizon of the calibration's span at each scale's α
     (:func:`fdi.drift.drift_variance_factors`).
 
     Parameters
@@ -216,7 +242,7 @@ def default_thresholds(cal: Calibration, *, kind: str = "gyro",
     df = s.n - 3
     vf_allan = variance_factors(s.allan, s.noise_covariance, fs, sc)
     vf, choices = tail_variance_factors(s.tails, sc, tuple(share for _ in sc), vf_allan)
-    vf = drift_variance_factors(s.drift, sc, vf)
+    vf = drift_variance_factors(s.drift, sc, vf, alpha=tuple(share for _ in sc))
     thr = tuple(chi2_threshold(share, df) if df >= 1 else 1e300 for _ in sc)
     h = cusum_threshold(share, cusum_drift, 2 * s.n) if detector != "windows" else float("nan")
     notes = (f"per-sample alpha {a_tot:.3e} = {false_alarms_per_hour:g}/h at {fs:g} Hz split "

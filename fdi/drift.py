@@ -26,27 +26,38 @@ with ``τ_h = 1.5·h + T_c/2``. So, per whitened direction, at most::
     δ²(h) = 2 · max( e(τ_L) · τ_h / τ_L,  max_{τ ≥ τ_L/4} e(τ) )
 
 (never below what the long end, τ ≥ τ_L/4, measured). A drift that flattens out (bias
-instability)
-makes this conservative; a drift that accelerates beyond τ_L (a rate ramp) is not
-covered by the data and is not claimed. The offset is treated as an isotropic Gaussian
-offset of variance δ² per whitened direction, as the bias uncertainty β is
-(:mod:`fdi.reconstruction`): the whole measured excess is put on every direction, which is
-right for a drift along one direction (the scaled χ²(df) threshold then over-covers its
-χ²(1) law) and conservative for one spread over several. The window's variance factor becomes
-(:func:`drift_variance_factors`)::
+instability) makes this conservative; a drift that accelerates beyond τ_L (a rate ramp) is
+not covered by the data and is not claimed.
 
-    f'_w = f_w + w · δ²(h)
+How the thresholds cover it (:func:`drift_variance_factors` with the scales' α): at the
+end of the horizon the offset is a Gaussian of total variance δ²(h) over the whitened
+directions (earlier in the horizon it is smaller: the rate stays below the target at every
+time of the horizon); its shape is not known, so both extremes are covered. A w-sample
+window statistic in units of its noise variance f_w is then ``χ²(df−1) + c·χ²(1)`` when the
+offset lies along one direction and ``(1 + (c−1)/df)·χ²(df)`` when it spreads evenly,
+``c = 1 + w·δ²(h)/f_w`` (the upper tail of a weighted sum of χ²(1) with a given total
+weight lies between the two; the one-direction shape is the heavier at small α). The
+window's variance factor becomes
 
-so a w-sample window's threshold covers white noise, the tail and the expected drift, and
-the detectable size ``rimu tune`` states grows with ``sqrt(f'_w / f_w)``: a fault that
-looks like a drift slower and smaller than δ is given up, and the stated size says so.
+    f'_w = f_w · max(q_one, q_spread) / χ²(df).isf(α_w)
+
+with q the level each shape exceeds with probability α_w, so its threshold covers white
+noise, the tail and the expected drift, and the detectable size ``rimu tune`` states grows
+with ``sqrt(f'_w / f_w)``: a fault that looks like a drift slower and smaller than δ is
+given up, and the stated size says so. Without α (the bare rule, kept for the monitor's
+default thresholds' notes): ``f_w + w·δ²(h)``, the offset put on every direction, which
+bounds f'_w from above.
 """
 
 from __future__ import annotations
 
 import itertools
+import math
 from dataclasses import dataclass
 from typing import Any
+
+import numpy as np
+from scipy import optimize, special, stats
 
 from fdi.fileio import Fields
 
@@ -165,10 +176,80 @@ def drift_model_from_fields(r: Fields) -> DriftModel:
                       excess=tuple(float(e) for e in excess), source=source)
 
 
+_S_NODES, _S_WEIGHTS = np.polynomial.legendre.leggauss(96)
+
+
+def _sf_one_direction(q: float, df: int, c: np.ndarray) -> np.ndarray:
+    """``P(χ²(df−1) + c·χ²(1) > q)`` per c: the window statistic (in units of its noise
+    variance) when the whole offset variance lies along one whitened direction.
+
+    With Y = s², ``P = P(cY > q) + ∫_0^{s0} √(2/π)·e^{−s²/2}·P(χ²(df−1) > q − c·s²) ds``,
+    s0 = √(q/c), by 96-point Gauss–Legendre in s.
+    """
+    c = np.asarray(c, float)[:, None]
+    tail = special.chdtrc(1, q / c[:, 0])
+    if df <= 1:
+        return tail
+    s0 = np.sqrt(q / c)
+    s = 0.5 * s0 * (_S_NODES + 1.0)
+    inner = np.sqrt(2.0 / np.pi) * np.exp(-0.5 * s * s) * special.chdtrc(df - 1, q - c * s * s)
+    return tail + 0.5 * s0[:, 0] * (inner @ _S_WEIGHTS)
+
+
+def _level(sf, alpha: float, lo: float, hi: float) -> float:
+    """The q in [lo, hi] with ``sf(q) = alpha`` (sf decreasing; brentq on the log)."""
+    la = math.log(alpha)
+    g = lambda q: math.log(max(float(sf(q)), 1e-300)) - la   # noqa: E731
+    if g(lo) <= 0.0:
+        return lo
+    hi = max(hi, lo) * (1.0 + 1e-9)
+    while g(hi) > 0.0:                  # rounding at the bracket's bound: widen it
+        hi *= 1.5
+    return float(optimize.brentq(g, lo, hi, xtol=1e-12 * hi, rtol=1e-10))
+
+
+def offset_levels(alpha: float, df: int, d2: float) -> tuple[float, float]:
+    """Levels exceeded with probability α by a window statistic with an offset, for the two
+    extreme shapes of the offset (module docstring): along one direction and spread evenly.
+
+    Parameters
+    ----------
+    alpha : float
+        Exceedance probability per sample.
+    df : int
+        Parity dimension.
+    d2 : float
+        ``w·δ²/f_w``: the offset's total variance over the whitened directions in units of
+        the window's noise variance.
+
+    Returns
+    -------
+    one, spread : float
+        Levels on the window statistic in units of its noise variance (χ²(df) without
+        drift: both equal ``χ²(df).isf(α)``).
+    """
+    c = 1.0 + max(float(d2), 0.0)
+    base = float(stats.chi2.isf(alpha, df))
+    hi = (float(stats.chi2.isf(alpha / 2.0, max(df - 1, 1))) * (df > 1)
+          + c * float(stats.chi2.isf(alpha / 2.0, 1)))
+    one = _level(lambda q: float(_sf_one_direction(q, df, np.array([c]))[0]), alpha, base,
+                 max(hi, base))
+    cs = 1.0 + (c - 1.0) / df
+    return one, base * cs
+
+
 def drift_variance_factors(model: DriftModel | None, scales: tuple[int, ...],
-                           factors: tuple[float, ...], horizon_s: float | None = None
-                           ) -> tuple[float, ...]:
-    """``f_w + w·δ²(h)`` per scale (module docstring); ``factors`` unchanged without a model.
+                           factors: tuple[float, ...], horizon_s: float | None = None,
+                           alpha: tuple[float, ...] | None = None) -> tuple[float, ...]:
+    """Variance factors that cover the drift over the horizon (module docstring); ``factors``
+    unchanged without a model.
+
+    Without ``alpha``: ``f_w + w·δ²(h)``, the offset variance put on every direction. With
+    the per-scale false-alarm probabilities: the factor whose scaled χ²(df) level at α_w is
+    the larger of the α_w-levels of the two extreme shapes of an offset of total variance
+    δ² (``c = 1 + w·δ²/f_w``): along one direction, ``χ²(df−1) + c·χ²(1)``; spread evenly,
+    ``(1 + w·δ²/(df·f_w))·χ²(df)`` (the tail of a sum of weighted χ²(1) with a given
+    total weight lies between them, the one-direction shape the heavier at small α).
 
     Parameters
     ----------
@@ -179,8 +260,18 @@ def drift_variance_factors(model: DriftModel | None, scales: tuple[int, ...],
         The variance factors without drift (Allan, tail overbound).
     horizon_s : float, optional
         See :meth:`DriftModel.offset_variance`.
+    alpha : tuple of float, optional
+        Per-scale exceedance probability of the thresholds the factors go with.
     """
     if model is None:
         return tuple(float(f) for f in factors)
+    if alpha is None:
+        d2 = model.offset_variance(horizon_s)
+        return tuple(float(f) + int(w) * d2 for w, f in zip(scales, factors, strict=True))
     d2 = model.offset_variance(horizon_s)
-    return tuple(float(f) + int(w) * d2 for w, f in zip(scales, factors, strict=True))
+    out = []
+    for w, f, a in zip(scales, factors, alpha, strict=True):
+        f = float(f)
+        one, spread = offset_levels(float(a), int(model.df), int(w) * d2 / f)
+        out.append(f * max(one, spread) / float(stats.chi2.isf(float(a), int(model.df))))
+    return tuple(out)

@@ -16,8 +16,9 @@ is laid out in :mod:`fdi.state`; the windows and the CUSUM bank are :mod:`fdi.wi
 Detection state machine: the first alarm emits ``"detected"``; after ``persistence``
 consecutive alarms a set that can isolate isolates the GLT sensor at the scale with the
 largest D/T (``"isolated"``, with the magnitude); a set that cannot stays "detected" until
-every statistic has stayed below ``clear_ratio × threshold`` for ``clear_samples`` samples
-(hysteresis: one event per onset, no flapping).
+every statistic has stayed below its clearing level for ``clear_samples`` samples
+(hysteresis: one event per onset, no flapping; the level is ``clear_ratio × threshold``,
+raised where that lies in the bulk of healthy noise, :func:`fdi.detector.clear_thresholds`).
 
 Samples in which a healthy sensor is missing (``valid = False``) give ω̂ from the sensors
 present, do not enter the windows (windows count complete samples) and carry an infinite

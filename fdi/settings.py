@@ -230,6 +230,15 @@ class MonitorSettings:
         ``clear_ratio × threshold`` ...
     clear_samples : int
         ... for this many consecutive samples.
+    clear_miss : float
+        Floor of the clearing level: never so low that healthy white noise fails to clear
+        in ``clear_samples`` samples with probability above this (union bound over the
+        samples and the scales: the χ²(df) level exceeded with probability
+        ``clear_miss / (clear_samples · scales)``), and never above the threshold. At the
+        far-tail thresholds of low targets ``clear_ratio × threshold`` is above the floor
+        and rules; at high targets (one alarm a minute) half the threshold lies in the
+        bulk of the healthy statistic, a detection could never clear, and one episode
+        would swallow every later alarm (:func:`fdi.detector.clear_thresholds`).
     readmission : bool
         Re-admit an isolated sensor after it behaved for ``readmit_dwell_s``. Off by
         default: isolated sensors stay isolated.
@@ -268,6 +277,7 @@ class MonitorSettings:
     persistence: int = 3
     clear_ratio: float = 0.5
     clear_samples: int = 100
+    clear_miss: float = 0.05
     readmission: bool = False
     readmit_dwell_s: float = 10.0
     readmit_gate: float = 9.0
@@ -290,6 +300,8 @@ class MonitorSettings:
             raise ConfigError("clear_ratio must lie in (0, 1]")
         if int(self.clear_samples) < 1:
             raise ConfigError("clear_samples must be >= 1")
+        if not 0.0 < self.clear_miss < 1.0:
+            raise ConfigError("clear_miss must lie in (0, 1)")
         if not self.stale_timeout_s > 0:
             raise ConfigError("stale_timeout_s must be positive")
         if int(self.stuck_count) < 2:

@@ -56,6 +56,7 @@ import numpy as np
 from numba.extending import register_jitable
 
 from fdi.blocks import CAPABILITY_CODE as _CAPABILITY_CODE
+from fdi.detector import clear_thresholds
 
 __all__ = [
     "BLOCK_ROWS",
@@ -350,7 +351,7 @@ def pack_set(model, H: np.ndarray, sigma_diag: np.ndarray, lo: tuple[float, ...]
     scales[:, s.CHI2_SCALE] = model.chi2_scale
     scales[:, s.RHO_GAIN] = model.rho_gain
     scales[:, s.OFFSET_GAIN] = model.offset_gain
-    scales[:, s.CLEAR_THRESHOLD] = [settings.clear_ratio * t for t in model.thr]
+    scales[:, s.CLEAR_THRESHOLD] = clear_thresholds(model.thr, df, settings)
     mats[:df] = model.V
     mats[df:df + 3] = model.G
     mats[df + 3:2 * df + 3, :df] = model.A

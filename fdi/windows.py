@@ -7,7 +7,8 @@ ring of the last R = 2^K + 1 of them; the sum over the last w samples is c_t −
     D_w = |Σ_w z|² / (w·f_w)                         (χ²(df) for healthy white noise)
     T_w = thr_w · (1 + w·β/f_w + κ/f_w · Σ_w ρ)      (calibration error does not average)
 
-an alarm is D_w > T_w; the detection clears only while every D_w < clear_ratio·thr_w.
+an alarm is D_w > T_w; the detection clears only while every D_w is below its clearing
+level (``clear_ratio·thr_w``, with the floor of :func:`fdi.detector.clear_thresholds`).
 ``D`` is NaN and ``T`` the base threshold while fewer than w samples are in the windows.
 """
 

@@ -248,6 +248,21 @@ def _count(result: Any, fallback_env: np.ndarray, fs: float, target: float,
     return row
 
 
+def _accepted(targets: Sequence[float], fs: float
+              ) -> tuple[list[float], list[dict[str, Any]]]:
+    """The targets ``rimu tune`` accepts at ``fs``, and the refused ones with the reason
+    (alarms that would merge: :func:`thresholds.tune.max_false_alarms_per_hour`)."""
+    from thresholds.tune import max_false_alarms_per_hour
+
+    top = max_false_alarms_per_hour(fs)
+    ok = [float(R) for R in targets if R <= top]
+    refused = [{"target_per_hour": float(R), "max_per_hour": top,
+                "reason": f"refused by rimu tune: above {top:.3g}/h at {fs:.3g} Hz one "
+                          f"alarm's shortest episode takes more than a tenth of the time "
+                          f"between alarms"} for R in targets if R > top]
+    return ok, refused
+
+
 def _tune(cal: Calibration, target: float, kind: str = "gyro") -> Any:
     from thresholds.tune import tune
 
@@ -260,6 +275,7 @@ def holdout_flight(flight: Flight, targets: Sequence[float] = TARGETS_PER_HOUR, 
     """Calibrate and tune on one half, count alarm episodes on the other, both ways round."""
     first, second = split_flight(flight)
     rows, env_src = [], ""
+    targets, refused = _accepted(targets, flight.sample_rate_hz)
     for name, fit_part, test_part in (("tune first half, count second", first, second),
                                       ("tune second half, count first", second, first)):
         cal = inflight_calibration(fit_part)
@@ -272,7 +288,7 @@ def holdout_flight(flight: Flight, targets: Sequence[float] = TARGETS_PER_HOUR, 
             rows.append(row)
             if progress:
                 progress()
-    return {"rows": rows, "envelope_source": env_src,
+    return {"rows": rows, "envelope_source": env_src, "refused": refused,
             "split_at_s": float(second.t[0]), "samples": int(flight.t.shape[0])}
 
 
@@ -366,6 +382,7 @@ def holdout_static_set(flight: Flight, targets: Sequence[float] = TARGETS_PER_HO
     first, second = split_flight(flight)
     fs = flight.sample_rate_hz
     rows = []
+    targets, refused = _accepted(targets, fs)
     for name, fit_part, test_part in (("tune first half, count second", first, second),
                                       ("tune second half, count first", second, first)):
         cal = calibrate_static(fit_part)
@@ -376,6 +393,7 @@ def holdout_static_set(flight: Flight, targets: Sequence[float] = TARGETS_PER_HO
     res = run_monitor(flight, cal, thr)
     whole = _count(res, np.zeros(flight.t.size, np.int64), fs, 1.0, thr)
     return {"rows": rows, "whole_record_1_per_hour": whole, "sample_rate_hz": fs,
+            "refused": refused,
             "samples": int(flight.t.size), "duration_s": float(flight.t[-1] - flight.t[0]),
             "calibration": "rimu calibrate --static (calibration.inflight.static)",
             "envelope_source": "the monitoring chain (replay.chain), online"}
@@ -727,10 +745,16 @@ def must_hold(res: dict[str, Any]) -> list[tuple[str, bool, str]]:
     res_rows = [(k, r) for k, r in rows if r["resolved"]]
     off = [f"{k} {r['target_per_hour']:g}/h: {r['observed']} vs {r['expected']:.2f}"
            for k, r in res_rows if not _holdout_ok(r)]
+    refused = sorted({f"{x['target_per_hour']:g}/h" for f in [*fl.values()]
+                      for x in f["holdout"].get("refused", [])}
+                     | {f"{x['target_per_hour']:g}/h"
+                        for x in res["static_4x_mpu9250"].get("refused", [])})
     out.append(("held out, outside the envelope: false alarms within 3x of the target "
                 "where the length resolves it", bool(res_rows) and not off,
                 f"{len(off)} of {len(res_rows)} resolved rows off"
-                + (": " + "; ".join(off) if off else "")))
+                + (": " + "; ".join(off) if off else "")
+                + (f" (refused by rimu tune as alarms that would merge: "
+                   f"{', '.join(refused)})" if refused else "")))
     n1 = sum(r["observed"] for k, r in rows if k in fl and r["target_per_hour"] == 1.0)
     out.append(("held out at 1/h: at most one alarm over all real flights together",
                 n1 <= 1, f"{n1} alarms"))

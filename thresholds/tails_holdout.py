@@ -106,7 +106,7 @@ def _verdict(rec: dict[str, Any], target: float) -> dict[str, Any]:
     return rec
 
 
-def flight_holdout(flight: Flight, *, targets: tuple[float, ...] = (1.0, 100.0, 1000.0),
+def flight_holdout(flight: Flight, *, targets: tuple[float, ...] = (1.0, 10.0, 100.0),
                    fraction: float = 0.5, kinds: tuple[str, ...] = ("tune",),
                    simulate_hours: float = 0.0, jitter: bool = True) -> dict[str, Any]:
     """Both ways of a time split of a flight (module docstring).
@@ -195,7 +195,7 @@ def _model_summary(cal: Calibration) -> list[dict[str, Any]]:
 
 
 def static_holdout_tails(t: np.ndarray, y: np.ndarray, names: tuple[str, ...], *,
-                         targets: tuple[float, ...] = (1.0, 100.0, 1000.0),
+                         targets: tuple[float, ...] = (1.0, 10.0, 100.0),
                          fraction: float = 0.5, kinds: tuple[str, ...] = ("tune",),
                          simulate_hours: float = 0.0) -> dict[str, Any]:
     """Both ways of a time split of a static recording (N, n) rad/s (module docstring).

@@ -38,11 +38,21 @@ The tuning here
 Drift over the horizon
 ----------------------
 Where the calibration carries a drift model of its whitened parity (:mod:`fdi.drift`,
-``docs/drift.md``), every scale's variance factor gets ``w·δ²(h)`` added after the tail
-overbound: δ²(h) is the parity offset variance the calibration's own long-τ Allan
-covariance predicts at the end of the horizon h (``drift_horizon_s``, default the span of
-the calibration data) under a random-walk extrapolation. The detectable sizes below then
-grow with it, and the tuning states the drift given up (1 σ of the offset, worst sensor).
+``docs/drift.md``), every scale's variance factor is raised after the tail overbound so
+that, at the scale's α, its threshold covers an offset of the variance δ²(t) the
+calibration's own long-τ Allan covariance predicts (random-walk extrapolation) over the
+horizon h (``drift_horizon_s``, default the span of the calibration data), averaged over
+the horizon and for the worse of an offset along one direction or spread over all
+(:func:`fdi.drift.drift_variance_factors`). The detectable sizes below then grow with it,
+and the tuning states the drift given up (1 σ of the offset at the horizon's end, worst
+sensor).
+
+Targets tune refuses
+--------------------
+An alarm episode lasts at least ``clear_samples`` samples (the hysteresis). A target whose
+mean time between alarms is less than ten such episodes (:data:`MAX_DEAD_TIME_SHARE`,
+:func:`max_false_alarms_per_hour`: 157/h at 43.5 Hz, 180/h at 50 Hz, 3600/h at 1 kHz) is
+refused: alarms would merge, and the counted rate no longer follows the thresholds.
 
 Detectable size (at rest)
 -------------------------
@@ -77,14 +87,19 @@ from fdi.drift import drift_variance_factors
 from fdi.errors import ConfigError
 from fdi.fileio import to_jsonable
 from fdi.parity import parity_matrix
-from fdi.settings import MAX_SCALE, Thresholds
+from fdi.settings import MAX_SCALE, MonitorSettings, Thresholds
 from fdi.tails import TailChoice, tail_variance_factors
 from fdi.units import DPS
 from thresholds.select import TUNING_SCHEMA
 
-__all__ = ["MIN_SIMULATED_RATE", "DetectableSize", "Tuning", "check_scales",
-           "detectable_sizes", "tune", "upcrossing_probability"]
+__all__ = ["MAX_DEAD_TIME_SHARE", "MIN_SIMULATED_RATE", "DetectableSize", "Tuning", "check_scales",
+           "detectable_sizes", "max_false_alarms_per_hour", "tune", "upcrossing_probability"]
 
+MAX_DEAD_TIME_SHARE = 0.1
+"""Largest share of the mean time between false alarms that one alarm's shortest episode
+(``clear_samples`` of :class:`fdi.settings.MonitorSettings`) may take: above it, episodes
+merge (a dead time D thins a Poisson rate R to R/(1 + R·D)), the counted rate no longer
+follows the thresholds, and ``tune`` refuses the target."""
 MIN_SIMULATED_RATE = 20.0
 """False alarms per hour below which the simulation correction is measured at this rate."""
 DETECTION_PROBABILITY = 0.99
@@ -124,6 +139,13 @@ def _alpha_for_upcrossings(rate: float, df: int, w: int) -> float:
     g = lambda la: math.log(upcrossing_probability(math.exp(la), df, w)) - math.log(rate)  # noqa: E731
     lo = math.log(rate) - 1e-12
     return math.exp(optimize.brentq(g, lo, math.log(0.45), xtol=1e-10))
+
+
+def max_false_alarms_per_hour(sample_rate_hz: float) -> float:
+    """Highest target ``tune`` accepts: one alarm's shortest episode (``clear_samples`` of
+    the default :class:`fdi.settings.MonitorSettings`) at most :data:`MAX_DEAD_TIME_SHARE`
+    of the mean time between alarms (per hour; 157/h at 43.5 Hz, 180/h at 50 Hz)."""
+    return 3600.0 * MAX_DEAD_TIME_SHARE * float(sample_rate_hz) / MonitorSettings().clear_samples
 
 
 def check_scales(cal: Calibration, scales: int | tuple[int, ...], *, kind: str = "gyro",
@@ -389,7 +411,10 @@ def _drift_assumptions(cal: Calibration, kind: str, thr: Thresholds, vf_no_drift
             "unit": "deg/s" if kind == "gyro" else "m/s^2", "worst_sensor": i + 1,
             "variance_factor_without_drift": list(vf_no_drift),
             "variance_factor": list(thr.variance_factor),
-            "rule": "f_w + w*delta^2(h), delta^2(h) = 2*max(e(tau_L)*tau_h/tau_L, max e), "
+            "rule": "f_w*max(q_one, q_spread)/chi2(df).isf(alpha_w): the levels exceeded "
+                    "with probability alpha_w on average over the horizon by an offset of "
+                    "variance delta^2(t) along one direction or spread over all; "
+                    "delta^2(t) = 2*max(e(tau_L)*tau_t/tau_L, max e), "
                     "tau_h = 1.5 h + T_c/2 (random walk beyond the longest resolved tau)"}
 
 
@@ -423,8 +448,9 @@ def tune(cal: Calibration, *, false_alarms_per_hour: float, kind: str = "gyro",
     Raises
     ------
     ConfigError
-        No residual statistics, a target that is not positive and finite, an unknown scale,
-        a set without redundancy, a negative or non-finite horizon.
+        No residual statistics, a target that is not positive and finite or so high that
+        alarms would merge (:data:`MAX_DEAD_TIME_SHARE`), an unknown scale, a set without
+        redundancy, a negative or non-finite horizon.
     """
     R = float(false_alarms_per_hour)
     if not (math.isfinite(R) and R > 0):
@@ -438,10 +464,14 @@ def tune(cal: Calibration, *, false_alarms_per_hour: float, kind: str = "gyro",
                           f"sensors (no Allan table of the residuals): recalibrate with the "
                           f"Allan table on, or give thresholds by hand")
     fs = float(cal.sample_rate_hz)
-    if R > 36.0 * fs:
-        raise ConfigError(f"--false-alarms-per-hour {R:g} is more than one alarm per 100 "
-                          f"samples at {fs:g} Hz (at most {36.0 * fs:g}); that is not a "
-                          f"false-alarm budget")
+    if R > max_false_alarms_per_hour(fs):
+        dead_s = MonitorSettings().clear_samples / fs
+        raise ConfigError(
+            f"--false-alarms-per-hour {R:g} is more than the monitor can count as separate "
+            f"alarms at {fs:g} Hz (at most {max_false_alarms_per_hour(fs):.3g}): an "
+            f"alarm lasts at least {dead_s:.3g} s (clear_samples), and at this rate that "
+            f"is more than {MAX_DEAD_TIME_SHARE:.0%} of the time between alarms; alarms "
+            f"would merge and that is not a false-alarm budget")
     sc = check_scales(cal, scales, kind=kind, sample_rate_hz=fs)
     if s.n < 4:
         raise ConfigError(f"{s.n} {kind} sensors: no parity space, nothing to tune")
@@ -473,12 +503,13 @@ def tune(cal: Calibration, *, false_alarms_per_hour: float, kind: str = "gyro",
     # measured tails then inflate the variance per scale at the alpha it ended with
     vf_tail, choices = tail_variance_factors(s.tails, sc, thr.alpha, vf)
     # then the drift expected over the horizon (fdi.drift), on top of noise and tail
-    vf_used = drift_variance_factors(s.drift, sc, vf_tail, drift_horizon_s)
+    vf_used = drift_variance_factors(s.drift, sc, vf_tail, drift_horizon_s, thr.alpha)
     drift_note = ""
     if s.drift is not None:
         h = s.drift.span_s if drift_horizon_s is None else float(drift_horizon_s)
-        drift_note = (f"; parity drift over a {h:g} s horizon: variance factor + w*"
-                      f"{s.drift.offset_variance(drift_horizon_s):.3g}")
+        drift_note = (f"; parity drift over a {h:g} s horizon (offset variance up to "
+                      f"{s.drift.offset_variance(drift_horizon_s):.3g} per sample, "
+                      f"fdi.drift)")
     notes = (f"tuned for {R:g} false alarms/h: exact white-noise upcrossing rate per scale, "
              f"equal shares, simulated correction {gamma:.3f}{tail_note(choices)}"
              f"{drift_note} (rimu tune)")

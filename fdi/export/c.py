@@ -395,7 +395,8 @@ def _settings_table(st: MonitorSettings, th: Thresholds) -> str:
                                         ", ".join(str(w) for w in th.scales)),
             ("sample rate the thresholds assume", f"{th.sample_rate_hz:g} Hz"),
             ("persistence", st.persistence), ("clear_ratio", st.clear_ratio),
-            ("clear_samples", st.clear_samples), ("readmission", st.readmission),
+            ("clear_samples", st.clear_samples), ("clear_miss", st.clear_miss),
+            ("readmission", st.readmission),
             ("readmit_dwell_s", st.readmit_dwell_s), ("readmit_gate", st.readmit_gate),
             ("stale_timeout_s", st.stale_timeout_s),
             ("stuck_count", st.stuck_count), ("wrong_exclusion", st.wrong_exclusion)]

@@ -216,7 +216,13 @@ class OracleMonitor:
             self.last_T = getattr(self, "last_T", {})
             self.last_T[w] = T
             ratios.append(D / T if D > T else -np.inf)
-            clear &= D < self.settings.clear_ratio * thr
+            # clearing level: half the threshold, never below the χ² level healthy noise
+            # stays under for clear_samples samples on every scale but with clear_miss
+            # (union bound), never above the threshold
+            st = self.settings
+            floor = chi2_threshold(st.clear_miss / (st.clear_samples * len(self.scales)),
+                                   mdl.df)
+            clear &= D < min(thr, max(st.clear_ratio * thr, floor))
         if self.cusum:
             U = mdl.U / np.linalg.norm(mdl.U, axis=0)
             r = U.T @ z

@@ -12,7 +12,7 @@ import pytest
 
 from calibration.drift import fit_drift_model
 from fdi.calfile import CALIBRATION_SCHEMA, CALIBRATION_SCHEMA_DRIFT, calibration_from_dict
-from fdi.drift import DriftModel, drift_variance_factors
+from fdi.drift import DriftModel, drift_variance_factors, offset_levels
 from fdi.errors import ConfigError, FileFormatError
 from thresholds.realnoise import static_calibration
 from thresholds.tails_holdout import without_tails
@@ -128,8 +128,13 @@ def test_tune_adds_the_drift_and_states_what_it_gives_up():
     d2 = cal.gyro.drift.offset_variance()
     assert d2 > 0
     ws = a.thresholds.scales
-    assert a.thresholds.variance_factor == pytest.approx(
-        [f + w * d2 for w, f in zip(ws, plain.thresholds.variance_factor, strict=True)])
+    vf_plain = plain.thresholds.variance_factor
+    assert a.thresholds.variance_factor == pytest.approx(drift_variance_factors(
+        cal.gyro.drift, ws, vf_plain, None, a.thresholds.alpha))
+    # the level at each alpha lies between no drift and the end-of-horizon offset put on
+    # every direction (f + w·δ²(h), the rule without alpha)
+    for w, f, fa in zip(ws, vf_plain, a.thresholds.variance_factor, strict=True):
+        assert f < fa <= f + w * d2, (w, f, fa, d2)
     # a shorter horizon gives up less, and every detectable size grows with the drift
     assert all(x <= y for x, y in zip(b.thresholds.variance_factor,
                                       a.thresholds.variance_factor, strict=True))
@@ -176,8 +181,10 @@ def test_default_thresholds_carry_the_drift_over_the_calibration_span():
     a, b = default_thresholds(cal), default_thresholds(plain)
     d2 = cal.gyro.drift.offset_variance()
     assert d2 > 0
-    assert a.variance_factor == pytest.approx(
-        [f + w * d2 for w, f in zip(b.scales, b.variance_factor, strict=True)])
+    assert a.variance_factor == pytest.approx(drift_variance_factors(
+        cal.gyro.drift, b.scales, b.variance_factor, None, a.alpha))
+    for w, f, fa in zip(b.scales, b.variance_factor, a.variance_factor, strict=True):
+        assert f < fa <= f + w * d2, (w, f, fa, d2)
     assert "parity drift" in a.notes and "parity drift" not in b.notes
 
 
@@ -190,3 +197,29 @@ def test_drift_and_validated_range_in_one_file():
     assert back.gyro.drift == cal.gyro.drift
     assert back.gyro.validated_rate.tolist() == [1.0, 2.0, 3.0]
     assert back.fingerprint() == cal.fingerprint()
+
+
+@pytest.mark.parametrize("df, alpha, d2", [(3, 1e-3, 4.0), (9, 1e-3, 20.0), (2, 1e-2, 1.5)])
+def test_offset_levels_are_exceeded_at_alpha(df, alpha, d2):
+    """Monte Carlo: an offset of total variance d2 (in noise units) along one direction or
+    spread evenly over df, noise χ²(df): each shape's level is exceeded with probability α
+    (binomial 3σ), the larger of the two (what the thresholds use) at most α for both, and
+    both below the bare rule's level (1 + d2)·χ²(df).isf(α)."""
+    from scipy import stats
+
+    rng = np.random.default_rng(df * 1000 + int(-math.log10(alpha)))
+    one, spread = offset_levels(alpha, df, d2)
+    n = 400_000
+    noise = rng.standard_normal((n, df))
+    along = noise.copy()
+    along[:, 0] += rng.standard_normal(n) * math.sqrt(d2)
+    even = noise + rng.standard_normal((n, df)) * math.sqrt(d2 / df)
+    d_one, d_even = np.sum(along**2, axis=1), np.sum(even**2, axis=1)
+    sd = math.sqrt(n * alpha * (1 - alpha))
+    for name, d, q in (("one direction", d_one, one), ("spread", d_even, spread)):
+        k = int(np.sum(d > q))
+        assert abs(k - n * alpha) < 3 * sd, (name, k, n * alpha)
+    top = max(one, spread)
+    for name, d in (("one direction", d_one), ("spread", d_even)):
+        assert np.sum(d > top) < n * alpha + 3 * sd, name
+    assert top < (1 + d2) * stats.chi2.isf(alpha, df)

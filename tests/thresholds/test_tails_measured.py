@@ -27,7 +27,9 @@ import pytest
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "calibration"))
 from _erle import DATA, FLIGHTS, SHARED, read_erle
 
-TARGETS = (1.0, 100.0, 1000.0)
+TARGETS = (1.0, 10.0, 100.0)
+"""1000/h is refused by ``rimu tune`` at these rates (50 and 43.5 Hz: alarms would merge,
+:func:`thresholds.tune.max_false_alarms_per_hour`)."""
 pytestmark = pytest.mark.slow
 
 
@@ -65,7 +67,7 @@ def test_flights_meet_resolvable_targets_within_3x(flights):
             if a["resolvable"]:
                 checked += 1
                 assert a["within_3x"], (name, fit, target, a["alarms"], a["hours"])
-    assert checked >= 4                     # 100/h and 1000/h on both flights, both ways
+    assert checked >= 4                     # 100/h on both flights, both ways
 
 
 def test_one_per_hour_at_most_one_alarm_over_all_flights(flights):
