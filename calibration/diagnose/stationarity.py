@@ -106,11 +106,12 @@ def _segment_amplitudes(d: KindData, i: int, Z0: np.ndarray, segs: list[np.ndarr
     sc = np.linalg.norm(X, axis=0)
     sc[sc == 0] = 1.0
     Xs = X / sc
-    beta, *_ = np.linalg.lstsq(Xs, y, rcond=None)
+    Gi = np.linalg.pinv(Xs.T @ Xs, hermitian=True)     # normal equations: k × k
+    beta = Gi @ (Xs.T @ y)
     resid = y - Xs @ beta
-    dof = max(d.N - np.linalg.matrix_rank(Xs), 1)
-    s2 = float(resid @ resid) / dof
-    cov = s2 * np.linalg.pinv(Xs.T @ Xs)
+    rank = int(np.linalg.matrix_rank(Gi, hermitian=True))
+    s2 = float(resid @ resid) / max(d.N - rank, 1)
+    cov = s2 * Gi
     beta, cov = beta / sc, cov / np.outer(sc, sc)
     p = Z0.shape[1]
     k0 = X.shape[1] - p * len(segs)
