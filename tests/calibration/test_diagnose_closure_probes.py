@@ -11,19 +11,25 @@
   sensor at its time; a late quadratic drift, which a step does not explain, stays
   "unexplained".
 
-The levels on full presets sessions are a campaign (test_closure_levels.py).
+The levels on full presets sessions are a campaign (test_closure_levels.py). Also
+``rimu calibrate --sensor-class`` (the class whose physical bounds label effect terms).
 """
+
+import dataclasses
 
 import numpy as np
 import scipy.stats
+from _cli import run
 from test_diagnose_holdout import _synthetic
 
-from calibration.diagnose import get_candidate
+from calibration.diagnose import format_adequacy, get_candidate
 from calibration.diagnose.adequacy import adequacy_record
 from calibration.diagnose.library import line_search
 from calibration.diagnose.selection import Selection, _family, _probe, select
 from calibration.diagnose.stationarity import line_stationarity, segments
+from calibration.presets import preset
 from fdi.adequacy import SUSPECTED
+from fdi.calfile import EffectTerm
 from fdi.units import DPH
 
 LINE = get_candidate("periodic_line")
@@ -126,3 +132,29 @@ def test_quadratic_drift_is_not_named_a_step():
     out = _probed(d, 1.5 * u**2, 2)
     assert not out.claimed and not out.promoted
     assert {u["sensor"] for u in out.unexplained} == {3}
+
+
+# ---- rimu calibrate --sensor-class ------------------------------------------------------
+
+def test_calibrate_sensor_class_sets_the_bounds(capsys, tmp_path):
+    """``format_adequacy(cal, sensor_class=...)`` (what ``rimu calibrate --sensor-class``
+    prints): 100 °/h per g of g-sensitivity is beyond the FOG bound the tetrad's noise
+    implies, within the MEMS one when the class is given; the option is refused for the
+    other kinds of session, in one line, exit 2."""
+    truth = preset("tetrad-paper").truth
+    term = EffectTerm("g_sensitivity", "gyro", 1, 100.0, 3.0, "deg/h per g",
+                      ("specific force",), {})
+    cal = dataclasses.replace(truth, effects=(term,))
+
+    def note(**kw):
+        lines = format_adequacy(cal, **kw)
+        i = next(k for k, ln in enumerate(lines) if ln.startswith("effect g_sensitivity"))
+        return lines[i + 1]
+
+    assert "absorbing something else" in note()
+    assert "absorbing something else" in note(sensor_class="fog")
+    assert "absorbing" not in note(sensor_class="mems")
+    code, out, err = run(capsys, "calibrate", "--in-flight", tmp_path, "--out",
+                         tmp_path / "c.json", "--sensor-class", "mems")
+    assert code == 2 and not out and len(err.strip().splitlines()) == 1, err
+    assert "--sensor-class" in err
