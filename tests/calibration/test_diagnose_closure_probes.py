@@ -94,7 +94,8 @@ def test_stationarity_level_on_constant_lines():
     """150 sets, a constant line with the frequency searched and refined (the product's
     path): p < 0.05 in at most the 99.9 % quantile of Binomial(150, 0.05) (the test is
     conservative if anything: the fitted frequency removes the phase drift a frequency
-    error leaves)."""
+    error leaves; measured 6 of 150 below 0.05, 1 below 0.01, KS against uniform p 5e-4:
+    conservative, so uniformity is not asserted)."""
     rng = np.random.default_rng(3)
     ps = []
     for _ in range(150):
@@ -103,7 +104,6 @@ def test_stationarity_level_on_constant_lines():
         ps.append(line_stationarity(d, 1, models[("gyro", 1)], LINE, par)["p_value"])
     ps = np.asarray(ps)
     assert np.sum(ps < 0.05) <= scipy.stats.binom.ppf(0.999, ps.size, 0.05), np.mean(ps < 0.05)
-    assert scipy.stats.kstest(ps, "uniform").pvalue > 1e-3 or np.mean(ps < 0.05) < 0.05
 
 
 def _probed(d, signal, sensor):
