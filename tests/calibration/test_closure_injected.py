@@ -21,7 +21,8 @@ switched off (``detectability=False``): they only turn an "adequate" verdict int
 weaker one, so the adequacy claim is checked against the strongest verdict the product
 could give. The Allan table and the Earth-rate fit are skipped (they feed no parameter
 the claims compare). 160 sessions, about 1-2 s each: 315-390 s wall (330-410 s with the
-held-out check) for the file with ``--slow`` on the shared 2-core machine (the ~60 s
+held-out check; 682 s with the closure probes under a load of 4-5) for the file with
+``--campaign`` on the shared 2-core machine (the ~60 s
 aimed for would need shorter sessions than the presets' sequences; the presets were
 kept). Marked ``campaign``: it runs with ``pytest --campaign`` and not in CI, whose
 budget it would take half of.
