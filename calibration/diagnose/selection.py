@@ -9,8 +9,14 @@ Family: every testable (candidate, sensor) pair of every kind. At each round eve
 yet accepted is tested against its sensor's current model (:class:`.linmodel.LinModel`);
 the smallest p-value is accepted when ``p < (α/2) / m`` with ``m`` the pairs still in the
 family (Holm's step-down, which stops at the first non-rejection). The remaining ``α/2``
-goes to the adequacy probes (:mod:`.probes`), Bonferroni over probes × sensors: the chance
-that a session whose model is complete gets any effect or "unexplained" is at most α.
+goes to the adequacy probes (:mod:`.probes`), Bonferroni over probes × sensors plus one
+stationarity test per fitted periodic line (:mod:`.stationarity`): the chance that a
+session whose model is complete gets any effect or "unexplained" is at most α.
+
+A failing ``change_point`` probe is named ``bias_step`` on its sensor when the step at
+the probe's time makes every probe of the kind pass (:func:`_promote_steps`): the probe
+and the candidate make the same test, the probe in the smaller family. This relabels a
+finding and never adds one, so the level above holds.
 
 A sensor whose probes still fail after selection is *unexplained*: effects accepted on it
 are not claimed (they are reported as partial fits), since picking the best of a bad lot
