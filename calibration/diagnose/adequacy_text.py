@@ -8,7 +8,7 @@ from collections.abc import Iterable, Mapping
 from typing import Any
 
 from calibration.diagnose.adequacy import MONITOR_NOTE
-from calibration.diagnose.bounds import sensor_class
+from calibration.diagnose.bounds import sensor_class as class_of
 from calibration.diagnose.run import bound_fields
 from fdi.adequacy import NOT_RULED_OUT
 from fdi.calfile import Calibration
@@ -91,8 +91,10 @@ def holdout_lines(a: Mapping[str, Any]) -> list[str]:
     return out
 
 
-def format_adequacy(cal: Calibration) -> list[str]:
-    """Lines ``rimu calibrate`` prints about the adequacy and the effect terms."""
+def format_adequacy(cal: Calibration, sensor_class: str | None = None) -> list[str]:
+    """Lines ``rimu calibrate`` prints about the adequacy and the effect terms
+    (``sensor_class``: ``"fog"`` or ``"mems"``, whose physical bounds label the effect
+    terms, :mod:`.bounds`; default: read from the calibration's gyro noise)."""
     a = cal.adequacy
     out = []
     if a is not None:
@@ -107,7 +109,7 @@ def format_adequacy(cal: Calibration) -> list[str]:
                        f"{a.get('noise_model_requested')})")
         out.extend(holdout_lines(a))
         out.extend(limit_lines(a))
-    cls = sensor_class(cal) if cal.effects else ""
+    cls = (sensor_class or class_of(cal)) if cal.effects else ""
     for t in cal.effects:
         out.append(f"effect {t.name} on {t.kind} {t.sensor + 1}: {t.estimate:+.4g} ± "
                    f"{t.estimate_sd:.2g} {t.unit}")

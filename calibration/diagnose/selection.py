@@ -9,8 +9,14 @@ Family: every testable (candidate, sensor) pair of every kind. At each round eve
 yet accepted is tested against its sensor's current model (:class:`.linmodel.LinModel`);
 the smallest p-value is accepted when ``p < (α/2) / m`` with ``m`` the pairs still in the
 family (Holm's step-down, which stops at the first non-rejection). The remaining ``α/2``
-goes to the adequacy probes (:mod:`.probes`), Bonferroni over probes × sensors: the chance
-that a session whose model is complete gets any effect or "unexplained" is at most α.
+goes to the adequacy probes (:mod:`.probes`), Bonferroni over probes × sensors plus one
+stationarity test per fitted periodic line (:mod:`.stationarity`): the chance that a
+session whose model is complete gets any effect or "unexplained" is at most α.
+
+A failing ``change_point`` probe is named ``bias_step`` on its sensor when the step at
+the probe's time makes every probe of the kind pass (:func:`_promote_steps`): the probe
+and the candidate make the same test, the probe in the smaller family. This relabels a
+finding and never adds one, so the level above holds.
 
 A sensor whose probes still fail after selection is *unexplained*: effects accepted on it
 are not claimed (they are reported as partial fits), since picking the best of a bad lot
@@ -22,6 +28,7 @@ one is listed as its alias (this sequence cannot tell them apart).
 
 from __future__ import annotations
 
+import copy
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -33,10 +40,14 @@ from calibration.diagnose.context import KindData
 from calibration.diagnose.library import Candidate, testable
 from calibration.diagnose.linmodel import LinModel
 from calibration.diagnose.probes import PROBES, run_probes, shared_regressors
+from calibration.diagnose.stationarity import LINE_EFFECT, line_stationarity
 
-__all__ = ["ALIAS_CORRELATION", "Selected", "Selection", "base_columns", "noise_sets", "select"]
+__all__ = ["ALIAS_CORRELATION", "STEP_EFFECT", "Selected", "Selection", "base_columns",
+           "noise_sets", "select"]
 
 ALIAS_CORRELATION = 0.95
+STEP_EFFECT = "bias_step"
+"""The library effect a failing ``change_point`` probe is named (:func:`_promote_steps`)."""
 
 
 @dataclass(frozen=True)
@@ -85,6 +96,9 @@ class Selection:
     noise_null: dict[str, str] = field(default_factory=dict)
     """Per kind, the noise of the null hypothesis: ``"white"`` or ``"white +
     Gauss-Markov"`` (profile-likelihood tests, :mod:`.coloured`)."""
+    promoted: list[dict[str, Any]] = field(default_factory=list)
+    """Change points the probes found that were named ``bias_step`` (claimed with the
+    probe's p): ``{"kind", "sensor" (1-based), "name", "p_value", "time_s"}``."""
 
 
 def noise_sets(sel: Selection) -> dict[str, NoiseSet]:
@@ -154,7 +168,8 @@ def select(datas: Mapping[str, KindData], cands: Iterable[Candidate], alpha: flo
     cache = _first_pass(datas, family, out)
     out.family_size = len(cache)
     _forward(datas, {c.name: c for c in cands}, cache, out, alpha)
-    _probe(datas, out, alpha)
+    _probe(datas, out, alpha,
+           step=next((c for c in cands if c.name == STEP_EFFECT), None))
     return out
 
 
@@ -253,25 +268,108 @@ def _forward(datas: Mapping[str, KindData], by_name: dict[str, Candidate],
                 cache[k2] = (p2, lp2, par2, Z2, ss2)
 
 
+def _line_terms(out: Selection, kind: str, i: int) -> list[Selected]:
+    """The fitted periodic lines of sensor ``i`` (claimed or forced)."""
+    return [s for s in out.claimed if (s.kind, s.sensor) == (kind, i)
+            and s.candidate.name == LINE_EFFECT and "frequency_hz" in s.params]
+
+
+def _sensor_probes(d: KindData, kind: str, i: int, model: LinModel | GlsModel,
+                   out: Selection, thr: float,
+                   shared: dict[str, tuple[np.ndarray, np.ndarray]]) -> list[dict[str, Any]]:
+    """Failing probes of one sensor: the adequacy probes (:mod:`.probes`) and, per line
+    its model holds, the line's stationarity (:mod:`.stationarity`)."""
+    recs = run_probes(d, i, model, thr, shared)
+    mine = [s for s in out.claimed if (s.kind, s.sensor) == (kind, i)]
+    for ln in _line_terms(out, kind, i):
+        others = [s.candidate.columns(d, i, s.params) for s in mine if s is not ln]
+        rec = line_stationarity(d, i, model, ln.candidate, ln.params, others)
+        if rec is not None and rec["p_value"] < thr:
+            recs.append(rec)
+    return recs
+
+
 def _probe(datas: Mapping[str, KindData], out: Selection, alpha: float, *,
-           demote: bool = True) -> None:
-    """Adequacy probes on every sensor; demote effects of sensors that still fail."""
+           demote: bool = True, step: Candidate | None = None) -> None:
+    """Adequacy probes on every sensor (with the stationarity of every fitted line, in the
+    same Bonferroni family); name a change point ``bias_step`` where that explains the
+    sensor (:func:`_promote_steps`, when ``step`` is given); demote effects of sensors
+    that still fail."""
     n_sensors = sum(d.n for d in datas.values())
-    thr = (alpha / 2) / (len(PROBES) * max(n_sensors, 1))
-    bad: set[tuple[str, int]] = set()
+    n_lines = sum(len(_line_terms(out, k, i)) for k, d in datas.items() for i in range(d.n))
+    thr = (alpha / 2) / (len(PROBES) * max(n_sensors, 1) + n_lines)
+    found: dict[tuple[str, int], list[dict[str, Any]]] = {}
     for kind, d in datas.items():
         shared = shared_regressors(d)
         for i in range(d.n):
-            for rec in run_probes(d, i, out.models[(kind, i)], thr, shared):
-                bad.add((kind, i))
-                out.unexplained.append({"kind": kind, "sensor": i + 1,
-                                        "sensor_name": d.names[i], **rec})
+            recs = _sensor_probes(d, kind, i, out.models[(kind, i)], out, thr, shared)
+            if recs:
+                found[(kind, i)] = recs
+    if step is not None:
+        _promote_steps(datas, out, found, thr, step)
+    for (kind, i), recs in found.items():
+        out.unexplained.extend({"kind": kind, "sensor": i + 1,
+                                "sensor_name": datas[kind].names[i], **rec} for rec in recs)
     if not demote:
         return
     keep = []
     for s in out.claimed:
-        (out.partial if (s.kind, s.sensor) in bad else keep).append(s)
+        (out.partial if (s.kind, s.sensor) in found else keep).append(s)
     out.claimed = keep
     for rec in out.unexplained:
         rec["partial_fits"] = [s.candidate.name for s in out.partial
                                if (s.kind, s.sensor + 1) == (rec["kind"], rec["sensor"])]
+
+
+def _promote_steps(datas: Mapping[str, KindData], out: Selection,
+                   found: dict[tuple[str, int], list[dict[str, Any]]], thr: float,
+                   step: Candidate) -> None:
+    """Name a failing ``change_point`` probe ``bias_step`` on its sensor when the step
+    explains the sensor.
+
+    The ``change_point`` probe and the ``bias_step`` candidate make the same test (a bias
+    step at the best scanned time, Bonferroni over the scan); the probe's family is the
+    smaller one, so a step can pass the probe's threshold and miss the selection's Holm
+    threshold (as under a coloured-noise null, whose wider σ a chance colour of another
+    sensor can bring). Sensors whose failing probes include ``change_point`` are tried
+    in order of that probe's p: the step at the probe's time is added to a copy of the
+    kind's models (the set's noise is shared, so every sensor of the kind is re-probed),
+    and the step is claimed, with the probe's p and threshold, only when the sensor then
+    passes every probe and no sensor of the kind that passed fails. Under a complete model
+    this changes no session's "anything found" (it only relabels a probe that already
+    failed), so the family-wise level stays at most α.
+    """
+    while True:
+        tried = sorted(((r["p_value"], key, r) for key, recs in found.items()
+                        for r in recs if r["test"] == "change_point"
+                        and key[0] in step.kinds and testable(step, datas[key[0]]) is None
+                        and not any((s.kind, s.sensor, s.candidate.name)
+                                    == (*key, step.name) for s in out.claimed)),
+                       key=lambda x: x[0])
+        done = False
+        for p, (kind, i), rec in tried:
+            d = datas[kind]
+            keys = [(kind, j) for j in range(d.n)]
+            shared_noise = {id(m.noise): m.noise for k in keys
+                            if isinstance(m := out.models[k], GlsModel)}
+            trial = copy.deepcopy({k: out.models[k] for k in keys}, shared_noise)
+            params = {"time_s": float(rec["time_s"])}
+            if not trial[(kind, i)].add(step.columns(d, i, params)):
+                continue
+            shared = shared_regressors(d)
+            new = {k: r for k in keys
+                   if (r := _sensor_probes(d, kind, k[1], trial[k], out, thr, shared))}
+            if (kind, i) in new or any(k not in found for k in new):
+                continue
+            out.models.update(trial)
+            for k in keys:
+                found.pop(k, None)
+            found.update(new)
+            out.claimed.append(Selected(step, kind, i, params, float(p), thr, (),
+                                        float(np.log(max(p, 1e-300)))))
+            out.promoted.append({"kind": kind, "sensor": i + 1, "name": step.name,
+                                 "p_value": float(p), "time_s": params["time_s"]})
+            done = True
+            break
+        if not done:
+            return

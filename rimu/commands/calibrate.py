@@ -47,6 +47,10 @@ def configure(p: argparse.ArgumentParser) -> None:
                    help="fit the Earth rate to the raw outputs, not the wavelet-denoised ones")
     p.add_argument("--plot", metavar="DIR",
                    help="write PNG plots (per-step residuals, Earth-rate fit) into DIR")
+    p.add_argument("--sensor-class", choices=("fog", "mems"), default=None,
+                   help="sensor class whose physical bounds label the effect terms of a "
+                        "session's calibration (default: from the calibration's gyro "
+                        "noise, docs/diagnose.md)")
     add_ferraris_arguments(p)
     from rimu.commands.calibrate_effects import add_calibrate_options
     from rimu.commands.calibrate_inflight import configure_options
@@ -128,8 +132,9 @@ def _noise_lines(nm: NoiseModel | None) -> list[str]:
     return out
 
 
-def summary_text(cal: Calibration) -> str:
-    """The readable summary ``rimu calibrate`` prints."""
+def summary_text(cal: Calibration, sensor_class: str | None = None) -> str:
+    """The readable summary ``rimu calibrate`` prints (``sensor_class``: the class whose
+    physical bounds label the effect terms, default from the gyro noise)."""
     from fdi.units import DEG, DPH
 
     ex = cal.extras
@@ -167,7 +172,7 @@ def summary_text(cal: Calibration) -> str:
     lines.extend(_noise_lines(ex.noise_model))
     from calibration.diagnose.adequacy_text import format_adequacy
 
-    lines.extend(format_adequacy(cal))
+    lines.extend(format_adequacy(cal, sensor_class=sensor_class))
     return "\n".join(lines)
 
 
@@ -188,9 +193,10 @@ def _check_modes(args: argparse.Namespace) -> None:
              "--effects": getattr(args, "effects", None),
              "--no-denoise": args.no_denoise or None,
              "--bias-method": None if args.bias_method == "model" else args.bias_method,
-             "--noise-model": None if args.noise_model == "auto" else args.noise_model}
+             "--noise-model": None if args.noise_model == "auto" else args.noise_model,
+             "--sensor-class": getattr(args, "sensor_class", None)}
     session_only = ("--compare", "--plot", "--effects", "--no-denoise", "--bias-method",
-                    "--noise-model")
+                    "--noise-model", "--sensor-class")
     refuse_together("rimu calibrate", given, "--in-flight",
                     ("SESSION", "--ferraris", "--static", "--sections", "--sample-rate-hz",
                      *session_only))
@@ -269,7 +275,7 @@ def run(args: argparse.Namespace) -> int:
         compared = format_comparison(compare(cal, truth, effects, effect_sensors))
     with atomic_file(out) as tmp:
         cal.save(tmp)
-    print(summary_text(cal))
+    print(summary_text(cal, sensor_class=args.sensor_class))
     for w in cal.extras.warnings:
         logging.getLogger("rimu").warning(w)
     print(f"wrote {out}")

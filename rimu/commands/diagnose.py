@@ -55,6 +55,10 @@ def _unexplained_line(u: dict) -> str:
         where.append(f"band {u['band_hz'][0]:.3g}-{u['band_hz'][1]:.3g} Hz")
     if u.get("time_s") is not None:
         where.append(f"near t = {u['time_s']:.1f} s")
+    if u.get("segments"):                        # line_stationarity: amplitude per segment
+        where.append("amplitude per segment " + " ".join(
+            f"{g['amplitude']:.3g}±{g['amplitude_sd']:.2g}" for g in u["segments"])
+            + f" {u.get('unit', '')}".rstrip())
     part = f"; partial fits not claimed: {', '.join(u['partial_fits'])}" \
         if u.get("partial_fits") else ""
     return (f"  {u['kind']} {u['sensor']} ({u['sensor_name']}): {u['test']} "
