@@ -341,9 +341,8 @@ def _markdown(doc: dict, images: list[str]) -> str:
 
 def _refused(rec: dict[str, Any]) -> list[str]:
     """One line per target ``rimu tune`` refused for the recording (alarms would merge)."""
-    return ["", *(f"Not counted: {x['target_per_hour']:g}/h, {x['reason']} (at most "
-                  f"{x['max_per_hour']:.3g}/h)." for x in rec.get("refused", []))] \
-        if rec.get("refused") else []
+    return ["", *(f"Not counted: {x['target_per_hour']:g}/h, {x['reason']}."
+                  for x in rec.get("refused", []))] if rec.get("refused") else []
 
 
 def main(argv: list[str] | None = None) -> int:

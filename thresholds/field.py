@@ -257,9 +257,9 @@ def _accepted(targets: Sequence[float], fs: float
     top = max_false_alarms_per_hour(fs)
     ok = [float(R) for R in targets if R <= top]
     refused = [{"target_per_hour": float(R), "max_per_hour": top,
-                "reason": f"refused by rimu tune: above {top:.3g}/h at {fs:.3g} Hz one "
-                          f"alarm's shortest episode takes more than a tenth of the time "
-                          f"between alarms"} for R in targets if R > top]
+                "reason": f"refused by rimu tune: at {fs:.3g} Hz one alarm's shortest "
+                          f"episode would take more than a tenth of the mean time between "
+                          f"alarms above {top:.3g}/h"} for R in targets if R > top]
     return ok, refused
 
 
