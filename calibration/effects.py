@@ -12,7 +12,7 @@ it acts on).
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 
 from fdi.effect_specs import (
@@ -27,7 +27,10 @@ from fdi.effect_specs import (
 from fdi.errors import ConfigError
 
 __all__ = [
+    "DELAY_KNOB",
+    "EARTH_RATE_KNOB",
     "EFFECTS",
+    "TEMPERATURE_KNOB",
     "TEMP_RISE_DEGC",
     "TEMP_START_DEGC",
     "TEMP_TAU_S",
@@ -76,6 +79,18 @@ EFFECTS: dict[str, Effect] = {
                    s.simulator.flag, s.simulator.all_sensors, s.simulator)
     for s in effect_specs() if s.simulator is not None}
 """The effects, by name (the specs that have a simulator form, in their order)."""
+
+
+def _knob(test: Callable[[SimulatorForm], bool]) -> str:
+    return next(e.name for e in EFFECTS.values() if test(e.form))
+
+
+DELAY_KNOB = _knob(lambda f: f.stage == "delay")
+"""The knob that delays the inputs (the sensor samples late)."""
+EARTH_RATE_KNOB = _knob(lambda f: f.stage == "earth_rate")
+"""The knob that leaves the Earth rate out."""
+TEMPERATURE_KNOB = _knob(lambda f: f.column)
+"""The knob whose session carries a temperature column."""
 
 
 def effects_help() -> str:

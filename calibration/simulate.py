@@ -32,7 +32,14 @@ from pathlib import Path
 import numpy as np
 from scipy.signal import lfilter
 
-from calibration.effects import EFFECTS, resolve_effect_sensors, temperature_profile
+from calibration.effects import (
+    DELAY_KNOB,
+    EARTH_RATE_KNOB,
+    EFFECTS,
+    TEMPERATURE_KNOB,
+    resolve_effect_sensors,
+    temperature_profile,
+)
 from calibration.sequence import Sequence
 from calibration.session import Session
 from calibration.session_io import MIN_STEP_SAMPLES
@@ -320,16 +327,11 @@ class EffectContext:
     f_along: np.ndarray
 
 
-def _stage(stage: str) -> str | None:
-    """The effect acting on the inputs at ``stage`` (``"delay"``, ``"earth_rate"``)."""
-    return next((e.name for e in EFFECTS.values() if e.form.stage == stage), None)
-
-
 _OUTPUT_EFFECTS = tuple(sorted((e for e in EFFECTS.values() if e.form.apply is not None),
                                key=lambda e: e.form.order))
 """Gyro effects on the output, in the order they are applied (gains, then biases; the
-spec's ``simulator.order``); the others act on the inputs (:func:`_stage`)."""
-_DELAY, _NO_EARTH = _stage("delay"), _stage("earth_rate")
+spec's ``simulator.order``); the others act on the inputs (``DELAY_KNOB``,
+``EARTH_RATE_KNOB``)."""
 
 
 def gyro_outputs(setup: SimSetup, sequence: Sequence, tb: TimeBase,
@@ -338,7 +340,7 @@ def gyro_outputs(setup: SimSetup, sequence: Sequence, tb: TimeBase,
     """Raw gyro outputs with the effects (stage 4), shape (N, n_g)."""
     gset, eff, touched = setup.gyros, setup.effects, setup.touched
     Hg = gset.H
-    earth = 0.0 if eff.get(_NO_EARTH, 0.0) else 1.0
+    earth = 0.0 if eff.get(EARTH_RATE_KNOB, 0.0) else 1.0
 
     def sel(name: str) -> np.ndarray:
         return np.isin(np.arange(1, gset.n + 1), touched.get(name, ()))
@@ -346,7 +348,7 @@ def gyro_outputs(setup: SimSetup, sequence: Sequence, tb: TimeBase,
     sg = (base[0] + earth * base[1]) @ Hg.T             # input along the true axes
     f_g = base[2] @ Hg.T                                 # specific force along h̃_i
     if skewed is not base:
-        m = sel(_DELAY)
+        m = sel(DELAY_KNOB)
         sg[:, m] = ((skewed[0] + earth * skewed[1]) @ Hg.T)[:, m]
         f_g[:, m] = (skewed[2] @ Hg.T)[:, m]
     ctx = EffectContext(t=tb.t, duration_s=tb.n_samples / setup.sample_rate_hz,
@@ -367,7 +369,7 @@ def accel_outputs(setup: SimSetup, base: tuple[np.ndarray, ...],
         return None
     sa = base[2] @ aset.H.T
     if skewed is not base:
-        m = np.isin(np.arange(1, aset.n + 1), setup.touched[_DELAY])
+        m = np.isin(np.arange(1, aset.n + 1), setup.touched[DELAY_KNOB])
         sa[:, m] = (skewed[2] @ aset.H.T)[:, m]
     return (sa + aset.biases + draw.white["accel"] + draw.slow["accel"]) / aset.scale_factors
 
@@ -430,7 +432,7 @@ def simulate_session(config: Configuration | str | None, sequence: Sequence,
     tb = time_base(sequence, su.sample_rate_hz)
     draw = draw_noise(su, noise, tb.n_samples, seed)
     base = sampled_inputs(sequence, tb, su.latitude_rad, su.gravity)
-    skew = su.effects.get(_DELAY, 0.0) if _DELAY in su.touched else 0.0
+    skew = su.effects.get(DELAY_KNOB, 0.0) if DELAY_KNOB in su.touched else 0.0
     skewed = sampled_inputs(sequence, tb, su.latitude_rad, su.gravity, skew) \
         if skew != 0.0 else base
     meta = {
@@ -454,8 +456,7 @@ def simulate_session(config: Configuration | str | None, sequence: Sequence,
         raw_accel=accel_outputs(su, base, skewed, draw), gyro_raw_unit=_raw_unit(su.gyros),
         accel_raw_unit=_raw_unit(su.accels) if su.accels is not None else "raw",
         gravity=su.gravity, source="<simulated>", meta=meta,
-        temperature_degC=temperature_profile(tb.t)
-        if any(e.form.column for e in EFFECTS.values() if e.name in su.effects) else None)
+        temperature_degC=temperature_profile(tb.t) if TEMPERATURE_KNOB in su.effects else None)
 
 
 def true_raw_means(session: Session, truth: Calibration, *,
@@ -510,7 +511,7 @@ def truth_of_session(session: Session, truth: Calibration
                   "noise": meta.get("noise")})
     cal = dataclasses.replace(
         truth, sample_rate_hz=session.sample_rate_hz, latitude_deg=session.latitude_deg,
-        earth_rate_dph=0.0 if effects.get(_NO_EARTH) else EARTH_RATE_DPH,
+        earth_rate_dph=0.0 if effects.get(EARTH_RATE_KNOB) else EARTH_RATE_DPH,
         earth_rate_dph_sd=0.0, extra=extra)
     return cal, effects, sensors, details
 
