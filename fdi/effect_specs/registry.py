@@ -39,13 +39,16 @@ def register_spec(spec: EffectSpec) -> EffectSpec:
     return spec
 
 
-def entry_point_objects(entry_points: object = None) -> list[object]:
+def entry_point_objects(entry_points: object = None, *, strict: bool = True
+                        ) -> list[object]:
     """The objects the group's entry points name (callables called, lists flattened).
+
+    ``strict`` False skips an entry point that cannot be loaded.
 
     Raises
     ------
     ConfigError
-        An entry point that cannot be loaded (named).
+        ``strict``: an entry point that cannot be loaded (named).
     """
     eps = metadata.entry_points(group=ENTRY_POINT_GROUP) if entry_points is None \
         else entry_points
@@ -53,11 +56,14 @@ def entry_point_objects(entry_points: object = None) -> list[object]:
     for ep in eps:
         try:
             obj = ep.load()
+            if callable(obj) and not isinstance(obj, EffectSpec) \
+                    and not hasattr(obj, "regressor"):
+                obj = obj()
         except Exception as exc:  # a broken plug-in must name itself
+            if not strict:
+                continue
             raise ConfigError(f"entry point {ep.name!r} of group {ENTRY_POINT_GROUP}: cannot "
                               f"load {ep.value} ({exc})") from None
-        if callable(obj) and not isinstance(obj, EffectSpec) and not hasattr(obj, "regressor"):
-            obj = obj()
         out += list(obj) if isinstance(obj, list | tuple) else [obj]
     return out
 
@@ -67,7 +73,9 @@ def _load() -> None:
     if _LOADED:
         return
     _LOADED = True
-    for obj in entry_point_objects():
+    # a broken plug-in is skipped here (the knob list and the monitor go on without it);
+    # the diagnosis loads the group strictly and names it
+    for obj in entry_point_objects(strict=False):
         if isinstance(obj, EffectSpec):
             register_spec(obj)
 
