@@ -22,8 +22,8 @@ The in-flight diagnosis tests ``time_skew``, ``g_sensitivity``, ``temperature``,
 (as ``warm_up``, τ = :data:`WARMUP_FLIGHT_TAU_S`), ``bias_drift`` (Legendre P1…P3) and
 ``periodic_line`` (as ``vibration_<f>Hz`` lines) on each IMU's three parity channels.
 
-None of these effects is in the seed papers' linear model (``y = SF·u − b``, seed 001
-Eq. 1): they are what :mod:`calibration.diagnose` tests that model against.
+None of these effects is in the seed papers' error model (misalignment, bias and scale
+factor, seed 001 Eq. 1): they are what :mod:`calibration.diagnose` tests that model against.
 
 Adding an effect: one more :class:`EffectSpec` in :data:`BUILTIN` (``docs/effects.md``).
 """
@@ -224,6 +224,8 @@ def _needs_reference(p: Mapping[str, Any]) -> str | None:
 _FOG_MEMS = {"fog": 50.0, "mems": 3600.0 * 5}           # deg/h: warm-up, drift, step
 
 
+# every effect here extends the error model of seed 001 Eq. 1 (misalignment, bias and scale
+# factor only); none is in the seed papers
 BUILTIN: tuple[EffectSpec, ...] = (
     EffectSpec(
         "g_sensitivity", ("gyro",), "gyro bias proportional to the specific force along the "
