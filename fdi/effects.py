@@ -272,6 +272,8 @@ class Compensator:
         self._scalar = [(rt.code, nm, int(idx[j]), float(k[j]),
                          extra[j].tolist() if extra.ndim == 2 else float(extra[j]))
                         for rt, nm, idx, k, extra in self._grouped for j in range(idx.size)]
+        self._scalar_forms = [(self._forms[code].apply, self._forms[code].input)
+                              for code, *_ in self._scalar]
         self._sf_list, self._b_list = self._sf.tolist(), self._b.tolist()
 
     @property
@@ -370,18 +372,18 @@ class Compensator:
         T = (None if T is None else [float(T)] * self.n if T.shape == ()
              else T.tolist() if T.shape == (self.n,) else None)
         sf, b = self._sf_list, self._b_list
-        for code, name, i, k, e in self._scalar:
-            rt = self._forms[code]
-            if rt.input == "rate":
-                v = rt.apply(k, r[i] * sf[i] - b[i], e)
-            elif rt.input == "specific_force":
+        for (_, name, i, k, e), (apply, inp) in zip(self._scalar, self._scalar_forms,
+                                                   strict=True):
+            if inp == "rate":
+                v = apply(k, r[i] * sf[i] - b[i], e)
+            elif inp == "specific_force":
                 fi = f if f is None or not isinstance(f[0], list) else f[i]
-                v = rt.apply(k, fi, e) if fi is not None else math.nan
+                v = apply(k, fi, e) if fi is not None else math.nan
             else:
-                v = rt.apply(k, T[i], e) if T is not None else math.nan
+                v = apply(k, T[i], e) if T is not None else math.nan
             if not math.isfinite(v):
                 v = 0.0
-                if rt.input != "rate":
+                if inp != "rate":
                     self.missing[(name, i)] += 1
             c[i] += v
         return np.array(c)
