@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from calibration.effects import TEMP_START_DEGC
+from calibration.effects import EARTH_RATE_KNOB, TEMP_START_DEGC, TEMPERATURE_KNOB
 from fdi.calfile import Calibration, misalignment_angles
 from fdi.errors import ConfigError
 from fdi.units import (
@@ -67,7 +67,7 @@ class ComparisonRow:
 def true_earth_rate_dph(truth: Calibration, effects: Mapping[str, float] | None = None) -> float:
     """The Earth rate a simulated session contains: 0 with ``no_earth_rate``, else the
     truth's ``earth_rate_dph`` or 15.041 °/h."""
-    if effects and effects.get("no_earth_rate"):
+    if effects and effects.get(EARTH_RATE_KNOB):
         return 0.0
     return truth.earth_rate_dph if truth.earth_rate_dph is not None else EARTH_RATE_DPH
 
@@ -84,12 +84,12 @@ def true_bias(cal: Calibration, truth: Calibration, kind: str, i: int,
     estimates is b₀ + k·(T_ref − T₀). Otherwise the truth's bias as it is.
     """
     b0 = truth.sets[kind].sensors[i].bias
-    k = (effects or {}).get("temperature", 0.0)
-    on = (effect_sensors or {}).get("temperature", ())
+    k = (effects or {}).get(TEMPERATURE_KNOB, 0.0)
+    on = (effect_sensors or {}).get(TEMPERATURE_KNOB, ())
     if kind != "gyro" or k == 0.0 or (i + 1) not in on:
         return b0
     for term in cal.effects:
-        if (term.name, term.kind, term.sensor) == ("temperature", kind, i) \
+        if (term.name, term.kind, term.sensor) == (TEMPERATURE_KNOB, kind, i) \
                 and "reference_degC" in term.params:
             t_ref = float(term.params["reference_degC"])
             return b0 + k * DPH * (t_ref - TEMP_START_DEGC)

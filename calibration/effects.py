@@ -1,45 +1,36 @@
 """Effects the default calibration model lacks, as simulator knobs (all off by default).
 
-The list below is data: the CLI help text, the checks and the truth sidecar are generated
-from it. Each effect has one value (same for every sensor it touches) and touches only the
-sensors named with ``--effect-sensors`` (1-based, within each sensor kind; default: all
-sensors of the kinds it acts on). Definitions, with ``s_i = h̃_i·x`` the input sensed along
-the true axis (SI), ``w`` the sequence's table rate and ``t`` the time since the start of the
-session:
-
-- ``g_sensitivity`` k (°/h per g), gyros: ``s_i += k·(h̃_i·f_b)/g₀`` (bias proportional to
-  the specific force along the sensor axis).
-- ``scale_asymmetry`` a (fraction), gyros: ``s_i *= 1 + (a/2)·sign(s_i)`` (gains for + and −
-  inputs differ by a).
-- ``scale_nonlinearity`` k (fraction at the table rate), gyros: ``s_i += k·s_i²/w`` (quadratic
-  term equal to k·w at the table rate).
-- ``warmup`` A (°/h), gyros: ``s_i += A·exp(−t/τ)`` with τ = :data:`WARMUP_TAU_S` (the
-  temperature-dependent bias of a sensor warming up after switch-on).
-- ``time_skew`` τ (s), gyros and accelerometers: the sensor samples its input τ late,
-  ``x(t − τ)``; the input is evaluated exactly from the step's table motion at ``t − τ``.
-- ``bias_drift`` D (°/h), gyros: linear bias drift, ``s_i += D·t/T`` (T the session length):
-  the bias is the truth bias at the start and truth + D at the end.
-- ``no_earth_rate`` (flag, 1 = on), all gyros: Earth rate is not applied.
-- ``temperature`` k (°/h per °C), gyros: ``s_i += k·(T(t) − T₀)`` with the session's
-  temperature warming up from T₀ = :data:`TEMP_START_DEGC` by :data:`TEMP_RISE_DEGC` with
-  time constant :data:`TEMP_TAU_S` (:func:`temperature_profile`); the simulated session
-  carries ``T(t)`` as its per-set temperature column whenever the knob is given (also 0).
+The knobs are the simulator forms of the effect specifications (:mod:`fdi.effect_specs`:
+each spec's ``simulator`` gives its unit, the sensor kinds it acts on, its one-line
+definition and its arithmetic; :mod:`fdi.effect_specs.builtin` tabulates them). The CLI help
+text, the checks and the truth sidecar are generated from them. Each effect has one value
+(same for every sensor it touches) and touches only the sensors named with
+``--effect-sensors`` (1-based, within each sensor kind; default: all sensors of the kinds
+it acts on).
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
+from fdi.effect_specs import (
+    TEMP_RISE_DEGC,
+    TEMP_START_DEGC,
+    TEMP_TAU_S,
+    WARMUP_TAU_S,
+    SimulatorForm,
+    effect_specs,
+    temperature_profile,
+)
 from fdi.errors import ConfigError
 
-if TYPE_CHECKING:
-    import numpy as np
-
 __all__ = [
+    "DELAY_KNOB",
+    "EARTH_RATE_KNOB",
     "EFFECTS",
+    "TEMPERATURE_KNOB",
     "TEMP_RISE_DEGC",
     "TEMP_START_DEGC",
     "TEMP_TAU_S",
@@ -52,32 +43,10 @@ __all__ = [
     "temperature_profile",
 ]
 
-WARMUP_TAU_S = 300.0
-"""Time constant of the ``warmup`` bias transient (s)."""
-
-TEMP_START_DEGC = 20.0
-"""Temperature at the start of a simulated session (°C), the reference of ``temperature``."""
-TEMP_RISE_DEGC = 15.0
-"""Warm-up rise of the simulated temperature (°C)."""
-TEMP_TAU_S = 600.0
-"""Time constant of the simulated temperature warm-up (s)."""
-
-
-def temperature_profile(t_s: np.ndarray) -> np.ndarray:
-    """Simulated temperature (°C) at times ``t_s`` (s) from the session start, same shape.
-
-    ``T(t) = T₀ + ΔT·(1 − exp(−t/τ))`` with :data:`TEMP_START_DEGC`,
-    :data:`TEMP_RISE_DEGC` and :data:`TEMP_TAU_S`.
-    """
-    import numpy as np  # here: the help of rimu simulate calibration lists the effects
-
-    t = np.asarray(t_s, float)
-    return TEMP_START_DEGC + TEMP_RISE_DEGC * -np.expm1(-t / TEMP_TAU_S)
-
 
 @dataclass(frozen=True)
 class Effect:
-    """One simulator effect.
+    """One simulator effect (a spec's :class:`~fdi.effect_specs.SimulatorForm`, named).
 
     Attributes
     ----------
@@ -92,6 +61,8 @@ class Effect:
         True when the value is only on/off.
     all_sensors : bool
         True when it ignores ``--effect-sensors`` (acts on every sensor of its kinds).
+    form : SimulatorForm or None
+        The spec's simulator form (its arithmetic).
     """
 
     name: str
@@ -100,30 +71,26 @@ class Effect:
     doc: str
     flag: bool = False
     all_sensors: bool = False
+    form: SimulatorForm | None = None
 
 
-EFFECTS: dict[str, Effect] = {e.name: e for e in (
-    Effect("g_sensitivity", "deg/h per g", ("gyro",),
-           "gyro bias += k * (specific force along the sensor axis) / g0"),
-    Effect("scale_asymmetry", "fraction", ("gyro",),
-           "gyro gain 1+a/2 for positive inputs, 1-a/2 for negative ones"),
-    Effect("scale_nonlinearity", "fraction at the table rate", ("gyro",),
-           "gyro input += k * input^2 / table_rate (k*table_rate at the table rate)"),
-    Effect("warmup", "deg/h", ("gyro",),
-           f"gyro bias += A * exp(-t / {WARMUP_TAU_S:g} s), t from the session start"),
-    Effect("time_skew", "s", ("gyro", "accel"),
-           "the sensor samples its input this much late (input evaluated at t - skew)"),
-    Effect("bias_drift", "deg/h", ("gyro",),
-           "gyro bias drifts linearly from the truth bias at the start to truth + D at the "
-           "end of the session"),
-    Effect("no_earth_rate", "flag (1 = on)", ("gyro",),
-           "Earth rate is not applied to the gyros", flag=True, all_sensors=True),
-    Effect("temperature", "deg/h per degC", ("gyro",),
-           f"gyro bias += k * (T - {TEMP_START_DEGC:g} degC), T warming up by "
-           f"{TEMP_RISE_DEGC:g} degC with time constant {TEMP_TAU_S:g} s; the session "
-           "records T as its temperature column"),
-)}
-"""The effects, by name."""
+EFFECTS: dict[str, Effect] = {
+    s.name: Effect(s.name, s.simulator.unit, s.simulator.kinds, s.simulator.doc,
+                   s.simulator.flag, s.simulator.all_sensors, s.simulator)
+    for s in effect_specs() if s.simulator is not None}
+"""The effects, by name (the specs that have a simulator form, in their order)."""
+
+
+def _knob(test: Callable[[SimulatorForm], bool]) -> str:
+    return next(e.name for e in EFFECTS.values() if test(e.form))
+
+
+DELAY_KNOB = _knob(lambda f: f.stage == "delay")
+"""The knob that delays the inputs (the sensor samples late)."""
+EARTH_RATE_KNOB = _knob(lambda f: f.stage == "earth_rate")
+"""The knob that leaves the Earth rate out."""
+TEMPERATURE_KNOB = _knob(lambda f: f.column)
+"""The knob whose session carries a temperature column."""
 
 
 def effects_help() -> str:

@@ -33,11 +33,10 @@ import numpy as np
 from scipy.signal import lfilter
 
 from calibration.effects import (
+    DELAY_KNOB,
+    EARTH_RATE_KNOB,
     EFFECTS,
-    TEMP_RISE_DEGC,
-    TEMP_START_DEGC,
-    TEMP_TAU_S,
-    WARMUP_TAU_S,
+    TEMPERATURE_KNOB,
     resolve_effect_sensors,
     temperature_profile,
 )
@@ -48,7 +47,7 @@ from calibration.turntable import body_inputs, gravity_local
 from fdi.calfile import Calibration, SensorSet
 from fdi.errors import ConfigError
 from fdi.geometry import Configuration, load_configuration
-from fdi.units import DPH, EARTH_RATE_DPH, G0
+from fdi.units import EARTH_RATE_DPH
 
 __all__ = ["EffectContext", "NoiseDraw", "NoiseModel", "SimSetup", "TimeBase", "accel_outputs",
            "configuration_of", "draw_noise", "gyro_outputs", "sampled_inputs",
@@ -328,35 +327,11 @@ class EffectContext:
     f_along: np.ndarray
 
 
-def _asymmetry(s: np.ndarray, v: float, c: EffectContext) -> np.ndarray:
-    return s * (1.0 + 0.5 * v * np.sign(s))
-
-
-def _nonlinearity(s: np.ndarray, v: float, c: EffectContext) -> np.ndarray:
-    return s + v * s**2 / c.table_rate
-
-
-def _g_sensitivity(s: np.ndarray, v: float, c: EffectContext) -> np.ndarray:
-    return s + v * DPH * c.f_along / G0
-
-
-def _warmup(s: np.ndarray, v: float, c: EffectContext) -> np.ndarray:
-    return s + v * DPH * np.exp(-c.t / WARMUP_TAU_S)[:, None]
-
-
-def _bias_drift(s: np.ndarray, v: float, c: EffectContext) -> np.ndarray:
-    return s + v * DPH * (c.t / c.duration_s)[:, None]
-
-
-def _temperature(s: np.ndarray, v: float, c: EffectContext) -> np.ndarray:
-    return s + v * DPH * (temperature_profile(c.t) - TEMP_START_DEGC)[:, None]
-
-
-_GYRO_EFFECTS = (("scale_asymmetry", _asymmetry), ("scale_nonlinearity", _nonlinearity),
-                 ("g_sensitivity", _g_sensitivity), ("warmup", _warmup),
-                 ("bias_drift", _bias_drift), ("temperature", _temperature))
-"""Gyro effects in the order they are applied (``time_skew``, ``no_earth_rate`` act on
-the inputs)."""
+_OUTPUT_EFFECTS = tuple(sorted((e for e in EFFECTS.values() if e.form.apply is not None),
+                               key=lambda e: e.form.order))
+"""Gyro effects on the output, in the order they are applied (gains, then biases; the
+spec's ``simulator.order``); the others act on the inputs (``DELAY_KNOB``,
+``EARTH_RATE_KNOB``)."""
 
 
 def gyro_outputs(setup: SimSetup, sequence: Sequence, tb: TimeBase,
@@ -365,7 +340,7 @@ def gyro_outputs(setup: SimSetup, sequence: Sequence, tb: TimeBase,
     """Raw gyro outputs with the effects (stage 4), shape (N, n_g)."""
     gset, eff, touched = setup.gyros, setup.effects, setup.touched
     Hg = gset.H
-    earth = 0.0 if eff.get("no_earth_rate", 0.0) else 1.0
+    earth = 0.0 if eff.get(EARTH_RATE_KNOB, 0.0) else 1.0
 
     def sel(name: str) -> np.ndarray:
         return np.isin(np.arange(1, gset.n + 1), touched.get(name, ()))
@@ -373,15 +348,16 @@ def gyro_outputs(setup: SimSetup, sequence: Sequence, tb: TimeBase,
     sg = (base[0] + earth * base[1]) @ Hg.T             # input along the true axes
     f_g = base[2] @ Hg.T                                 # specific force along h̃_i
     if skewed is not base:
-        m = sel("time_skew")
+        m = sel(DELAY_KNOB)
         sg[:, m] = ((skewed[0] + earth * skewed[1]) @ Hg.T)[:, m]
         f_g[:, m] = (skewed[2] @ Hg.T)[:, m]
     ctx = EffectContext(t=tb.t, duration_s=tb.n_samples / setup.sample_rate_hz,
                         table_rate=sequence.table_rate, f_along=f_g)
-    for name, fn in _GYRO_EFFECTS:
-        if name in touched:
-            m = sel(name)
-            sg[:, m] = fn(sg[:, m], eff[name], dataclasses.replace(ctx, f_along=f_g[:, m]))
+    for e in _OUTPUT_EFFECTS:
+        if e.name in touched:
+            m = sel(e.name)
+            sg[:, m] = e.form.apply(sg[:, m], eff[e.name],
+                                    dataclasses.replace(ctx, f_along=f_g[:, m]))
     return (sg + gset.biases + draw.white["gyro"] + draw.slow["gyro"]) / gset.scale_factors
 
 
@@ -393,7 +369,7 @@ def accel_outputs(setup: SimSetup, base: tuple[np.ndarray, ...],
         return None
     sa = base[2] @ aset.H.T
     if skewed is not base:
-        m = np.isin(np.arange(1, aset.n + 1), setup.touched["time_skew"])
+        m = np.isin(np.arange(1, aset.n + 1), setup.touched[DELAY_KNOB])
         sa[:, m] = (skewed[2] @ aset.H.T)[:, m]
     return (sa + aset.biases + draw.white["accel"] + draw.slow["accel"]) / aset.scale_factors
 
@@ -456,7 +432,7 @@ def simulate_session(config: Configuration | str | None, sequence: Sequence,
     tb = time_base(sequence, su.sample_rate_hz)
     draw = draw_noise(su, noise, tb.n_samples, seed)
     base = sampled_inputs(sequence, tb, su.latitude_rad, su.gravity)
-    skew = su.effects.get("time_skew", 0.0) if "time_skew" in su.touched else 0.0
+    skew = su.effects.get(DELAY_KNOB, 0.0) if DELAY_KNOB in su.touched else 0.0
     skewed = sampled_inputs(sequence, tb, su.latitude_rad, su.gravity, skew) \
         if skew != 0.0 else base
     meta = {
@@ -480,7 +456,7 @@ def simulate_session(config: Configuration | str | None, sequence: Sequence,
         raw_accel=accel_outputs(su, base, skewed, draw), gyro_raw_unit=_raw_unit(su.gyros),
         accel_raw_unit=_raw_unit(su.accels) if su.accels is not None else "raw",
         gravity=su.gravity, source="<simulated>", meta=meta,
-        temperature_degC=temperature_profile(tb.t) if "temperature" in su.effects else None)
+        temperature_degC=temperature_profile(tb.t) if TEMPERATURE_KNOB in su.effects else None)
 
 
 def true_raw_means(session: Session, truth: Calibration, *,
@@ -523,23 +499,19 @@ def truth_of_session(session: Session, truth: Calibration
     effects = {k: float(v) for k, v in meta.get("effects", {}).items() if v != 0.0}
     sensors = {k: tuple(v) for k, v in meta.get("effect_sensors", {}).items()}
     details: dict = {}
-    if "warmup" in effects:
-        details["warmup"] = {"tau_s": WARMUP_TAU_S}
-    if "scale_nonlinearity" in effects:
-        details["scale_nonlinearity"] = {"table_rate_dps": meta.get("table_rate_dps")}
-    if "bias_drift" in effects:
-        details["bias_drift"] = {"session_duration_s": float(session.t.size
-                                                             / session.sample_rate_hz)}
-    if "temperature" in meta.get("effects", {}):
-        details["temperature"] = {"profile": "T0 + rise*(1 - exp(-t/tau))",
-                                  "start_degC": TEMP_START_DEGC, "rise_degC": TEMP_RISE_DEGC,
-                                  "tau_s": TEMP_TAU_S, "reference_degC": TEMP_START_DEGC}
+    given = meta.get("effects", {})
+    info = {"table_rate_dps": meta.get("table_rate_dps"),
+            "duration_s": float(session.t.size / session.sample_rate_hz)}
+    for e in EFFECTS.values():
+        if e.form.details is not None and (e.name in effects
+                                           or (e.form.column and e.name in given)):
+            details[e.name] = e.form.details(info)
     extra = dict(truth.extra)
     extra.update({"sequence": meta.get("sequence"), "seed": meta.get("seed"),
                   "noise": meta.get("noise")})
     cal = dataclasses.replace(
         truth, sample_rate_hz=session.sample_rate_hz, latitude_deg=session.latitude_deg,
-        earth_rate_dph=0.0 if effects.get("no_earth_rate") else EARTH_RATE_DPH,
+        earth_rate_dph=0.0 if effects.get(EARTH_RATE_KNOB) else EARTH_RATE_DPH,
         earth_rate_dph_sd=0.0, extra=extra)
     return cal, effects, sensors, details
 

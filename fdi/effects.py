@@ -2,23 +2,22 @@
 
 A calibration may carry effect terms beyond the linear sensor model (``rimu calibrate
 --effects``, ``rimu diagnose``): each adds ``estimate · g(inputs; params)`` to one sensor's
-SI output, with ``g`` the regressor of :mod:`calibration.diagnose.library` (the SI output
-gained per unit of the estimate, the estimate in the term's ``unit``). The monitor takes a
-run-time correction ``c`` (rad/s or m/s²) subtracted from the compensated outputs,
+SI output, with ``g`` the session regressor of the effect's spec (:mod:`fdi.effect_specs`;
+the SI output gained per unit of the estimate, the estimate in the term's ``unit``). The
+monitor takes a run-time correction ``c`` (rad/s or m/s²) subtracted from the compensated outputs,
 ``y = SF·u − b − c`` (:meth:`fdi.monitor.Monitor.run`); this module computes ``c`` from the
 terms whose inputs the stream carries, and says which terms it cannot apply and why.
 
-Compensated terms and their run-time input (``ŝ_i`` the sensor's own compensated output,
-``h̃_i`` its calibrated axis)::
-
-    scale_asymmetry     fraction          c = a·|ŝ|/2                    rate sign
-    scale_nonlinearity  fraction          c = k·(ŝ² − σ²)/w              rate squared
-    g_sensitivity       deg/h per g       c = k·DPH·(h̃·f)/g0             specific force
-    temperature         deg/h (mg) per °C c = k·DPH (MG)·(T − T_ref)     temperature
-
-``w`` the table rate of the calibration session (``params.table_rate_dps``), ``T_ref`` the
-term's ``params.reference_degC``, ``f`` the specific force (m/s², MB frame) from the
-accelerometers in the stream, ``T`` the sensor's temperature (°C) from the stream.
+Each compensated effect's run-time form is its spec's
+:class:`~fdi.effect_specs.RuntimeForm` (:mod:`fdi.effect_specs.builtin` tabulates which
+effects have one, the input each reads, and why the others have none): an elementwise
+``apply(k, x, e)`` with the constants folded into ``k`` and ``e`` once, shared by the block
+path, the one-sample path and :func:`term_correction`. The rate terms read ``ŝ_i`` the
+sensor's own compensated output, ``g_sensitivity`` the specific force ``f`` (m/s², MB
+frame) from the accelerometers in the stream along ``h̃_i`` its calibrated axis,
+``temperature`` the sensor's temperature ``T`` (°C) from the stream against the term's
+``params.reference_degC``; ``scale_nonlinearity`` divides by the table rate of the
+calibration session (``params.table_rate_dps``).
 
 **Which rate.** The regressors of the rate terms are written in the true input along the
 axis, ``s = h̃·x``, which the monitor does not know. The sensor's own compensated output
@@ -34,14 +33,10 @@ rate and vanishes for ``|s| ≫ σ``, a residual bias of at most ``a·σ·0.4`` 
 ``a = 0.001``). The effect inside ``ŝ`` changes the correction by a relative ``a/2`` or
 ``k·s/w``: second order.
 
-**Not compensated** (listed with the reason): ``bias_step``, ``bias_drift``,
-``periodic_line``, ``misalignment`` and ``no_earth_rate`` describe the calibration session
-(a jump at a session time, a drift over the session length, a line of unknown phase, a
-re-mounting on the table, the Earth-rate model), not a sensor property that carries into
-the run; ``warmup`` needs the time since switch-on, which no stream carries; ``time_skew``
-needs the input's rate of change; user effects have no run-time form; a term of the other
-sensor kind is not monitored; a term whose unit or parameters the evaluator does not
-recognise is refused rather than guessed.
+**Not compensated**: the effects whose spec gives ``no_runtime`` (the reason is listed
+with the term), user effects without a run-time form, a term of the other sensor kind, and a
+term whose unit or parameters the run-time form does not recognise (refused rather than
+guessed).
 
 Bad inputs never raise: a non-finite output, force or temperature gives that term 0 for
 that sample, and the samples are counted (:attr:`Compensator.missing`).
@@ -57,7 +52,7 @@ from typing import Any
 import numpy as np
 
 from fdi.calfile import Calibration, EffectTerm
-from fdi.units import DPH, DPS, G0, MG
+from fdi.effect_specs import INPUT_LACKING, RUNTIME_INPUTS, EffectSpec, effect_specs, get_spec
 
 __all__ = [
     "COMPENSABLE",
@@ -73,71 +68,48 @@ __all__ = [
 EFFECTS_RUNTIME_SCHEMA = "rimu.effects-runtime/1"
 """Version of :meth:`Compensator.to_dict` (in reports)."""
 
-INPUTS = ("rate", "specific_force", "temperature")
+INPUTS = RUNTIME_INPUTS
 """Run-time inputs a term can need (the rate is the sensor's own output, always there)."""
 
-_BIAS_SI = {"gyro": ("deg/h", DPH), "accel": ("mg", MG)}
+_RUNTIME = {sp.name: sp for sp in sorted((sp for sp in effect_specs() if sp.runtime),
+                                         key=lambda sp: sp.runtime.code)}
 
 COMPENSABLE: dict[str, tuple[str, str]] = {
-    "scale_asymmetry": ("rate", "rate sign"),
-    "scale_nonlinearity": ("rate", "rate squared"),
-    "g_sensitivity": ("specific_force", "specific force"),
-    "temperature": ("temperature", "temperature"),
-}
-"""Compensable effect: (run-time input, what it reads)."""
+    n: (sp.runtime.input, sp.runtime.reads) for n, sp in _RUNTIME.items()}
+"""Compensable built-in effect: (run-time input, what it reads), in the order of the
+run-time codes."""
 
-NOT_COMPENSABLE: dict[str, str] = {
-    "bias_step": "session-specific (a jump at a time of the calibration session), not a "
-                 "sensor property",
-    "bias_drift": "session-specific (a drift over the calibration session's length), not a "
-                  "sensor property",
-    "periodic_line": "session-specific (a line whose phase at run time is unknown)",
-    "misalignment": "session-specific (a re-mounting on the turntable)",
-    "no_earth_rate": "a flaw of the session's Earth-rate model, not of the sensor",
-    "warmup": "needs the time since switch-on, which the stream does not carry",
-    "time_skew": "needs the input's rate of change (no run-time form)",
-}
+NOT_COMPENSABLE: dict[str, str] = {sp.name: sp.no_runtime for sp in effect_specs()
+                                   if sp.runtime is None and sp.no_runtime}
 """Known effects the monitor does not compensate, with the reason."""
 
-_UNITS = {
-    "scale_asymmetry": {"gyro": "fraction"},
-    "scale_nonlinearity": {"gyro": "fraction"},
-    "g_sensitivity": {"gyro": "deg/h per g"},
-    "temperature": {"gyro": "deg/h per degC", "accel": "mg per degC"},
-}
-"""The unit each compensable term must carry (the library's), per kind."""
+
+def _form(name: str) -> EffectSpec | None:
+    """The spec of a term's effect when it has a run-time form (user specs included)."""
+    sp = _RUNTIME.get(name) or get_spec(name)
+    return sp if sp is not None and sp.runtime is not None else None
 
 
-def _finite_param(params: Mapping[str, Any], key: str) -> float | None:
-    try:
-        v = float(params[key])
-    except (KeyError, TypeError, ValueError):
-        return None
-    return v if math.isfinite(v) else None
-
-
-def term_correction(term: EffectTerm, axis: np.ndarray, *, s: Any = None, s_sq: Any = None,
+def term_correction(term: EffectTerm, axis: np.ndarray, *, s: Any = None,
                     force: Any = None, temperature: Any = None) -> np.ndarray:
     """The SI output a term adds, ``estimate · g(inputs)``, for N samples.
 
-    The same arithmetic as the library regressor times the estimate
-    (:mod:`calibration.diagnose.library`); non-finite inputs give NaN rows (the
-    :class:`Compensator` turns them into 0 and counts them).
+    The spec's run-time form (:class:`~fdi.effect_specs.RuntimeForm`, the session
+    regressor times the estimate, with no noise variance subtracted); non-finite inputs
+    give NaN rows (the :class:`Compensator` turns them into 0 and counts them).
 
     Parameters
     ----------
     term : EffectTerm
         A compensable term (:data:`COMPENSABLE`) with its library unit.
     axis : ndarray, shape (3,)
-        The sensor's calibrated axis h̃ (g_sensitivity).
+        The sensor's calibrated axis h̃ (terms reading the specific force).
     s : array_like, shape (N,)
-        Input along the axis (SI; scale_asymmetry).
-    s_sq : array_like, shape (N,)
-        Its square (SI²; scale_nonlinearity; default ``s**2``).
+        Input along the axis (SI; terms reading the rate).
     force : array_like, shape (N, 3)
-        Specific force, MB frame (m/s²; g_sensitivity).
+        Specific force, MB frame (m/s²).
     temperature : array_like, shape (N,)
-        Sensor temperature (°C; temperature).
+        Sensor temperature (°C).
 
     Returns
     -------
@@ -147,26 +119,24 @@ def term_correction(term: EffectTerm, axis: np.ndarray, *, s: Any = None, s_sq: 
     Raises
     ------
     ValueError
-        Not a compensable term, or its input not given (a programming error, not data).
+        Not a compensable term, or parameters its form needs missing (a programming
+        error, not data).
     """
-    est = float(term.estimate)
-    name = term.name
-    if name == "scale_asymmetry":
-        return est * 0.5 * np.abs(np.asarray(s, float))
-    if name == "scale_nonlinearity":
-        w = _finite_param(term.params, "table_rate_dps")
-        if w is None or w <= 0:
-            raise ValueError("scale_nonlinearity: params.table_rate_dps missing")
-        sq = np.asarray(s, float) ** 2 if s_sq is None else np.asarray(s_sq, float)
-        return est * sq / (w * DPS)
-    if name == "g_sensitivity":
+    sp = _form(term.name)
+    if sp is None:
+        raise ValueError(f"effect {term.name!r} has no run-time form")
+    rt = sp.runtime
+    why = rt.check(term.params)
+    if why is not None:
+        raise ValueError(f"{term.name}: {why}")
+    k = rt.coefficient(float(term.estimate), term.params, term.kind)
+    e = rt.extra(term.params, np.asarray(axis, float), 0.0)
+    if rt.input == "rate":
+        return rt.apply(k, np.asarray(s, float), e)
+    if rt.input == "specific_force":
         f = np.asarray(force, float)
-        return est * DPH * (f @ np.asarray(axis, float)) / G0
-    if name == "temperature":
-        ref = _finite_param(term.params, "reference_degC")
-        unit_si = _BIAS_SI[term.kind][1]
-        return est * unit_si * (np.asarray(temperature, float) - (ref or 0.0))
-    raise ValueError(f"effect {name!r} has no run-time form")
+        return rt.apply(k, (f[..., 0], f[..., 1], f[..., 2]), e)
+    return rt.apply(k, np.asarray(temperature, float), e)
 
 
 @dataclass(frozen=True)
@@ -210,31 +180,26 @@ def _why_not(term: EffectTerm, kind: str, n: int,
         return f"sensor {term.sensor + 1} is not in the calibration's {n} sensors"
     if term.name in NOT_COMPENSABLE:
         return NOT_COMPENSABLE[term.name]
-    if term.name not in COMPENSABLE:
+    sp = _form(term.name)
+    if sp is None:
         return "user effect: no run-time form"
-    want = _UNITS[term.name].get(kind)
-    if want is None:
+    rt = sp.runtime
+    if kind not in rt.kinds:
         return f"no run-time form for {kind} sensors"
+    want = sp.unit_for(kind)
     if term.unit != want:
         return f"unit {term.unit!r}, the run-time form expects {want!r}"
     if not math.isfinite(float(term.estimate)):
         return "the estimate is not finite"
     if "components" in term.params:
         return "a multi-column term (no run-time form)"
-    if term.name == "scale_nonlinearity":
-        w = _finite_param(term.params, "table_rate_dps")
-        if w is None or w <= 0:
-            return ("the term does not record the table rate (params.table_rate_dps); "
-                    "refit it with this version")
-    if term.name == "temperature" and _finite_param(term.params, "reference_degC") is None:
-        return "the term does not record its reference temperature (params.reference_degC)"
-    need = COMPENSABLE[term.name][0]
-    lacking = lacking or {}
-    if need == "specific_force" and term.sensor not in available.get(need, ()):
-        return "needs specific force: " + lacking.get(need, "no accelerometers in the stream")
-    if need == "temperature" and term.sensor not in available.get(need, ()):
-        return "needs temperature: " + lacking.get(
-            need, "the stream carries none for this sensor")
+    why = rt.check(term.params)
+    if why is not None:
+        return why
+    need = rt.input
+    if need != "rate" and term.sensor not in available.get(need, ()):
+        return (f"needs {need.replace('_', ' ')}: "
+                + (lacking or {}).get(need, INPUT_LACKING.get(need, "not in the stream")))
     return None
 
 
@@ -289,8 +254,8 @@ class Compensator:
             why = ("switched off (--no-effects)" if not enabled
                    else _why_not(t, kind, s.n, av, lacking))
             if why is None:
-                inp, reads = COMPENSABLE[t.name]
-                applied.append(AppliedTerm(t, inp, reads))
+                rt = _form(t.name).runtime
+                applied.append(AppliedTerm(t, rt.input, rt.reads))
             else:
                 skipped.append(SkippedTerm(t, why))
         self.applied: tuple[AppliedTerm, ...] = tuple(applied)
@@ -298,17 +263,17 @@ class Compensator:
         self.missing: dict[tuple[str, int], int] = {
             (a.term.name, a.term.sensor): 0 for a in self.applied if a.input != "rate"}
         self._grouped = self._groups()
-        rate = sorted({int(i) for nm, idx, _, _ in self._grouped
-                       if COMPENSABLE[nm][0] == "rate" for i in idx})
+        rate = sorted({int(i) for rt, _, idx, _, _ in self._grouped
+                       if rt.input == "rate" for i in idx})
         self._rate_idx = np.array(rate, dtype=np.intp)
         self._rate_pos = {nm: np.searchsorted(self._rate_idx, idx)
-                          for nm, idx, _, _ in self._grouped if COMPENSABLE[nm][0] == "rate"}
-        code = {"scale_asymmetry": 0, "scale_nonlinearity": 1, "g_sensitivity": 2,
-                "temperature": 3}
-        self._scalar = [(code[nm], nm, int(idx[j]), float(k[j]),
-                         extra[j].tolist() if extra.ndim == 2 else
-                         float(extra[j]) if extra.size else 0.0)
-                        for nm, idx, k, extra in self._grouped for j in range(idx.size)]
+                          for rt, nm, idx, _, _ in self._grouped if rt.input == "rate"}
+        self._forms = {rt.code: rt for rt, *_ in self._grouped}
+        self._scalar = [(rt.code, nm, int(idx[j]), float(k[j]),
+                         extra[j].tolist() if extra.ndim == 2 else float(extra[j]))
+                        for rt, nm, idx, k, extra in self._grouped for j in range(idx.size)]
+        self._scalar_forms = [(self._forms[code].apply, self._forms[code].input)
+                              for code, *_ in self._scalar]
         self._sf_list, self._b_list = self._sf.tolist(), self._b.tolist()
 
     @property
@@ -321,28 +286,20 @@ class Compensator:
         """Run-time inputs the applied terms read."""
         return frozenset(a.input for a in self.applied)
 
-    def _groups(self) -> list[tuple[str, np.ndarray, np.ndarray, np.ndarray]]:
-        """Applied terms by effect: (name, sensors, coefficients, extra) with the constants
-        of :func:`term_correction` folded into one coefficient per term (``extra``: the
-        axes of g_sensitivity, the reference temperatures)."""
+    def _groups(self) -> list[tuple[Any, str, np.ndarray, np.ndarray, np.ndarray]]:
+        """Applied terms by effect, in the order of the run-time codes: (run-time form,
+        name, sensors, coefficients ``k``, extras ``e``) with the constants of the form
+        folded in once (``e``: the axes of a force term, (m, 3); else (m,))."""
         out = []
-        for name in COMPENSABLE:
+        names = list(dict.fromkeys(a.term.name for a in self.applied))
+        for name in sorted(names, key=lambda nm: _form(nm).runtime.code):
+            rt = _form(name).runtime
             ts = [a.term for a in self.applied if a.term.name == name]
-            if not ts:
-                continue
             idx = np.array([t.sensor for t in ts], dtype=np.intp)
-            est = np.array([float(t.estimate) for t in ts])
-            if name == "scale_asymmetry":
-                k, extra = est * 0.5, np.zeros(0)
-            elif name == "scale_nonlinearity":
-                w = np.array([_finite_param(t.params, "table_rate_dps") for t in ts]) * DPS
-                k, extra = est / w, self._var[idx]
-            elif name == "g_sensitivity":
-                k, extra = est * DPH / G0, self._H[idx]
-            else:
-                k = est * np.array([_BIAS_SI[t.kind][1] for t in ts])
-                extra = np.array([_finite_param(t.params, "reference_degC") for t in ts])
-            out.append((name, idx, k, extra))
+            k = np.array([rt.coefficient(float(t.estimate), t.params, t.kind) for t in ts])
+            extra = np.array([rt.extra(t.params, self._H[t.sensor], self._var[t.sensor])
+                              for t in ts], float)
+            out.append((rt, name, idx, k, extra))
         return out
 
     def _compute(self, raw: np.ndarray, force: np.ndarray | None,
@@ -355,22 +312,19 @@ class Compensator:
             return c
         with np.errstate(all="ignore"):
             s_hat = raw[:, self._rate_idx] * self._sf[self._rate_idx] - self._b[self._rate_idx]
-            for name, idx, k, extra in self._grouped:
-                if name == "scale_asymmetry":
-                    v = k * np.abs(s_hat[:, self._rate_pos[name]])
-                elif name == "scale_nonlinearity":
-                    x = s_hat[:, self._rate_pos[name]]
-                    v = k * (x * x - extra)
-                elif name == "g_sensitivity":
+            for rt, name, idx, k, extra in self._grouped:
+                if rt.input == "rate":
+                    v = rt.apply(k, s_hat[:, self._rate_pos[name]], extra)
+                elif rt.input == "specific_force":
                     f = _force_of(force, N, self.n, idx)                  # (N, m, 3)
-                    v = k * (f[..., 0] * extra[:, 0] + f[..., 1] * extra[:, 1]
-                             + f[..., 2] * extra[:, 2])
+                    v = rt.apply(k, (f[..., 0], f[..., 1], f[..., 2]),
+                                 (extra[:, 0], extra[:, 1], extra[:, 2]))
                 else:
-                    v = k * (_temp_of(temperature, N, self.n, idx) - extra)
+                    v = rt.apply(k, _temp_of(temperature, N, self.n, idx), extra)
                 bad = ~np.isfinite(v)
                 if bad.any():
                     v = np.where(bad, 0.0, v)
-                    if name in ("g_sensitivity", "temperature"):   # a bad output: the monitor's
+                    if rt.input != "rate":                 # a bad output: the monitor's
                         for j, cnt in zip(idx, bad.sum(axis=0), strict=True):
                             self.missing[(name, int(j))] += int(cnt)
                 if np.unique(idx).size == idx.size:
@@ -418,21 +372,18 @@ class Compensator:
         T = (None if T is None else [float(T)] * self.n if T.shape == ()
              else T.tolist() if T.shape == (self.n,) else None)
         sf, b = self._sf_list, self._b_list
-        for code, name, i, k, e in self._scalar:
-            if code == 0:
-                v = k * abs(r[i] * sf[i] - b[i])
-            elif code == 1:
-                x = r[i] * sf[i] - b[i]
-                v = k * (x * x - e)
-            elif code == 2:
+        for (_, name, i, k, e), (apply, inp) in zip(self._scalar, self._scalar_forms,
+                                                   strict=True):
+            if inp == "rate":
+                v = apply(k, r[i] * sf[i] - b[i], e)
+            elif inp == "specific_force":
                 fi = f if f is None or not isinstance(f[0], list) else f[i]
-                v = k * (fi[0] * e[0] + fi[1] * e[1] + fi[2] * e[2]) if fi is not None \
-                    else math.nan
+                v = apply(k, fi, e) if fi is not None else math.nan
             else:
-                v = k * (T[i] - e) if T is not None else math.nan
+                v = apply(k, T[i], e) if T is not None else math.nan
             if not math.isfinite(v):
                 v = 0.0
-                if code >= 2:
+                if inp != "rate":
                     self.missing[(name, i)] += 1
             c[i] += v
         return np.array(c)

@@ -221,15 +221,18 @@ def plan_effects(cal: Calibration, kind: str, *, duration_s: float, sample_rate_
     if accel_noise_mps2 is None and "specific_force" in needs:
         accel_noise_mps2 = _accel_noise_of(cal, sample_rate_hz)
         if accel_noise_mps2 is None:
-            who = ", ".join(f"{kind} {t.sensor + 1}" for t in terms
-                            if t.name == "g_sensitivity")
+            force_terms = [t for t in terms if COMPENSABLE[t.name][0] == "specific_force"]
+            who = "; ".join(f"{nm} on " + ", ".join(f"{kind} {t.sensor + 1}" for t in force_terms
+                                                    if t.name == nm)
+                            for nm in dict.fromkeys(t.name for t in force_terms))
             raise ConfigError(
-                f"--effects-from-cal: g_sensitivity on {who} needs the specific force, and "
+                f"--effects-from-cal: {who} needs the specific force, and "
                 f"the calibration ({cal.configuration}) has no accelerometers; give "
                 "--accel-noise SD (m/s^2 per sample) to simulate a body-frame accelerometer "
                 "triad beside the gyros")
     if temperature is None and "temperature" in needs:
-        refs = [float(t.params["reference_degC"]) for t in terms if t.name == "temperature"]
+        refs = [float(t.params["reference_degC"]) for t in terms
+                if COMPENSABLE[t.name][0] == "temperature"]
         temperature = TemperatureProfile(min(refs) - 10.0, max(refs) + 10.0, duration_s / 3.0)
     return EffectPlan(terms, skipped, temperature, accel_noise_mps2,
                       float(temperature_noise_degC))

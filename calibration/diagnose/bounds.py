@@ -16,9 +16,10 @@ cone preset has 0.05 °/s/√Hz = 3 °/√h). The accelerometers of a set take t
 class. Coarse: a high-end MEMS unit (0.15-0.4 °/√h) reads as fog; ``sensor_class``
 overrides it.
 
-Bounds (:data:`PHYSICAL_BOUNDS`). Each is two to ten times the magnitude the class's data
-sheets give for the effect (so that only an estimate no sensor of the class could have is
-labelled, not one from a poor unit), in the effect's unit. Sources, order of magnitude:
+Bounds (:data:`PHYSICAL_BOUNDS`, from each effect spec's ``bounds``). Each is two to ten
+times the magnitude the class's data sheets give for the effect (so that only an estimate
+no sensor of the class could have is labelled, not one from a poor unit), in the effect's
+unit. Sources, order of magnitude:
 
 - MEMS gyros: Analog Devices ADXRS150 data sheet (acceleration sensitivity 0.2 °/s per g,
   nonlinearity 0.1 % of full scale, null drift of tenths of °/s over temperature);
@@ -30,8 +31,8 @@ labelled, not one from a poor unit), in the effect's unit. Sources, order of mag
   nonlinearity and asymmetry of 100-500 ppm.
 - both: a sampling delay within a few sample periods (a skew of a second is a time-stamp
   error, not a sensor effect); a re-mounting tilt within tens of mrad (a degree or two;
-  beyond it the mounting, not the sensor, moved); ``no_earth_rate`` within 0-1 (the
-  fraction of the Earth rate missing).
+  beyond it the mounting, not the sensor, moved); a fraction of the Earth rate missing
+  within 0-1.
 
 The bounds describe sensors, not a session: they are not tuned to any test.
 """
@@ -44,6 +45,7 @@ from typing import Any
 import numpy as np
 
 from fdi.calfile import Calibration
+from fdi.effect_specs import effect_specs
 from fdi.units import DPS
 
 __all__ = ["FOG_CLASS_ARW_DPSH", "PHYSICAL_BOUNDS", "SENSOR_CLASSES", "bound_check",
@@ -54,42 +56,16 @@ FOG_CLASS_ARW_DPSH = 0.5
 """Angle random walk (°/√h) below which a gyro set is taken as FOG / tactical class."""
 
 PHYSICAL_BOUNDS: dict[str, dict[tuple[str, str], float]] = {
-    # (effect, kind) -> largest plausible |estimate|, in the effect's unit
-    "fog": {
-        ("warmup", "gyro"): 50.0,                    # deg/h
-        ("bias_drift", "gyro"): 50.0,                # deg/h over the session
-        ("bias_step", "gyro"): 50.0,                 # deg/h
-        ("periodic_line", "gyro"): 20.0,             # deg/h
-        ("temperature", "gyro"): 5.0,                # deg/h per degC
-        ("g_sensitivity", "gyro"): 10.0,             # deg/h per g
-        ("scale_asymmetry", "gyro"): 5e-3,           # fraction
-        ("scale_nonlinearity", "gyro"): 5e-3,        # fraction
-        ("bias_step", "accel"): 5.0,                 # mg
-        ("periodic_line", "accel"): 5.0,             # mg
-        ("temperature", "accel"): 0.5,               # mg per degC
-    },
-    "mems": {
-        ("warmup", "gyro"): 3600.0 * 5,              # deg/h (5 deg/s)
-        ("bias_drift", "gyro"): 3600.0 * 5,
-        ("bias_step", "gyro"): 3600.0 * 5,
-        ("periodic_line", "gyro"): 3600.0 * 2,
-        ("temperature", "gyro"): 3600.0 * 0.2,       # deg/h per degC (0.2 deg/s/degC)
-        ("g_sensitivity", "gyro"): 3600.0 * 2,       # deg/h per g (2 deg/s per g)
-        ("scale_asymmetry", "gyro"): 0.05,
-        ("scale_nonlinearity", "gyro"): 0.05,
-        ("bias_step", "accel"): 300.0,               # mg
-        ("periodic_line", "accel"): 100.0,           # mg
-        ("temperature", "accel"): 5.0,               # mg per degC
-    },
-}
+    cls: {(sp.name, kind): b for sp in effect_specs()
+          for kind, b in sp.bounds.get(cls, {}).items()}
+    for cls in SENSOR_CLASSES}
 """Largest plausible |estimate| per class, (effect, kind), in the effect's unit (module
-docstring for the sources). Effects not listed use :data:`_COMMON`."""
+docstring for the sources; each spec's ``bounds``, :mod:`fdi.effect_specs.builtin`).
+Effects bounded alike in every class are in :data:`_COMMON`."""
 
 _COMMON: dict[tuple[str, str], float] = {
-    ("time_skew", "gyro"): 0.1, ("time_skew", "accel"): 0.1,          # s
-    ("misalignment", "gyro"): 50.0, ("misalignment", "accel"): 50.0,  # mrad
-}
-_FRACTION_RANGE = {"no_earth_rate": (-0.5, 1.5)}
+    (sp.name, kind): b for sp in effect_specs() for kind, b in sp.bounds.get("*", {}).items()}
+_FRACTION_RANGE = {sp.name: sp.fraction_range for sp in effect_specs() if sp.fraction_range}
 """Effects whose value is a fraction of a physical quantity: the plausible interval
 (0-1, with a margin for the estimate's scatter)."""
 

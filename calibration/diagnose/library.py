@@ -5,25 +5,15 @@ regressor columns ``Z`` for one sensor, scaled so that the sensor's SI output ga
 ``Z @ β`` when the effect's value is ``β`` in the candidate's unit. The diagnosis tests
 ``Z`` as a nested-model extension of the calibration model (:mod:`.selection`).
 
-Built-in candidates (the simulator's knob names where they match,
-:mod:`calibration.effects`)::
+The built-in candidates are the session forms of the effect specifications
+(:mod:`fdi.effect_specs`; the table is in :mod:`fdi.effect_specs.builtin`):
+:meth:`Candidate.from_spec` turns a spec into a candidate; the searches for an unknown
+parameter (a time, a frequency, a mounting) are here.
 
-    g_sensitivity       gyro   deg/h per g     k·(h̃·f)/g0
-    scale_asymmetry     gyro   fraction        (a/2)·|s|
-    scale_nonlinearity  gyro   fraction        k·s²/w          (w the table rate)
-    warmup              gyro   deg/h           A·exp(−t/300 s)
-    time_skew           both   s               −τ·h̃·ẋ          (input sampled τ late)
-    bias_drift          gyro   deg/h           D·t/T           (T the session length)
-    no_earth_rate       gyro   fraction        −e·h̃·ω_earth    (1: Earth rate absent)
-    temperature         both   deg/h or mg /°C k·(T − T̄)       (needs a temperature column)
-    bias_step           both   deg/h or mg     c·[t ≥ t₀]      (t₀ searched)
-    periodic_line       both   deg/h or mg     A·cos(2πf·t+φ)  (f searched)
-    misalignment        both   mrad            δ·(E·x)         (E ⟂ h̃, two angles)
-
-``s = h̃·x`` is the input along the calibrated axis. Users add candidates with
-:func:`register_effect` or through the entry-point group ``rimu.effects`` (each entry
-point names a :class:`Candidate` or a callable returning one or a list); see
-``docs/diagnose.md``.
+Users add candidates with :func:`register_effect` or through the entry-point group
+``rimu.effects`` (each entry point names a :class:`Candidate`, an
+:class:`~fdi.effect_specs.EffectSpec` or a callable returning one or a list); see
+``docs/diagnose.md`` and ``docs/effects.md``.
 """
 
 from __future__ import annotations
@@ -38,10 +28,16 @@ import numpy as np
 import scipy.optimize
 
 from calibration.diagnose.context import KindData
-from calibration.effects import WARMUP_TAU_S
-from fdi.calfile import tangent_basis
+from fdi.effect_specs import (
+    BIAS_UNITS,
+    ENTRY_POINT_GROUP,
+    EffectSpec,
+    effect_specs,
+    entry_point_objects,
+    register_spec,
+)
+from fdi.effect_specs.builtin import temperature_reference
 from fdi.errors import ConfigError
-from fdi.units import DPH, DPS, G0, MG
 
 __all__ = [
     "BIAS_UNITS",
@@ -49,6 +45,7 @@ __all__ = [
     "ENTRY_POINT_GROUP",
     "LINE_MIN_CYCLES",
     "OUTSIDE_ALIASES",
+    "SEARCHES",
     "Candidate",
     "candidates",
     "change_point_scan",
@@ -64,33 +61,12 @@ __all__ = [
     "testable",
 ]
 
-ENTRY_POINT_GROUP = "rimu.effects"
-OUTSIDE_ALIASES = {
-    "g_sensitivity": "a bias that follows the table's orientation for another reason (a "
-                     "magnetic or thermal gradient)",
-    "scale_asymmetry": "a dead zone or any other gain change even in the rate",
-    "scale_nonlinearity": "a gain that varies with |rate| in another law (at one table "
-                          "rate any such law looks the same)",
-    "warmup": "any early transient of another time constant, or a curved drift",
-    "time_skew": "a low-pass lag (sensor bandwidth) at the table's accelerations",
-    "bias_drift": "a curved or late-starting drift, a slow wander (measured: a quadratic "
-                  "drift from 40 % of the session, absorbed with warmup; the held-out "
-                  "check refuses that refit)",
-    "no_earth_rate": "a bias that depends on the heading or the table position",
-    "temperature": "any slow drift that correlates with the temperature profile "
-                   "(warm-up, time)",
-    "bias_step": "a fast ramp, several steps, or a transient that does not recover",
-    "periodic_line": "a line whose amplitude or frequency varies, or a non-sinusoidal "
-                     "periodic signal (measured: a line whose amplitude grows 7-fold, "
-                     "which the held-out check does not see)",
-    "misalignment": "a bias or gain that changes with the mounting",
-}
+OUTSIDE_ALIASES = {sp.name: sp.could_absorb for sp in effect_specs() if sp.could_absorb}
 """Effects outside the library that each built-in candidate can absorb when it is fitted
-(printed with each effect found; ``tests/calibration/test_closure_injected.py`` measured
-the two marked). The calibration's own terms alias too: a bias that follows the rate sign
-is mostly a scale factor on a sequence of one table rate."""
-BIAS_UNITS = {"gyro": ("deg/h", DPH), "accel": ("mg", MG)}
-"""Display unit and its SI factor of bias-like effects, per kind."""
+(printed with each effect found; the spec's ``could_absorb``;
+``tests/calibration/test_closure_injected.py`` measured the two marked). The calibration's
+own terms alias too: a bias that follows the rate sign is mostly a scale factor on a
+sequence of one table rate."""
 
 Regressor = Callable[[KindData, int, Mapping[str, Any]], np.ndarray]
 
@@ -133,6 +109,15 @@ class Candidate:
     monitor_input: str | None = None
     fixed_params: Callable[[KindData, int], dict[str, Any]] | None = None
 
+    @classmethod
+    def from_spec(cls, spec: EffectSpec) -> Candidate:
+        """The diagnosis's form of an effect spec (its search by the parameter it
+        searches, :data:`SEARCHES`)."""
+        return cls(spec.name, spec.kinds, spec.meaning, spec.unit, spec.regressor,
+                   spec.inputs, search=SEARCHES[spec.search] if spec.search else None,
+                   needs=spec.needs, monitor_input=spec.monitor_input,
+                   fixed_params=spec.fixed_params)
+
     def unit_for(self, kind: str) -> str:
         """The unit of the value for sensors of ``kind``."""
         return self.unit.replace("{bias}", BIAS_UNITS[kind][0])
@@ -152,16 +137,21 @@ _REGISTRY: dict[str, Candidate] = {}
 _LOADED_ENTRY_POINTS = False
 
 
-def register_effect(candidate: Candidate | None = None, /, **kw: Any) -> Candidate:
+def register_effect(candidate: Candidate | EffectSpec | None = None, /, **kw: Any
+                    ) -> Candidate:
     """Add a candidate effect (or replace one of the same name).
 
-    Either pass a :class:`Candidate` or its fields as keywords::
+    Either pass a :class:`Candidate`, an :class:`~fdi.effect_specs.EffectSpec` (also
+    registered for the simulator and the monitor, :func:`fdi.effect_specs.register_spec`)
+    or the candidate's fields as keywords::
 
         register_effect(name="humidity", kinds=("gyro",), unit="deg/h per %",
                         meaning="bias proportional to humidity",
                         regressor=lambda d, i, p: DPH * humidity)
     """
     c = candidate if candidate is not None else Candidate(**kw)
+    if isinstance(c, EffectSpec):
+        c = Candidate.from_spec(register_spec(c))
     if not isinstance(c, Candidate):
         raise ConfigError(f"register_effect: expected a Candidate, got {type(c).__name__}")
     _REGISTRY[c.name] = c
@@ -173,16 +163,8 @@ def _load_entry_points() -> None:
     if _LOADED_ENTRY_POINTS:
         return
     _LOADED_ENTRY_POINTS = True
-    for ep in metadata.entry_points(group=ENTRY_POINT_GROUP):
-        try:
-            obj = ep.load()
-        except Exception as exc:  # a broken plug-in must name itself
-            raise ConfigError(f"entry point {ep.name!r} of group {ENTRY_POINT_GROUP}: cannot "
-                              f"load {ep.value} ({exc})") from None
-        if callable(obj) and not isinstance(obj, Candidate):
-            obj = obj()
-        for c in (obj if isinstance(obj, list | tuple) else [obj]):
-            register_effect(c)
+    for c in entry_point_objects(metadata.entry_points(group=ENTRY_POINT_GROUP)):
+        register_effect(c)
 
 
 def candidates(kind: str | None = None) -> list[Candidate]:
@@ -294,52 +276,13 @@ def line_search(data: KindData, sensor: int, Q: np.ndarray,
     return {"frequency_hz": fbest}, int(kk.size)
 
 
-# -- built-in regressors -------------------------------------------------------------------
-def _bias_si(d: KindData) -> float:
-    return BIAS_UNITS[d.kind][1]
-
-
-def _needs_rates(d: KindData) -> str | None:
-    return None if d.table_rate > 0 else "the session has no rate steps"
-
-
-def _needs_temperature(d: KindData) -> str | None:
-    if d.temperature is None:
-        return ("the session has no temperature column (add temp_degC, or "
-                "temp_degC.<sensor>, to samples.csv)")
-    return None
-
-
-def _needs_force_change(d: KindData) -> str | None:
-    f = d.force
-    return None if np.ptp(f, axis=0).max() > 0.1 * G0 else \
-        "the specific force does not change direction during the session"
-
-
-def _needs_motion(d: KindData) -> str | None:
-    return None if np.max(np.abs(d.x_dot)) > 0 else "the input never changes within a step"
-
-
-def _line(d: KindData, i: int, p: Mapping[str, Any]) -> np.ndarray:
-    ph = 2 * np.pi * float(p["frequency_hz"]) * d.t
-    return _bias_si(d) * np.column_stack([np.cos(ph), np.sin(ph)])
-
-
-def _misalignment(d: KindData, i: int, p: Mapping[str, Any]) -> np.ndarray:
-    m = d.mount == int(p["mount"])
-    return 1e-3 * (d.x @ tangent_basis(d.H[i]).T) * m[:, None]
-
-
-def _needs_mounts(d: KindData) -> str | None:
-    return None if d.mount.max() > 0 else "the session uses one mounting only"
-
-
 def mount_search(data: KindData, sensor: int, Q: np.ndarray,
                  e: np.ndarray) -> tuple[dict[str, Any], int]:
     """The mounting (after the first) whose axis tilt explains most of ``e``."""
+    regressor = next(s.regressor for s in effect_specs() if s.search == "mount")
     best, arg = -1.0, 1
     for m in range(1, int(data.mount.max()) + 1):
-        z = _misalignment(data, sensor, {"mount": m})
+        z = regressor(data, sensor, {"mount": m})
         z = z - Q @ (Q.T @ z)
         g = z.T @ z
         if np.linalg.cond(g) > 1e12:
@@ -350,55 +293,12 @@ def mount_search(data: KindData, sensor: int, Q: np.ndarray,
     return {"mount": arg}, int(data.mount.max())
 
 
-_BUILTIN = (
-    Candidate("g_sensitivity", ("gyro",), "gyro bias proportional to the specific force "
-              "along the sensor axis", "deg/h per g",
-              lambda d, i, p: DPH * (d.force @ d.H[i]) / G0, ("specific_force",),
-              needs=_needs_force_change, monitor_input="specific force (accelerometers)"),
-    Candidate("scale_asymmetry", ("gyro",), "gain differs for positive and negative inputs "
-              "(1 ± a/2)", "fraction", lambda d, i, p: 0.5 * np.abs(d.s[:, i]),
-              ("rate_sign",), needs=_needs_rates, monitor_input="rate sign"),
-    Candidate("scale_nonlinearity", ("gyro",), "quadratic scale-factor term, k·s²/w (k·w at "
-              "the table rate w)", "fraction",
-              lambda d, i, p: d.s[:, i] ** 2 / max(d.table_rate, 1e-300), ("table_rate",),
-              needs=_needs_rates, monitor_input="rate squared",
-              fixed_params=lambda d, i: {"table_rate_dps": d.table_rate / DPS}),
-    Candidate("warmup", ("gyro",), f"bias transient after switch-on, A·exp(-t/{WARMUP_TAU_S:g}"
-              " s)", "deg/h", lambda d, i, p: DPH * np.exp(-d.t / WARMUP_TAU_S), ("time",),
-              monitor_input="time since switch-on"),
-    Candidate("time_skew", ("gyro", "accel"), "the sensor samples its input tau late",
-              "s", lambda d, i, p: -(d.x_dot @ d.H[i]), ("table_motion",),
-              needs=_needs_motion, monitor_input=None),
-    Candidate("bias_drift", ("gyro",), "bias drifts linearly by D over the session",
-              "deg/h", lambda d, i, p: DPH * d.t / d.duration_s, ("time",)),
-    Candidate("no_earth_rate", ("gyro",), "the Earth rate is missing from the output (1) or "
-              "scaled wrongly (fraction missing)", "fraction",
-              lambda d, i, p: -(d.earth @ d.H[i]), ("latitude",)),
-    Candidate("temperature", ("gyro", "accel"), "bias proportional to the temperature, "
-              "k·(T − T_ref), T_ref the session mean", "{bias} per degC",
-              lambda d, i, p: _bias_si(d) * (d.temperature[:, i]
-                                            - float(p.get("reference_degC", 0.0))),
-              ("temperature",), needs=_needs_temperature,
-              monitor_input="temperature in the stream",
-              fixed_params=lambda d, i: {"reference_degC": temperature_reference(d, i)}),
-    Candidate("bias_step", ("gyro", "accel"), "bias jumps by c at an unknown time t0",
-              "{bias}", lambda d, i, p: _bias_si(d) * (d.t >= float(p["time_s"])),
-              ("time",), search=step_search),
-    Candidate("periodic_line", ("gyro", "accel"), "sinusoid of amplitude A at an unknown "
-              "frequency f", "{bias}", _line, ("time",), search=line_search),
-    Candidate("misalignment", ("gyro", "accel"), "input axis tilted by two small angles in "
-              "the steps of one mounting (re-mounting error; the first mounting is the "
-              "reference)", "mrad", _misalignment, ("mounting",), search=mount_search,
-              needs=_needs_mounts),
-)
-for _c in _BUILTIN:
-    register_effect(_c)
+SEARCHES: dict[str, Callable[..., tuple[dict[str, Any], int]]] = {
+    "time_s": step_search, "frequency_hz": line_search, "mount": mount_search}
+"""The search of each parameter a built-in spec searches (``EffectSpec.search``)."""
 
-
-def temperature_reference(data: KindData, sensor: int) -> float:
-    """The reference temperature of the ``temperature`` effect (session mean, °C)."""
-    return float(np.mean(data.temperature[:, sensor])) if data.temperature is not None \
-        else 0.0
+for _s in effect_specs():
+    register_effect(Candidate.from_spec(_s))
 
 
 def testable(c: Candidate, data: KindData) -> str | None:

@@ -17,34 +17,30 @@ flight) are reported as one ``slow_bias_change`` with their combined effect (the
 the fitted slow bias over the flight); matrices (``g_sensitivity``, ``bias_drift``) carry
 row and column labels and their unit (``matrix``).
 
-Candidate effects, per IMU j (regressors on its three channels):
-
-==================  ===============================================  ==================
-``time_skew``       ``H_j·dω̂/dt`` (one parameter, the skew τ)          ms
-``g_sensitivity``   specific force of IMU j (3×3 matrix)               (deg/s)/g
-``temperature``     logged temperature − mean (per axis)               (deg/s)/degC
-``warm_up``         ``exp(−t/60 s)`` (per axis)                         deg/s at t = 0
-``bias_drift``      Legendre P1…P3 over the flight (per axis)           deg/s per term
-``vibration``       cos/sin of each spectral line of the residual       deg/s amplitude
-==================  ===============================================  ==================
-
-A constant per channel is always in the model. Selection is forward: at each step the
-candidate with the smallest p-value (HAC Wald test of its parameters in the model with
-those already chosen, :mod:`.regression`) enters if p < α/M (Bonferroni over all M
-candidates of all IMUs); effects that are functions of time only (warm-up, drift) enter
-only when no candidate built from a measured signal (angular acceleration, specific force,
-temperature, a spectral line) passes, since a slow temperature change and a warm-up curve
-explain the same residual and the measured one is the physical explanation. The reported
-p-values are those of the final model (each effect removed from it). Spectral lines: bins
-of the Welch spectrum of a channel more than :data:`LINE_FACTOR` times its running median
-(41 bins), local maxima, up to :data:`MAX_LINES`.
+Candidate effects, per IMU j: the in-flight forms of the effect specifications
+(:class:`fdi.effect_specs.FlightForm`; :mod:`fdi.effect_specs.builtin` lists them with
+their regressors on the IMU's three channels, units and time constants). A constant per
+channel is always in the model. Selection is forward with Holm's step-down over all M
+candidates of all IMUs (the multiplicity procedure of the session diagnosis,
+:mod:`calibration.diagnose.selection`): at each round the candidate with the smallest
+p-value (HAC Wald test of its parameters in its IMU's model with those already chosen,
+:mod:`.regression`) enters if ``p < α/(M − k)``, k the effects accepted so far; effects
+that are functions of time only (warm-up, drift) enter only when no candidate built from a
+measured signal (angular acceleration, specific force, temperature, a spectral line)
+passes, since a slow temperature change and a warm-up curve explain the same residual and
+the measured one is the physical explanation. The vibration-noise candidates continue the
+step-down after the mean model. The reported p-values are those of the final model (each
+effect removed from it). Spectral lines: bins of the Welch spectrum of a channel more than
+:data:`LINE_FACTOR` times its running median (41 bins), local maxima, up to
+:data:`MAX_LINES`.
 
 Vibration noise (a variance effect, tested after the mean model): the squared residual of
 each channel regressed on the IMU's accelerometer vibration power (1-s mean of the squared
 deviation from the 1-s mean acceleration); one candidate per IMU with accelerometers.
 
 Unexplained: after the final model, a channel whose 1-s block means vary more than its
-short-lag (AR(1)) correlation explains (χ² test at α/M), or that still shows a line.
+short-lag (AR(1)) correlation explains (χ² test at α/M, Bonferroni as the session's
+probes), or that still shows a line. The timing record's ``left`` is tested at α/M too.
 """
 
 from __future__ import annotations
@@ -56,20 +52,20 @@ from typing import Any
 import numpy as np
 from scipy import ndimage, signal, stats
 from scipy.interpolate import CubicSpline
-from scipy.special import eval_legendre
 
 from calibration.inflight.offset_check import SIGN_CONVENTION
 from calibration.inflight.regression import stacked_lstsq, wald_test
 from calibration.inflight.segments import find_segments, keep_mask
 from calibration.inflight.timing import other_flight_warning
 from fdi.calfile import Calibration
+from fdi.effect_specs import WARMUP_FLIGHT_TAU_S, FlightForm, FlightInputs, effect_specs
 from fdi.errors import ConfigError
 from fdi.extras import ImuTiming
 from fdi.units import DPS, G0, MS
 from replay.flight_data import Flight
 
-__all__ = ["DIAGNOSE_SCHEMA", "GENERIC", "LINE_FACTOR", "MAX_LINES", "RATE_LIMIT", "WARM_UP_S",
-           "diagnose_flight", "flight_residual", "shifted_residual"]
+__all__ = ["DIAGNOSE_SCHEMA", "DRIFT_EFFECT", "FORMS", "GENERIC", "LINE_FACTOR", "MAX_LINES",
+           "RATE_LIMIT", "WARM_UP_S", "diagnose_flight", "flight_residual", "shifted_residual"]
 
 DIAGNOSE_SCHEMA = "rimu.diagnose-flight/1"
 LINE_FACTOR = 10.0
@@ -77,10 +73,17 @@ LINE_FACTOR = 10.0
 _LOCAL_BINS = 41
 """Width (bins) of the running median a line is compared with."""
 MAX_LINES = 3
-GENERIC = ("warm_up", "bias_drift")
+FORMS: tuple[FlightForm, ...] = tuple(sorted(
+    (sp.flight for sp in effect_specs() if sp.flight is not None), key=lambda f: f.order))
+"""The in-flight candidates, in their order (the specs' ``flight`` forms)."""
+GENERIC = tuple(f.label for f in FORMS if f.time_only)
 """Effects that are functions of time only; they enter after the measured regressors."""
-WARM_UP_S = 60.0
-"""Time constant of the warm-up regressor (s)."""
+WARM_UP_S = WARMUP_FLIGHT_TAU_S
+"""Time constant of the warm-up regressor (s; :data:`fdi.effect_specs.WARMUP_FLIGHT_TAU_S`)."""
+_ROLE = {f.role: f.label for f in FORMS if f.role}
+"""The label of the skew and of the drift candidate."""
+DRIFT_EFFECT = _ROLE["drift"]
+"""The label of the drift candidate (the drift attribution is printed with it)."""
 RATE_LIMIT = 1e5 * DPS
 """A rate beyond this (rad/s; 100 000 deg/s, far beyond any gyro's range) is not a
 measurement: such samples are left out like non-finite ones."""
@@ -93,6 +96,7 @@ class _Cand:
     X: np.ndarray           # (N, 3, p)
     unit: str
     scale: float            # SI parameter → reported unit
+    form: FlightForm | None = None
 
 
 def flight_residual(flight: Flight, cal: Calibration, reference: str | None = None
@@ -234,62 +238,29 @@ def _refine(r: np.ndarray, t: np.ndarray, f0: float, fs: float) -> float:
     return float(grid[int(np.argmax(pw))])
 
 
-def _per_axis(v: np.ndarray) -> np.ndarray:
-    """(N,) regressor → (N, 3, 3): the same regressor on each channel, one parameter each."""
-    X = np.zeros((v.shape[0], 3, 3))
-    for k in range(3):
-        X[:, k, k] = v
-    return X
-
-
 def _candidates(flight: Flight, imu: str, idx: list[int], H: np.ndarray, omega_dot: np.ndarray,
                 r: np.ndarray, t: np.ndarray, keep: np.ndarray
                 ) -> tuple[list[_Cand], list[dict[str, str]]]:
-    N = t.shape[0]
+    """The candidates of one IMU from the specs' flight forms, and those not testable."""
     cands: list[_Cand] = []
     untestable: list[dict[str, str]] = []
-    X = (omega_dot @ H[idx].T)[:, :, None]
-    cands.append(_Cand("time_skew", imu, X, "ms", 1e3))
-    f = _aux(flight, "accel", imu)
-    if f is not None and f.shape[1] == 3 and np.isfinite(f[keep]).all():
-        fc = f - f[keep].mean(axis=0)
-        Xg = np.zeros((N, 3, 9))
-        for k in range(3):
-            Xg[:, k, 3 * k:3 * k + 3] = fc
-        cands.append(_Cand("g_sensitivity", imu, Xg, "(deg/s)/g", G0 / DPS))
-    else:
-        untestable.append({"name": "g_sensitivity", "imu": imu,
-                           "reason": "no accelerometer logged beside the gyros"})
-    T = _aux(flight, "temperature", imu)
-    if T is not None and np.isfinite(T[keep, 0]).all() and np.std(T[keep, 0]) > 0.2:
-        cands.append(_Cand("temperature", imu, _per_axis(T[:, 0] - T[keep, 0].mean()),
-                           "(deg/s)/degC", 1 / DPS))
-    else:
-        untestable.append({"name": "temperature", "imu": imu,
-                           "reason": "no temperature logged" if T is None
-                           else "temperature does not vary (sd <= 0.2 degC)"})
-    w = np.exp(-(t - t[0]) / WARM_UP_S)
-    if t[-1] - t[0] > WARM_UP_S:
-        cands.append(_Cand("warm_up", imu, _per_axis(w - w[keep].mean()), "deg/s", 1 / DPS))
-    else:
-        untestable.append({"name": "warm_up", "imu": imu,
-                           "reason": f"flight shorter than {WARM_UP_S:g} s"})
-    u = 2 * (t - t[0]) / max(t[-1] - t[0], 1e-9) - 1
-    Xd = np.zeros((N, 3, 9))
-    for d in range(1, 4):
-        P = eval_legendre(d, u)
-        for k in range(3):
-            Xd[:, k, 3 * (d - 1) + k] = P
-    cands.append(_Cand("bias_drift", imu, Xd, "deg/s per Legendre term (P1, P2, P3 x axes)",
-                       1 / DPS))
+    fi = FlightInputs(t=t, keep=keep, rate_dot=omega_dot @ H[idx].T,
+                      force=_aux(flight, "accel", imu),
+                      temperature=_aux(flight, "temperature", imu))
     fs = flight.sample_rate_hz
-    for f0 in _lines(r[keep], fs):
-        f1 = _refine(r[keep], t[keep], f0, fs)
-        Xv = np.zeros((N, 3, 6))
-        for k in range(3):
-            Xv[:, k, k] = np.cos(2 * np.pi * f1 * t)
-            Xv[:, k, 3 + k] = np.sin(2 * np.pi * f1 * t)
-        cands.append(_Cand(f"vibration_{f1:.2f}Hz", imu, Xv, "deg/s amplitude", 1 / DPS))
+    for form in FORMS:
+        if form.searched:
+            for f0 in _lines(r[keep], fs):
+                f1 = _refine(r[keep], t[keep], f0, fs)
+                cands.append(_Cand(f"{form.label}_{f1:.2f}Hz", imu,
+                                   form.columns(fi, {"frequency_hz": f1}), form.unit,
+                                   form.scale, form))
+            continue
+        X = form.columns(fi, {})
+        if isinstance(X, str):
+            untestable.append({"name": form.label, "imu": imu, "reason": X})
+        else:
+            cands.append(_Cand(form.label, imu, X, form.unit, form.scale, form))
     return cands, untestable
 
 
@@ -333,28 +304,52 @@ def _design(base: np.ndarray, chosen: list[_Cand]) -> tuple[np.ndarray, list[sli
     return np.concatenate(blocks, axis=2), sl
 
 
-def _select(r: np.ndarray, cands: list[_Cand], keep: np.ndarray, alpha_each: float
-            ) -> tuple[list[_Cand], Any, list[slice]]:
-    N = r.shape[0]
+def _base(N: int) -> np.ndarray:
+    """The constant of each channel, (N, 3, 3)."""
     base = np.zeros((N, 3, 3))
     for k in range(3):
         base[:, k, k] = 1.0
-    Y = r[keep]
-    chosen: list[_Cand] = []
-    left = list(cands)
-    while left:
-        ps = []
-        for c in left:
-            X, sl = _design(base, [*chosen, c])
-            fit = stacked_lstsq(X[keep], Y)
-            ps.append(wald_test(fit, np.arange(sl[-1].start, sl[-1].stop))[2])
-        ok = [(c.name in GENERIC, p, i) for i, (c, p) in enumerate(zip(left, ps, strict=True))
-              if p < alpha_each]
+    return base
+
+
+def _pvalues(r: np.ndarray, chosen: list[_Cand], left: list[_Cand], keep: np.ndarray
+             ) -> list[float]:
+    """The p-value of each candidate in ``left`` added to the model with ``chosen``."""
+    base, Y = _base(r.shape[0]), r[keep]
+    ps = []
+    for c in left:
+        X, sl = _design(base, [*chosen, c])
+        fit = stacked_lstsq(X[keep], Y)
+        ps.append(wald_test(fit, np.arange(sl[-1].start, sl[-1].stop))[2])
+    return ps
+
+
+def _select(res: dict[str, np.ndarray], cands: dict[str, list[_Cand]], keep: np.ndarray,
+            alpha: float, M: int) -> tuple[dict[str, tuple[list[_Cand], Any, list[slice]]],
+                                            int]:
+    """Forward selection over every IMU with Holm's step-down: the k-th effect accepted
+    passed ``α/(M − k)`` (k from 0), measured regressors before functions of time.
+    Returns each IMU's (chosen, final fit, slices) and the number accepted."""
+    chosen: dict[str, list[_Cand]] = {g: [] for g in cands}
+    left = {g: list(c) for g, c in cands.items()}
+    ps = {g: _pvalues(res[g], [], left[g], keep) for g in cands}
+    k = 0
+    while True:
+        thr = alpha / max(M - k, 1)
+        ok = [(c.name in GENERIC, p, gi, i) for gi, g in enumerate(cands)
+              for i, (c, p) in enumerate(zip(left[g], ps[g], strict=True)) if p < thr]
         if not ok:
             break
-        chosen.append(left.pop(min(ok)[2]))       # measured regressors before generic ones
-    X, sl = _design(base, chosen)
-    return chosen, stacked_lstsq(X[keep], Y), sl
+        _, _, gi, i = min(ok)                   # measured regressors before generic ones
+        g = list(cands)[gi]
+        chosen[g].append(left[g].pop(i))
+        ps[g] = _pvalues(res[g], chosen[g], left[g], keep)
+        k += 1
+    out = {}
+    for g in cands:
+        X, sl = _design(_base(res[g].shape[0]), chosen[g])
+        out[g] = (chosen[g], stacked_lstsq(X[keep], res[g][keep]), sl)
+    return out, k
 
 
 def _structure(e: np.ndarray, fs: float, alpha_each: float, names: list[str]) -> list[str]:
@@ -395,23 +390,21 @@ def _effect_record(c: Any, s: slice, fit: Any, g: str, sensors: list[int],
            "estimate_sd": float(sd[0]) if sd.size == 1 else sd.tolist(),
            "unit": c.unit, "p_value": wald_test(fit, np.arange(s.start, s.stop))[2]}
     known = _imu_timing(cal, g)
-    if c.name == "time_skew":
+    if c.name == _ROLE["skew"]:
         cal_txt = (f"the calibration's {known.time_offset_s / MS:+.3f} ± "
                    f"{known.time_offset_sd_s / MS:.3f} ms" if known.time_offset_s is not None
                    else "no calibrated offset")
         rec["detail"] = (f"time skew left after {cal_txt} for {g} (applied exactly, as the "
                          f"calibration reads it; rimu monitor-file moves {g}'s samples by "
                          f"the same offset); {SIGN_CONVENTION}")
-    if c.name == "bias_drift":
-        rec["matrix"] = {"rows": [f"{g}.{a} gyro" for a in "xyz"],
-                         "cols": ["Legendre P1", "Legendre P2", "Legendre P3"],
-                         "values": est.reshape(3, 3).T.tolist(),
-                         "sd": sd.reshape(3, 3).T.tolist(), "unit": "deg/s"}
-    if c.name == "g_sensitivity":
-        rec["matrix"] = {"rows": [f"{g}.{a} gyro" for a in "xyz"],
-                         "cols": [f"specific force {a}" for a in "xyz"],
-                         "values": est.reshape(3, 3).tolist(),
-                         "sd": sd.reshape(3, 3).tolist(), "unit": c.unit}
+    if c.form is not None and c.form.matrix is not None:
+        cols, term_major = c.form.matrix
+        vals, sds = est.reshape(3, len(cols)), sd.reshape(3, len(cols))
+        if term_major:                          # parameters P1x P1y P1z P2x ...
+            vals, sds = est.reshape(len(cols), 3).T, sd.reshape(len(cols), 3).T
+        rec["matrix"] = {"rows": [f"{g}.{a} gyro" for a in "xyz"], "cols": list(cols),
+                         "values": vals.tolist(), "sd": sds.tolist(),
+                         "unit": "deg/s" if term_major else c.unit}
     return rec
 
 
@@ -458,15 +451,12 @@ def _timing_record(g: str, chosen: list[_Cand], sl: list[slice], fit: Any,
     """What the calibration's time offset of IMU ``g`` leaves: the skew δτ in the final
     model (with the skew added when it was not chosen), against the calibrated offset."""
     names = [c.name for c in chosen]
-    if "time_skew" in names:
-        k = names.index("time_skew")
+    if _ROLE["skew"] in names:
+        k = names.index(_ROLE["skew"])
         f, s = fit, sl[k]
     else:
-        skew = next((c for c in cands if c.name == "time_skew"), None)
-        base = np.zeros((r0.shape[0], 3, 3))
-        for j in range(3):
-            base[:, j, j] = 1.0
-        X, sls = _design(base, [*chosen, skew])
+        skew = next((c for c in cands if c.name == _ROLE["skew"]), None)
+        X, sls = _design(_base(r0.shape[0]), [*chosen, skew])
         f, s = stacked_lstsq(X[keep], r0[keep]), sls[-1]
     d, dsd = 1e3 * float(f.beta[s][0]), 1e3 * float(f.sd[s][0])
     p = wald_test(f, np.arange(s.start, s.stop))[2]
@@ -490,13 +480,10 @@ def _drift_p1(chosen: list[_Cand], sl: list[slice], fit: Any, cands: list[_Cand]
     idx = [k for k, c in enumerate(chosen) if c.name in GENERIC]
     f, cs, sls = fit, chosen, sl
     if not idx:
-        cand = next((c for c in cands if c.name == "bias_drift"), None)
+        cand = next((c for c in cands if c.name == _ROLE["drift"]), None)
         if cand is None:
             return None
-        base = np.zeros((r0.shape[0], 3, 3))
-        for j in range(3):
-            base[:, j, j] = 1.0
-        X, sls = _design(base, [*chosen, cand])
+        X, sls = _design(_base(r0.shape[0]), [*chosen, cand])
         f, cs = stacked_lstsq(X[keep], r0[keep]), [*chosen, cand]
         idx = [len(cs) - 1]
     rows = np.flatnonzero(keep)
@@ -529,13 +516,10 @@ def _attribution(p1: dict[str, tuple[np.ndarray, np.ndarray]], groups: dict[str,
                     "reference)"}
 
 
-def _vibration_record(residual: np.ndarray, vibration: np.ndarray, g: str,
-                      sensors: list[int], alpha_each: float) -> dict[str, Any] | None:
-    """The ``vibration_noise`` record when the residual variance grows with the
-    accelerometer vibration power at ``alpha_each``, else None."""
-    sl_, sd_, p, (calm, rough) = _vibration_noise(residual, vibration)
-    if not p < alpha_each:
-        return None
+def _vibration_record(test: tuple[np.ndarray, np.ndarray, float, list[float]], g: str,
+                      sensors: list[int]) -> dict[str, Any]:
+    """The ``vibration_noise`` record of a test :func:`_vibration_noise` accepted."""
+    sl_, sd_, p, (calm, rough) = test
     f2 = (G0 / DPS) ** 2                  # rad²/s² per (m/s²)² → (deg/s)² per g²
     return {"name": "vibration_noise", "imu": g, "sensors": sensors,
             "estimate": (sl_ * f2).tolist(), "estimate_sd": (sd_ * f2).tolist(),
@@ -544,6 +528,16 @@ def _vibration_record(residual: np.ndarray, vibration: np.ndarray, g: str,
             "detail": f"residual rms {calm / DPS:.3g} deg/s in the calmest quarter, "
                       f"{rough / DPS:.3g} deg/s in the roughest (a variance effect: "
                       f"not removed from the residual)"}
+
+
+def _holm_rest(ps: dict[str, float], alpha: float, M: int, k: int) -> set[str]:
+    """The members of ``ps`` Holm's step-down accepts after ``k`` acceptances of M."""
+    out: set[str] = set()
+    for g in sorted(ps, key=lambda g: ps[g]):
+        if not ps[g] < alpha / max(M - k - len(out), 1):
+            break
+        out.add(g)
+    return out
 
 
 def diagnose_flight(flight: Flight, cal: Calibration, *, alpha: float = 0.01,
@@ -583,13 +577,18 @@ def diagnose_flight(flight: Flight, cal: Calibration, *, alpha: float = 0.01,
         not_testable += u
     vib = {g: _vibration_level(flight, g) for g in res}
     M = sum(len(c) for c in per_imu.values()) + sum(v is not None for v in vib.values())
-    alpha_each = alpha / max(M, 1)
+    alpha_each = alpha / max(M, 1)                   # the after-checks (Bonferroni)
+    r0s = {g: np.nan_to_num(r) for g, r in res.items()}
+    selected, k = _select(r0s, per_imu, keep, alpha, M)
+    vib_tests = {g: _vibration_noise(selected[g][1].residual, v[keep])
+                 for g, v in vib.items() if v is not None}
+    vib_on = _holm_rest({g: v[2] for g, v in vib_tests.items()}, alpha, M, k)
     effects, detail, timing = [], [], []
     p1: dict[str, tuple[np.ndarray, np.ndarray]] = {}
     chans, before, after = [], [], []
-    for g, r in res.items():
-        r0 = np.nan_to_num(r)
-        chosen, fit, sl = _select(r0, per_imu[g], keep, alpha_each)
+    for g in res:
+        r0 = r0s[g]
+        chosen, fit, sl = selected[g]
         names = [flight.sensor_names[i] for i in groups[g]]
         chans += names
         before += list(np.sqrt(np.mean(r0[keep] ** 2, axis=0)) / DPS)
@@ -605,17 +604,17 @@ def diagnose_flight(flight: Flight, cal: Calibration, *, alpha: float = 0.01,
         d1 = _drift_p1(chosen, sl, fit, per_imu[g], r0, keep)
         if d1 is not None:
             p1[g] = d1
-        if vib[g] is not None:
-            rec = _vibration_record(fit.residual, vib[g][keep], g, sensors, alpha_each)
-            effects += [rec] if rec is not None else []
-        else:
+        if g in vib_on:
+            effects.append(_vibration_record(vib_tests[g], g, sensors))
+        elif g not in vib_tests:
             not_testable.append({"name": "vibration_noise", "imu": g,
                                  "reason": "no accelerometer logged beside the gyros"})
         detail += _structure(fit.residual, flight.sample_rate_hz, alpha_each, names)
         for f0 in _lines(fit.residual, flight.sample_rate_hz):
             detail.append(f"{g}: a spectral line at {f0:.2f} Hz remains")
     return {"schema": DIAGNOSE_SCHEMA, "source": flight.source, "reference": ref,
-            "alpha": alpha, "candidates": M, "correction": "Bonferroni over all candidates",
+            "alpha": alpha, "candidates": M,
+            "correction": "Holm over all candidates (the after-checks at alpha/M)",
             "effects": effects, "unexplained": bool(detail), "unexplained_detail": detail,
             "not_testable": not_testable,
             "timing": timing, "time_offset_sign": SIGN_CONVENTION, "warnings": warnings,

@@ -32,6 +32,7 @@ from fdi import state as S
 from fdi.calfile import Calibration
 from fdi.capability import AXIS_SHARE
 from fdi.detector import chi2_threshold, default_thresholds
+from fdi.effect_specs import RUNTIME_INPUTS
 from fdi.effects import Compensator
 from fdi.errors import ExportError
 from fdi.health import health_limits
@@ -47,9 +48,9 @@ MAX_TABLE_BYTES = 8 << 20
 """Largest set tables the export writes (8 MiB: 9 sensors take about 2 MiB in float64)."""
 MAX_RING = 1 << 16
 """Longest window (samples) the export accepts: the ring of cumulative sums is static."""
-_EFFECT_CODE = {"scale_asymmetry": 0, "scale_nonlinearity": 1, "g_sensitivity": 2,
-                "temperature": 3}
-"""The template's EFFECT_* codes (the order of Compensator.one's branches)."""
+_TEMPLATE_CODES = frozenset({0, 1, 2, 3})
+"""The run-time codes the template's ``EFFECT_*`` switch implements (the specs'
+``runtime.code``, :mod:`fdi.effect_specs.builtin`)."""
 _F32_MAX = float(np.finfo(np.float32).max)
 
 
@@ -197,13 +198,13 @@ def _effect_tables(cal: Calibration, kind: str, num: _Numbers, effects: bool
     ``effects`` False, as ``--no-effects``)."""
     s = cal.kind(kind)
     every = list(range(s.n))
-    comp = Compensator(cal, kind, available={"specific_force": every, "temperature": every},
+    comp = Compensator(cal, kind, available={k: every for k in RUNTIME_INPUTS if k != "rate"},
                        enabled=effects)
     codes, sensors, ks, extras = [], [], [], []
     for code, _name, i, k, e in comp._scalar:
-        if _EFFECT_CODE.get(_name) != code:         # the template's switch must follow
-            raise RuntimeError(f"effect {_name!r}: Compensator code {code}, the C template "
-                               f"knows {_EFFECT_CODE.get(_name)}")
+        if code not in _TEMPLATE_CODES:             # the template's switch must follow
+            raise RuntimeError(f"effect {_name!r}: run-time code {code}, the C template "
+                               f"knows {sorted(_TEMPLATE_CODES)}")
         codes.append(str(code))
         sensors.append(str(i))
         ks.append(num(k, f"effect term {_name} sensor {i + 1}"))

@@ -7,6 +7,7 @@ import argparse
 from typing import TYPE_CHECKING, Any
 
 from fdi.adequacy import ADEQUATE, NOT_RULED_OUT, SUSPECTED, WITHIN_SEQUENCE_LIMITS
+from fdi.effect_specs import builtin_names
 from rimu.argtypes import probability
 
 if TYPE_CHECKING:
@@ -15,12 +16,10 @@ if TYPE_CHECKING:
 
 __all__ = ["EFFECT_NAMES", "add_calibrate_options", "calibrate_with_check"]
 
-EFFECT_NAMES = ("g_sensitivity", "scale_asymmetry", "scale_nonlinearity", "warmup", "time_skew",
-                "bias_drift", "no_earth_rate", "temperature", "bias_step", "periodic_line",
-                "misalignment")
-"""The candidate effects (:func:`calibration.diagnose.library.candidates`, in its order;
-kept here so that ``rimu calibrate --help`` does not import the library; a test checks
-they agree)."""
+EFFECT_NAMES = builtin_names()
+"""The built-in candidate effects (:func:`fdi.effect_specs.builtin_names`, the order of
+:func:`calibration.diagnose.library.candidates`; read from the specs, which import no
+numerical library, so that ``rimu calibrate --help`` stays light)."""
 
 
 def add_calibrate_options(p: argparse.ArgumentParser) -> None:

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import json
 
-from calibration.inflight.diagnose import diagnose_flight
+from calibration.inflight.diagnose import DRIFT_EFFECT, diagnose_flight
 from fdi.calfile import load_calibration
 from replay.flight_io import load_flight_dir
 
@@ -66,7 +66,7 @@ def format_text(doc: dict) -> str:
     for n in doc["not_testable"]:
         lines.append(f"  not testable: {n['name']} ({n['imu']}): {n['reason']}")
     a = doc.get("drift_attribution")
-    if a and any(e["name"] in ("bias_drift", "slow_bias_change") for e in doc["effects"]):
+    if a and any(e["name"] in (DRIFT_EFFECT, "slow_bias_change") for e in doc["effects"]):
         lines.append(f"  drift: {a['statement']}")
         lines.append("    shared by every IMU relative to the reference: [" + ", ".join(
             f"{c:+.4f} ± {q:.4f}" for c, q in zip(a["common"], a["common_sd"], strict=True))

@@ -3,14 +3,14 @@
 - the turntable diagnosis' forward selection is Holm's step-down at α/2: at each round the
   smallest p is accepted while p < (α/2)/m, m the members left (calibration.diagnose.
   selection._forward);
-- the flight diagnosis enters a candidate only when p < α/M, M all candidates of all IMUs
-  (Bonferroni), and stops at the first that does not pass.
+- the flight diagnosis enters its k-th candidate only when p < α/(M − k), M all candidates
+  of all IMUs (Holm's step-down, as the turntable diagnosis; Bonferroni α/M until issue
+  21), and stops at the first that does not pass.
 """
 
 from __future__ import annotations
 
 import numpy as np
-import pytest
 
 import calibration.inflight.diagnose as fd
 from calibration.diagnose.selection import Selection, _forward
@@ -63,6 +63,13 @@ def test_alpha_is_halved_for_the_selection() -> None:
     assert len(_run([0.004], 0.01).claimed) == 1
 
 
+def _per_axis(v):
+    X = np.zeros((v.shape[0], 3, 3))
+    for k in range(3):
+        X[:, k, k] = v
+    return X
+
+
 def _cands_data(seed: int = 0):
     rng = np.random.default_rng(seed)
     N = 3000
@@ -71,8 +78,8 @@ def _cands_data(seed: int = 0):
     r = rng.normal(0, 1.0, (N, 3))
     r[:, 0] += 0.08 * u1                                  # strong
     r[:, 1] += 0.05 * u2                                  # weaker
-    cands = [fd._Cand("a", "imu2", fd._per_axis(u1), "u", 1.0),
-             fd._Cand("b", "imu2", fd._per_axis(u2), "u", 1.0)]
+    cands = [fd._Cand("a", "imu2", _per_axis(u1), "u", 1.0),
+             fd._Cand("b", "imu2", _per_axis(u2), "u", 1.0)]
     return t, r, cands
 
 
@@ -91,21 +98,28 @@ def test_flight_selection_enters_only_below_alpha_each_and_stops() -> None:
     pa = _p_alone(r, cands[0], keep)
     pb = _p_alone(r, cands[1], keep, (cands[0],))
     assert pa < pb < 0.01
-    chosen, _, _ = fd._select(r, cands, keep, pb * 1.01)
+
+    def select(alpha, M=1):             # M = 1: the threshold is alpha at every step
+        return fd._select({"imu2": r}, {"imu2": cands}, keep, alpha, M)[0]["imu2"][0]
+
+    chosen = select(pb * 1.01)
     assert [c.name for c in chosen] == ["a", "b"]
-    chosen, _, _ = fd._select(r, cands, keep, pb * 0.99)
+    chosen = select(pb * 0.99)
     assert [c.name for c in chosen] == ["a"]
-    chosen, _, _ = fd._select(r, cands, keep, pa * 0.99)
+    chosen = select(pa * 0.99)
     assert chosen == []
+    # M = 2: a against alpha/2, then b against alpha/1 (Holm), not alpha/2 (Bonferroni)
+    assert pa < pb / 2
+    assert [c.name for c in select(pb * 1.01, 2)] == ["a", "b"]
 
 
-def test_flight_diagnosis_applies_bonferroni_over_all_candidates(monkeypatch) -> None:
+def test_flight_diagnosis_applies_holm_over_all_candidates(monkeypatch) -> None:
     seen = []
     real = fd._select
 
-    def spy(r, cands, keep, alpha_each):
-        seen.append((len(cands), alpha_each))
-        return real(r, cands, keep, alpha_each)
+    def spy(res, cands, keep, alpha, M):
+        seen.append(({g: len(c) for g, c in cands.items()}, alpha, M))
+        return real(res, cands, keep, alpha, M)
 
     monkeypatch.setattr(fd, "_select", spy)
     f = simulate_imu_set(ImuSetSpec(imus=3, duration_s=30, seed=3))
@@ -113,8 +127,8 @@ def test_flight_diagnosis_applies_bonferroni_over_all_candidates(monkeypatch) ->
     from calibration.inflight.fit import fit_inflight
 
     doc = fd.diagnose_flight(f, calibration_from_fit(fit_inflight(f), f), alpha=0.02)
-    assert len(seen) == 2                                  # two IMUs besides the reference
-    M = doc["candidates"]
-    assert M >= sum(n for n, _ in seen)                    # every candidate of every IMU
-    for _, a in seen:
-        assert a == pytest.approx(0.02 / M)
+    (n, a, M) = seen[0]                                     # one family for every IMU
+    assert len(seen) == 1 and len(n) == 2                  # two IMUs besides the reference
+    assert M == doc["candidates"]
+    assert M >= sum(n.values())                            # every candidate of every IMU
+    assert a == 0.02 and doc["correction"].startswith("Holm")

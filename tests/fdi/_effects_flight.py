@@ -9,8 +9,9 @@ import dataclasses
 
 import numpy as np
 
-from calibration.simulate import EffectContext, _asymmetry, _g_sensitivity, _nonlinearity
+from calibration.simulate import EffectContext
 from fdi.calfile import EffectTerm
+from fdi.effect_specs import get_spec
 from fdi.units import DPS
 from replay.flight import simulate_flight
 from replay.flight_data import AuxChannels
@@ -63,8 +64,8 @@ def flight_with_effects(cal, seed, *, truth=None, duration_s=FLIGHT_S, effects=N
     ctx = EffectContext(t=fl.t, duration_s=duration_s, table_rate=table_rate_dps * DPS,
                         f_along=f @ g.H.T)
     s2 = s.copy()
-    for name, fn in (("scale_asymmetry", _asymmetry), ("scale_nonlinearity", _nonlinearity),
-                     ("g_sensitivity", _g_sensitivity)):
+    for name in ("scale_asymmetry", "scale_nonlinearity", "g_sensitivity"):
+        fn = get_spec(name).simulator.apply                  # the simulator's form
         for (nm, i), v in effects.items():                   # the simulator's order
             if nm == name:
                 s2[:, [i]] = fn(s2[:, [i]], v,
