@@ -49,6 +49,7 @@ __all__ = [
     "Candidate",
     "candidates",
     "change_point_scan",
+    "effect_searching",
     "get_candidate",
     "line_search",
     "model_effects",
@@ -299,6 +300,16 @@ SEARCHES: dict[str, Callable[..., tuple[dict[str, Any], int]]] = {
 
 for _s in effect_specs():
     register_effect(Candidate.from_spec(_s))
+
+
+def effect_searching(parameter: str) -> str:
+    """Name of the built-in effect whose unknown parameter is searched as ``parameter`` (a
+    key of :data:`SEARCHES`: ``"time_s"`` the step, ``"frequency_hz"`` the line), so that
+    probes tied to one effect name it without writing it."""
+    for spec in effect_specs():
+        if spec.search == parameter:
+            return spec.name
+    raise KeyError(f"no effect searches {parameter!r}")
 
 
 def testable(c: Candidate, data: KindData) -> str | None:

@@ -37,7 +37,7 @@ import numpy as np
 
 from calibration.diagnose.coloured import GlsModel, NoiseSet, block_noise, needs_coloured
 from calibration.diagnose.context import KindData
-from calibration.diagnose.library import Candidate, testable
+from calibration.diagnose.library import Candidate, effect_searching, testable
 from calibration.diagnose.linmodel import LinModel
 from calibration.diagnose.probes import PROBES, run_probes, shared_regressors
 from calibration.diagnose.stationarity import LINE_EFFECT, line_stationarity
@@ -46,7 +46,7 @@ __all__ = ["ALIAS_CORRELATION", "STEP_EFFECT", "Selected", "Selection", "base_co
            "noise_sets", "select"]
 
 ALIAS_CORRELATION = 0.95
-STEP_EFFECT = "bias_step"
+STEP_EFFECT = effect_searching("time_s")
 """The library effect a failing ``change_point`` probe is named (:func:`_promote_steps`)."""
 
 

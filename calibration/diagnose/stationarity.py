@@ -37,11 +37,11 @@ import numpy as np
 
 from calibration.diagnose.context import KindData
 from calibration.diagnose.holdout import folds
-from calibration.diagnose.library import BIAS_UNITS, Candidate
+from calibration.diagnose.library import BIAS_UNITS, Candidate, effect_searching
 
 __all__ = ["LINE_EFFECT", "line_stationarity", "segments"]
 
-LINE_EFFECT = "periodic_line"
+LINE_EFFECT = effect_searching("frequency_hz")
 """The library effect this probe checks."""
 
 
