@@ -66,7 +66,11 @@ tails hold there; the monitor's envelope marks what lies beyond,
 :data:`fdi.envelope.RANGE`)::
 
      "validated_range": {"gyro": {"rate_abs_max": [wx, wy, wz], "rate_unit": "rad/s",
-                                  "specific_force_max": f, "specific_force_unit": "m/s^2"}}
+                                  "specific_force_max": f, "specific_force_unit": "m/s^2",
+                                  "jolt_max": j, "jolt_unit": "m/s^2 per sample"}}
+
+(``jolt_max`` optional: the largest change of specific force from one sample to the next
+that every IMU felt, :func:`fdi.envelope.covered_jolt`.)
 
 Optional per sensor (a ``/3`` file without them loads with 0): ``timing_jitter_ms`` and
 ``timing_jitter_ms_sd``, the standard deviation of the sensor's sampling-time error
@@ -310,6 +314,10 @@ class SensorSet:
         Gyros: the largest specific force (m/s², felt by every IMU,
         :func:`fdi.envelope.covered_specific_force`) the calibration's samples reached;
         None when not stated (no accelerometers, or no range stated).
+    validated_jolt : float or None
+        Gyros: the largest change of specific force from one sample to the next (m/s², the
+        smallest over the IMUs, :func:`fdi.envelope.covered_jolt`) the calibration's samples
+        reached; None when not stated.
     """
 
     kind: str
@@ -322,6 +330,7 @@ class SensorSet:
     drift: DriftModel | None = None
     validated_rate: np.ndarray | None = None
     validated_specific_force: float | None = None
+    validated_jolt: float | None = None
 
     @property
     def n(self) -> int:
@@ -614,12 +623,19 @@ def _parity_models(r: Fields, sets: dict[str, SensorSet], key: str,
     return out
 
 
+JOLT_UNIT = "m/s^2 per sample"
+"""Unit of ``validated_range.jolt_max``."""
+
+
 def _range_to_dict(s: SensorSet) -> dict[str, Any]:
     doc: dict[str, Any] = {"rate_abs_max": np.asarray(s.validated_rate, float).tolist(),
                            "rate_unit": "rad/s"}
     if s.validated_specific_force is not None:
         doc["specific_force_max"] = float(s.validated_specific_force)
         doc["specific_force_unit"] = "m/s^2"
+    if s.validated_jolt is not None:
+        doc["jolt_max"] = float(s.validated_jolt)
+        doc["jolt_unit"] = JOLT_UNIT
     return doc
 
 
@@ -638,15 +654,18 @@ def _validated_range(r: Fields, sets: dict[str, SensorSet]) -> dict[str, SensorS
             continue
         if kind != "gyro":
             raise v.error(kind, "a validated range is stated for gyros only")
-        for key, unit in (("rate_unit", "rad/s"), ("specific_force_unit", "m/s^2")):
+        for key, unit in (("rate_unit", "rad/s"), ("specific_force_unit", "m/s^2"),
+                          ("jolt_unit", JOLT_UNIT)):
             if sub.get(key, unit) != unit:
                 raise sub.error(key, f"expected {unit!r}, got {sub.get(key)!r}")
         a = sub.array("rate_abs_max", (3,))
         if np.isnan(a).any() or (a < 0).any():
             raise sub.error("rate_abs_max", "expected three rates >= 0")
         f = sub.number("specific_force_max", None, nonnegative=True)
+        j = sub.number("jolt_max", None, nonnegative=True)
         sub.finish()
-        out[kind] = replace(sets[kind], validated_rate=a, validated_specific_force=f)
+        out[kind] = replace(sets[kind], validated_rate=a, validated_specific_force=f,
+                            validated_jolt=j)
     v.finish(accept=sets)
     return out
 

@@ -421,7 +421,8 @@ def default_envelope(cal: Calibration, kind: str, groups: Sequence[str],
     s = cal.kind(kind)
     return EnvelopeTracker(H=s.H, groups=list(idx.values()) if grouped else None,
                            declared=tuple(declared), validated_rate=s.validated_rate,
-                           validated_specific_force=s.validated_specific_force)
+                           validated_specific_force=s.validated_specific_force,
+                           validated_jolt=s.validated_jolt)
 
 
 def _envelope(choice: Any, cal: Calibration, kind: str, groups: Sequence[str],

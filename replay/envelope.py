@@ -91,7 +91,8 @@ def flight_envelope(flight: Flight, cal: Calibration | None = None,
                          declared=declared_intervals(flight.events, categories),
                          validated_rate=cal.gyro.validated_rate if cal is not None else None,
                          validated_specific_force=(cal.gyro.validated_specific_force
-                                                   if cal is not None else None))
+                                                   if cal is not None else None),
+                         validated_jolt=cal.gyro.validated_jolt if cal is not None else None)
     return tr.update(flight.t, rates, flight_accel(flight))
 
 

@@ -37,7 +37,7 @@ from calibration.inflight.timing import flight_identity
 from calibration.residual_models import with_residual_models
 from calibration.residuals import allan_table
 from fdi.calfile import AllanTable, Calibration, SensorCal, SensorSet, tangent_basis
-from fdi.envelope import covered_rate, covered_specific_force
+from fdi.envelope import covered_jolt, covered_rate, covered_specific_force
 from fdi.units import DPH, DPS, MS, RAW_UNITS
 from replay.envelope import flight_accel
 from replay.flight_data import Flight
@@ -174,8 +174,10 @@ def calibration_from_fit(fit: InflightFit, flight: Flight, *, tails: bool = True
                            fit.used)
     acc = flight_accel(flight)
     force = covered_specific_force(acc, fit.used) if acc is not None else None
+    jolt = covered_jolt(acc, fit.used) if acc is not None else None
     gs = SensorSet("gyro", tuple(sensors), cov, allan=_allan(fit, noise),
-                   validated_rate=covered, validated_specific_force=force)
+                   validated_rate=covered, validated_specific_force=force,
+                   validated_jolt=jolt)
     if tails or drift_model:
         gs = with_residual_models(gs, sensor_residuals(fit, flight), flight.raw,
                                   fit.sample_rate_hz, tails=tails, drift=drift_model,

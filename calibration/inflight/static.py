@@ -19,8 +19,11 @@ a set at rest does show:
   :func:`attribute_drift`: what every IMU shares relative to the reference is the
   reference's own drift (it cannot be told apart from all others drifting together).
 
-Scale factors are not observable at rest (taken as 1, sd 0, noted). The noise covariance
-and Allan table come from each IMU's rates with its mean removed.
+Scale factors are not observable at rest (taken as 1, sd 0, noted). The noise covariance,
+the Allan table, the residual's tail and drift models and the range the samples covered
+(rate, specific force, jolt) come from each IMU's rates with its mean removed, on the
+samples at rest: shocks (a knock on the bench, :func:`at_rest`) are left out, so the
+monitor marks them beyond the range instead of its thresholds covering them.
 """
 
 from __future__ import annotations
@@ -37,15 +40,15 @@ from calibration.inflight.calfile import _sf_unit
 from calibration.residual_models import with_residual_models
 from calibration.residuals import allan_table
 from fdi.calfile import Calibration, SensorCal, SensorSet, tangent_basis
-from fdi.envelope import covered_rate, covered_specific_force
+from fdi.envelope import covered_jolt, covered_rate, covered_specific_force
 from fdi.errors import CalibrationError, ConfigError
 from fdi.extras import StaticAlignment, extras_from_dict
 from fdi.units import DEG, DPS
 from replay.envelope import flight_accel
 from replay.flight_data import Flight
 
-__all__ = ["BLOCKS", "SCALE_FACTOR_TOLERANCE", "STATIC_METHOD", "attribute_drift",
-           "calibrate_static", "static_text"]
+__all__ = ["BLOCKS", "SCALE_FACTOR_TOLERANCE", "SHOCK_PAD_S", "SHOCK_SD", "STATIC_METHOD",
+           "at_rest", "attribute_drift", "calibrate_static", "static_text"]
 
 STATIC_METHOD = "static alignment to a reference IMU (calibration.inflight.static/1)"
 BLOCKS = 10
@@ -57,6 +60,12 @@ the monitor's thresholds widen when the bench moves instead of taking the scale-
 differences for a fault."""
 """Contiguous blocks whose scatter gives the sds."""
 _MOVING_RPS = 0.05
+SHOCK_SD = 8.0
+"""A sample in which at least two IMUs depart from their record median by more than this
+many robust sds (1.4826·MAD) on any gyro or accelerometer axis is a shock (a knock on the
+bench: 4×MPU9250 at 186.76 s, accelerometers 140 sd, gyros 18 sd), not rest."""
+SHOCK_PAD_S = 0.5
+"""Samples this close to a shock are not rest either (the ringing after a knock)."""
 _MIN_ANGLE_DEG = 15.0
 """Smallest angle between gravity and the shared motion for both to fix the rotation."""
 
@@ -71,6 +80,41 @@ def _accel(flight: Flight, imu: str) -> np.ndarray | None:
     a = flight.aux.select("accel")
     cols = [k for k, h in enumerate(a.imu) if h == imu]
     return a.values[:, cols] if len(cols) == 3 else None
+
+
+def at_rest(x: np.ndarray, acc: Mapping[str, np.ndarray | None],
+            groups: Mapping[str, list[int]], sample_rate_hz: float) -> np.ndarray:
+    """Samples at rest: not within :data:`SHOCK_PAD_S` of a shock (:data:`SHOCK_SD`).
+
+    Parameters
+    ----------
+    x : ndarray, shape (N, n)
+        Gyro outputs (rad/s).
+    acc : mapping of IMU name to ndarray, shape (N, 3), or None
+        Each IMU's accelerometer (m/s²) on the same samples.
+    groups : mapping of IMU name to its gyro columns
+    sample_rate_hz : float
+
+    Returns
+    -------
+    ndarray of bool, shape (N,)
+    """
+    def robust_out(a: np.ndarray) -> np.ndarray:
+        med = np.median(a, axis=0)
+        mad = 1.4826 * np.median(np.abs(a - med), axis=0)
+        return np.any(np.abs(a - med) > SHOCK_SD * np.where(mad > 0, mad, np.inf), axis=1)
+
+    hits = np.zeros((x.shape[0], len(groups)), int)
+    for k, (g, idx) in enumerate(groups.items()):
+        out = robust_out(x[:, idx])
+        if acc.get(g) is not None:
+            out |= robust_out(np.asarray(acc[g], float))
+        hits[:, k] = out
+    shock = hits.sum(axis=1) >= 2
+    pad = max(0, round(SHOCK_PAD_S * sample_rate_hz))
+    if pad and shock.any():
+        shock = np.convolve(shock.astype(float), np.ones(2 * pad + 1), "same") > 0.5
+    return ~shock
 
 
 def _shared_direction(x: np.ndarray, groups: dict[str, list[int]]) -> dict[str, np.ndarray] | None:
@@ -251,6 +295,14 @@ def calibrate_static(flight: Flight, *, reference: str | None = None, alpha: flo
         rot_sd[g] = (np.std(vs, axis=0, ddof=1) / math.sqrt(len(vs)) if len(vs) > 2
                      else np.full(3, np.inf))
     b = x.mean(axis=0)
+    # the noise statistics, the residual models and the range describe the set at rest: a
+    # knock is beyond the range (its jolt) and out of the monitor's envelope, not noise its
+    # thresholds must cover (the alignment above uses every sample: knocks are shared motion)
+    rest = at_rest(x, acc, groups, flight.sample_rate_hz)
+    if rest.mean() < 0.5:
+        raise CalibrationError(f"{flight.source}: only {rest.mean():.0%} of the samples are "
+                               f"at rest (shocks of more than {SHOCK_SD:g} sd in two IMUs)")
+    xr = xs[rest]
     sensors: list[SensorCal] = []
     n = flight.n
     cov = np.zeros((n, n))
@@ -258,7 +310,7 @@ def calibrate_static(flight: Flight, *, reference: str | None = None, alpha: flo
     w_ref = xs[:, groups[ref]]
     for g, idx in groups.items():
         R = rots[g].as_matrix()                  # v_ref = R v_j; rows of H_j: R[:, k]
-        cov[np.ix_(idx, idx)] = np.cov(xs[:, idx].T)
+        cov[np.ix_(idx, idx)] = np.cov(xr[:, idx].T)
         for k, i in enumerate(idx):
             h = R[:, k]
             nom = np.zeros(3)
@@ -276,7 +328,7 @@ def calibrate_static(flight: Flight, *, reference: str | None = None, alpha: flo
                 input_error_cov=tol**2 * np.outer(h, h) + across,
                 misalignment_sd=ms, raw_unit=flight.raw_unit,
                 scale_factor_unit=_sf_unit(flight.raw_unit), bias_unit="deg/s",
-                residual_rms=float(np.std(xs[:, i]))))
+                residual_rms=float(np.std(xr[:, i]))))
         if g == ref:
             continue
         r = xs[:, idx] - w_ref @ R                  # y_j − H_j·ω̂ with H_j = Rᵀ
@@ -308,12 +360,18 @@ def calibrate_static(flight: Flight, *, reference: str | None = None, alpha: flo
                "samples": int(x.shape[0]), "duration_s": float(t[-1] - t[0])}
     H = np.array([c.axis for c in sensors])
     acc_all = flight_accel(flight)
+    notes.append(f"{int(np.sum(~rest))} of {rest.size} samples near shocks (more than "
+                 f"{SHOCK_SD:g} robust sd in two IMUs, +-{SHOCK_PAD_S:g} s) are left out of "
+                 f"the noise, the residual models and the range")
+    acc_ok = acc_all[ok] if acc_all is not None else None
     gs = with_residual_models(
-        SensorSet("gyro", tuple(sensors), cov, allan=allan_table(xs, flight.sample_rate_hz),
-                  validated_rate=covered_rate(H, list(groups.values()), x - b),
-                  validated_specific_force=(covered_specific_force(acc_all[ok])
-                                            if acc_all is not None else None)),
-        xs, x, flight.sample_rate_hz, source="static residual (raw - mean)")
+        SensorSet("gyro", tuple(sensors), cov, allan=allan_table(xr, flight.sample_rate_hz),
+                  validated_rate=covered_rate(H, list(groups.values()), x - b, rest),
+                  validated_specific_force=(covered_specific_force(acc_ok, rest)
+                                            if acc_ok is not None else None),
+                  validated_jolt=covered_jolt(acc_ok, rest) if acc_ok is not None else None),
+        np.where(rest[:, None], xs, np.nan), x, flight.sample_rate_hz,
+        source="static residual (raw - mean), shocks left out")
     return Calibration(configuration=f"{len(groups)} IMUs at rest", sets={"gyro": gs},
         sample_rate_hz=flight.sample_rate_hz,
         extra={"method": STATIC_METHOD, "source": flight.source, "static": summary})

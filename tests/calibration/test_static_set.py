@@ -168,3 +168,31 @@ def test_static_calibration_needs_two_imu_triads():
     with pytest.raises(ConfigError, match=r"one\.csv: static calibration needs two or more "
                                           r"IMU groups of three gyros"):
         calibrate_static(one)
+
+
+def test_a_knock_is_left_out_and_marked_beyond_the_range() -> None:
+    """A knock on the bench (every accelerometer jumps, every gyro turns for two samples):
+    the static calibration leaves its samples out of the noise, the residual models and the
+    range (a note says how many), and the monitor's envelope marks it beyond the covered
+    jolt (RANGE) while the rest of the record stays inside."""
+    from dataclasses import replace
+
+    from fdi.envelope import RANGE
+    from replay.envelope import flight_envelope
+
+    f = _set(seed=4, shared=False)
+    k = 12000
+    raw, acc = f.raw.copy(), f.aux.values.copy()
+    raw[k:k + 2] += 0.05                               # rad/s on every gyro axis
+    acc[k:k + 2] += 2.0                                # m/s² on every accelerometer axis
+    f = replace(f, raw=raw, aux=replace(f.aux, values=acc))
+    cal = calibrate_static(f)
+    note = [n for n in cal.extras.static.notes if "near shocks" in n]
+    assert note, cal.extras.static.notes
+    pad = round(0.5 * FS)
+    assert note[0].startswith(f"{2 + 2 * pad} of {raw.shape[0]} samples"), note[0]
+    jolt = cal.gyro.validated_jolt
+    assert jolt is not None and jolt < 1.0, jolt
+    env = flight_envelope(f, cal)
+    assert (env[k:k + 3] & RANGE).all(), env[k - 2:k + 4]
+    assert np.mean(env != 0) < 0.01

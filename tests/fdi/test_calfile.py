@@ -152,7 +152,7 @@ def _ranged() -> Calibration:
 
     cal = _cal()
     g = dataclasses.replace(cal.gyro, validated_rate=np.array([1.1, 2.2, 0.4]),
-                            validated_specific_force=21.5)
+                            validated_specific_force=21.5, validated_jolt=0.75)
     return dataclasses.replace(cal, sets={"gyro": g})
 
 
@@ -168,11 +168,14 @@ def test_validated_range_round_trip_and_default(tmp_path):
     np.testing.assert_allclose(back.gyro.validated_rate, [1.1, 2.2, 0.4], rtol=1e-15,
                                err_msg="validated_rate")
     assert back.gyro.validated_specific_force == 21.5
+    assert back.gyro.validated_jolt == 0.75
+    assert doc["validated_range"]["gyro"]["jolt_unit"] == "m/s^2 per sample"
     assert back.fingerprint() == cal.fingerprint() != _cal().fingerprint()
     del doc["validated_range"]
     p.write_text(json.dumps(doc))
     back = load_calibration(p)
     assert back.gyro.validated_rate is None and back.gyro.validated_specific_force is None
+    assert back.gyro.validated_jolt is None
 
 
 @pytest.mark.parametrize(("mutate", "field"), [
@@ -181,6 +184,8 @@ def test_validated_range_round_trip_and_default(tmp_path):
     (lambda r: r.update(rate_unit="deg/s"), "validated_range.gyro.rate_unit"),
     (lambda r: r.update(specific_force_max=-1.0), "validated_range.gyro.specific_force_max"),
     (lambda r: r.update(specific_force_g=2.0), "validated_range.gyro.specific_force_g"),
+    (lambda r: r.update(jolt_max=-0.1), "validated_range.gyro.jolt_max"),
+    (lambda r: r.update(jolt_unit="m/s^3"), "validated_range.gyro.jolt_unit"),
 ])
 def test_bad_validated_range_is_named(tmp_path, mutate, field):
     doc = _ranged().to_dict()

@@ -20,6 +20,7 @@ from fdi.envelope import (
     DeclaredInterval,
     EnvelopeSettings,
     EnvelopeTracker,
+    covered_jolt,
     covered_rate,
     covered_specific_force,
     independent_estimates,
@@ -221,6 +222,33 @@ def test_range_settings_refuse_bad_values():
         EnvelopeTracker(H=H2, validated_rate=[1.0, -1.0, 1.0])
     with pytest.raises(ConfigError, match="validated_specific_force"):
         EnvelopeTracker(H=H2, validated_specific_force=float("nan"))
+    with pytest.raises(ConfigError, match="validated_jolt"):
+        EnvelopeTracker(H=H2, validated_jolt=-1.0)
+
+
+def test_jolt_beyond_the_covered_one_needs_every_imu():
+    """A knock: the specific force of every IMU jumps from one sample to the next by more
+    than the calibration covered (RANGE, for hold_s); one accelerometer alone jumping does
+    not take the set out of the envelope; the covered jolt of the calm samples is what the
+    smallest jump over the IMUs reached, and marks nothing on them."""
+    _t, r, a = _calm(300)
+    j = covered_jolt(a)
+    d = np.min(np.linalg.norm(np.diff(a, axis=0), axis=2), axis=1)
+    assert j == pytest.approx(float(d.max())), "covered jolt"
+    assert not (_run(r, a, validated_jolt=j) & RANGE).any()
+    one = a.copy()
+    one[150, 0, 0] += 20.0                             # imu1's accelerometer alone
+    assert not (_run(r, one, validated_jolt=j) & RANGE).any()
+    knock = a.copy()
+    knock[150, :, 0] += 20.0 * j                       # both IMUs: a knock
+    c = _run(r, knock, validated_jolt=j)
+    assert (c[150] & RANGE) and not (c[:150] & RANGE).any() and not (c & SHOCK).any()
+    hold = EnvelopeSettings().hold_s
+    t = np.arange(300) / FS
+    assert ((c & RANGE) != 0).sum() == int(np.sum((t >= t[150]) & (t <= t[151] + hold)))
+    used = np.ones(300, bool)
+    used[150:152] = False                              # left out: not covered
+    assert covered_jolt(knock, used) == pytest.approx(j)
 
 
 def test_leave_one_out_estimates_for_an_ungrouped_set():
@@ -247,7 +275,8 @@ def test_blocks_of_any_size_give_identical_codes(cuts):
     r[450:455, 3] = 1200 * DPS
     dec = [DeclaredInterval(9.0, 9.2, "x")]
     rng_kw = {"validated_rate": np.array([100, 100, 300]) * DPS,
-              "validated_specific_force": 2.0 * G0}
+              "validated_specific_force": 2.0 * G0, "validated_jolt": 3.0}
+    a[500, :, 1] += 5.0                                # a knock every IMU feels: jolt
     whole = _run(r, a, t=t, declared=dec, **rng_kw)
     assert (whole & SHOCK).any() and (whole & TUMBLE).any() and (whole & SATURATION).any()
     assert (whole & RANGE).any()
@@ -269,7 +298,8 @@ def test_any_numbers_never_raise(data, b):
     r = np.array(data.draw(st.lists(_BAD, min_size=6 * b, max_size=6 * b))).reshape(b, 6)
     a = np.array(data.draw(st.lists(_BAD, min_size=6 * b, max_size=6 * b))).reshape(b, 2, 3)
     tr = EnvelopeTracker(H=H2, groups=GROUPS, declared=[DeclaredInterval(0.0, 1.0)],
-                         validated_rate=np.full(3, 0.5), validated_specific_force=15.0)
+                         validated_rate=np.full(3, 0.5), validated_specific_force=15.0,
+                         validated_jolt=1.0)
     for _ in range(2):
         c = tr.update(t, r, a)
         assert c.shape == (b,) and c.dtype == np.int64 and np.all((c >= 0) & (c < 32))
