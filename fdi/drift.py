@@ -29,24 +29,25 @@ with ``τ_h = 1.5·h + T_c/2``. So, per whitened direction, at most::
 instability) makes this conservative; a drift that accelerates beyond τ_L (a rate ramp) is
 not covered by the data and is not claimed.
 
-How the thresholds cover it (:func:`drift_variance_factors` with the scales' α): at the
-end of the horizon the offset is a Gaussian of total variance δ²(h) over the whitened
-directions (earlier in the horizon it is smaller: the rate stays below the target at every
-time of the horizon); its shape is not known, so both extremes are covered. A w-sample
-window statistic in units of its noise variance f_w is then ``χ²(df−1) + c·χ²(1)`` when the
+How the thresholds cover it (:func:`drift_variance_factors` with the scales' α): at time t
+after the calibration data ended the offset is a Gaussian of total variance δ²(t) over the
+whitened directions; its shape is not known, so both extremes are covered. A w-sample
+window statistic in units of its noise variance f_w is ``χ²(df−1) + c·χ²(1)`` when the
 offset lies along one direction and ``(1 + (c−1)/df)·χ²(df)`` when it spreads evenly,
-``c = 1 + w·δ²(h)/f_w`` (the upper tail of a weighted sum of χ²(1) with a given total
-weight lies between the two; the one-direction shape is the heavier at small α). The
+``c = 1 + w·δ²(t)/f_w`` (the upper tail of a weighted sum of χ²(1) with a given total
+weight lies between the two; the one-direction shape is the heavier at small α). A
+false-alarm rate per hour of the horizon is the time average of the rate at each t (the
+expected count over the horizon over its length), so each shape's level is the q whose
+exceedance probability, averaged over t ∈ [0, h] (8 Gauss–Legendre nodes), is α; the
 window's variance factor becomes
 
     f'_w = f_w · max(q_one, q_spread) / χ²(df).isf(α_w)
 
-with q the level each shape exceeds with probability α_w, so its threshold covers white
-noise, the tail and the expected drift, and the detectable size ``rimu tune`` states grows
-with ``sqrt(f'_w / f_w)``: a fault that looks like a drift slower and smaller than δ is
-given up, and the stated size says so. Without α (the bare rule, kept for the monitor's
-default thresholds' notes): ``f_w + w·δ²(h)``, the offset put on every direction, which
-bounds f'_w from above.
+so its threshold covers white noise, the tail and the expected drift, and the detectable
+size ``rimu tune`` states grows with ``sqrt(f'_w / f_w)``: a fault that looks like a drift
+slower and smaller than δ is given up, and the stated size says so. Without α (the bare
+rule, kept for the monitor's default thresholds' notes): ``f_w + w·δ²(h)``, the
+end-of-horizon offset put on every direction, which bounds f'_w from above.
 """
 
 from __future__ import annotations
@@ -132,6 +133,20 @@ class DriftModel:
                     if t >= tau_l / 4.0)
         return 2.0 * max(rw, floor)
 
+    def offset_variances(self, horizon_s: float | None = None
+                         ) -> tuple[np.ndarray, np.ndarray]:
+        """δ²(t) over the horizon: at 8 Gauss–Legendre nodes t_j of [0, h] with weights
+        summing to 1 (a horizon of 0 s: the one value δ²(0)).
+
+        A false-alarm rate per hour of the horizon is the time average of the rate at each
+        t, whose offset variance is δ²(t) (:meth:`offset_variance` of a horizon t).
+        """
+        h = self.span_s if horizon_s is None else float(horizon_s)
+        if h <= 0.0:
+            return np.array([self.offset_variance(0.0)]), np.ones(1)
+        t = 0.5 * h * (_T_NODES + 1.0)
+        return np.array([self.offset_variance(float(x)) for x in t]), 0.5 * _T_WEIGHTS
+
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready ``rimu.drift/1`` record."""
         return {"method": self.method, "df": self.df, "samples": self.samples,
@@ -177,6 +192,7 @@ def drift_model_from_fields(r: Fields) -> DriftModel:
 
 
 _S_NODES, _S_WEIGHTS = np.polynomial.legendre.leggauss(96)
+_T_NODES, _T_WEIGHTS = np.polynomial.legendre.leggauss(8)
 
 
 def _sf_one_direction(q: float, df: int, c: np.ndarray) -> np.ndarray:
@@ -208,9 +224,11 @@ def _level(sf, alpha: float, lo: float, hi: float) -> float:
     return float(optimize.brentq(g, lo, hi, xtol=1e-12 * hi, rtol=1e-10))
 
 
-def offset_levels(alpha: float, df: int, d2: float) -> tuple[float, float]:
-    """Levels exceeded with probability α by a window statistic with an offset, for the two
-    extreme shapes of the offset (module docstring): along one direction and spread evenly.
+def offset_levels(alpha: float, df: int, d2: np.ndarray, weights: np.ndarray
+                  ) -> tuple[float, float]:
+    """Levels exceeded with probability α on average over the horizon by a window statistic
+    with an offset, for the two extreme shapes of the offset (module docstring): along one
+    direction and spread evenly.
 
     Parameters
     ----------
@@ -218,9 +236,11 @@ def offset_levels(alpha: float, df: int, d2: float) -> tuple[float, float]:
         Exceedance probability per sample.
     df : int
         Parity dimension.
-    d2 : float
-        ``w·δ²/f_w``: the offset's total variance over the whitened directions in units of
-        the window's noise variance.
+    d2 : ndarray, shape (m,)
+        ``w·δ²(t_j)/f_w`` at the horizon's quadrature nodes t_j: the offset's total variance
+        over the whitened directions in units of the window's noise variance.
+    weights : ndarray, shape (m,)
+        Quadrature weights over the horizon, summing to 1.
 
     Returns
     -------
@@ -228,14 +248,17 @@ def offset_levels(alpha: float, df: int, d2: float) -> tuple[float, float]:
         Levels on the window statistic in units of its noise variance (χ²(df) without
         drift: both equal ``χ²(df).isf(α)``).
     """
-    c = 1.0 + max(float(d2), 0.0)
+    c = 1.0 + np.maximum(np.asarray(d2, float).reshape(-1), 0.0)
+    wts = np.asarray(weights, float).reshape(-1)
     base = float(stats.chi2.isf(alpha, df))
     hi = (float(stats.chi2.isf(alpha / 2.0, max(df - 1, 1))) * (df > 1)
-          + c * float(stats.chi2.isf(alpha / 2.0, 1)))
-    one = _level(lambda q: float(_sf_one_direction(q, df, np.array([c]))[0]), alpha, base,
+          + float(c.max()) * float(stats.chi2.isf(alpha / 2.0, 1)))
+    one = _level(lambda q: float(_sf_one_direction(q, df, c) @ wts), alpha, base,
                  max(hi, base))
     cs = 1.0 + (c - 1.0) / df
-    return one, base * cs
+    spread = _level(lambda q: float(special.chdtrc(df, q / cs) @ wts), alpha, base,
+                    base * float(cs.max()))
+    return one, spread
 
 
 def drift_variance_factors(model: DriftModel | None, scales: tuple[int, ...],
@@ -268,10 +291,10 @@ def drift_variance_factors(model: DriftModel | None, scales: tuple[int, ...],
     if alpha is None:
         d2 = model.offset_variance(horizon_s)
         return tuple(float(f) + int(w) * d2 for w, f in zip(scales, factors, strict=True))
-    d2 = model.offset_variance(horizon_s)
+    d2_t, wts = model.offset_variances(horizon_s)
     out = []
     for w, f, a in zip(scales, factors, alpha, strict=True):
         f = float(f)
-        one, spread = offset_levels(float(a), int(model.df), int(w) * d2 / f)
+        one, spread = offset_levels(float(a), int(model.df), int(w) * d2_t / f, wts)
         out.append(f * max(one, spread) / float(stats.chi2.isf(float(a), int(model.df))))
     return tuple(out)

@@ -273,7 +273,8 @@ def test_an_envelope_tracker_in_the_chain_gives_its_codes_to_the_monitor(lagged)
     assert (want & SHOCK).any()
     tr = EnvelopeTracker(H=cal.gyro.H, groups=list(f.imu_groups().values()),
                          validated_rate=cal.gyro.validated_rate,
-                         validated_specific_force=cal.gyro.validated_specific_force)
+                         validated_specific_force=cal.gyro.validated_specific_force,
+                         validated_jolt=cal.gyro.validated_jolt)
     res, rep = run_flight(chain_for_flight(f, cal, ChainOptions(envelope=tr)), f)
     np.testing.assert_array_equal(res.envelope, want)
     assert any(e["type"] == "envelope" for e in rep["events"])

@@ -166,7 +166,8 @@ def test_blocks_of_a_real_flight_give_the_same_codes(case):
     tr = EnvelopeTracker(H=H, groups=list(flight.imu_groups().values()),
                          declared=declared_intervals(flight.events),
                          validated_rate=cal.gyro.validated_rate,
-                         validated_specific_force=cal.gyro.validated_specific_force)
+                         validated_specific_force=cal.gyro.validated_specific_force,
+                         validated_jolt=cal.gyro.validated_jolt)
     rng = np.random.default_rng(17)
     out, i = [], 0
     while i < flight.t.size:

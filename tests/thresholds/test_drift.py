@@ -199,21 +199,29 @@ def test_drift_and_validated_range_in_one_file():
     assert back.fingerprint() == cal.fingerprint()
 
 
-@pytest.mark.parametrize("df, alpha, d2", [(3, 1e-3, 4.0), (9, 1e-3, 20.0), (2, 1e-2, 1.5)])
-def test_offset_levels_are_exceeded_at_alpha(df, alpha, d2):
-    """Monte Carlo: an offset of total variance d2 (in noise units) along one direction or
-    spread evenly over df, noise χ²(df): each shape's level is exceeded with probability α
-    (binomial 3σ), the larger of the two (what the thresholds use) at most α for both, and
-    both below the bare rule's level (1 + d2)·χ²(df).isf(α)."""
+@pytest.mark.parametrize("df, alpha", [(3, 1e-3), (9, 1e-3), (2, 1e-2)])
+def test_offset_levels_are_exceeded_at_alpha_over_the_horizon(df, alpha):
+    """Monte Carlo: the time t is drawn over the horizon (the quadrature nodes' weights), an
+    offset of variance δ²(t) is put along one direction or spread over all, noise is χ²(df);
+    each shape's level is exceeded with probability α (binomial 3σ), the larger of the two
+    levels (what the thresholds use) at most α for both shapes, and both below the bare
+    rule's level (the end-of-horizon offset on every direction)."""
     from scipy import stats
 
     rng = np.random.default_rng(df * 1000 + int(-math.log10(alpha)))
-    one, spread = offset_levels(alpha, df, d2)
+    m = DriftModel(df=df, samples=10_000, sample_rate_hz=50.0, span_s=200.0,
+                   tau_s=(5.0, 10.0, 20.0), blocks=(40, 20, 10), excess=(0.0, 0.01, 0.02))
+    d2_t, wts = m.offset_variances()
+    assert wts.sum() == pytest.approx(1.0) and d2_t[-1] <= m.offset_variance()
+    w, f = 64, 1.3
+    lam = w * d2_t / f                              # offset variance per noise variance
+    one, spread = offset_levels(alpha, df, lam, wts)
     n = 400_000
+    j = rng.choice(lam.size, size=n, p=wts)
     noise = rng.standard_normal((n, df))
     along = noise.copy()
-    along[:, 0] += rng.standard_normal(n) * math.sqrt(d2)
-    even = noise + rng.standard_normal((n, df)) * math.sqrt(d2 / df)
+    along[:, 0] += rng.standard_normal(n) * np.sqrt(lam[j])
+    even = noise + rng.standard_normal((n, df)) * np.sqrt(lam[j] / df)[:, None]
     d_one, d_even = np.sum(along**2, axis=1), np.sum(even**2, axis=1)
     sd = math.sqrt(n * alpha * (1 - alpha))
     for name, d, q in (("one direction", d_one, one), ("spread", d_even, spread)):
@@ -222,4 +230,4 @@ def test_offset_levels_are_exceeded_at_alpha(df, alpha, d2):
     top = max(one, spread)
     for name, d in (("one direction", d_one), ("spread", d_even)):
         assert np.sum(d > top) < n * alpha + 3 * sd, name
-    assert top < (1 + d2) * stats.chi2.isf(alpha, df)
+    assert top < (1 + w * m.offset_variance() / f) * stats.chi2.isf(alpha, df)
