@@ -58,7 +58,6 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy import optimize, special, stats
 
 from fdi.fileio import Fields
 
@@ -202,6 +201,8 @@ def _sf_one_direction(q: float, df: int, c: np.ndarray) -> np.ndarray:
     With Y = s², ``P = P(cY > q) + ∫_0^{s0} √(2/π)·e^{−s²/2}·P(χ²(df−1) > q − c·s²) ds``,
     s0 = √(q/c), by 96-point Gauss–Legendre in s.
     """
+    from scipy import special  # not at import: loading a calibration stays scipy-free
+
     c = np.asarray(c, float)[:, None]
     tail = special.chdtrc(1, q / c[:, 0])
     if df <= 1:
@@ -214,6 +215,8 @@ def _sf_one_direction(q: float, df: int, c: np.ndarray) -> np.ndarray:
 
 def _level(sf, alpha: float, lo: float, hi: float) -> float:
     """The q in [lo, hi] with ``sf(q) = alpha`` (sf decreasing; brentq on the log)."""
+    from scipy import optimize
+
     la = math.log(alpha)
     g = lambda q: math.log(max(float(sf(q)), 1e-300)) - la   # noqa: E731
     if g(lo) <= 0.0:
@@ -248,6 +251,8 @@ def offset_levels(alpha: float, df: int, d2: np.ndarray, weights: np.ndarray
         Levels on the window statistic in units of its noise variance (χ²(df) without
         drift: both equal ``χ²(df).isf(α)``).
     """
+    from scipy import special, stats
+
     c = 1.0 + np.maximum(np.asarray(d2, float).reshape(-1), 0.0)
     wts = np.asarray(weights, float).reshape(-1)
     base = float(stats.chi2.isf(alpha, df))
@@ -291,6 +296,8 @@ def drift_variance_factors(model: DriftModel | None, scales: tuple[int, ...],
     if alpha is None:
         d2 = model.offset_variance(horizon_s)
         return tuple(float(f) + int(w) * d2 for w, f in zip(scales, factors, strict=True))
+    from scipy import stats
+
     d2_t, wts = model.offset_variances(horizon_s)
     out = []
     for w, f, a in zip(scales, factors, alpha, strict=True):
