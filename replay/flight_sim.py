@@ -47,6 +47,7 @@ from typing import Any
 import numpy as np
 
 from fdi.calfile import Calibration
+from fdi.effect_specs.builtin import BIAS_DRIFT
 from fdi.errors import ConfigError
 from replay.faults import Fault
 from replay.flight_data import FLIGHT_TRUTH_SCHEMA, Flight, concat_flights
@@ -248,7 +249,7 @@ def _truth_extras(truth: Calibration | Sequence[Any] | None, gm_sd: np.ndarray,
             and truth[1]:
         out["effects_not_simulated"] = sorted(str(k) for k in truth[1])
     if gm_sd.any() or rw_q.any():
-        out["bias_drift"] = {"bias_instability": gm_sd.tolist(),
+        out[BIAS_DRIFT] = {"bias_instability": gm_sd.tolist(),
                              "bias_correlation_s": float(bias_correlation_s),
                              "random_walk": rw_q.tolist(),
                              "units": "SI input; random walk per sqrt(s)"}

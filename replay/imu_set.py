@@ -47,6 +47,7 @@ from typing import Any
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from fdi.effect_specs.builtin import G_SENSITIVITY
 from fdi.errors import ConfigError
 from fdi.units import G0
 from replay.flight_data import FLIGHT_TRUTH_SCHEMA, AuxChannels, Flight
@@ -244,7 +245,7 @@ class _Imu:
         return {"gain_matrix": self.G.tolist(), "misalignment_rad": self.theta.tolist(),
                 "nonorthogonality_rad": self.nonorth.tolist(),
                 "scale_error": self.scale.tolist(), "bias": self.bias.tolist(),
-                "time_offset_s": self.tau, "g_sensitivity": self.gsens.tolist(),
+                "time_offset_s": self.tau, G_SENSITIVITY: self.gsens.tolist(),
                 "warm_up": self.warm.tolist(), "temperature_coeff": self.tcoef.tolist(),
                 "vibration_amplitude": self.vib_amp.tolist(),
                 "vibration_phase_rad": self.vib_phase.tolist()}
@@ -383,7 +384,7 @@ def _truth(spec: ImuSetSpec, imus: Sequence[_Imu], N: int) -> dict[str, Any]:
             "motion": "replay.motion: sin^2 rate pulses per 2-s segment and axis",
             "noise_sd": spec.noise_sd, "noise_scale": list(spec.noise_scale),
             "accel_noise_sd": spec.accel_noise_sd,
-            "effects": {"g_sensitivity": e.g_sensitivity, "warm_up": e.warm_up,
+            "effects": {G_SENSITIVITY: e.g_sensitivity, "warm_up": e.warm_up,
                         "warm_up_s": e.warm_up_s, "temperature_coeff": e.temperature_coeff,
                         "temperature_rise_c": e.temperature_rise_c,
                         "temperature_tau_s": e.temperature_tau_s,
@@ -392,6 +393,6 @@ def _truth(spec: ImuSetSpec, imus: Sequence[_Imu], N: int) -> dict[str, Any]:
                         "vibration_accel": e.vibration_accel, "imus": list(e.imus)},
             "imus": {f"imu{j}": m.to_dict() for j, m in enumerate(imus, start=1)},
             "relative_to_reference": {"reference": "imu1", **rel},
-            "units": {"gyro": "rad/s", "g_sensitivity": "rad/s per m/s^2",
+            "units": {"gyro": "rad/s", G_SENSITIVITY: "rad/s per m/s^2",
                       "temperature_coeff": "rad/s per degC", "random_walk":
                           "rad/s per sqrt(s)"}}

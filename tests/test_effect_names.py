@@ -30,16 +30,6 @@ CONSUMERS = ("fdi/effects.py", "fdi/effects_monitor.py", "fdi/export/c.py",
              "calibration/diagnose/", "rimu/commands/calibrate_effects.py",
              "rimu/commands/diagnose_flight.py")
 """Modules (or folders) that use effects and so must read their names from the specs."""
-OTHER_FORMATS = {
-    ("g_sensitivity", "replay/imu_set.py"):
-        "a key of the IMU-set flight simulator's truth file (its own 3x3 matrix knob)",
-    ("bias_drift", "replay/flight_sim.py"):
-        "a key of the flight simulator's truth file (its Gauss-Markov drift)",
-}
-"""File-format keys of the flight simulators that share a built-in name (renaming them
-changes a written format)."""
-
-
 def effect_name_strings(root: Path, names: tuple[str, ...]) -> dict[str, dict[str, list[int]]]:
     """name → module (relative path) → line numbers of string constants equal to it."""
     hits: dict[str, dict[str, list[int]]] = defaultdict(lambda: defaultdict(list))
@@ -66,8 +56,6 @@ def violations(hits: dict[str, dict[str, list[int]]], names: tuple[str, ...]) ->
         if SPEC_MODULE not in modules:
             out.append(f"{name}: not in {SPEC_MODULE}")
         for m in sorted(modules - {SPEC_MODULE}):
-            if (name, m) in OTHER_FORMATS:
-                continue
             if name in HOMONYMS and not m.startswith(CONSUMERS):
                 continue
             out.append(f"{name}: also in {m} (lines {hits[name][m]})")
@@ -83,8 +71,6 @@ def test_each_builtin_effect_name_is_written_in_one_module() -> None:
 
 def test_the_exceptions_are_still_needed() -> None:
     hits = _product_hits()
-    for name, module in OTHER_FORMATS:
-        assert module in hits[name], (name, module)
     for name in HOMONYMS:
         assert set(hits[name]) - {SPEC_MODULE}, name
 

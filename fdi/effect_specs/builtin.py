@@ -45,8 +45,14 @@ from fdi.effect_specs.spec import (
 )
 from fdi.units import DPH, DPS, G0
 
-__all__ = ["BUILTIN", "INPUT_LACKING", "RUNTIME_INPUTS", "TEMP_RISE_DEGC", "TEMP_START_DEGC",
-           "TEMP_TAU_S", "WARMUP_FLIGHT_TAU_S", "WARMUP_TAU_S", "temperature_profile"]
+__all__ = ["BIAS_DRIFT", "BUILTIN", "G_SENSITIVITY", "INPUT_LACKING", "RUNTIME_INPUTS",
+           "TEMP_RISE_DEGC", "TEMP_START_DEGC", "TEMP_TAU_S", "WARMUP_FLIGHT_TAU_S",
+           "WARMUP_TAU_S", "temperature_profile"]
+
+G_SENSITIVITY = "g_sensitivity"
+"""Name of the g-sensitivity effect; the flight simulators' truth files use it as a key."""
+BIAS_DRIFT = "bias_drift"
+"""Name of the linear bias drift; the flight simulator's truth file keys its drift by it."""
 
 WARMUP_TAU_S = 300.0
 """Time constant of the ``warmup`` bias transient of a session (s): simulator and session
@@ -228,7 +234,7 @@ _FOG_MEMS = {"fog": 50.0, "mems": 3600.0 * 5}           # deg/h: warm-up, drift,
 # factor only); none is in the seed papers
 BUILTIN: tuple[EffectSpec, ...] = (
     EffectSpec(
-        "g_sensitivity", ("gyro",), "gyro bias proportional to the specific force along the "
+        G_SENSITIVITY, ("gyro",), "gyro bias proportional to the specific force along the "
         "sensor axis", "deg/h per g", lambda d, i, p: DPH * (d.force @ d.H[i]) / G0,
         ("specific_force",), needs=_needs_force_change,
         could_absorb="a bias that follows the table's orientation for another reason (a "
@@ -244,7 +250,7 @@ BUILTIN: tuple[EffectSpec, ...] = (
             lambda est, p, kind: est * DPH / G0,
             lambda p, axis, var: (float(axis[0]), float(axis[1]), float(axis[2])),
             lambda k, x, e: k * (x[0] * e[0] + x[1] * e[1] + x[2] * e[2])),
-        flight=FlightForm("g_sensitivity", "(deg/s)/g", G0 / DPS, _flight_force, 1,
+        flight=FlightForm(G_SENSITIVITY, "(deg/s)/g", G0 / DPS, _flight_force, 1,
                           matrix=(("specific force x", "specific force y",
                                    "specific force z"), False))),
     EffectSpec(
@@ -303,7 +309,7 @@ BUILTIN: tuple[EffectSpec, ...] = (
         flight=FlightForm("time_skew", "ms", 1e3, lambda fi, p: fi.rate_dot[:, :, None], 0,
                           role="skew")),
     EffectSpec(
-        "bias_drift", ("gyro",), "bias drifts linearly by D over the session", "deg/h",
+        BIAS_DRIFT, ("gyro",), "bias drifts linearly by D over the session", "deg/h",
         lambda d, i, p: DPH * d.t / d.duration_s, ("time",),
         could_absorb="a curved or late-starting drift, a slow wander (measured: a quadratic "
                      "drift from 40 % of the session, absorbed with warmup; the held-out "
@@ -315,7 +321,7 @@ BUILTIN: tuple[EffectSpec, ...] = (
             lambda s, v, c: s + v * DPH * (c.t / c.duration_s)[:, None], order=4,
             details=lambda m: {"session_duration_s": m["duration_s"]}),
         no_runtime=_SESSION.format("a drift over the calibration session's length"),
-        flight=FlightForm("bias_drift", "deg/s per Legendre term (P1, P2, P3 x axes)",
+        flight=FlightForm(BIAS_DRIFT, "deg/s per Legendre term (P1, P2, P3 x axes)",
                           1 / DPS, _flight_drift, 4, time_only=True, role="drift",
                           matrix=(("Legendre P1", "Legendre P2", "Legendre P3"), True))),
     EffectSpec(
