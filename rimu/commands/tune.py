@@ -39,7 +39,10 @@ def configure(p: argparse.ArgumentParser) -> None:
     p.add_argument("--cal", required=True, metavar="FILE", help="calibration file")
     p.add_argument("--false-alarms-per-hour", required=True, metavar="X",
                    type=positive_float(MAX_FALSE_ALARMS_PER_HOUR),
-                   help="target rate of false alarms per hour of healthy operation")
+                   help="target rate of false alarms per hour of healthy operation (at "
+                        "most what the monitor can count as separate alarms: 3.6 x the "
+                        "sample rate in Hz with the default clear_samples, e.g. 180 at "
+                        "50 Hz)")
     p.add_argument("--scales", metavar="LIST",
                    help="window lengths in samples, e.g. 1,2,4,...,128 (default 1 ... 128)")
     p.add_argument("--kind", default="gyro", choices=("gyro", "accel"))

@@ -154,3 +154,16 @@ def test_simulated_false_alarm_rate_within_factor_2(target, hours):
     n, h = simulated_rate(CAL, tu.thresholds, hours=hours, seed=424242)
     rate = n / h
     assert target / 2 < rate < 2 * target, (n, h, rate)
+
+
+def test_a_target_whose_alarms_would_merge_is_refused():
+    """One alarm lasts at least clear_samples: a target above a tenth of one alarm per
+    clear_samples is refused with the largest accepted one named; just below it is tuned."""
+    from thresholds.tune import max_false_alarms_per_hour
+
+    top = max_false_alarms_per_hour(CAL.sample_rate_hz)
+    assert top == pytest.approx(0.1 * 3600.0 * CAL.sample_rate_hz / 100)
+    with pytest.raises(ConfigError, match=f"at most {top:.3g}") as err:
+        tune(CAL, false_alarms_per_hour=1.01 * top, simulate_hours=0)
+    assert "--false-alarms-per-hour" in str(err.value) and "merge" in str(err.value)
+    assert tune(CAL, false_alarms_per_hour=0.99 * top, simulate_hours=0).thresholds.alpha
