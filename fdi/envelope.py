@@ -498,15 +498,12 @@ class EnvelopeTracker:
         if self.validated_specific_force is not None and accel is not None:
             out |= _force_floor(np.asarray(accel, float).reshape(B, -1, 3)) \
                 > self.validated_specific_force
-        if accel is not None:
+        if self.validated_jolt is not None and accel is not None:
             a = np.asarray(accel, float).reshape(B, -1, 3)
             prev = self._acc_prev if (self._acc_prev is not None
                                       and self._acc_prev.shape == a.shape[1:]) else None
-            jolt = _jolt_floor(a, prev)
-            if a.shape[0]:
-                self._acc_prev = a[-1].copy()
-            if self.validated_jolt is not None:
-                out |= jolt > self.validated_jolt
+            out |= _jolt_floor(a, prev) > self.validated_jolt
+            self._acc_prev = a[-1].copy()
         return out
 
     def _declared(self, t: np.ndarray) -> np.ndarray:
@@ -562,14 +559,16 @@ def covered_jolt(accel: np.ndarray, used: np.ndarray | None = None) -> float:
     accel : ndarray, shape (N, k, 3)
         Specific force of each IMU (m/s²), consecutive samples.
     used : ndarray of bool, shape (N,), optional
-        The samples the calibration fitted its model on (default: all).
+        The samples the calibration fitted its model on (default: all); a jolt counts
+        where its sample and the one before were both used.
     """
     a = np.asarray(accel, float)
     if a.ndim != 3 or a.shape[2] != 3:
         raise ConfigError(f"covered_jolt: accel must be (N, k, 3), got {a.shape}")
     j = _jolt_floor(a)
     if used is not None:
-        j = j[np.asarray(used, bool)]
+        u = np.asarray(used, bool)
+        j = j[u & np.concatenate([[True], u[:-1]])]     # the sample before was used too
     return float(np.max(j)) if j.size and a.shape[1] else 0.0
 
 
