@@ -48,10 +48,15 @@ from fdi.extras.inflight import (
     offset_check_from_dict,
 )
 from fdi.extras.record import (
+    FERRARIS_LAYOUT,
+    INFLIGHT_LAYOUT,
+    STATIC_LAYOUT,
+    TURNTABLE_LAYOUT,
     TYPED_KEYS,
     CalibrationExtras,
     Method,
     extras_from_dict,
+    replace_extras,
 )
 from fdi.extras.static import (
     DriftAttribution,
@@ -60,6 +65,8 @@ from fdi.extras.static import (
     StaticImu,
 )
 from fdi.extras.turntable import (
+    PARITY_SD_KEYS,
+    RESIDUAL_UNITS,
     SD_FACTOR_KEYS,
     EarthRateRecord,
     GyroBias,
@@ -70,7 +77,13 @@ from fdi.extras.turntable import (
 )
 
 __all__ = [
+    "FERRARIS_LAYOUT",
+    "INFLIGHT_LAYOUT",
+    "PARITY_SD_KEYS",
+    "RESIDUAL_UNITS",
     "SD_FACTOR_KEYS",
+    "STATIC_LAYOUT",
+    "TURNTABLE_LAYOUT",
     "TYPED_KEYS",
     "CalibrationExtras",
     "DriftAttribution",
@@ -96,4 +109,5 @@ __all__ = [
     "StaticImu",
     "extras_from_dict",
     "offset_check_from_dict",
+    "replace_extras",
 ]
