@@ -36,6 +36,7 @@ from fdi.extras.ferraris import (
     FerrarisRecord,
 )
 from fdi.extras.inflight import (
+    ALIGNMENT_UNITS,
     FlightIdentity,
     ImuAlignment,
     ImuTiming,
@@ -45,6 +46,7 @@ from fdi.extras.inflight import (
     OffsetCheck,
     OffsetConsistency,
     OffsetPiece,
+    inflight_to_dict,
     offset_check_from_dict,
 )
 from fdi.extras.record import (
@@ -59,6 +61,7 @@ from fdi.extras.record import (
     replace_extras,
 )
 from fdi.extras.static import (
+    ATTRIBUTION_UNIT,
     DriftAttribution,
     OwnDrift,
     StaticAlignment,
@@ -77,6 +80,8 @@ from fdi.extras.turntable import (
 )
 
 __all__ = [
+    "ALIGNMENT_UNITS",
+    "ATTRIBUTION_UNIT",
     "FERRARIS_LAYOUT",
     "INFLIGHT_LAYOUT",
     "PARITY_SD_KEYS",
@@ -108,6 +113,7 @@ __all__ = [
     "StaticAlignment",
     "StaticImu",
     "extras_from_dict",
+    "inflight_to_dict",
     "offset_check_from_dict",
     "replace_extras",
 ]

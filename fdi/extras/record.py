@@ -11,6 +11,7 @@ from fdi.extras.ferraris import FerrarisRecord, read_ferraris
 from fdi.extras.inflight import (
     InflightAlignment,
     InflightTiming,
+    inflight_to_dict,
     read_inflight_alignment,
     read_inflight_timing,
 )
@@ -189,7 +190,7 @@ def _entries(x: CalibrationExtras, always: frozenset[str]) -> dict[str, Any]:
     and not None."""
     out: dict[str, Any] = {k: v for k, v in parity_sd_to_dict(x.parity_sd).items()}
     if x.inflight is not None or x.inflight_alignment is not None:
-        raise NotImplementedError("in-flight entries")
+        out["inflight"] = inflight_to_dict(x.inflight, x.inflight_alignment)
     for name, write in _WRITE.items():
         v = getattr(x, name)
         if name == "method":
