@@ -27,6 +27,12 @@ existed loads as it did and keeps its fingerprint; :func:`extras_from_dict` chec
 and names the bad field (``extra.inflight.imus.imu2.time_offset_ms``). Keys the types do not
 cover stay in ``Calibration.extra`` and are not checked.
 
+The writers build the same types: every record's ``to_dict()`` is its JSON in the file's
+units (``1e3·τ`` as ``time_offset_ms``, ...), :meth:`CalibrationExtras.to_dict` writes the
+block with the keys in the order of a calibration kind (:data:`TURNTABLE_LAYOUT`,
+:data:`FERRARIS_LAYOUT`, :data:`STATIC_LAYOUT`, :data:`INFLIGHT_LAYOUT`) and
+:func:`replace_extras` rewrites entries of a written block, so the keys are spelled here only.
+
 Modules: :mod:`fdi.extras.record` (:class:`CalibrationExtras`, :func:`extras_from_dict`),
 :mod:`fdi.extras.inflight`, :mod:`fdi.extras.static`, :mod:`fdi.extras.turntable`,
 :mod:`fdi.extras.ferraris`, and the shared readers :mod:`fdi.extras.read`.
