@@ -47,7 +47,6 @@ from fdi.extras import (
     InflightTiming,
     LeftOut,
     Method,
-    inflight_to_dict,
 )
 from fdi.extras import ImuAlignment as ImuAlignmentRecord
 from fdi.units import RAW_UNITS
@@ -245,9 +244,3 @@ def fit_records(fit: InflightFit, flight: Flight) -> tuple[InflightTiming, Infli
         samples_used=int(fit.used.sum()), samples=int(fit.used.shape[0]),
         samples_nonfinite=int(getattr(fit, "nonfinite", 0)))
     return timing, alignment
-
-
-def fit_summary(fit: InflightFit, flight: Flight) -> dict[str, object]:
-    """The ``extra.inflight`` block of a fit as the file writes it (:func:`fit_records`)."""
-    return inflight_to_dict(*fit_records(fit, flight))
-

@@ -7,6 +7,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
+import numpy as np
+
 from fdi.extras.read import floats, matrix
 from fdi.fileio import Fields
 from fdi.units import DEG
@@ -59,15 +61,16 @@ class FerrarisRecord:
     imucal: Mapping[str, Any] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
-        """The JSON record (``extra.ferraris``; angles in degrees)."""
+        """The record ``extra.ferraris`` (angles in degrees; the fits' matrices and χ² as
+        arrays, as the fit gives them: :func:`fdi.fileio.to_jsonable` writes them)."""
         lat = None if self.latitude is None else self.latitude / DEG
         return {"rotation_deg": self.rotation / DEG, "gravity_m_s2": self.gravity,
                 "position_sd_deg": self.position_sd / DEG, "angle_sd_deg": self.angle_sd / DEG,
                 "earth_rate_in_sd": self.earth_rate_in_sd, "latitude_deg": lat,
-                "g_sensitivity_raw_per_m_s2": [list(r) for r in self.g_sensitivity_raw_per_m_s2],
-                "g_sensitivity_raw_per_m_s2_sd": [list(r) for r in
-                                                  self.g_sensitivity_raw_per_m_s2_sd],
-                "chi2_dof": {**{k: list(v) for k, v in self.chi2_dof.items()},
+                "g_sensitivity_raw_per_m_s2": np.array(self.g_sensitivity_raw_per_m_s2, float),
+                "g_sensitivity_raw_per_m_s2_sd": np.array(self.g_sensitivity_raw_per_m_s2_sd,
+                                                          float),
+                "chi2_dof": {**{k: np.array(v, float) for k, v in self.chi2_dof.items()},
                              "dof": self.chi2_dof_dof},
                 "imucal": dict(self.imucal), "rotation_dof": self.rotation_dof}
 

@@ -7,6 +7,8 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+import numpy as np
+
 from fdi.extras.ferraris import FerrarisRecord, read_ferraris
 from fdi.extras.inflight import (
     InflightAlignment,
@@ -176,9 +178,13 @@ def _json(v: Any) -> Any:
     return v.to_dict()
 
 
+def _array(v: Any) -> np.ndarray:
+    return np.array(v, float)
+
+
 _WRITE: dict[str, Callable[[Any], Any]] = {
     "warnings": list, "source": str, "method": _json, "static": _json,
-    "noise_model": _json, "rate_test": _json, "step_residual_chi2_dof": list,
+    "noise_model": _json, "rate_test": _json, "step_residual_chi2_dof": _array,
     "residual_steps": residual_steps_to_dict, "earth_rate_fit": _json, "gyro_bias": _json,
     "ferraris": _json}
 """How each field of :class:`CalibrationExtras` becomes its JSON (``parity_sd`` and the
@@ -188,13 +194,13 @@ in-flight pair are written by :func:`_entries`)."""
 def _entries(x: CalibrationExtras, always: frozenset[str]) -> dict[str, Any]:
     """``{extra key: JSON}`` of the fields of ``x`` to write: set, or listed in ``always``
     and not None."""
-    out: dict[str, Any] = {k: v for k, v in parity_sd_to_dict(x.parity_sd).items()}
+    out: dict[str, Any] = dict(parity_sd_to_dict(x.parity_sd))
     if x.inflight is not None or x.inflight_alignment is not None:
         out["inflight"] = inflight_to_dict(x.inflight, x.inflight_alignment)
     for name, write in _WRITE.items():
         v = getattr(x, name)
-        if name == "method":
-            v = None if not _set(v.to_dict()) and name not in always else v
+        if name == "method" and not _set(v.to_dict()) and name not in always:
+            continue
         if _set(v) or (v is not None and name in always):
             out[name] = write(v)
     return out

@@ -9,6 +9,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
+import numpy as np
+
 from fdi.errors import ConfigError
 from fdi.extras.read import floats, ints, matrix, optional_number
 from fdi.fileio import Fields
@@ -139,9 +141,10 @@ class RateTest:
     chi2_dof: tuple[float, ...] = ()
 
     def to_dict(self) -> dict[str, Any]:
-        """The JSON record (``extra.rate_test``)."""
-        return {"pairs": [list(p) for p in self.pairs], "R_rad_s": [list(r) for r in self.rates],
-                "chi2_dof": list(self.chi2_dof)}
+        """The record ``extra.rate_test`` (``R_rad_s`` and ``chi2_dof`` as arrays, as the fit
+        gives them; :func:`fdi.fileio.to_jsonable` writes them)."""
+        return {"pairs": [list(p) for p in self.pairs], "R_rad_s": np.array(self.rates, float),
+                "chi2_dof": np.array(self.chi2_dof, float)}
 
 
 @dataclass(frozen=True)
@@ -352,9 +355,10 @@ def read_parity_sd(r: Fields) -> dict[str, tuple[tuple[float, ...], ...]]:
 
 
 def parity_sd_to_dict(parity_sd: Mapping[str, tuple[tuple[float, ...], ...]]
-                      ) -> dict[str, list[list[float]]]:
-    """The JSON entries of the parity sds per kind (``parity_calibrated_sd``, ...)."""
-    return {PARITY_SD_KEYS[k]: [list(row) for row in v] for k, v in parity_sd.items()}
+                      ) -> dict[str, Any]:
+    """The entries of the parity sds per kind (``parity_calibrated_sd``, ...): an array of
+    shape (n-3, n), ``[]`` for a set of three."""
+    return {PARITY_SD_KEYS[k]: np.array(v, float) if v else [] for k, v in parity_sd.items()}
 
 
 def residual_steps_to_dict(steps: Mapping[str, tuple[ResidualStep, ...]]) -> dict[str, Any]:

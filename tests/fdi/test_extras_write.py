@@ -54,6 +54,7 @@ from fdi.extras import (
     extras_from_dict,
     replace_extras,
 )
+from fdi.fileio import to_jsonable
 from fdi.units import DEG, DPH, DPS
 
 DATA = Path(__file__).parent / "data"
@@ -80,7 +81,7 @@ def _same(a: Any, b: Any, where: str = "extra") -> None:
                                               ("inflight", INFLIGHT_LAYOUT)])
 def test_old_writers_extra_is_written_back_by_the_types(name, layout):
     extra = json.loads((DATA / f"calibration3_{name}.json").read_text("utf-8"))["extra"]
-    _same(extras_from_dict(extra).to_dict(layout), extra)
+    _same(to_jsonable(extras_from_dict(extra).to_dict(layout)), extra)
 
 
 def _nan_free() -> CalibrationExtras:
@@ -136,7 +137,7 @@ def _nan_free() -> CalibrationExtras:
 
 def test_every_typed_entry_reads_back_what_it_writes():
     x = _nan_free()
-    doc = x.to_dict()
+    doc = to_jsonable(x.to_dict())
     assert list(doc) == ["earth_rate_fit", "ferraris", "gyro_bias", "inflight", "method",
                          "noise_model", "parity_accel_calibrated_sd", "parity_calibrated_sd",
                          "rate_test", "residual_steps", "source", "static",
@@ -146,7 +147,7 @@ def test_every_typed_entry_reads_back_what_it_writes():
 
 def test_records_write_the_writers_json():
     x = _nan_free()
-    doc = x.to_dict()
+    doc = to_jsonable(x.to_dict())
     assert doc["gyro_bias"] == {"unit": "deg/h", "model": [2.0], "model_sd": [0.5],
                                 "turns": [1.0], "turns_sd": [0.5], "turns_steps": [1, 3],
                                 "turns_per_step": [2, 2], "vertical_correction": [0.25]}
