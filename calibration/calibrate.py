@@ -125,7 +125,17 @@ from calibration.uncertainty import (
 )
 from fdi.calfile import Calibration, SensorSet
 from fdi.errors import CalibrationError
-from fdi.units import EARTH_RATE, input_unit_factor
+from fdi.extras import (
+    TURNTABLE_LAYOUT,
+    CalibrationExtras,
+    GyroBias,
+    Method,
+    NoiseFit,
+    NoiseModel,
+    ResidualStep,
+)
+from fdi.extras import RateTest as RateTestRecord
+from fdi.units import EARTH_RATE
 
 __all__ = ["BIAS_METHODS", "MIN_STEP_SAMPLES", "NOISE_MODELS", "AccelStages",
            "CalibrationStages", "GyroStages", "accel_stages", "calibrate", "display_units",
@@ -310,7 +320,7 @@ def run_stages(session: Session, *, bias_method: str = "model", denoise: bool = 
                     allan=allan)
     res = g.residuals
     warnings = whiteness_warnings(res, session.gyro_config.sensor_names,
-                                  bool(g.uncertainty.record.get("applied")))
+                                  g.uncertainty.record.applied)
     er = earth_rate_stage(session, g.sensor_set, denoise=denoise) if earth_rate else None
     acc = None
     if session.raw_accel is not None and session.accel_config is not None:
@@ -381,24 +391,25 @@ def calibrate(session: Session, *, bias_method: str = "model", denoise: bool = T
                       earth_rate=earth_rate, noise_model=noise_model).calibration
 
 
-def _gyro_bias_record(session: Session, g: GyroStages) -> dict[str, Any]:
-    """``extra["gyro_bias"]``: both offsets in the file's bias unit."""
+def _gyro_bias_record(session: Session, g: GyroStages) -> GyroBias:
+    """``extra["gyro_bias"]``: both offsets (written in the file's bias unit)."""
     unc = g.uncertainty
     bu = g.sensor_set.sensors[0].bias_unit
-    bfac = input_unit_factor(bu)
-    rec: dict[str, Any] = {"unit": bu,
-                           "model": [e.bias / bfac for e in unc.estimates],
-                           "model_sd": [e.bias_sd / bfac for e in unc.estimates]}
-    if unc.estimates_turns is not None:
-        tw, p = g.problem.turns, g.problem
-        vert = g.sensor_set.H @ (EARTH_RATE * np.sin(p.latitude_rad)
-                                 * p.up[tw.in_window].mean(axis=0))
-        rec.update({
-            "turns": [e.bias / bfac for e in unc.estimates_turns],
-            "turns_sd": [e.bias_sd / bfac for e in unc.estimates_turns],
-            "turns_steps": list(tw.steps), "turns_per_step": list(tw.turns),
-            "vertical_correction": (vert / bfac).tolist()})
-    return rec
+    model = (tuple(e.bias for e in unc.estimates), tuple(e.bias_sd for e in unc.estimates))
+    if unc.estimates_turns is None:
+        return GyroBias(unit=bu, model=model[0], model_sd=model[1])
+    tw, p = g.problem.turns, g.problem
+    vert = g.sensor_set.H @ (EARTH_RATE * np.sin(p.latitude_rad)
+                             * p.up[tw.in_window].mean(axis=0))
+    return GyroBias(unit=bu, model=model[0], model_sd=model[1],
+                    turns=tuple(e.bias for e in unc.estimates_turns),
+                    turns_sd=tuple(e.bias_sd for e in unc.estimates_turns),
+                    turns_steps=tuple(tw.steps), turns_per_step=tuple(tw.turns),
+                    vertical_correction=tuple(vert.tolist()))
+
+
+def _rows(a: np.ndarray) -> tuple[tuple[float, ...], ...]:
+    return tuple(tuple(r) for r in np.asarray(a, float).tolist())
 
 
 def _extra(session: Session, g: GyroStages, er: EarthRateFit | None,
@@ -409,52 +420,52 @@ def _extra(session: Session, g: GyroStages, er: EarthRateFit | None,
     nums, steps = p.step_numbers, list(session.steps)
     bs = g.fit.bias_steps
     Q = g.fit.Q
-    extra: dict[str, Any] = {
-        "source": p.source,
-        "method": {"gyro": "rate test, seed 000 Eqs. 16-19 / seed 001 Eqs. 11-15, inputs "
-                           "from the turntable model with the Earth rate",
-                   "bias": bias_method, "denoise": "db4 level 8 (approximation)"
-                   if denoise else "none"},
-        "rate_test": {"pairs": [[nums[k], nums[q]] for k, q in g.rate_test.pairs],
-                      "R_rad_s": g.rate_test.R, "chi2_dof": res.rate_chi2_dof},
-        "step_residual_chi2_dof": res.step_chi2_dof,
-        "warnings": warnings,
-        "noise_model": {"method": NOISE_METHOD[noise_model], "gyro": unc.record},
-        "gyro_bias": _gyro_bias_record(session, g),
-        "parity_calibrated_sd": parity_sd(g.sensor_set.H,
-                                          [e.split.jac[1:4] for e in unc.estimates],
-                                          res.noise_cov_raw, Q[:3, :3], unc.extra_cov),
-        "residual_steps": {"unit": {"gyro": "rad/s", "accel": "m/s^2"},
-                           "gyro": residual_step_stats(
-                               g.residuals_si, session.step[res.mask],
-                               [nums[j] for j in bs], [steps[j].label for j in bs],
-                               [steps[j].kind for j in bs])},
-    }
+    noise = {"gyro": unc.record}
+    par = {"gyro": _rows(parity_sd(g.sensor_set.H, [e.split.jac[1:4] for e in unc.estimates],
+                                   res.noise_cov_raw, Q[:3, :3], unc.extra_cov))}
+    resid = {"gyro": residual_step_stats(g.residuals_si, session.step[res.mask],
+                                         [nums[j] for j in bs], [steps[j].label for j in bs],
+                                         [steps[j].kind for j in bs])}
+    if acc is not None:
+        noise["accel"], resid["accel"], par["accel"] = _accel_extra(session, acc)
+    extras = CalibrationExtras(
+        source=p.source,
+        method=Method(parts={"gyro": "rate test, seed 000 Eqs. 16-19 / seed 001 Eqs. 11-15, "
+                                     "inputs from the turntable model with the Earth rate",
+                             "bias": bias_method, "denoise": "db4 level 8 (approximation)"
+                             if denoise else "none"}),
+        rate_test=RateTestRecord(pairs=tuple((int(nums[k]), int(nums[q]))
+                                             for k, q in g.rate_test.pairs),
+                                 rates=_rows(g.rate_test.R),
+                                 chi2_dof=tuple(np.asarray(res.rate_chi2_dof).tolist())),
+        step_residual_chi2_dof=tuple(np.asarray(res.step_chi2_dof).tolist()),
+        warnings=tuple(warnings), noise_model=NoiseModel(NOISE_METHOD[noise_model], noise),
+        gyro_bias=_gyro_bias_record(session, g), parity_sd=par, residual_steps=resid)
+    other: dict[str, Any] = {}
     if p.regressors is not None:
-        extra["regressors"] = {"names": list(p.regressor_names),
+        other["regressors"] = {"names": list(p.regressor_names),
                                "coefficients_raw": g.fit.beta,
                                "coefficients_raw_sd": unc.theta_sd[4:].T}
     if er is not None:
-        extra["earth_rate_fit"] = er.to_dict()
-    if acc is not None:
-        _accel_extra(session, acc, extra)
-    return extra
+        other["earth_rate_fit"] = er.to_dict()
+    return extras.to_dict(TURNTABLE_LAYOUT, other)
 
 
-def _accel_extra(session: Session, acc: AccelStages, extra: dict[str, Any]) -> None:
-    """Accelerometer entries of ``Calibration.extra``."""
+def _accel_extra(session: Session, acc: AccelStages
+                 ) -> tuple[NoiseFit, tuple[ResidualStep, ...], tuple[tuple[float, ...], ...]]:
+    """Accelerometer entries of ``Calibration.extra``: noise fit, per-step residuals and
+    the calibrated parity sd."""
     unc, aset = acc.uncertainty, acc.sensor_set
     pos_steps = list(acc.problem.step_numbers)
     label = {s.index: s.label for s in session.steps}
-    extra["noise_model"]["accel"] = unc.record
     m = acc.problem.segment >= 0
-    extra["residual_steps"]["accel"] = residual_step_stats(
+    steps = residual_step_stats(
         acc.residuals_raw * aset.scale_factors, session.step[m], pos_steps,
         [label[k] for k in pos_steps], ["position"] * len(pos_steps))
     Q = (acc.fit.op / acc.problem.count) @ acc.fit.op.T
-    extra["parity_accel_calibrated_sd"] = parity_sd(
-        aset.H, [e.split.jac[1:4] for e in unc.estimates], acc.noise_cov_raw, Q[:3, :3],
-        unc.extra_cov) if aset.n > 3 else []
+    par = _rows(parity_sd(aset.H, [e.split.jac[1:4] for e in unc.estimates], acc.noise_cov_raw,
+                          Q[:3, :3], unc.extra_cov)) if aset.n > 3 else ()
+    return unc.record, steps, par
 
 
 def outer_axis_fit(session: Session, cal: Calibration, *,

@@ -66,6 +66,7 @@ from calibration.session import Session
 from fdi.adequacy import ADEQUATE, NOT_RULED_OUT, SUSPECTED
 from fdi.calfile import Calibration
 from fdi.errors import ConfigError
+from fdi.extras import replace_extras
 
 __all__ = ["calibrate_checked"]
 
@@ -105,7 +106,7 @@ def calibrate_checked(session: Session, *, alpha: float = 0.01, noise_model: str
     if effects:
         forced = assess(session, white, alpha=alpha, effects=effects, datas=datas)
         fit = refit(datas, white, forced.claimed, noise=noise_sets(forced))
-        fitted = dataclasses.replace(fit.calibration, extra=dict(
+        fitted = dataclasses.replace(fit.calibration, extra=replace_extras(
             fit.calibration.extra, warnings=_refit_warnings(fit, datas)))
         datas = model_effects(kind_data(session, fitted), fitted.effects)
         sel = assess(session, fitted, alpha=alpha, datas=datas)
@@ -144,9 +145,8 @@ def calibrate_checked(session: Session, *, alpha: float = 0.01, noise_model: str
                         + "); " + ("the Gauss-Markov noise widening is withheld (it would "
                                    "hide them): run rimu diagnose"
                                    if noise_model != "white" else "run rimu diagnose"))
-    extra = dict(base.extra)
-    extra["warnings"] = warnings
-    return dataclasses.replace(base, adequacy=rec, extra=extra)
+    return dataclasses.replace(base, adequacy=rec,
+                               extra=replace_extras(base.extra, warnings=warnings))
 
 
 def _refit_warnings(fit: Refit, datas: Mapping[str, KindData]) -> list[str]:

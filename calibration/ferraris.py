@@ -59,6 +59,7 @@ from calibration.sensor_set import build_sensor_set, check_gains
 from calibration.uncertainty import split_with_cov
 from fdi.calfile import Calibration
 from fdi.errors import CalibrationError
+from fdi.extras import FERRARIS_LAYOUT, CalibrationExtras, FerrarisRecord, Method
 from fdi.geometry import Configuration
 from fdi.units import DEG, EARTH_RATE, G0
 
@@ -398,19 +399,24 @@ def _extra(session: FerrarisSession, opt: FerrarisOptions, tg: np.ndarray,
            cov_g: np.ndarray, sets: dict, chi_a: np.ndarray, chi_g: np.ndarray,
            warnings: list[str]) -> dict[str, Any]:
     k_sd = np.sqrt(np.clip(np.diagonal(cov_g[:, 4:, 4:], axis1=1, axis2=2), 0, None))
-    return {
-        "source": session.source,
-        "method": {"gyro": "Ferraris: offsets and g-sensitivity from six static positions, "
-                           "gains from the integrated rate over known-angle rotations",
-                   "accel": "six-position least squares (seed 001 Eqs. 5-10)"},
-        "ferraris": {
-            "rotation_deg": opt.rotation_deg, "gravity_m_s2": opt.gravity,
-            "position_sd_deg": opt.position_sd_deg, "angle_sd_deg": opt.angle_sd_deg,
-            "earth_rate_in_sd": opt.earth_rate, "latitude_deg": opt.latitude_deg,
-            "g_sensitivity_raw_per_m_s2": tg[4:].T, "g_sensitivity_raw_per_m_s2_sd": k_sd,
-            "chi2_dof": {"accel": chi_a, "gyro": chi_g, "dof": 2},
-            "imucal": {"gyro": _imucal_matrices(sets["gyro"], DEG),
-                       "accel": _imucal_matrices(sets["accel"], 1.0)},
-            "rotation_dof": 0},
-        "warnings": warnings,
-    }
+    lat = None if opt.latitude_deg is None else opt.latitude_deg * DEG
+    record = FerrarisRecord(
+        rotation=opt.rotation_deg * DEG, gravity=opt.gravity,
+        position_sd=opt.position_sd_deg * DEG, angle_sd=opt.angle_sd_deg * DEG,
+        earth_rate_in_sd=opt.earth_rate, latitude=lat,
+        g_sensitivity_raw_per_m_s2=_rows(tg[4:].T), g_sensitivity_raw_per_m_s2_sd=_rows(k_sd),
+        chi2_dof={"accel": tuple(chi_a.tolist()), "gyro": tuple(chi_g.tolist())},
+        chi2_dof_dof=2, rotation_dof=0,
+        imucal={"gyro": _imucal_matrices(sets["gyro"], DEG),
+                "accel": _imucal_matrices(sets["accel"], 1.0)})
+    return CalibrationExtras(
+        source=session.source,
+        method=Method(parts={
+            "gyro": "Ferraris: offsets and g-sensitivity from six static positions, gains "
+                    "from the integrated rate over known-angle rotations",
+            "accel": "six-position least squares (seed 001 Eqs. 5-10)"}),
+        ferraris=record, warnings=tuple(warnings)).to_dict(FERRARIS_LAYOUT)
+
+
+def _rows(a: np.ndarray) -> tuple[tuple[float, ...], ...]:
+    return tuple(tuple(r) for r in np.asarray(a, float).tolist())

@@ -21,6 +21,7 @@ import numpy as np
 import scipy.optimize
 
 from fdi.calfile import AllanTable
+from fdi.extras import ResidualStep
 
 __all__ = [
     "GM_SIGMA_CAP_RECORDS",
@@ -87,7 +88,7 @@ def noise_covariance(residuals: np.ndarray, dof_used: int = 0) -> np.ndarray:
 
 def residual_step_stats(residuals: np.ndarray, step: np.ndarray,
                         step_numbers: Sequence[int], labels: Sequence[str] = (),
-                        kinds: Sequence[str] = ()) -> list[dict[str, Any]]:
+                        kinds: Sequence[str] = ()) -> tuple[ResidualStep, ...]:
     """Mean, RMS and sample count of the residuals of each step.
 
     Parameters
@@ -101,8 +102,9 @@ def residual_step_stats(residuals: np.ndarray, step: np.ndarray,
 
     Returns
     -------
-    list of dict
-        ``{"step", "label", "kind", "n", "mean": [n], "rms": [n]}`` per step.
+    tuple of ResidualStep
+        One per step (:class:`fdi.extras.ResidualStep`: step, label, kind, n, mean and RMS
+        per sensor).
     """
     nums = list(step_numbers)
     lookup = {k: j for j, k in enumerate(nums)}
@@ -111,15 +113,10 @@ def residual_step_stats(residuals: np.ndarray, step: np.ndarray,
     ids = seg[inv]
     r = np.asarray(residuals, float)
     counts, (m, m2) = segment_means(ids, len(nums), r, r**2)
-    out = []
-    for j, k in enumerate(nums):
-        out.append({"step": int(k),
-                    "label": labels[j] if j < len(labels) else "",
-                    "kind": kinds[j] if j < len(kinds) else "",
-                    "n": int(counts[j]),
-                    "mean": m[j].tolist(),
-                    "rms": np.sqrt(m2[j]).tolist()})
-    return out
+    return tuple(ResidualStep(step=int(k), label=labels[j] if j < len(labels) else "",
+                              kind=kinds[j] if j < len(kinds) else "", n=int(counts[j]),
+                              mean=tuple(m[j].tolist()), rms=tuple(np.sqrt(m2[j]).tolist()))
+                 for j, k in enumerate(nums))
 
 
 def allan_table(residuals: np.ndarray, rate_hz: float) -> AllanTable | None:

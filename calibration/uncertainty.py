@@ -20,7 +20,6 @@ error/σ: ``tests/calibration/test_calibrate_coloured_holdout.py``.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
@@ -33,6 +32,7 @@ from calibration.residuals import (
     gauss_markov_segment_corr,
     gauss_markov_sigma_candidates,
 )
+from fdi.extras import SD_FACTOR_KEYS, NoiseFit
 from fdi.parity import parity_matrix
 
 __all__ = ["NOISE_METHOD", "ColouredNoise", "SensorEstimate", "Uncertainty", "coloured_noise",
@@ -164,19 +164,6 @@ class ColouredNoise:
     record_s: float = 0.0
     sigma_cut: bool = False
 
-    def to_dict(self) -> dict[str, Any]:
-        """``{"bias_instability", "correlation_s", "likelihood_ratio", "applied",
-        "sigma_bias_instability", "sigma_correlation_s", "sigma_cut", "record_s"}`` (the
-        sigma_ pair: the one the σ are computed with, None when not applied; sigma_cut: the
-        interval of τc was cut at a quarter of the record; record_s: the residual record's
-        length, s)."""
-        return {"bias_instability": self.bias_instability,
-                "correlation_s": self.correlation_s,
-                "likelihood_ratio": self.likelihood_ratio, "applied": self.applied,
-                "sigma_bias_instability": self.sigma_bias_instability,
-                "sigma_correlation_s": self.sigma_correlation_s, "sigma_cut": self.sigma_cut,
-                "record_s": self.record_s}
-
 
 def coloured_noise(resid_si: np.ndarray, sf: np.ndarray, fs: float, seg_start: np.ndarray,
                    seg_len: np.ndarray, ops: list[np.ndarray]) -> ColouredNoise:
@@ -234,24 +221,28 @@ def segment_times(t: np.ndarray, seg: np.ndarray, cnt_seg: np.ndarray,
 
 def noise_record(cn: ColouredNoise | None, parts: list[SensorEstimate], a: np.ndarray,
                  c: np.ndarray, Q: np.ndarray, Sigma_raw: np.ndarray, H0: np.ndarray,
-                 extra_cov: np.ndarray | None) -> dict[str, Any]:
+                 extra_cov: np.ndarray | None) -> NoiseFit:
     """What the noise model did to one set: fit, and sd factors (auto/white) per sensor."""
     n = a.shape[0]
-    rec = cn.to_dict() if cn is not None else {"applied": False}
     if extra_cov is None:
-        rec["sd_factor"] = {"bias": [1.0] * n, "scale_factor": [1.0] * n,
-                            "misalignment": [1.0] * n}
-        return rec
-    white = split_all(a, c, Q, Sigma_raw, H0)
-    pw = list(zip(parts, white, strict=True))
-    rec["sd_factor"] = {
-        "bias": [p.bias_sd / max(w.bias_sd, 1e-300) for p, w in pw],
-        "scale_factor": [p.split.scale_factor_sd / max(w.split.scale_factor_sd, 1e-300)
-                         for p, w in pw],
-        "misalignment": [float(np.max(p.split.misalignment_sd
-                                      / np.maximum(w.split.misalignment_sd, 1e-300)))
-                         for p, w in pw]}
-    return rec
+        factors = dict.fromkeys(SD_FACTOR_KEYS, (1.0,) * n)
+    else:
+        white = split_all(a, c, Q, Sigma_raw, H0)
+        pw = list(zip(parts, white, strict=True))
+        factors = dict(zip(SD_FACTOR_KEYS, (
+            tuple(p.bias_sd / max(w.bias_sd, 1e-300) for p, w in pw),
+            tuple(p.split.scale_factor_sd / max(w.split.scale_factor_sd, 1e-300)
+                  for p, w in pw),
+            tuple(float(np.max(p.split.misalignment_sd
+                               / np.maximum(w.split.misalignment_sd, 1e-300)))
+                  for p, w in pw)), strict=True))
+    if cn is None:
+        return NoiseFit(applied=False, sd_factor=factors)
+    return NoiseFit(applied=cn.applied, bias_instability=cn.bias_instability,
+                    correlation_s=cn.correlation_s, likelihood_ratio=cn.likelihood_ratio,
+                    sigma_bias_instability=cn.sigma_bias_instability,
+                    sigma_correlation_s=cn.sigma_correlation_s, sigma_cut=cn.sigma_cut,
+                    record_s=cn.record_s, sd_factor=factors)
 
 
 def parity_sd(H: np.ndarray, axis_jac: list[np.ndarray], Sigma_raw: np.ndarray,
@@ -290,7 +281,7 @@ class Uncertainty:
         The Gauss-Markov fit (None: ``noise_model="white"``).
     extra_cov : ndarray, shape (n, k, k), or None
         Coloured part of the main operator's covariance (raw units); None: white only.
-    record : dict
+    record : NoiseFit
         ``extra["noise_model"][kind]``: the fit and the sd factors over white noise.
     theta_sd : ndarray, shape (k, n)
         sd of every row of ``θ = op @ ū_seg`` (raw units; rows a, c and regressors).
@@ -300,7 +291,7 @@ class Uncertainty:
     estimates_turns: tuple[SensorEstimate, ...] | None
     coloured: ColouredNoise | None
     extra_cov: np.ndarray | None
-    record: dict[str, Any]
+    record: NoiseFit
     theta_sd: np.ndarray
 
 

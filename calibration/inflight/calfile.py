@@ -31,14 +31,25 @@ import math
 
 import numpy as np
 
-from calibration.inflight.fit import InflightFit, decompose
+from calibration.inflight.fit import ImuAlignment, InflightFit, decompose
 from calibration.inflight.offset_check import SIGN_CONVENTION
 from calibration.inflight.timing import flight_identity
 from calibration.residual_models import with_residual_models
 from calibration.residuals import allan_table
 from fdi.calfile import AllanTable, Calibration, SensorCal, SensorSet, tangent_basis
 from fdi.envelope import covered_jolt, covered_rate, covered_specific_force
-from fdi.units import DPH, DPS, MS, RAW_UNITS
+from fdi.extras import (
+    INFLIGHT_LAYOUT,
+    CalibrationExtras,
+    FlightIdentity,
+    ImuTiming,
+    InflightAlignment,
+    InflightTiming,
+    LeftOut,
+    Method,
+)
+from fdi.extras import ImuAlignment as ImuAlignmentRecord
+from fdi.units import RAW_UNITS
 from replay.envelope import flight_accel
 from replay.flight_data import Flight
 
@@ -183,10 +194,12 @@ def calibration_from_fit(fit: InflightFit, flight: Flight, *, tails: bool = True
                                   fit.sample_rate_hz, tails=tails, drift=drift_model,
                                   inflation=jitter,
                                   source="in-flight alignment residual (samples the fit used)")
+    timing, alignment = fit_records(fit, flight)
     return Calibration(configuration=f"{len(groups)} IMUs in flight", sets={"gyro": gs},
-        sample_rate_hz=fit.sample_rate_hz, extra={"method": INFLIGHT_METHOD,
-                                                 "source": fit.source,
-                                                 "inflight": fit_summary(fit, flight)})
+        sample_rate_hz=fit.sample_rate_hz,
+        extra=CalibrationExtras(method=Method(INFLIGHT_METHOD), source=fit.source,
+                                inflight=timing, inflight_alignment=alignment
+                                ).to_dict(INFLIGHT_LAYOUT))
 
 
 def _finite0(x: float) -> float:
@@ -195,35 +208,39 @@ def _finite0(x: float) -> float:
     return x if math.isfinite(x) and x >= 0 else 0.0
 
 
-def fit_summary(fit: InflightFit, flight: Flight) -> dict[str, object]:
-    """The ``extra.inflight`` block: every estimate with its sd, excitation, residuals, the
-    offset checks, the sign convention of the offsets and the identity of the flight they
-    belong to."""
-    imus = {}
-    for g, a in fit.alignments.items():
-        parts = decompose(a.A, a.A_cov)
-        r = a.residual[np.all(np.isfinite(a.residual), axis=1)]
-        lag1 = [float(np.corrcoef(r[1:, k], r[:-1, k])[0, 1]) for k in range(3)]
-        imus[g] = {
-            "model": a.model, "A": a.A.tolist(),
-            "A_sd": np.sqrt(np.diag(a.A_cov)).reshape(3, 3).tolist(),
-            **{f"{name}": v.tolist() for name, (v, _) in parts.items()},
-            **{f"{name}_sd": s.tolist() for name, (_, s) in parts.items()},
-            "bias_dph": (a.c / DPH).tolist(),
-            "bias_dph_sd": (np.sqrt(np.diag(a.c_cov)) / DPH).tolist(),
-            "time_offset_ms": 1e3 * a.time_offset_s,
-            "time_offset_ms_sd": 1e3 * a.time_offset_sd_s,
-            "time_offset_check": a.offset_check,
-            "timing_jitter_ms": a.timing_jitter_s / MS,
-            "timing_jitter_ms_sd": a.timing_jitter_sd_s / MS,
-            "residual_rms_dps": (np.sqrt(np.mean(r**2, axis=0)) / DPS).tolist(),
-            "residual_lag1_autocorrelation": lag1,
-            "hac_lags": a.lags, "samples": int(r.shape[0]),
-            "excitation": a.excitation.to_dict(), "notes": list(a.notes)}
-    return {"reference": fit.reference, "units": {
-        "rotation": "rad", "scale": "fraction", "nonorthogonality": "rad"},
-        "time_offset_sign": SIGN_CONVENTION, "flight": flight_identity(flight),
-        "imus": imus, "left_out": [s.to_dict() for s in fit.left_out],
-        "samples_used": int(fit.used.sum()), "samples": int(fit.used.shape[0]),
-        "samples_nonfinite": int(getattr(fit, "nonfinite", 0))}
+def _rows(m: np.ndarray) -> tuple[tuple[float, ...], ...]:
+    return tuple(tuple(r) for r in np.asarray(m, float).tolist())
 
+
+def _alignment(a: ImuAlignment) -> ImuAlignmentRecord:
+    """The typed record of one IMU's fitted alignment."""
+    parts = decompose(a.A, a.A_cov)
+    r = a.residual[np.all(np.isfinite(a.residual), axis=1)]
+    lag1 = [float(np.corrcoef(r[1:, k], r[:-1, k])[0, 1]) for k in range(3)]
+    return ImuAlignmentRecord(
+        model=a.model, A=_rows(a.A), A_sd=_rows(np.sqrt(np.diag(a.A_cov)).reshape(3, 3)),
+        **{name: tuple(v.tolist()) for name, (v, _) in parts.items()},
+        **{f"{name}_sd": tuple(sd.tolist()) for name, (_, sd) in parts.items()},
+        bias=tuple(a.c.tolist()), bias_sd=tuple(np.sqrt(np.diag(a.c_cov)).tolist()),
+        residual_rms=tuple(np.sqrt(np.mean(r**2, axis=0)).tolist()),
+        residual_lag1_autocorrelation=tuple(lag1), hac_lags=a.lags, samples=int(r.shape[0]),
+        excitation=a.excitation.to_dict(), notes=tuple(a.notes))
+
+
+def fit_records(fit: InflightFit, flight: Flight) -> tuple[InflightTiming, InflightAlignment]:
+    """The typed ``extra.inflight`` of a fit: the offsets with their checks, the sign
+    convention and the identity of the flight they belong to; every alignment estimate
+    with its sd, excitation and residuals."""
+    timing = InflightTiming(
+        reference=fit.reference, time_offset_sign=SIGN_CONVENTION,
+        flight=FlightIdentity(**flight_identity(flight)),
+        imus={g: ImuTiming(time_offset_s=a.time_offset_s, time_offset_sd_s=a.time_offset_sd_s,
+                           timing_jitter_s=a.timing_jitter_s,
+                           timing_jitter_sd_s=a.timing_jitter_sd_s, check=a.check)
+              for g, a in fit.alignments.items()})
+    alignment = InflightAlignment(
+        imus={g: _alignment(a) for g, a in fit.alignments.items()},
+        left_out=tuple(LeftOut(s.t0_s, s.t1_s, s.reason, s.detail) for s in fit.left_out),
+        samples_used=int(fit.used.sum()), samples=int(fit.used.shape[0]),
+        samples_nonfinite=int(getattr(fit, "nonfinite", 0)))
+    return timing, alignment

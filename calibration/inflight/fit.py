@@ -43,6 +43,7 @@ from calibration.inflight.offset_check import check_offset
 from calibration.inflight.regression import StackedFit, stacked_lstsq
 from calibration.inflight.segments import Segment, find_segments, keep_mask
 from fdi.errors import CalibrationError, ConfigError
+from fdi.extras import OffsetCheck
 from replay.flight_data import Flight
 
 __all__ = ["EXCITATION_MIN", "MODELS", "VIF_MAX", "Excitation", "ImuAlignment",
@@ -128,9 +129,9 @@ class ImuAlignment:
         Newey–West lag of the covariance.
     excitation : Excitation
     notes : tuple of str
-    offset_check : dict
+    check : OffsetCheck or None
         How far the offset's sd holds (:func:`calibration.inflight.offset_check.check_offset`):
-        HAC, block-bootstrap and piece sds, the piece-consistency test; empty when τ is
+        HAC, block-bootstrap and piece sds, the piece-consistency test; None when τ is
         not fitted. ``time_offset_sd_s`` is the largest of those sds.
     """
 
@@ -146,9 +147,14 @@ class ImuAlignment:
     lags: int
     excitation: Excitation
     notes: tuple[str, ...] = ()
-    offset_check: dict[str, object] = field(default_factory=dict)
+    check: OffsetCheck | None = None
     timing_jitter_s: float = 0.0
     timing_jitter_sd_s: float = 0.0
+
+    @property
+    def offset_check(self) -> dict[str, object]:
+        """:attr:`check` as the file writes it (ms; empty when τ is not fitted)."""
+        return {} if self.check is None else self.check.to_dict()
 
     def parts(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
         """Rotation, scale and non-orthogonality of A with their sds (rad, fraction)."""
@@ -394,7 +400,7 @@ def fit_pair(t: np.ndarray, y_ref: np.ndarray, y: np.ndarray, used: np.ndarray, 
     rows = np.flatnonzero(ok)[inside]
     residual[rows] = fit.residual
     sd_tau = float(fit.sd[-1]) if time_offset else 0.0
-    chk: dict[str, object] = {}
+    chk: OffsetCheck | None = None
     if time_offset and check:
         fitted = np.zeros(t.shape[0], bool)
         fitted[rows] = True
@@ -411,7 +417,7 @@ def fit_pair(t: np.ndarray, y_ref: np.ndarray, y: np.ndarray, used: np.ndarray, 
             return a.time_offset_s, a.time_offset_sd_s, a.model
 
         chk = check_offset(t, fitted, X[inside], fit.residual, sd_tau, fs, piece)
-        sd_tau = 1e-3 * float(chk["sd_ms"])
+        sd_tau = 1e-3 * (1e3 * chk.sd_s)        # through the file's ms, as written
     # timing jitter: the residual against the angular acceleration IMU j sees, A·ω̇_ref
     jit = (fit_timing_jitter(fit.residual, dz[inside] @ A.T, lags=fit.lags) if jitter
            else JitterFit(0.0, 0.0, 0.0, 0.0, np.zeros((3, 3)), 0))
@@ -420,7 +426,7 @@ def fit_pair(t: np.ndarray, y_ref: np.ndarray, y: np.ndarray, used: np.ndarray, 
                         time_offset_s=tau if time_offset else 0.0,
                         time_offset_sd_s=sd_tau,
                         residual=residual, lags=fit.lags, excitation=exc, notes=tuple(notes),
-                        offset_check=chk, timing_jitter_s=jit.tau_s,
+                        check=chk, timing_jitter_s=jit.tau_s,
                         timing_jitter_sd_s=jit.tau_sd_s)
 
 

@@ -38,7 +38,7 @@ from typing import Any
 import numpy as np
 from scipy import stats
 
-from fdi.extras import OffsetCheck, offset_check_from_dict
+from fdi.extras import OffsetCheck, OffsetConsistency, OffsetPiece, offset_check_from_dict
 from fdi.units import MS
 
 __all__ = ["BLOCK_S", "CONSISTENCY_ALPHA", "PIECES", "PIECE_MIN_S", "SIGN_CONVENTION",
@@ -124,7 +124,7 @@ def consistency(tau: np.ndarray, sd: np.ndarray) -> dict[str, float]:
 def check_offset(t: np.ndarray, used: np.ndarray, X: np.ndarray, e: np.ndarray,
                  sd_hac_s: float, fs: float,
                  fit_piece: Callable[[np.ndarray], tuple[float, float]], *,
-                 pieces: int = PIECES) -> dict[str, object]:
+                 pieces: int = PIECES) -> OffsetCheck:
     """The sds of a fitted offset and the piece-consistency test (module docstring).
 
     Parameters
@@ -148,11 +148,11 @@ def check_offset(t: np.ndarray, used: np.ndarray, X: np.ndarray, e: np.ndarray,
 
     Returns
     -------
-    dict
-        JSON-ready (times in ms): ``sd_ms`` (the one to report), ``sd_hac_ms``,
-        ``sd_bootstrap_ms``, ``block_s``, ``pieces`` (t0_s, t1_s, offset_ms, sd_ms each),
-        ``consistency`` (χ² test, or None with fewer than two pieces), ``consistent``
-        (bool), ``widened`` (bool), ``sign``.
+    OffsetCheck
+        ``sd_s`` (the one to report), the HAC, bootstrap and piece sds, the block length,
+        the pieces, ``consistency`` (χ² test, or None with fewer than two pieces),
+        ``consistent``, ``widened``, ``sign`` (:class:`fdi.extras.OffsetCheck`; its
+        ``to_dict()`` is the file's ``time_offset_check``, in ms).
     """
     from fdi.errors import CalibrationError
 
@@ -165,32 +165,32 @@ def check_offset(t: np.ndarray, used: np.ndarray, X: np.ndarray, e: np.ndarray,
         m = np.zeros(t.shape[0], bool)
         m[chunk] = True
         m &= used
+        t0, t1 = float(t[chunk[0]]), float(t[chunk[-1]])
         try:
             tau_k, sd_k, model_k = fit_piece(m)
         except CalibrationError as exc:
-            out_p.append({"t0_s": float(t[chunk[0]]), "t1_s": float(t[chunk[-1]]),
-                          "offset_ms": None, "sd_ms": None, "note": str(exc)})
+            out_p.append(OffsetPiece(t0, t1, None, None, note=str(exc)))
             continue
-        out_p.append({"t0_s": float(t[chunk[0]]), "t1_s": float(t[chunk[-1]]),
-                      "offset_ms": 1e3 * tau_k, "sd_ms": 1e3 * sd_k, "model": model_k})
-    good = [q for q in out_p if q["offset_ms"] is not None and q["sd_ms"] > 0]
+        out_p.append(OffsetPiece(t0, t1, tau_k, sd_k, model=model_k))
+    good = [q for q in out_p if q.offset_s is not None and q.sd_s > 0]
     cons = None
     sd_piece = 0.0
     ok = True
     if len(good) >= 2:
-        c = consistency(np.array([q["offset_ms"] for q in good]) * 1e-3,
-                        np.array([q["sd_ms"] for q in good]) * 1e-3)
-        cons = {"mean_ms": 1e3 * c["mean_s"], "sd_internal_ms": 1e3 * c["sd_internal_s"],
-                "sd_external_ms": 1e3 * c["sd_external_s"], "chi2": c["chi2"],
-                "dof": c["dof"], "chi2_dof": c["chi2_dof"], "p_value": c["p_value"],
-                "alpha": CONSISTENCY_ALPHA, "pieces_used": len(good)}
+        # from the pieces' offsets in ms, as the file holds them (1e3·τ, then back)
+        c = consistency(np.array([1e3 * q.offset_s for q in good]) * 1e-3,
+                        np.array([1e3 * q.sd_s for q in good]) * 1e-3)
+        cons = OffsetConsistency(
+            mean_s=c["mean_s"], sd_internal_s=c["sd_internal_s"],
+            sd_external_s=c["sd_external_s"], chi2=c["chi2"], dof=c["dof"],
+            chi2_dof=c["chi2_dof"], p_value=c["p_value"], alpha=CONSISTENCY_ALPHA,
+            pieces_used=len(good))
         sd_piece = c["sd_external_s"]
         ok = c["p_value"] >= CONSISTENCY_ALPHA
     sd = max(sd_hac_s, sd_boot, sd_piece)
-    return {"sd_ms": 1e3 * sd, "sd_hac_ms": 1e3 * sd_hac_s, "sd_bootstrap_ms": 1e3 * sd_boot,
-            "sd_pieces_ms": 1e3 * sd_piece, "block_s": block / fs, "pieces": out_p,
-            "consistency": cons, "consistent": ok, "widened": sd > sd_hac_s,
-            "sign": SIGN_CONVENTION}
+    return OffsetCheck(sd_s=sd, sd_hac_s=sd_hac_s, sd_bootstrap_s=sd_boot, sd_pieces_s=sd_piece,
+                       block_s=block / fs, pieces=tuple(out_p), consistency=cons, consistent=ok,
+                       widened=sd > sd_hac_s, sign=SIGN_CONVENTION)
 
 
 def check_lines(chk: OffsetCheck | Mapping[str, Any] | None) -> list[str]:

@@ -42,7 +42,16 @@ from calibration.residuals import allan_table
 from fdi.calfile import Calibration, SensorCal, SensorSet, tangent_basis
 from fdi.envelope import covered_jolt, covered_rate, covered_specific_force
 from fdi.errors import CalibrationError, ConfigError
-from fdi.extras import StaticAlignment, extras_from_dict
+from fdi.extras import (
+    STATIC_LAYOUT,
+    CalibrationExtras,
+    DriftAttribution,
+    Method,
+    OwnDrift,
+    StaticAlignment,
+    StaticImu,
+    extras_from_dict,
+)
 from fdi.units import DEG, DPS
 from replay.envelope import flight_accel
 from replay.flight_data import Flight
@@ -337,32 +346,26 @@ def calibrate_static(flight: Flight, *, reference: str | None = None, alpha: flo
         dsd = np.asarray(dr["change_sd"])
         rel_drift[g] = R @ d                        # into the reference (body) frame
         rel_cov[g] = R @ np.diag(dsd**2) @ R.T
-        per_imu[g] = {"rotation_deg": np.degrees(rots[g].as_rotvec()).tolist(),
-                      "rotation_deg_sd": np.degrees(rot_sd[g]).tolist(),
-                      "relative_bias_dps": ((b[idx] - R.T @ b[groups[ref]]) / DPS).tolist(),
-                      "relative_drift_dps": (d / DPS).tolist(),
-                      "relative_drift_dps_sd": (dsd / DPS).tolist(),
-                      "relative_drift_z": dr["z"], "relative_drift_p": dr["p_value"],
-                      "drift_block_s": dr["block_s"], "drift_hac_lags": dr["hac_lags"]}
+        per_imu[g] = StaticImu(
+            rotation=tuple(rots[g].as_rotvec().tolist()), rotation_sd=tuple(rot_sd[g].tolist()),
+            relative_bias=tuple((b[idx] - R.T @ b[groups[ref]]).tolist()),
+            relative_drift=tuple(d.tolist()), relative_drift_sd=tuple(dsd.tolist()),
+            relative_drift_z=tuple(dr["z"]), relative_drift_p=tuple(dr["p_value"]),
+            drift_block_s=dr["block_s"], drift_hac_lags=dr["hac_lags"])
     attr = attribute_drift(rel_drift, rel_cov, ref, alpha=alpha)
-    attr_dps = {**attr, "common": (np.asarray(attr["common"]) / DPS).tolist(),
-                "common_sd": (np.asarray(attr["common_sd"]) / DPS).tolist(),
-                "own": {g: {**v, "drift": (np.asarray(v["drift"]) / DPS).tolist()}
-                        for g, v in attr["own"].items()},
-                "unit": "deg/s over the record (body frame of the reference)"}
     notes.append(f"scale factors are not observable at rest: taken as 1 ± "
                  f"{100 * SCALE_FACTOR_TOLERANCE:g} % (a stated tolerance, in the input-error "
                  "covariance: the monitor's thresholds widen when the set moves)")
     notes.append("biases hold the Earth rate's projection (<= 0.0042 deg/s)")
-    summary = {"reference": ref, "imus": per_imu, "alignment_full": full, "notes": notes,
-               "drift_attribution": attr_dps, "alpha": alpha,
-               "bias_dps": (b / DPS).tolist(), "bias_dps_sd": (bias_sd / DPS).tolist(),
-               "samples": int(x.shape[0]), "duration_s": float(t[-1] - t[0])}
     H = np.array([c.axis for c in sensors])
     acc_all = flight_accel(flight)
     notes.append(f"{int(np.sum(~rest))} of {rest.size} samples near shocks (more than "
                  f"{SHOCK_SD:g} robust sd in two IMUs, +-{SHOCK_PAD_S:g} s) are left out of "
                  f"the noise, the residual models and the range")
+    summary = StaticAlignment(
+        reference=ref, imus=per_imu, drift_attribution=_attribution(attr), notes=tuple(notes),
+        alpha=alpha, bias=tuple(b.tolist()), bias_sd=tuple(bias_sd.tolist()),
+        samples=int(x.shape[0]), duration_s=float(t[-1] - t[0]), alignment_full=full)
     acc_ok = acc_all[ok] if acc_all is not None else None
     gs = with_residual_models(
         SensorSet("gyro", tuple(sensors), cov, allan=allan_table(xr, flight.sample_rate_hz),
@@ -374,7 +377,18 @@ def calibrate_static(flight: Flight, *, reference: str | None = None, alpha: flo
         source="static residual (raw - mean), shocks left out")
     return Calibration(configuration=f"{len(groups)} IMUs at rest", sets={"gyro": gs},
         sample_rate_hz=flight.sample_rate_hz,
-        extra={"method": STATIC_METHOD, "source": flight.source, "static": summary})
+        extra=CalibrationExtras(method=Method(STATIC_METHOD), source=flight.source,
+                                static=summary).to_dict(STATIC_LAYOUT))
+
+
+def _attribution(attr: Mapping[str, Any]) -> DriftAttribution:
+    """The record of :func:`attribute_drift`'s result."""
+    return DriftAttribution(
+        common=tuple(attr["common"]), common_sd=tuple(attr["common_sd"]),
+        common_p=attr["common_p"], consistent_chi2=attr["consistent_chi2"],
+        consistent_dof=attr["consistent_dof"], consistent_p=attr["consistent_p"],
+        own={g: OwnDrift(drift=tuple(v["drift"]), z=tuple(v["z"]), p_value=v["p_value"])
+             for g, v in attr["own"].items()}, statement=attr["statement"])
 
 
 def static_text(doc: StaticAlignment | Mapping[str, Any]) -> str:

@@ -27,6 +27,12 @@ existed loads as it did and keeps its fingerprint; :func:`extras_from_dict` chec
 and names the bad field (``extra.inflight.imus.imu2.time_offset_ms``). Keys the types do not
 cover stay in ``Calibration.extra`` and are not checked.
 
+The writers build the same types: every record's ``to_dict()`` is its JSON in the file's
+units (``1e3·τ`` as ``time_offset_ms``, ...), :meth:`CalibrationExtras.to_dict` writes the
+block with the keys in the order of a calibration kind (:data:`TURNTABLE_LAYOUT`,
+:data:`FERRARIS_LAYOUT`, :data:`STATIC_LAYOUT`, :data:`INFLIGHT_LAYOUT`) and
+:func:`replace_extras` rewrites entries of a written block, so the keys are spelled here only.
+
 Modules: :mod:`fdi.extras.record` (:class:`CalibrationExtras`, :func:`extras_from_dict`),
 :mod:`fdi.extras.inflight`, :mod:`fdi.extras.static`, :mod:`fdi.extras.turntable`,
 :mod:`fdi.extras.ferraris`, and the shared readers :mod:`fdi.extras.read`.
@@ -36,6 +42,7 @@ from fdi.extras.ferraris import (
     FerrarisRecord,
 )
 from fdi.extras.inflight import (
+    ALIGNMENT_UNITS,
     FlightIdentity,
     ImuAlignment,
     ImuTiming,
@@ -45,21 +52,30 @@ from fdi.extras.inflight import (
     OffsetCheck,
     OffsetConsistency,
     OffsetPiece,
+    inflight_to_dict,
     offset_check_from_dict,
 )
 from fdi.extras.record import (
+    FERRARIS_LAYOUT,
+    INFLIGHT_LAYOUT,
+    STATIC_LAYOUT,
+    TURNTABLE_LAYOUT,
     TYPED_KEYS,
     CalibrationExtras,
     Method,
     extras_from_dict,
+    replace_extras,
 )
 from fdi.extras.static import (
+    ATTRIBUTION_UNIT,
     DriftAttribution,
     OwnDrift,
     StaticAlignment,
     StaticImu,
 )
 from fdi.extras.turntable import (
+    PARITY_SD_KEYS,
+    RESIDUAL_UNITS,
     SD_FACTOR_KEYS,
     EarthRateRecord,
     GyroBias,
@@ -70,7 +86,15 @@ from fdi.extras.turntable import (
 )
 
 __all__ = [
+    "ALIGNMENT_UNITS",
+    "ATTRIBUTION_UNIT",
+    "FERRARIS_LAYOUT",
+    "INFLIGHT_LAYOUT",
+    "PARITY_SD_KEYS",
+    "RESIDUAL_UNITS",
     "SD_FACTOR_KEYS",
+    "STATIC_LAYOUT",
+    "TURNTABLE_LAYOUT",
     "TYPED_KEYS",
     "CalibrationExtras",
     "DriftAttribution",
@@ -95,5 +119,7 @@ __all__ = [
     "StaticAlignment",
     "StaticImu",
     "extras_from_dict",
+    "inflight_to_dict",
     "offset_check_from_dict",
+    "replace_extras",
 ]

@@ -5,6 +5,9 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
 
 from fdi.extras.read import floats, matrix
 from fdi.fileio import Fields
@@ -39,6 +42,9 @@ class FerrarisRecord:
         Their degrees of freedom per sensor.
     rotation_dof : int
         Spare degrees of freedom of the rotations.
+    imucal : dict
+        imucal's matrices from this fit (``K``, ``R``, ``b`` per kind in imucal's units),
+        written as they come (not checked).
     """
 
     rotation: float
@@ -52,6 +58,21 @@ class FerrarisRecord:
     chi2_dof: Mapping[str, tuple[float, ...]] = field(default_factory=dict)
     chi2_dof_dof: int = 0
     rotation_dof: int = 0
+    imucal: Mapping[str, Any] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        """The record ``extra.ferraris`` (angles in degrees; the fits' matrices and χ² as
+        arrays, as the fit gives them: :func:`fdi.fileio.to_jsonable` writes them)."""
+        lat = None if self.latitude is None else self.latitude / DEG
+        return {"rotation_deg": self.rotation / DEG, "gravity_m_s2": self.gravity,
+                "position_sd_deg": self.position_sd / DEG, "angle_sd_deg": self.angle_sd / DEG,
+                "earth_rate_in_sd": self.earth_rate_in_sd, "latitude_deg": lat,
+                "g_sensitivity_raw_per_m_s2": np.array(self.g_sensitivity_raw_per_m_s2, float),
+                "g_sensitivity_raw_per_m_s2_sd": np.array(self.g_sensitivity_raw_per_m_s2_sd,
+                                                          float),
+                "chi2_dof": {**{k: np.array(v, float) for k, v in self.chi2_dof.items()},
+                             "dof": self.chi2_dof_dof},
+                "imucal": dict(self.imucal), "rotation_dof": self.rotation_dof}
 
 
 def read_ferraris(r: Fields) -> FerrarisRecord | None:
@@ -70,5 +91,6 @@ def read_ferraris(r: Fields) -> FerrarisRecord | None:
         g_sensitivity_raw_per_m_s2=matrix(f, "g_sensitivity_raw_per_m_s2"),
         g_sensitivity_raw_per_m_s2_sd=matrix(f, "g_sensitivity_raw_per_m_s2_sd"),
         chi2_dof={k: floats(c, k) for k in c.keys() if k != "dof"},
-        chi2_dof_dof=c.integer("dof", 0, lo=0), rotation_dof=f.integer("rotation_dof", 0, lo=0))
+        chi2_dof_dof=c.integer("dof", 0, lo=0), rotation_dof=f.integer("rotation_dof", 0, lo=0),
+        imucal=f.free("imucal", {}))
 

@@ -13,11 +13,28 @@ import numpy as np
 
 from fdi.extras.read import floats, matrix, ms_field, plain, strings
 from fdi.fileio import Fields
-from fdi.units import DPH, DPS
+from fdi.units import DPH, DPS, MS
 
-__all__ = ["FlightIdentity", "ImuAlignment", "ImuTiming", "InflightAlignment", "InflightTiming",
-           "LeftOut", "OffsetCheck", "OffsetConsistency", "OffsetPiece",
-           "offset_check_from_dict", "read_inflight_alignment", "read_inflight_timing"]
+__all__ = ["ALIGNMENT_UNITS", "FlightIdentity", "ImuAlignment", "ImuTiming", "InflightAlignment",
+           "InflightTiming", "LeftOut", "OffsetCheck", "OffsetConsistency", "OffsetPiece",
+           "inflight_to_dict", "offset_check_from_dict", "read_inflight_alignment",
+           "read_inflight_timing"]
+
+ALIGNMENT_UNITS = {"rotation": "rad", "scale": "fraction", "nonorthogonality": "rad"}
+"""``extra.inflight.units``: the units of the parts of the gain matrix."""
+
+
+def _ms(x: float | None) -> float | None:
+    """s to the file's ms, as the offset checks write them (``1e3 · x``)."""
+    return None if x is None else 1e3 * x
+
+
+def _rows(m: tuple[tuple[float, ...], ...]) -> list[list[float]]:
+    return [list(r) for r in m]
+
+
+def _per(v: tuple[float, ...], unit: float) -> list[float]:
+    return (np.asarray(v, float) / unit).tolist()
 
 
 # -- in-flight timing -------------------------------------------------------------------
@@ -72,6 +89,12 @@ class OffsetPiece:
     model: str = ""
     note: str = ""
 
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON record (ms): ``model`` when fitted, ``note`` when not."""
+        tail = {"note": self.note} if self.offset_s is None else {"model": self.model}
+        return {"t0_s": self.t0_s, "t1_s": self.t1_s, "offset_ms": _ms(self.offset_s),
+                "sd_ms": _ms(self.sd_s), **tail}
+
 
 @dataclass(frozen=True)
 class OffsetConsistency:
@@ -95,6 +118,13 @@ class OffsetConsistency:
     p_value: float
     alpha: float
     pieces_used: int
+
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON record (ms)."""
+        return {"mean_ms": _ms(self.mean_s), "sd_internal_ms": _ms(self.sd_internal_s),
+                "sd_external_ms": _ms(self.sd_external_s), "chi2": self.chi2, "dof": self.dof,
+                "chi2_dof": self.chi2_dof, "p_value": self.p_value, "alpha": self.alpha,
+                "pieces_used": self.pieces_used}
 
 
 @dataclass(frozen=True)
@@ -130,6 +160,14 @@ class OffsetCheck:
     consistent: bool
     widened: bool
     sign: str = ""
+
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON record (``time_offset_check``; ms)."""
+        return {"sd_ms": _ms(self.sd_s), "sd_hac_ms": _ms(self.sd_hac_s),
+                "sd_bootstrap_ms": _ms(self.sd_bootstrap_s), "sd_pieces_ms": _ms(self.sd_pieces_s),
+                "block_s": self.block_s, "pieces": [p.to_dict() for p in self.pieces],
+                "consistency": None if self.consistency is None else self.consistency.to_dict(),
+                "consistent": self.consistent, "widened": self.widened, "sign": self.sign}
 
 
 @dataclass(frozen=True)
@@ -283,6 +321,11 @@ class LeftOut:
     reason: str = ""
     detail: str = ""
 
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON record."""
+        return {"t0_s": self.t0_s, "t1_s": self.t1_s, "reason": self.reason,
+                "detail": self.detail}
+
 
 @dataclass(frozen=True)
 class ImuAlignment:
@@ -331,6 +374,7 @@ class ImuAlignment:
     residual_lag1_autocorrelation: tuple[float, ...] = ()
     hac_lags: int = 0
     samples: int = 0
+    excitation: Mapping[str, Any] = field(default_factory=dict)
     notes: tuple[str, ...] = ()
 
 
@@ -364,7 +408,7 @@ def _imu_alignment(r: Fields) -> ImuAlignment:
         bias=floats(r, "bias_dph", scale=DPH), bias_sd=floats(r, "bias_dph_sd", scale=DPH),
         residual_rms=floats(r, "residual_rms_dps", scale=DPS),
         hac_lags=r.integer("hac_lags", 0, lo=0), samples=r.integer("samples", 0, lo=0),
-        notes=strings(r, "notes"))
+        excitation=r.free("excitation", {}), notes=strings(r, "notes"))
 
 
 def read_inflight_alignment(r: Fields) -> InflightAlignment | None:
@@ -382,3 +426,41 @@ def read_inflight_alignment(r: Fields) -> InflightAlignment | None:
         samples_used=f.integer("samples_used", 0, lo=0), samples=f.integer("samples", 0, lo=0),
         samples_nonfinite=f.integer("samples_nonfinite", 0, lo=0))
 
+
+
+# -- writing ----------------------------------------------------------------------------
+_PARTS = ("rotation", "scale", "nonorthogonality")
+
+
+def _imu_to_dict(t: ImuTiming | None, a: ImuAlignment | None) -> dict[str, Any]:
+    """One IMU's record: its alignment and timing, interleaved as the file lists them."""
+    a = ImuAlignment() if a is None else a
+    t = ImuTiming(None) if t is None else t
+    jit = None if t.timing_jitter_s is None else t.timing_jitter_s / MS
+    return {"model": a.model, "A": _rows(a.A), "A_sd": _rows(a.A_sd),
+            **{k: list(getattr(a, k)) for k in _PARTS},
+            **{f"{k}_sd": list(getattr(a, f"{k}_sd")) for k in _PARTS},
+            "bias_dph": _per(a.bias, DPH), "bias_dph_sd": _per(a.bias_sd, DPH),
+            "time_offset_ms": _ms(t.time_offset_s), "time_offset_ms_sd": _ms(t.time_offset_sd_s),
+            "time_offset_check": {} if t.check is None else t.check.to_dict(),
+            "timing_jitter_ms": jit, "timing_jitter_ms_sd": t.timing_jitter_sd_s / MS,
+            "residual_rms_dps": _per(a.residual_rms, DPS),
+            "residual_lag1_autocorrelation": list(a.residual_lag1_autocorrelation),
+            "hac_lags": a.hac_lags, "samples": a.samples, "excitation": dict(a.excitation),
+            "notes": list(a.notes)}
+
+
+def inflight_to_dict(timing: InflightTiming | None,
+                     alignment: InflightAlignment | None) -> dict[str, Any]:
+    """The JSON record ``extra.inflight`` of the timing and alignment of an in-flight
+    calibration (ms, deg/h, deg/s in the file; either part may be None)."""
+    timing = InflightTiming() if timing is None else timing
+    alignment = InflightAlignment() if alignment is None else alignment
+    imus = dict.fromkeys([*alignment.imus, *timing.imus])
+    flight = {} if timing.flight is None else {"flight": timing.flight.to_dict()}
+    return {"reference": timing.reference, "units": dict(ALIGNMENT_UNITS),
+            "time_offset_sign": timing.time_offset_sign, **flight,
+            "imus": {g: _imu_to_dict(timing.imus.get(g), alignment.imus.get(g)) for g in imus},
+            "left_out": [e.to_dict() for e in alignment.left_out],
+            "samples_used": alignment.samples_used, "samples": alignment.samples,
+            "samples_nonfinite": alignment.samples_nonfinite}

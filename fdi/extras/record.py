@@ -3,14 +3,17 @@ one function that reads them (:func:`extras_from_dict`)."""
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
+
+import numpy as np
 
 from fdi.extras.ferraris import FerrarisRecord, read_ferraris
 from fdi.extras.inflight import (
     InflightAlignment,
     InflightTiming,
+    inflight_to_dict,
     read_inflight_alignment,
     read_inflight_timing,
 )
@@ -22,16 +25,19 @@ from fdi.extras.turntable import (
     NoiseModel,
     RateTest,
     ResidualStep,
+    parity_sd_to_dict,
     read_earth_rate,
     read_gyro_bias,
     read_noise_model,
     read_parity_sd,
     read_rate_test,
     read_residual_steps,
+    residual_steps_to_dict,
 )
 from fdi.fileio import Fields
 
-__all__ = ["TYPED_KEYS", "CalibrationExtras", "Method", "extras_from_dict"]
+__all__ = ["FERRARIS_LAYOUT", "INFLIGHT_LAYOUT", "STATIC_LAYOUT", "TURNTABLE_LAYOUT",
+           "TYPED_KEYS", "CalibrationExtras", "Method", "extras_from_dict", "replace_extras"]
 
 _PREFIX = "extra"
 TYPED_KEYS = ("earth_rate_fit", "ferraris", "gyro_bias", "inflight", "method", "noise_model",
@@ -59,6 +65,11 @@ class Method:
     def part(self, key: str, default: str = "") -> str:
         """The line of one part (``default`` when the file has none)."""
         return self.parts.get(key, default)
+
+    def to_dict(self) -> str | dict[str, str]:
+        """The JSON value of ``extra.method``: :attr:`parts` when there are any, else
+        :attr:`text`."""
+        return dict(self.parts) if self.parts else self.text
 
 
 def read_method(r: Fields) -> Method:
@@ -121,6 +132,94 @@ class CalibrationExtras:
     def time_offsets_s(self) -> dict[str, float]:
         """``{IMU group: τ (s)}`` of an in-flight calibration (empty for any other)."""
         return {} if self.inflight is None else self.inflight.time_offsets_s()
+
+    def to_dict(self, layout: Sequence[str] = (),
+                other: Mapping[str, Any] | None = None) -> dict[str, Any]:
+        """The ``extra`` block: the JSON of the typed entries, in the file's units.
+
+        Parameters
+        ----------
+        layout : sequence of str
+            The ``extra`` keys a writer lists, in its order (:data:`TURNTABLE_LAYOUT`,
+            :data:`FERRARIS_LAYOUT`, :data:`STATIC_LAYOUT`, :data:`INFLIGHT_LAYOUT`): each is
+            written unless its entry is None, empty ones too (``"warnings": []``). Other typed
+            entries follow in :data:`TYPED_KEYS` order, only when set (not None, not empty).
+        other : mapping, optional
+            Entries the types do not cover (``regressors``, ``refit``, ...): placed where
+            ``layout`` lists them, else at the end.
+
+        Returns
+        -------
+        dict
+        """
+        entries = {**_entries(self, frozenset(layout)), **(other or {})}
+        order = dict.fromkeys([*layout, *TYPED_KEYS, *entries])
+        return {k: entries[k] for k in order if k in entries}
+
+
+TURNTABLE_LAYOUT = ("source", "method", "rate_test", "step_residual_chi2_dof", "warnings",
+                    "noise_model", "gyro_bias", "parity_calibrated_sd", "residual_steps",
+                    "regressors", "earth_rate_fit", "parity_accel_calibrated_sd")
+"""The ``extra`` keys of a turntable calibration (``rimu calibrate SESSION``), in order."""
+FERRARIS_LAYOUT = ("source", "method", "ferraris", "warnings")
+"""The ``extra`` keys of a Ferraris calibration, in order."""
+STATIC_LAYOUT = ("method", "source", "static")
+"""The ``extra`` keys of a calibration at rest (``rimu calibrate --static``), in order."""
+INFLIGHT_LAYOUT = ("method", "source", "inflight")
+"""The ``extra`` keys of an in-flight calibration (``rimu calibrate --in-flight``), in order."""
+
+
+def _set(v: Any) -> bool:
+    """Not None and not empty."""
+    return v is not None and not (isinstance(v, str | tuple | list | Mapping) and not v)
+
+
+def _json(v: Any) -> Any:
+    return v.to_dict()
+
+
+def _array(v: Any) -> np.ndarray:
+    return np.array(v, float)
+
+
+_WRITE: dict[str, Callable[[Any], Any]] = {
+    "warnings": list, "source": str, "method": _json, "static": _json,
+    "noise_model": _json, "rate_test": _json, "step_residual_chi2_dof": _array,
+    "residual_steps": residual_steps_to_dict, "earth_rate_fit": _json, "gyro_bias": _json,
+    "ferraris": _json}
+"""How each field of :class:`CalibrationExtras` becomes its JSON (``parity_sd`` and the
+in-flight pair are written by :func:`_entries`)."""
+
+
+def _entries(x: CalibrationExtras, always: frozenset[str]) -> dict[str, Any]:
+    """``{extra key: JSON}`` of the fields of ``x`` to write: set, or listed in ``always``
+    and not None."""
+    out: dict[str, Any] = dict(parity_sd_to_dict(x.parity_sd))
+    if x.inflight is not None or x.inflight_alignment is not None:
+        out["inflight"] = inflight_to_dict(x.inflight, x.inflight_alignment)
+    for name, write in _WRITE.items():
+        v = getattr(x, name)
+        if name == "method" and not _set(v.to_dict()) and name not in always:
+            continue
+        if _set(v) or (v is not None and name in always):
+            out[name] = write(v)
+    return out
+
+
+def replace_extras(extra: Mapping[str, Any], **entries: Any) -> dict[str, Any]:
+    """A copy of an ``extra`` block with some typed entries written anew (a key keeps its
+    place; a new one goes at the end). The other entries are copied as they are.
+
+    Parameters
+    ----------
+    extra : mapping
+    **entries
+        Fields of :class:`CalibrationExtras` (``warnings=[...]``), written as
+        :meth:`CalibrationExtras.to_dict` writes them (empty ones too).
+    """
+    out = dict(extra)
+    out.update(CalibrationExtras(**entries).to_dict(layout=tuple(entries)))
+    return out
 
 
 def extras_from_dict(extra: Mapping[str, Any], path: str = "<calibration>"

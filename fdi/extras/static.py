@@ -6,12 +6,23 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
 
 from fdi.extras.read import floats, strings
 from fdi.fileio import Fields
 from fdi.units import DEG, DPS
 
-__all__ = ["DriftAttribution", "OwnDrift", "StaticAlignment", "StaticImu", "read_static"]
+__all__ = ["ATTRIBUTION_UNIT", "DriftAttribution", "OwnDrift", "StaticAlignment", "StaticImu",
+           "read_static"]
+
+ATTRIBUTION_UNIT = "deg/s over the record (body frame of the reference)"
+"""``extra.static.drift_attribution.unit``: the unit of the drifts in the file."""
+
+
+def _dps(v: tuple[float, ...]) -> list[float]:
+    return (np.asarray(v, float) / DPS).tolist()
 
 
 @dataclass(frozen=True)
@@ -44,6 +55,17 @@ class StaticImu:
     drift_block_s: float = float("nan")
     drift_hac_lags: int = 0
 
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON record (``extra.static.imus.<imu>``; degrees and deg/s)."""
+        return {"rotation_deg": np.degrees(np.asarray(self.rotation, float)).tolist(),
+                "rotation_deg_sd": np.degrees(np.asarray(self.rotation_sd, float)).tolist(),
+                "relative_bias_dps": _dps(self.relative_bias),
+                "relative_drift_dps": _dps(self.relative_drift),
+                "relative_drift_dps_sd": _dps(self.relative_drift_sd),
+                "relative_drift_z": list(self.relative_drift_z),
+                "relative_drift_p": list(self.relative_drift_p),
+                "drift_block_s": self.drift_block_s, "drift_hac_lags": self.drift_hac_lags}
+
 
 @dataclass(frozen=True)
 class OwnDrift:
@@ -62,6 +84,10 @@ class OwnDrift:
     drift: tuple[float, ...] = ()
     z: tuple[float, ...] = ()
     p_value: float = float("nan")
+
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON record (deg/s)."""
+        return {"drift": _dps(self.drift), "z": list(self.z), "p_value": self.p_value}
 
 
 @dataclass(frozen=True)
@@ -92,6 +118,14 @@ class DriftAttribution:
     consistent_p: float = float("nan")
     own: Mapping[str, OwnDrift] = field(default_factory=dict)
     statement: str = ""
+
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON record (``extra.static.drift_attribution``; deg/s)."""
+        return {"common": _dps(self.common), "common_sd": _dps(self.common_sd),
+                "common_p": self.common_p, "consistent_chi2": self.consistent_chi2,
+                "consistent_dof": self.consistent_dof, "consistent_p": self.consistent_p,
+                "own": {g: o.to_dict() for g, o in self.own.items()},
+                "statement": self.statement, "unit": ATTRIBUTION_UNIT}
 
 
 @dataclass(frozen=True)
@@ -127,6 +161,16 @@ class StaticAlignment:
     samples: int = 0
     duration_s: float = float("nan")
     alignment_full: bool = True
+
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON record (``extra.static``; degrees and deg/s)."""
+        attr = {} if self.drift_attribution is None else {
+            "drift_attribution": self.drift_attribution.to_dict()}
+        return {"reference": self.reference,
+                "imus": {g: m.to_dict() for g, m in self.imus.items()},
+                "alignment_full": self.alignment_full, "notes": list(self.notes), **attr,
+                "alpha": self.alpha, "bias_dps": _dps(self.bias), "bias_dps_sd": _dps(self.bias_sd),
+                "samples": self.samples, "duration_s": self.duration_s}
 
 
 def _static_imu(r: Fields) -> StaticImu:

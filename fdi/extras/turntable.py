@@ -7,15 +7,19 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
 
 from fdi.errors import ConfigError
 from fdi.extras.read import floats, ints, matrix, optional_number
 from fdi.fileio import Fields
 from fdi.units import DEG, DPH, input_unit_factor
 
-__all__ = ["SD_FACTOR_KEYS", "EarthRateRecord", "GyroBias", "NoiseFit", "NoiseModel",
-           "RateTest", "ResidualStep", "read_earth_rate", "read_gyro_bias", "read_noise_model",
-           "read_parity_sd", "read_rate_test", "read_residual_steps"]
+__all__ = ["PARITY_SD_KEYS", "RESIDUAL_UNITS", "SD_FACTOR_KEYS", "EarthRateRecord", "GyroBias",
+           "NoiseFit", "NoiseModel", "RateTest", "ResidualStep", "parity_sd_to_dict",
+           "read_earth_rate", "read_gyro_bias", "read_noise_model", "read_parity_sd",
+           "read_rate_test", "read_residual_steps", "residual_steps_to_dict"]
 
 
 # -- noise model -------------------------------------------------------------------------
@@ -59,6 +63,19 @@ class NoiseFit:
     record_s: float | None = None
     sd_factor: Mapping[str, tuple[float, ...]] = field(default_factory=dict)
 
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON record (``extra.noise_model.<kind>``). Without a fit (white noise asked
+        for: ``likelihood_ratio`` None) only ``applied`` and ``sd_factor`` are written."""
+        fit = {} if self.likelihood_ratio is None else {
+            "bias_instability": self.bias_instability, "correlation_s": self.correlation_s,
+            "likelihood_ratio": self.likelihood_ratio}
+        rest = {} if self.likelihood_ratio is None else {
+            "sigma_bias_instability": self.sigma_bias_instability,
+            "sigma_correlation_s": self.sigma_correlation_s, "sigma_cut": self.sigma_cut,
+            "record_s": self.record_s}
+        return {**fit, "applied": self.applied, **rest,
+                "sd_factor": {k: list(v) for k, v in self.sd_factor.items()}}
+
 
 @dataclass(frozen=True)
 class NoiseModel:
@@ -74,6 +91,10 @@ class NoiseModel:
 
     method: str = ""
     sets: Mapping[str, NoiseFit] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON record (``extra.noise_model``)."""
+        return {"method": self.method, **{k: f.to_dict() for k, f in self.sets.items()}}
 
 
 def _noise_fit(r: Fields) -> NoiseFit:
@@ -119,6 +140,12 @@ class RateTest:
     rates: tuple[tuple[float, ...], ...] = ()
     chi2_dof: tuple[float, ...] = ()
 
+    def to_dict(self) -> dict[str, Any]:
+        """The record ``extra.rate_test`` (``R_rad_s`` and ``chi2_dof`` as arrays, as the fit
+        gives them; :func:`fdi.fileio.to_jsonable` writes them)."""
+        return {"pairs": [list(p) for p in self.pairs], "R_rad_s": np.array(self.rates, float),
+                "chi2_dof": np.array(self.chi2_dof, float)}
+
 
 @dataclass(frozen=True)
 class ResidualStep:
@@ -143,6 +170,11 @@ class ResidualStep:
     n: int
     mean: tuple[float, ...]
     rms: tuple[float, ...]
+
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON record (``extra.residual_steps.<kind>[k]``)."""
+        return {"step": self.step, "label": self.label, "kind": self.kind, "n": self.n,
+                "mean": list(self.mean), "rms": list(self.rms)}
 
 
 @dataclass(frozen=True)
@@ -180,6 +212,17 @@ class EarthRateRecord:
     n_samples: int = 0
     denoised: bool = False
 
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON record (``extra.earth_rate_fit``; deg/h and deg)."""
+        h = None if self.horizontal is None else self.horizontal / DPH
+        return {"rate_dph": self.rate / DPH, "rate_dph_sd": self.rate_sd / DPH,
+                "horizontal_dph": h, "horizontal_dph_sd": self.horizontal_sd / DPH,
+                "heading_offset_deg": self.heading_offset / DEG,
+                "heading_offset_deg_sd": self.heading_offset_sd / DEG,
+                "steps": list(self.steps), "per_step_dph": [x / DPH for x in self.per_step],
+                "scatter_sd_dph": self.scatter_sd / DPH, "n_samples": self.n_samples,
+                "denoised": self.denoised}
+
 
 @dataclass(frozen=True)
 class GyroBias:
@@ -207,6 +250,23 @@ class GyroBias:
     turns_steps: tuple[int, ...] = ()
     turns_per_step: tuple[int, ...] = ()
     vertical_correction: tuple[float, ...] | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON record (``extra.gyro_bias``): rates divided by the factor of
+        :attr:`unit`; the whole-turn entries only when :attr:`turns` is set."""
+        f = input_unit_factor(self.unit)
+
+        def out(v: tuple[float, ...] | None) -> list[float] | None:
+            return None if v is None else [x / f for x in v]
+
+        rec: dict[str, Any] = {"unit": self.unit, "model": out(self.model),
+                               "model_sd": out(self.model_sd)}
+        if self.turns is not None:
+            rec.update({"turns": out(self.turns), "turns_sd": out(self.turns_sd),
+                        "turns_steps": list(self.turns_steps),
+                        "turns_per_step": list(self.turns_per_step),
+                        "vertical_correction": out(self.vertical_correction)})
+        return rec
 
 
 def read_rate_test(r: Fields) -> RateTest | None:
@@ -278,11 +338,31 @@ def read_gyro_bias(r: Fields) -> GyroBias | None:
                     vertical_correction=floats(g, "vertical_correction", None, f))
 
 
+PARITY_SD_KEYS = {"gyro": "parity_calibrated_sd", "accel": "parity_accel_calibrated_sd"}
+"""The ``extra`` key of the calibrated parity matrix's sd per sensor kind."""
+
+RESIDUAL_UNITS = {"gyro": "rad/s", "accel": "m/s^2"}
+"""``extra.residual_steps.unit``: the unit of the residual statistics per kind."""
+
+
 def read_parity_sd(r: Fields) -> dict[str, tuple[tuple[float, ...], ...]]:
     """``extra.parity_calibrated_sd`` and ``parity_accel_calibrated_sd`` per kind."""
     out = {}
-    for kind, key in (("gyro", "parity_calibrated_sd"), ("accel", "parity_accel_calibrated_sd")):
+    for kind, key in PARITY_SD_KEYS.items():
         if key in r:
             out[kind] = matrix(r, key)
     return out
+
+
+def parity_sd_to_dict(parity_sd: Mapping[str, tuple[tuple[float, ...], ...]]
+                      ) -> dict[str, Any]:
+    """The entries of the parity sds per kind (``parity_calibrated_sd``, ...): an array of
+    shape (n-3, n), ``[]`` for a set of three."""
+    return {PARITY_SD_KEYS[k]: np.array(v, float) if v else [] for k, v in parity_sd.items()}
+
+
+def residual_steps_to_dict(steps: Mapping[str, tuple[ResidualStep, ...]]) -> dict[str, Any]:
+    """The JSON record ``extra.residual_steps`` (with its ``unit`` table)."""
+    return {"unit": dict(RESIDUAL_UNITS),
+            **{k: [e.to_dict() for e in v] for k, v in steps.items()}}
 
