@@ -640,8 +640,8 @@ def _range_to_dict(s: SensorSet) -> dict[str, Any]:
 
 
 def _validated_range(r: Fields, sets: dict[str, SensorSet]) -> dict[str, SensorSet]:
-    """``validated_range``: the rate and specific force the calibration covered (``/3``,
-    optional, gyros)."""
+    """``validated_range``: the rate, specific force and jolt the calibration covered
+    (``/3``, optional, gyros)."""
     from dataclasses import replace
 
     v = r.mapping("validated_range", None)

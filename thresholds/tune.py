@@ -92,8 +92,9 @@ from fdi.tails import TailChoice, tail_variance_factors
 from fdi.units import DPS
 from thresholds.select import TUNING_SCHEMA
 
-__all__ = ["MAX_DEAD_TIME_SHARE", "MIN_SIMULATED_RATE", "DetectableSize", "Tuning", "check_scales",
-           "detectable_sizes", "max_false_alarms_per_hour", "tune", "upcrossing_probability"]
+__all__ = ["MAX_DEAD_TIME_SHARE", "MIN_SIMULATED_RATE", "DetectableSize", "Tuning",
+           "check_scales", "detectable_sizes", "max_false_alarms_per_hour", "tune",
+           "upcrossing_probability"]
 
 MAX_DEAD_TIME_SHARE = 0.1
 """Largest share of the mean time between false alarms that one alarm's shortest episode
