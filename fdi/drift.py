@@ -45,9 +45,10 @@ window's variance factor becomes
 
 so its threshold covers white noise, the tail and the expected drift, and the detectable
 size ``rimu tune`` states grows with ``sqrt(f'_w / f_w)``: a fault that looks like a drift
-slower and smaller than δ is given up, and the stated size says so. Without α (the bare
-rule, kept for the monitor's default thresholds' notes): ``f_w + w·δ²(h)``, the
-end-of-horizon offset put on every direction, which bounds f'_w from above.
+slower and smaller than δ is given up, and the stated size says so. Without α the function
+gives the bare rule ``f_w + w·δ²(h)``, the end-of-horizon offset put on every direction: an
+upper bound of f'_w (the tests compare the two); ``tune`` and the default thresholds always
+pass α.
 """
 
 from __future__ import annotations
@@ -272,12 +273,13 @@ def drift_variance_factors(model: DriftModel | None, scales: tuple[int, ...],
     """Variance factors that cover the drift over the horizon (module docstring); ``factors``
     unchanged without a model.
 
-    Without ``alpha``: ``f_w + w·δ²(h)``, the offset variance put on every direction. With
-    the per-scale false-alarm probabilities: the factor whose scaled χ²(df) level at α_w is
-    the larger of the α_w-levels of the two extreme shapes of an offset of total variance
-    δ² (``c = 1 + w·δ²/f_w``): along one direction, ``χ²(df−1) + c·χ²(1)``; spread evenly,
-    ``(1 + w·δ²/(df·f_w))·χ²(df)`` (the tail of a sum of weighted χ²(1) with a given
-    total weight lies between them, the one-direction shape the heavier at small α).
+    With the per-scale false-alarm probabilities (what ``tune`` and the default thresholds
+    pass): the factor whose scaled χ²(df) level at α_w is the larger of the α_w-levels,
+    averaged over the horizon (:meth:`DriftModel.offset_variances`), of the two extreme
+    shapes of an offset of total variance δ²(t) (``c = 1 + w·δ²(t)/f_w``): along one
+    direction, ``χ²(df−1) + c·χ²(1)``; spread evenly, ``(1 + (c−1)/df)·χ²(df)``. Without
+    ``alpha``: the bare upper bound ``f_w + w·δ²(h)``, the end-of-horizon offset put on
+    every direction.
 
     Parameters
     ----------

@@ -103,7 +103,8 @@ disagreement spike during a fast rotation)."""
 DECLARED = 8
 """Inside a crash or estimator event the log declares."""
 RANGE = 16
-"""Turning faster, about some body axis, than the calibration's samples did."""
+"""Beyond what the calibration's samples covered: turning faster about some body axis, or a
+larger specific force or jolt felt by every IMU."""
 
 REASONS: dict[int, str] = {SHOCK: "shock", SATURATION: "saturation", TUMBLE: "tumble",
                            DECLARED: "declared", RANGE: "range"}
@@ -490,16 +491,17 @@ class EnvelopeTracker:
 
     def _range(self, w: np.ndarray, accel: np.ndarray | None) -> np.ndarray:
         """True where the axis floor of the rate exceeds the validated rate on some axis, or
-        the specific force every IMU feels exceeds the validated one."""
+        the specific force or the jolt every IMU feels exceeds the validated one."""
         B = w.shape[1]
         out = np.zeros(B, bool)
         if self.validated_rate is not None:
             out |= np.any(_axis_floor(w) > self.validated_rate, axis=1)
-        if self.validated_specific_force is not None and accel is not None:
-            out |= _force_floor(np.asarray(accel, float).reshape(B, -1, 3)) \
-                > self.validated_specific_force
-        if self.validated_jolt is not None and accel is not None:
-            a = np.asarray(accel, float).reshape(B, -1, 3)
+        if accel is None:
+            return out
+        a = np.asarray(accel, float).reshape(B, -1, 3)
+        if self.validated_specific_force is not None:
+            out |= _force_floor(a) > self.validated_specific_force
+        if self.validated_jolt is not None:
             prev = self._acc_prev if (self._acc_prev is not None
                                       and self._acc_prev.shape == a.shape[1:]) else None
             out |= _jolt_floor(a, prev) > self.validated_jolt
