@@ -116,7 +116,15 @@ def draw_true_model(cal: Calibration, seed: int, *, kind: str = "gyro") -> TrueM
     """True parameters drawn from the calibration's own uncertainty.
 
     ``h_i/SF_i = (ĥ_i + δ_i)/ŜF_i`` with ``δ_i ~ N(0, input_error_cov_i)`` (the
-    gain-normalised error of the file's ``input_error_cov``), ``b_i ~ N(b̂_i, bias_sd_i²)``.
+    gain-normalised error of the file's ``input_error_cov``), and the bias such that the
+    raw offset at rest is the calibrated one up to the bias uncertainty:
+    ``b_i/SF_i = (b̂_i + e_i)/ŜF_i``, ``e_i ~ N(0, bias_sd_i²)``.
+
+    The calibration measured its bias on the output it calibrated (``ŜF·u`` at zero input,
+    seed 000 Eq. 13), so a scale-factor error does not move the output at rest. Drawing the
+    true bias around b̂ in input units instead would add ``(g − 1)·b̂`` (g the gain error)
+    at rest: with a MEMS bias of 3 °/s and a datasheet scale-factor tolerance of 3 %, a
+    0.09 °/s offset the calibration's ``bias_sd`` does not state.
     """
     s = cal.kind(kind)
     rng = np.random.default_rng([int(seed), 1])
@@ -128,7 +136,7 @@ def draw_true_model(cal: Calibration, seed: int, *, kind: str = "gyro") -> TrueM
         g = float(np.linalg.norm(a))
         axes.append(a / g)
         sfs.append(c.scale_factor / g)                   # h·x/SF_true = a·x/SF_cal
-        bs.append(c.bias + c.bias_sd * rng.standard_normal())
+        bs.append((c.bias + c.bias_sd * rng.standard_normal()) / g)
     return TrueModel(np.array(axes), np.array(sfs), np.array(bs),
                      np.array(s.noise_covariance, float), "drawn from calibration covariance")
 

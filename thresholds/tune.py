@@ -29,8 +29,10 @@ The tuning here
   of the episode rate (items 1);
 - the remaining effects (2, 3, and the calibration-uncertainty inflation of the thresholds
   during manoeuvres) are measured: healthy flights of this calibration are simulated
-  (:mod:`replay.flight_sim`, errors drawn from the calibration covariance, manoeuvres up to
-  300 °/s), the full-set false-alarm rate is counted, and the per-scale shares are scaled by
+  (:mod:`replay.flight_sim`, errors drawn from the calibration covariance, manoeuvres
+  inside the calibration's validated rate range and at most 300 °/s:
+  :func:`correction_max_rate_dps`; a set calibrated at rest is corrected at rest), the
+  full-set false-alarm rate is counted, and the per-scale shares are scaled by
   target/measured (``correction``); twice, the second time at the corrected level. Below
   :data:`MIN_SIMULATED_RATE` per hour the correction is measured at that rate and carried
   over (stated in the assumptions).
@@ -92,9 +94,9 @@ from fdi.tails import TailChoice, tail_variance_factors
 from fdi.units import DPS
 from thresholds.select import TUNING_SCHEMA
 
-__all__ = ["MAX_DEAD_TIME_SHARE", "MIN_SIMULATED_RATE", "DetectableSize", "Tuning",
-           "check_scales", "detectable_sizes", "max_false_alarms_per_hour", "tune",
-           "upcrossing_probability"]
+__all__ = ["CORRECTION_MAX_RATE_DPS", "MAX_DEAD_TIME_SHARE", "MIN_SIMULATED_RATE",
+           "DetectableSize", "Tuning", "check_scales", "correction_max_rate_dps",
+           "detectable_sizes", "max_false_alarms_per_hour", "tune", "upcrossing_probability"]
 
 MAX_DEAD_TIME_SHARE = 0.1
 """Largest share of the mean time between false alarms that one alarm's shortest episode
@@ -102,6 +104,9 @@ MAX_DEAD_TIME_SHARE = 0.1
 merge (a dead time D thins a Poisson rate R to R/(1 + R·D)), the counted rate no longer
 follows the thresholds, and ``tune`` refuses the target."""
 MIN_SIMULATED_RATE = 20.0
+CORRECTION_MAX_RATE_DPS = 300.0
+"""Largest body rate (°/s) of the correction flights of a calibration that states no
+validated range (:func:`correction_max_rate_dps`)."""
 """False alarms per hour below which the simulation correction is measured at this rate."""
 DETECTION_PROBABILITY = 0.99
 """Detection probability of the detectable sizes."""
@@ -317,13 +322,15 @@ def _share_thresholds(base: dict[str, Any], per_scale_rate: float, df: int) -> T
 
 def simulated_rate(cal: Calibration, thr: Thresholds, *, hours: float, seed: int,
                    kind: str = "gyro", flight_s: float | None = None,
-                   bar: Any = None) -> tuple[int, float]:
+                   bar: Any = None, max_rate_dps: float = CORRECTION_MAX_RATE_DPS
+                   ) -> tuple[int, float]:
     """False alarms and exposure (h) of the full set over simulated healthy flights.
 
     Flights last ``flight_s`` (default: about one expected false alarm each at the
     thresholds' budget, between 60 and 600 s): the rate varies from flight to flight with
-    the drawn calibration error, so many flights are needed. ``bar``: a tqdm bar advanced
-    by the simulated hours.
+    the drawn calibration error, so many flights are needed. Their manoeuvres reach
+    ``max_rate_dps`` (°/s) on each axis. ``bar``: a tqdm bar advanced by the simulated
+    hours.
     """
     from thresholds.campaign import RunSpec, run_one
 
@@ -335,12 +342,37 @@ def simulated_rate(cal: Calibration, thr: Thresholds, *, hours: float, seed: int
     for j in range(nf):
         r = run_one(cal, thr, RunSpec(j, int(np.random.SeedSequence([seed, 77, j])
                                                .generate_state(1)[0]), "healthy", 0.0, 0.0,
-                                      0, math.inf, flight_s), kind=kind)
+                                      0, math.inf, flight_s, float(max_rate_dps)),
+                    kind=kind)
         count += int(r.false_alarm)
         expo += r.exposure_s
         if bar is not None:
             bar.update(flight_s / 3600.0)
     return count, expo / 3600.0
+
+
+def correction_max_rate_dps(cal: Calibration, kind: str = "gyro") -> float:
+    """Largest body rate (°/s) of the correction flights: inside the calibration's
+    validated range on every axis.
+
+    A gyro calibration that states the rates its samples covered (``validated_rate``,
+    :mod:`fdi.envelope`) is monitored inside that range only: beyond it the monitor marks
+    the answer ``range`` and its alarms are context, not false alarms. So the flights that
+    measure the correction keep every axis within the smallest axis's range, and at most
+    :data:`CORRECTION_MAX_RATE_DPS`. A set calibrated at rest is corrected on flights at
+    rest: its datasheet scale-factor tolerance inflates the thresholds in a manoeuvre (ρ,
+    :mod:`fdi.detector`), and flights at 300 °/s would raise the budget at rest about
+    fourfold (4×MPU9250, measured). Without a stated range (turntable calibrations,
+    accelerometers): :data:`CORRECTION_MAX_RATE_DPS`.
+    """
+    s = cal.kind(kind)
+    vr = getattr(s, "validated_rate", None)
+    if vr is None:
+        return CORRECTION_MAX_RATE_DPS
+    lo = float(np.min(np.asarray(vr, float))) / DPS
+    if not math.isfinite(lo):
+        return CORRECTION_MAX_RATE_DPS
+    return float(min(max(lo, 0.0), CORRECTION_MAX_RATE_DPS))
 
 
 def _assumptions(cal: Calibration, thr: Thresholds, kind: str, df: int, beta: float
@@ -422,7 +454,8 @@ def _drift_assumptions(cal: Calibration, kind: str, thr: Thresholds, vf_no_drift
 def tune(cal: Calibration, *, false_alarms_per_hour: float, kind: str = "gyro",
          scales: int | tuple[int, ...] = 7, simulate_hours: float = 4.0,
          seed: int = 0, progress: bool = False,
-         drift_horizon_s: float | None = None) -> Tuning:
+         drift_horizon_s: float | None = None,
+         max_rate_dps: float | None = None) -> Tuning:
     """Thresholds whose full-set false-alarm rate is ``false_alarms_per_hour``.
 
     Parameters
@@ -445,6 +478,9 @@ def tune(cal: Calibration, *, false_alarms_per_hour: float, kind: str = "gyro",
         How long after its data the calibration must hold (s): the horizon of the drift
         term (module docstring). Default: the span of the calibration data. Ignored when
         the calibration has no drift model.
+    max_rate_dps : float, optional
+        Largest body rate of the correction flights (°/s). Default: inside the
+        calibration's validated range (:func:`correction_max_rate_dps`).
 
     Raises
     ------
@@ -474,6 +510,11 @@ def tune(cal: Calibration, *, false_alarms_per_hour: float, kind: str = "gyro",
             f"is more than {MAX_DEAD_TIME_SHARE:.0%} of the time between alarms; alarms "
             f"would merge and that is not a false-alarm budget")
     sc = check_scales(cal, scales, kind=kind, sample_rate_hz=fs)
+    max_rate_dps_given = max_rate_dps is not None
+    if max_rate_dps is None:
+        max_rate_dps = correction_max_rate_dps(cal, kind)
+    elif not (math.isfinite(float(max_rate_dps)) and float(max_rate_dps) >= 0):
+        raise ConfigError(f"--max-rate-dps must be >= 0 and finite, got {max_rate_dps}")
     if s.n < 4:
         raise ConfigError(f"{s.n} {kind} sensors: no parity space, nothing to tune")
     df, u2, beta, _, _ = _parity_geometry(cal, kind)
@@ -493,7 +534,8 @@ def tune(cal: Calibration, *, false_alarms_per_hour: float, kind: str = "gyro",
         thr_c = _share_thresholds({**base, "false_alarms_per_hour": Rc},
                                   Rc / (3600.0 * fs) / len(sc) / gamma, df)
         cnt, hrs = simulated_rate(cal, thr_c, hours=min(simulate_hours, 150.0 / Rc),
-                                  seed=seed + 1000 * p, kind=kind, bar=bar)
+                                  seed=seed + 1000 * p, kind=kind, bar=bar,
+                                  max_rate_dps=float(max_rate_dps))
         meas = max(cnt, 0.5) / hrs
         passes.append({"target_per_hour": Rc, "false_alarms": cnt, "exposure_h": hrs,
                        "rate_per_hour": cnt / hrs, "correction_before": gamma})
@@ -530,7 +572,12 @@ def tune(cal: Calibration, *, false_alarms_per_hour: float, kind: str = "gyro",
     ass["simulation_correction"] = {
         "factor": gamma, "passes": passes,
         "flights": "replay.flight_sim healthy, errors drawn from the calibration covariance, "
-                   "manoeuvres up to 300 deg/s, 60-600 s",
+                   f"manoeuvres up to {float(max_rate_dps):.4g} deg/s, 60-600 s",
+        "max_rate_dps": float(max_rate_dps),
+        "max_rate_source": ("given" if max_rate_dps_given else
+                            "the calibration's validated range (smallest axis)"
+                            if s.validated_rate is not None and kind == "gyro"
+                            else f"default ({CORRECTION_MAX_RATE_DPS:g} deg/s)"),
         "extrapolated": R < MIN_SIMULATED_RATE and bool(passes),
         "note": ("not simulated: analytic shares only (conservative)" if not passes
                  else f"measured at {Rc:g}/h and carried over to {R:g}/h" if R < Rc

@@ -15,6 +15,8 @@ MAX_SIMULATE_HOURS = 1e4
 """Most healthy flight hours simulated per correction pass."""
 MAX_DRIFT_HORIZON_S = 1e8
 """Longest drift horizon (about three years)."""
+MAX_RATE_DPS = 1e5
+"""Largest body rate of the correction flights a user may ask for (°/s)."""
 
 HELP = ("tune thresholds for a false-alarm rate; print them and the detectable fault size "
         "per window scale")
@@ -57,6 +59,11 @@ def configure(p: argparse.ArgumentParser) -> None:
                    help="how long after its data the calibration must hold, for the parity "
                         "drift term (s; default: the span of the calibration data; only "
                         "for a calibration with a drift model)")
+    p.add_argument("--max-rate-dps", type=nonnegative_float(MAX_RATE_DPS), default=None,
+                   metavar="DPS",
+                   help="largest body rate of the simulated correction flights (deg/s; "
+                        "default: inside the calibration's validated rate range, at most "
+                        "300; 0: at rest)")
     p.add_argument("--out", required=True, metavar="FILE",
                    help="write the rimu.tuning/1 file here (for --thresholds)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -73,12 +80,14 @@ def run(args: argparse.Namespace) -> int:
     cal = load_calibration(args.cal)
     tu = tune(cal, false_alarms_per_hour=args.false_alarms_per_hour, kind=args.kind,
               scales=scales, simulate_hours=args.simulate_hours, seed=args.seed,
-              progress=not args.no_progress, drift_horizon_s=args.drift_horizon_s)
+              progress=not args.no_progress, drift_horizon_s=args.drift_horizon_s,
+              max_rate_dps=args.max_rate_dps)
     th = tu.thresholds
     corr = tu.assumptions["simulation_correction"]
     print(f"thresholds for {th.false_alarms_per_hour:g} false alarms/h, {th.n} {th.kind} "
           f"sensors at {th.sample_rate_hz:g} Hz (correction {corr['factor']:.3f}: "
-          f"{corr['note']})")
+          f"{corr['note']}; flights up to {corr['max_rate_dps']:.3g} deg/s, "
+          f"{corr['max_rate_source']})")
     d0 = tu.detectable[0]
     print(f"{'scale':>6} {'window_s':>9} {'alpha':>10} {'chi2 thr':>9} {'var f':>6} "
           f"{'detectable (99 %)':>18} {'sigma':>7}")
