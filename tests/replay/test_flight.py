@@ -102,17 +102,29 @@ def test_true_model_is_used_and_noise_has_calibration_covariance():
     assert np.abs(zm).max() < 4, f"mean of the noise: {zm} standard errors"
 
 
+def _rest_offset_z(cal, seeds):
+    """Per seed and sensor, (ŜF·u_rest − b̂)/bias_sd: the calibrated output at zero input
+    minus the calibrated bias, in units of the stated bias uncertainty."""
+    zb = []
+    for seed in seeds:
+        m = draw_true_model(cal, seed)
+        for i, c in enumerate(cal.gyro.sensors):
+            u_rest = m.bias[i] / m.scale_factor[i]              # raw output at zero input
+            zb.append((c.scale_factor * u_rest - c.bias) / c.bias_sd)
+    return np.array(zb)
+
+
 def test_true_parameters_drawn_from_calibration_covariance():
-    """(a_true − a_cal) ~ N(0, input_error_cov), (b_true − b̂) ~ N(0, bias_sd²), over seeds."""
-    zs, zb = [], []
+    """(a_true − a_cal) ~ N(0, input_error_cov), and the calibrated output at rest minus b̂
+    ~ N(0, bias_sd²) (what the calibration measured), over seeds."""
+    zs = []
     for seed in range(400):
         m = draw_true_model(CAL, seed)
         for i, c in enumerate(CAL.gyro.sensors):
             a_true = m.axis[i] * c.scale_factor / m.scale_factor[i]   # gain-normalised
             d = a_true - c.axis
             zs.append(d / np.sqrt(np.diag(c.input_error_cov)))
-            zb.append((m.bias[i] - c.bias) / c.bias_sd)
-    zs, zb = np.array(zs), np.array(zb)
+    zs, zb = np.array(zs), _rest_offset_z(CAL, range(400))
     for k in range(3):
         v = zs[:, k].var()
         assert 0.9 < v < 1.1, f"axis error component {k}: variance/expected {v:.3f}"
@@ -121,6 +133,27 @@ def test_true_parameters_drawn_from_calibration_covariance():
     # calibration error is present: the model differs from the calibration
     m = draw_true_model(CAL, 0)
     assert np.all(m.axis != CAL.gyro.H) and np.all(m.bias != CAL.gyro.biases)
+
+
+def test_rest_offset_stays_within_bias_sd_for_a_large_mems_bias():
+    """A MEMS gyro with a 3 °/s bias and a 3 % scale-factor tolerance: a scale-factor error
+    must not move the output at rest (the calibration measured its bias there), so the
+    offset at rest stays N(0, bias_sd²). Drawing b_true around b̂ in input units instead
+    gave an offset of (g − 1)·b̂: 0.09 °/s (1 sd) here, 65 bias_sd."""
+    from dataclasses import replace
+
+    s = CAL.gyro
+    big = tuple(replace(c, bias=3.0 * DPS * (1 if i % 2 else -1), bias_sd=5 * DPH,
+                        input_error_cov=np.eye(3) * 0.03 ** 2)
+                for i, c in enumerate(s.sensors))
+    cal = Calibration(CAL.configuration, {"gyro": replace(s, sensors=big)},
+                      CAL.sample_rate_hz)
+    zb = _rest_offset_z(cal, range(300))
+    n = zb.size
+    assert abs(zb.mean()) < 3 / np.sqrt(n), f"mean rest offset {zb.mean():.3f} bias_sd"
+    # variance of n standard normals: sd of the sample variance sqrt(2/n)
+    assert abs(zb.var() - 1.0) < 3 * np.sqrt(2.0 / n), \
+        f"rest offset variance {zb.var():.3f} bias_sd² (expected 1)"
 
 
 def test_truth_calibration_used_as_is():

@@ -7,10 +7,12 @@ sensor of both flights. Each claim of :func:`thresholds.field_claims.must_hold` 
 claims and their numbers come from the issue (no tolerance chosen here). Skipped when the
 data are absent (``RIMU_SHARED_DATA`` overrides the folder).
 
-Nine of the ten hold (statistical isolation, envelope with the calibrated range, tail
-thresholds with the timing-jitter term, the static set's tail and parity-drift thresholds,
-docs/drift.md, the clearing floor, the targets ``rimu tune`` refuses); the one that does
-not is a strict xfail with the reason (:data:`OPEN`).
+All ten hold (statistical isolation, envelope with the calibrated range, tail thresholds
+with the timing-jitter term, the static set's tail and parity-drift thresholds,
+docs/drift.md, the clearing floor, the targets ``rimu tune`` refuses, correction flights
+inside the calibration's validated range and a flight simulator whose drawn bias keeps the
+calibrated output at rest). A claim that stops holding fails here; :data:`OPEN` is where
+one that cannot hold yet would be listed as a strict xfail, with the reason.
 """
 
 from __future__ import annotations
@@ -79,14 +81,7 @@ def test_the_evidence_covers_what_the_issue_asks(verdicts):
         assert any(r["resolved"] for r in rows)
 
 
-OPEN = {
-    CLAIMS[7]: "one row: the static set tuned on its second half at 100/h gives no alarm "
-               "outside the envelope on the first (13.0 expected; the rate is shown below a "
-               "third of the target): the thresholds cover the drift's distribution at "
-               "alpha, and with the offset at its median size the windows exceed at 0.095 "
-               "of the budget (docs/drift.md); 1000/h is refused by rimu tune at 43.5 and "
-               "50 Hz (alarms would merge)",
-}
+OPEN: dict[str, str] = {}
 """Claims that do not hold yet (issue 17 stays open on them): strict xfail, so a change that
 makes one hold fails here until it moves to the holding list."""
 
