@@ -104,10 +104,10 @@ MAX_DEAD_TIME_SHARE = 0.1
 merge (a dead time D thins a Poisson rate R to R/(1 + R·D)), the counted rate no longer
 follows the thresholds, and ``tune`` refuses the target."""
 MIN_SIMULATED_RATE = 20.0
+"""False alarms per hour below which the simulation correction is measured at this rate."""
 CORRECTION_MAX_RATE_DPS = 300.0
 """Largest body rate (°/s) of the correction flights of a calibration that states no
 validated range (:func:`correction_max_rate_dps`)."""
-"""False alarms per hour below which the simulation correction is measured at this rate."""
 DETECTION_PROBABILITY = 0.99
 """Detection probability of the detectable sizes."""
 
@@ -362,17 +362,24 @@ def correction_max_rate_dps(cal: Calibration, kind: str = "gyro") -> float:
     :data:`CORRECTION_MAX_RATE_DPS`. A set calibrated at rest is corrected on flights at
     rest: its datasheet scale-factor tolerance inflates the thresholds in a manoeuvre (ρ,
     :mod:`fdi.detector`), and flights at 300 °/s would raise the budget at rest about
-    fourfold (4×MPU9250, measured). Without a stated range (turntable calibrations,
-    accelerometers): :data:`CORRECTION_MAX_RATE_DPS`.
+    fourfold (4×MPU9250, measured). The smallest axis is the conservative choice for a
+    flight whose axes reach different rates (flight 41: 254, 148, 71 °/s gives 71): fewer
+    manoeuvres inflate fewer thresholds, more simulated alarms lower α. Without a stated
+    range (turntable calibrations, accelerometers): :data:`CORRECTION_MAX_RATE_DPS`.
     """
-    s = cal.kind(kind)
-    vr = getattr(s, "validated_rate", None)
-    if vr is None:
-        return CORRECTION_MAX_RATE_DPS
-    lo = float(np.min(np.asarray(vr, float))) / DPS
+    return _correction_rate(cal, kind)[0]
+
+
+def _correction_rate(cal: Calibration, kind: str) -> tuple[float, str]:
+    """:func:`correction_max_rate_dps` and where it comes from (for the tuning file)."""
+    vr = getattr(cal.kind(kind), "validated_rate", None)
+    lo = math.nan if vr is None else float(np.min(np.asarray(vr, float))) / DPS
     if not math.isfinite(lo):
-        return CORRECTION_MAX_RATE_DPS
-    return float(min(max(lo, 0.0), CORRECTION_MAX_RATE_DPS))
+        return CORRECTION_MAX_RATE_DPS, f"default ({CORRECTION_MAX_RATE_DPS:g} deg/s)"
+    if lo >= CORRECTION_MAX_RATE_DPS:
+        return CORRECTION_MAX_RATE_DPS, (f"the calibration's validated range, capped at "
+                                         f"{CORRECTION_MAX_RATE_DPS:g} deg/s")
+    return max(lo, 0.0), "the calibration's validated range (smallest axis)"
 
 
 def _assumptions(cal: Calibration, thr: Thresholds, kind: str, df: int, beta: float
@@ -510,10 +517,11 @@ def tune(cal: Calibration, *, false_alarms_per_hour: float, kind: str = "gyro",
             f"is more than {MAX_DEAD_TIME_SHARE:.0%} of the time between alarms; alarms "
             f"would merge and that is not a false-alarm budget")
     sc = check_scales(cal, scales, kind=kind, sample_rate_hz=fs)
-    max_rate_dps_given = max_rate_dps is not None
     if max_rate_dps is None:
-        max_rate_dps = correction_max_rate_dps(cal, kind)
-    elif not (math.isfinite(float(max_rate_dps)) and float(max_rate_dps) >= 0):
+        max_rate_dps, rate_source = _correction_rate(cal, kind)
+    else:
+        rate_source = "given"
+    if not (math.isfinite(float(max_rate_dps)) and float(max_rate_dps) >= 0):
         raise ConfigError(f"--max-rate-dps must be >= 0 and finite, got {max_rate_dps}")
     if s.n < 4:
         raise ConfigError(f"{s.n} {kind} sensors: no parity space, nothing to tune")
@@ -574,10 +582,7 @@ def tune(cal: Calibration, *, false_alarms_per_hour: float, kind: str = "gyro",
         "flights": "replay.flight_sim healthy, errors drawn from the calibration covariance, "
                    f"manoeuvres up to {float(max_rate_dps):.4g} deg/s, 60-600 s",
         "max_rate_dps": float(max_rate_dps),
-        "max_rate_source": ("given" if max_rate_dps_given else
-                            "the calibration's validated range (smallest axis)"
-                            if s.validated_rate is not None and kind == "gyro"
-                            else f"default ({CORRECTION_MAX_RATE_DPS:g} deg/s)"),
+        "max_rate_source": rate_source,
         "extrapolated": R < MIN_SIMULATED_RATE and bool(passes),
         "note": ("not simulated: analytic shares only (conservative)" if not passes
                  else f"measured at {Rc:g}/h and carried over to {R:g}/h" if R < Rc
