@@ -13,7 +13,9 @@ calibration the way real sensors do (seed 000 Eq. 13, seed 001 Eq. 1)::
   factors ``SF_i`` and biases ``b_i`` are used as they are;
 - otherwise they are drawn from the calibration file's own uncertainty: the gain-normalised
   axis ``h_i/SF_i`` errs by ``δ_i ~ N(0, input_error_cov_i)`` (in units of the calibrated
-  gain), and ``b_i ~ N(b̂_i, bias_sd_i²)``, so calibration error is present in every flight;
+  gain), and the bias so that the calibrated output at rest is ``b̂_i + e_i``,
+  ``e_i ~ N(0, bias_sd_i²)`` (:func:`draw_true_model`), so calibration error is present in
+  every flight;
 - ``Σ`` is the calibration's per-sample noise covariance (the truth's when it has one),
   scaled by ``fs/fs_cal`` when the flight's sample rate differs (white noise of the same
   density);
