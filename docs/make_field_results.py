@@ -244,7 +244,8 @@ def _markdown(doc: dict, images: list[str]) -> str:
          "(`rimu calibrate --in-flight`), the bench set by `rimu calibrate --static` (its "
          "residual's tail and drift models and the range its samples covered); the monitor "
          "runs through `rimu monitor-file`'s chain; thresholds come from `rimu tune`'s "
-         "library call.", "",
+         "library call, whose simulated correction flights stay inside each calibration's "
+         "validated rate range (its smallest axis; at rest for the bench set).", "",
          "## Must hold", ""]
     L += _holds_table(now, before)
     L += ["", "Definitions (module docstring of `thresholds/field.py`): an *alarm episode* "
