@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:
     from fdi.calfile import Calibration
 
-__all__ = ["MODELS", "configure_options", "run", "summary_text"]
+__all__ = ["MODELS", "configure_options", "covered_range_text", "run", "summary_text"]
 
 MODELS = ("auto", "full", "rotation")
 """``--model`` (:data:`calibration.inflight.fit.MODELS`; kept here so that ``--help`` does
@@ -39,6 +39,28 @@ def configure_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--report", metavar="DIR",
                    help="with --in-flight: write report.md and PNG plots (residual before "
                         "and after, the offset of each piece, the periods left out) into DIR")
+
+
+def covered_range_text(cal: Calibration) -> str | None:
+    """The range the gyro calibration's samples covered, one line (None: no range stated).
+
+    Shared by ``--in-flight`` and ``--static``: beyond it the monitor marks its answers out
+    of the envelope, and ``rimu tune``'s correction flights stay inside it.
+    """
+    from fdi.units import DPS, G0
+
+    g = cal.gyro
+    if g.validated_rate is None:
+        return None
+    digits = 2 if max(g.validated_rate) < 10 * DPS else 0
+    force = (f", specific force {g.validated_specific_force / G0:.2f} g"
+             if g.validated_specific_force is not None else "")
+    jolt = (f", jolt {g.validated_jolt:.3g} m/s^2 per sample"
+            if g.validated_jolt is not None else "")
+    return ("covered range (the monitor marks what lies beyond as out of its envelope; rimu "
+            "tune's correction flights stay inside it): rate "
+            + " / ".join(f"{v / DPS:.{digits}f}" for v in g.validated_rate)
+            + f" deg/s about x / y / z{force}{jolt}")
 
 
 def summary_text(cal: Calibration) -> str:
@@ -91,7 +113,6 @@ def run(args: argparse.Namespace) -> int:
     """Run ``rimu calibrate --in-flight``."""
     from calibration.inflight.calfile import calibration_from_fit
     from calibration.inflight.fit import fit_inflight
-    from fdi.units import DPS, G0
     from replay.flight_io import load_flight_dir
     from rimu.outputs import atomic_file, input_path, output_file
 
@@ -120,13 +141,9 @@ def run(args: argparse.Namespace) -> int:
               + f"; w={r1.scale}: excess kurtosis {r1.excess_kurtosis:.3g}"
               + (f", GPD xi {r1.gpd.shape:.2f} +- {r1.gpd.shape_sd:.2f}" if r1.gpd else "")
               + " (rimu tune and the monitor overbound the non-Gaussian scales)")
-    g = cal.gyro
-    if g.validated_rate is not None:
-        force = (f", specific force {g.validated_specific_force / G0:.2f} g"
-                 if g.validated_specific_force is not None else "")
-        print("covered range (the monitor marks what lies beyond as out of its envelope): "
-              "rate " + " / ".join(f"{v / DPS:.0f}" for v in g.validated_rate)
-              + f" deg/s about x / y / z{force}")
+    rng = covered_range_text(cal)
+    if rng is not None:
+        print(rng)
     print(f"wrote {out}")
     if rep is not None:
         from calibration.inflight.report import write_flight_plots

@@ -25,6 +25,7 @@ def run(args: argparse.Namespace) -> int:
     """Run ``rimu calibrate --static``."""
     from calibration.inflight.static import calibrate_static, static_text
     from replay.flight_io import load_flight_dir
+    from rimu.commands.calibrate_inflight import covered_range_text
     from rimu.outputs import atomic_file, input_path, output_file
 
     out = output_file(args.out, "--out")
@@ -34,5 +35,8 @@ def run(args: argparse.Namespace) -> int:
     with atomic_file(out) as tmp:
         cal.save(tmp)
     print(static_text(cal.extras.static))
+    rng = covered_range_text(cal)
+    if rng is not None:
+        print(rng)
     print(f"wrote {out}")
     return 0

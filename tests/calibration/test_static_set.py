@@ -118,7 +118,14 @@ def test_cli_static_calibration_then_diagnose_names_the_drift(tmp_path: Path, ca
     d = tmp_path / "f"
     save_flight_dir(_set(drift={1: np.array([0.2 * DPS, 0.0, 0.0])}), d)
     assert main(["calibrate", "--static", str(d), "--out", str(tmp_path / "c.json")]) == 0
-    assert "static calibration against imu1" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "static calibration against imu1" in out
+    # the range the samples covered, as the file states it (rimu tune corrects inside it)
+    from fdi.calfile import load_calibration
+
+    vr = load_calibration(tmp_path / "c.json").gyro.validated_rate
+    line = next(x for x in out.splitlines() if x.startswith("covered range"))
+    assert " / ".join(f"{v / DPS:.2f}" for v in vr) in line and "tune" in line
     assert main(["diagnose", str(d), "--cal", str(tmp_path / "c.json"), "--json"]) == 0
     doc = json.loads(capsys.readouterr().out)
     found = {e["imu"] for e in doc["effects"] if e["name"] in ("bias_drift",
