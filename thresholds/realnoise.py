@@ -106,6 +106,13 @@ def static_calibration(y: np.ndarray, fs: float, names: tuple[str, ...],
                        drift: bool = False) -> Calibration:
     """A calibration of static channels (N, n) rad/s: aligned triads, SF 1, bias = mean.
 
+    The measurement harness of ``docs/drift.md`` and ``docs/noise-tails.md`` (bare arrays,
+    every choice a switch, so their before/after tables stay reproducible). A set at rest
+    is calibrated for use by ``rimu calibrate --static``
+    (:func:`calibration.inflight.static.calibrate_static`: alignment from gravity and the
+    shared motion, shocks left out, the range covered); both fit the residual's tail and
+    drift models with the same code.
+
     ``bias_sd`` is the standard error of the mean, or with ``drift_bias_sd`` the Allan
     deviation at the longest τ of the part (the in-run bias wander the mean cannot
     follow), which the monitor's bias-uncertainty inflation (1 + w·β/f_w) then carries.
