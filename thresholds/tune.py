@@ -372,7 +372,7 @@ def correction_max_rate_dps(cal: Calibration, kind: str = "gyro") -> float:
 
 def _correction_rate(cal: Calibration, kind: str) -> tuple[float, str]:
     """:func:`correction_max_rate_dps` and where it comes from (for the tuning file)."""
-    vr = getattr(cal.kind(kind), "validated_rate", None)
+    vr = cal.kind(kind).validated_rate
     lo = math.nan if vr is None else float(np.min(np.asarray(vr, float))) / DPS
     if not math.isfinite(lo):
         return CORRECTION_MAX_RATE_DPS, f"default ({CORRECTION_MAX_RATE_DPS:g} deg/s)"
