@@ -11,7 +11,8 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["CAPABILITIES", "EVENT_TYPES", "STATUSES", "Answer", "BlockResult", "Event"]
+__all__ = ["CAPABILITIES", "EVENT_TYPES", "STATUSES", "TIME_STATUSES", "Answer", "BlockResult",
+           "Event"]
 
 EVENT_TYPES = ("detected", "isolated", "disagree", "health", "readmitted", "envelope")
 """Kinds of :class:`Event`: ``"disagree"`` names sensors whose fault hypotheses the data
@@ -22,6 +23,9 @@ envelope."""
 CAPABILITIES = ("isolate", "detect", "reconstruct", "none")
 """What the monitor can still do with its healthy sensors (best first)."""
 
+TIME_STATUSES = ("ok", "nonfinite", "backward", "jump", "rebased")
+"""Verdicts on a sample's time stamp (``Answer.time_status``), in the order of the kernel's
+codes (:data:`fdi.state.TIME`)."""
 STATUSES = ("ok", "detected", "isolated", "stale", "nonfinite", "range", "stuck", "length")
 """Per-sensor status strings: ``"ok"``; ``"detected"`` (a fault is detected in the healthy
 set and not yet attributed); ``"isolated"`` (by the parity test); or the health check that
@@ -138,6 +142,13 @@ class Answer:
     suspects : tuple of int
         1-based sensors under suspicion while a detection is active (the hypotheses the
         data do not reject); empty otherwise.
+    time_status : str
+        The verdict on the sample's time stamp (:data:`TIME_STATUSES`): ``"ok"``;
+        ``"nonfinite"`` (NaN or ±inf), ``"backward"`` (earlier than the last good one) or
+        ``"jump"`` (more than ``MonitorSettings.max_time_step_s`` after it): the sample is
+        tested as any other but its time is not taken for the stale and re-admission
+        clocks (the stale clock then runs on the sample count); ``"rebased"``: a run of
+        bad but mutually consistent time stamps became the new time base here.
     """
 
     t: float
@@ -154,6 +165,7 @@ class Answer:
     envelope: int = 0
     unverified: np.ndarray = field(default_factory=lambda: np.zeros(3, bool))
     suspects: tuple[int, ...] = ()
+    time_status: str = "ok"
 
 
 @dataclass(frozen=True)
@@ -176,6 +188,9 @@ class BlockResult:
         Operating-envelope code per sample (None from producers that do not track it).
     unverified : ndarray of bool, shape (N, 3)
         Unverified body axes per sample, as in :class:`Answer`.
+    time_status : ndarray of str, shape (N,)
+        The verdict on each sample's time stamp, as in :class:`Answer` (None from
+        producers that do not judge it).
     """
 
     t: np.ndarray
@@ -190,6 +205,7 @@ class BlockResult:
     parity: np.ndarray | None = None
     envelope: np.ndarray | None = None
     unverified: np.ndarray | None = None
+    time_status: np.ndarray | None = None
 
     def __len__(self) -> int:
         return int(self.t.shape[0])

@@ -45,6 +45,7 @@ _EMPTY_WIDTH: dict[str, tuple[Any, ...]] = {
     "thresholds": ("K",), "parity": ("p",), "unverified": (3,)}
 # dtype of an empty block's fields (a filled block takes it from the values)
 _EMPTY_DTYPE: dict[str, Any] = {"healthy": bool, "capability": CAPABILITY_DTYPE,
+                                "time_status": CAPABILITY_DTYPE,
                                 "unverified": bool, "envelope": np.int64}
 
 

@@ -57,6 +57,7 @@ from fdi.state import (
     AXIS0,
     BIAS,
     BLOCK_ROWS,
+    CAND_T,
     CAPABILITY,
     CAPABILITY_CODE,
     CLEAR_RUN,
@@ -81,11 +82,15 @@ from fdi.state import (
     HEALTH_STALE,
     HEALTH_STUCK,
     HI,
+    HOLD_OPEN,
     IN_SET,
     JITTER_COEF,
+    LAST_GOOD_T,
     LAST_RAW,
     LAST_VALID_T,
     LO,
+    MAX_TIME_STEP_S,
+    MISSED_RUN,
     N_WINDOWS,
     OMEGA0,
     PERSISTENCE,
@@ -102,6 +107,8 @@ from fdi.state import (
     READMIT_DWELL_S,
     READMIT_GATE,
     READMIT_SENSOR,
+    REBASE_RUN,
+    REBASE_SAMPLES,
     RETURN_DETECTED,
     RHO_COEF0,
     RING_LEN,
@@ -123,8 +130,10 @@ from fdi.state import (
     SET_SENSORS,
     SF,
     SIGMA_II,
+    STALE_SAMPLES,
     STALE_TIMEOUT_S,
     STARTED,
+    STATE_CLOCK,
     STATE_CUSUM,
     STATE_SENSOR,
     STATE_WINDOWS,
@@ -140,6 +149,14 @@ from fdi.state import (
     STOP_ROW,
     STUCK_COUNT,
     THRESHOLD,
+    TIME_BACKWARD,
+    TIME_CODE,
+    TIME_JUMP,
+    TIME_NONFINITE,
+    TIME_OK,
+    TIME_REBASED,
+    TIME_STATUS,
+    WINDOW_COUNT,
     offset,
 )
 from fdi.state import span as _span_py
@@ -260,10 +277,50 @@ def compensate(raw, r, corr, cr, sensors, mats, df, has_omega, y, p, z, w, v0, v
 
 
 @njit(**_INLINE)
-def health_checks(t, raw, r, valid, vr, sensors, sensor, counters, stuck, stale_s) -> int:
+def time_check(t, clock, counters, max_step, rebase) -> int:
+    """The time-stamp verdict of one sample (:data:`fdi.state.TIME`); keeps the monitor's
+    time base in ``clock`` (:data:`fdi.state.CLOCK`).
+
+    A time stamp is good when it is finite, not earlier than the last good one and at most
+    ``max_step`` (s) after it (the first finite one is good). A bad one is not taken for the
+    clocks; the sample is tested as any other. ``rebase`` bad time stamps in a row that are
+    consistent among themselves (each finite, not earlier than the one before and at most
+    ``max_step`` after it) become the new time base (a clock reset, a genuine jump): that
+    sample is ``TIME_REBASED`` and good.
+    """
+    lg = clock[LAST_GOOD_T]
+    if not math.isfinite(t):
+        counters[REBASE_RUN] = 0
+        return TIME_NONFINITE
+    if lg != lg or (t >= lg and t - lg <= max_step):
+        clock[LAST_GOOD_T] = t
+        counters[REBASE_RUN] = 0
+        return TIME_OK
+    ct = clock[CAND_T]
+    if counters[REBASE_RUN] > 0 and t >= ct and t - ct <= max_step:
+        counters[REBASE_RUN] += 1
+    else:
+        counters[REBASE_RUN] = 1
+    clock[CAND_T] = t
+    if counters[REBASE_RUN] >= rebase:
+        counters[REBASE_RUN] = 0
+        clock[LAST_GOOD_T] = t
+        return TIME_REBASED
+    return TIME_BACKWARD if t < lg else TIME_JUMP
+
+
+@njit(**_INLINE)
+def health_checks(t, time_good, raw, r, valid, vr, sensors, sensor, counters, stuck,
+                  stale_s, stale_n) -> int:
     """Health verdict per sensor of the set (``counters[HEALTH0 + i]``); returns how many
     failed. Each sensor's check reads only its own history, so the order of isolation does
-    not change the verdicts."""
+    not change the verdicts.
+
+    The stale clock runs on two counts: the time since the sensor's latest valid sample at
+    a good time stamp (``time_good``: this sample's time stamp is good), and the samples in
+    a row without a valid sample of it (more than ``stale_n``). A bad time stamp neither
+    starts nor stops it (a valid sample at a bad time leaves the time unknown, NaN: the
+    sample count alone decides until the next valid sample at a good time)."""
     failed = 0
     for i in range(sensors.shape[1]):
         counters[HEALTH0 + i] = HEALTH_OK
@@ -284,13 +341,20 @@ def health_checks(t, raw, r, valid, vr, sensors, sensor, counters, stuck, stale_
             else:
                 sensor[i, SAME_RUN] = 1.0
                 sensor[i, LAST_RAW] = v
-            # a timestamp that goes backwards (or is NaN) must not reset the stale clock
-            lvt = sensor[i, LAST_VALID_T]
-            if t > lvt or lvt != lvt:
-                sensor[i, LAST_VALID_T] = t
-        elif t - sensor[i, LAST_VALID_T] > stale_s:
-            counters[HEALTH0 + i] = HEALTH_STALE
-            failed += 1
+            sensor[i, MISSED_RUN] = 0.0
+            if time_good:
+                # equal time stamps keep the clock (a good time is never earlier)
+                lvt = sensor[i, LAST_VALID_T]
+                if t > lvt or lvt != lvt:
+                    sensor[i, LAST_VALID_T] = t
+            else:
+                sensor[i, LAST_VALID_T] = np.nan
+        else:
+            sensor[i, MISSED_RUN] += 1.0
+            if (sensor[i, MISSED_RUN] > stale_n
+                    or (time_good and t - sensor[i, LAST_VALID_T] > stale_s)):
+                counters[HEALTH0 + i] = HEALTH_STALE
+                failed += 1
     return failed
 
 
@@ -301,11 +365,13 @@ def readmission_check(t, raw, r, corr, cr, valid, vr, sensors, mats, df, capabil
 
     Good behaviour: valid, within the raw bounds, not repeating, and |y_i − h_iᵀω̂|² below
     gate·(Σ_ii + h_iᵀPh_i) with ω̂ from the healthy set (``gate``: the squared standardised
-    residual, :attr:`fdi.settings.MonitorSettings.readmit_gate`; 9 is 3σ).
+    residual, :attr:`fdi.settings.MonitorSettings.readmit_gate`; 9 is 3σ), at a good time
+    stamp (a bad one restarts the dwell: its length is not known).
     """
     if capability == _NONE or counters[DETECTED] != 0:
         return -1
     n = sensors.shape[1]
+    time_good = counters[TIME_STATUS] == TIME_OK or counters[TIME_STATUS] == TIME_REBASED
     for i in range(n):
         if sensors[IN_SET, i] != 0.0 and not valid[vr, i]:
             return -1
@@ -322,7 +388,7 @@ def readmission_check(t, raw, r, corr, cr, valid, vr, sensors, mats, df, capabil
             hw = (sensors[AXIS0, i] * w[0] + sensors[AXIS0 + 1, i] * w[1]
                   + sensors[AXIS0 + 2, i] * w[2])
             var = sensors[SIGMA_II, i] + sensors[H_P_H, i]
-            good = (yi - hw) ** 2 < gate * var
+            good = (yi - hw) ** 2 < gate * var and time_good
         sensor[i, LAST_RAW] = v
         since = sensor[i, GOOD_SINCE_T]
         if not good:
@@ -342,9 +408,12 @@ def detection_machine(alarm, clear, fired, ask_isolate, persistence, clear_sampl
     The first alarm detects; ``persistence`` consecutive alarms ask the monitor to isolate
     (when the set can tell hypotheses apart, ``ask_isolate``; the monitor decides,
     :func:`fdi.isolation.decide`, and is asked again at every further alarm until it
-    excludes); a detection clears after
-    ``clear_samples`` samples below the clearing thresholds (hysteresis: one event per
-    onset) and stops the kernel after that sample (the monitor forgets its suspects).
+    excludes); a detection clears after ``clear_samples`` samples in a row below the
+    clearing levels (hysteresis: one event per onset; the levels follow the threshold's
+    inflation, :func:`fdi.windows.window_update`) once the windows hold at least
+    ``counters[HOLD_OPEN]`` samples (set at envelope re-entry: a detection open then stays
+    open until every window has refilled; before that the run of clear samples starts
+    again), and stops the kernel after that sample (the monitor forgets its suspects).
     """
     code = STOP_NONE
     if counters[DETECTED] == 0:
@@ -358,14 +427,22 @@ def detection_machine(alarm, clear, fired, ask_isolate, persistence, clear_sampl
         code = STOP_DETECTED
     else:
         counters[DETECTED_ROWS] += 1
+        if alarm and counters[CLEAR_RUN] > 0:
+            # the evidence had fallen back below the clearing levels and rises again: a new
+            # onset within the open detection; its isolation windows start here (what came
+            # before, a false alarm, must not hide it)
+            counters[DETECTED_ROWS] = 1
         counters[ALARM_RUN] = counters[ALARM_RUN] + 1 if alarm else 0
         counters[CLEAR_RUN] = counters[CLEAR_RUN] + 1 if clear else 0
     if ask_isolate and counters[ALARM_RUN] >= persistence:
         counters[FIRED] = fired
         code |= STOP_ISOLATE
     elif counters[DETECTED] != 0 and counters[CLEAR_RUN] >= clear_samples:
-        counters[DETECTED] = 0
-        code = STOP_CLEARED
+        if counters[WINDOW_COUNT] < counters[HOLD_OPEN]:     # not every window refilled yet
+            counters[CLEAR_RUN] = 0
+        else:
+            counters[DETECTED] = 0
+            code = STOP_CLEARED
     return code
 
 
@@ -456,10 +533,14 @@ def _advance(t, raw, corr, valid, r0, r1, kset, values, counters, out) -> int:
     persistence = int(kset[ic + PERSISTENCE])
     clear_samples = int(kset[ic + CLEAR_SAMPLES])
     stale_s = fconst[STALE_TIMEOUT_S]
+    stale_n = fconst[STALE_SAMPLES]
+    max_step = fconst[MAX_TIME_STEP_S]
+    rebase = int(kset[ic + REBASE_SAMPLES])
     dwell_s = fconst[READMIT_DWELL_S]
     gate = fconst[READMIT_GATE]
     R = counters[RING_LEN]
     sensor = _span(values, STATE_SENSOR, n, 0).reshape(n, SENSOR_STATE_COLS)
+    clock = _span(values, STATE_CLOCK, n, 0)
     cusum = _span(values, STATE_CUSUM, n, 0).reshape(CUSUM_ROWS, n)
     o_windows = offset(STATE_WINDOWS, n, 0)
     windows = values[o_windows:o_windows + (R + 1) * (df + 1)].reshape(R + 1, df + 1)
@@ -483,10 +564,14 @@ def _advance(t, raw, corr, valid, r0, r1, kset, values, counters, out) -> int:
         vr = r if has_valid else 0
         cr = r if per_row_corr else 0
         if phase == PHASE_HEALTH:
-            if counters[STARTED] == 0:
-                _start(tr, sensor, counters)
-            if health_checks(tr, raw, r, valid, vr, sensors, sensor, counters, stuck,
-                             stale_s) > 0:
+            tc = time_check(tr, clock, counters, max_step, rebase)
+            counters[TIME_STATUS] = tc
+            out[r, TIME_CODE] = tc
+            time_good = tc == TIME_OK or tc == TIME_REBASED
+            if counters[STARTED] == 0 or tc == TIME_REBASED:
+                _start(tr if time_good else np.nan, sensor, counters)
+            if health_checks(tr, time_good, raw, r, valid, vr, sensors, sensor, counters,
+                             stuck, stale_s, stale_n) > 0:
                 return _stop(counters, r, STOP_HEALTH)
         if phase <= PHASE_READMIT and readmission:
             k = readmission_check(tr, raw, r, corr, cr, valid, vr, sensors, mats, df,
@@ -577,10 +662,13 @@ def _complete(sensors, valid, vr) -> bool:
 
 @njit(**_INLINE)
 def _start(t, sensor, counters) -> None:
-    """The first sample: every sensor's stale clock starts at its time."""
+    """The first sample, or the first of a new time base: every sensor's stale clock starts
+    at its time (NaN: a bad time stamp, the sample count decides) and the re-admission
+    dwells start again."""
     counters[STARTED] = 1
     for i in range(sensor.shape[0]):
         sensor[i, LAST_VALID_T] = t
+        sensor[i, GOOD_SINCE_T] = np.nan
 
 
 @njit(**_INLINE)

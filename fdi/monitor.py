@@ -57,6 +57,7 @@ _INF = float("inf")
 _CHUNK = 1 << 16
 _NO_AXES = np.zeros(3, bool)
 _NO_AXES.setflags(write=False)
+_TIME_NAMES = np.array(S.TIME_STATUSES, dtype=object)
 
 
 class Monitor:
@@ -136,6 +137,7 @@ class Monitor:
         self._status = ["ok"] * self.n
         self._length_bad = False
         self._env = 0
+        self._time_code = S.TIME_OK                  # the verdict of the last time stamp seen
         self._set_model(self._full_mask)
 
     def _kernel_set(self, mask: int) -> S.KernelSet:
@@ -164,7 +166,8 @@ class Monitor:
         self._suspects: tuple[int, ...] = ()
         self._unverified = _NO_AXES
         self._iso_due = 0
-        self._hold_open = 0                 # window count before a detection may clear
+        self._rows_seen = 0                 # detection age at the last stop (a new onset
+        self._fresh = False                 # makes it smaller: decide afresh)
         self._no_fit = False                # no single-sensor fault explains this detection
 
     def _healthy_array(self, mask: int) -> np.ndarray:
@@ -294,6 +297,9 @@ class Monitor:
                 st.counters[S.HAS_VALID] = 1                 # of ``valid``: 0 here either way)
             code = advance(self._t1, u, corr, ok, 0, 1, self._kset.packed, st.values,
                            st.counters, self._row)
+            if self._row0[S.TIME_CODE] != self._time_code:  # rare: a time-stamp verdict
+                events = [] if events is None else events
+                self._time_events(self._t1, self._row[:, S.TIME_CODE], 0, events)
             osd = None
             if code & _STOP_MASK:                            # rare: the monitor's turn
                 events = [] if events is None else events
@@ -316,7 +322,8 @@ class Monitor:
                 "parity": r[p0:], "statistics": r[s0:t0], "thresholds": r[t0:p0],
                 "events": tuple(events) if events else (), "capability": self._capability,
                 "protection_level": float(r[S.PROTECTION]), "envelope": self._env,
-                "unverified": self._unverified, "suspects": self._suspects})
+                "unverified": self._unverified, "suspects": self._suspects,
+                "time_status": S.TIME_STATUSES[self._time_code]})
             return a
         except Exception as exc:
             self._state.counters[S.PHASE] = S.PHASE_HEALTH
@@ -325,7 +332,8 @@ class Monitor:
                           self._healthy_array(self._mask), tuple(self._status),
                           np.full(max(self.n - 3, 0), _NAN), np.full(self.K, _NAN),
                           np.full(self.K, _NAN), (ev,), self._model.capability, _INF,
-                          self._env, np.ones(3, bool), self._suspects)
+                          self._env, np.ones(3, bool), self._suspects,
+                          S.TIME_STATUSES[self._time_code])
 
     def _parse_sample(self, raw: Any, valid: Any, correction: Any, t: float
                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[Event]]:
@@ -387,7 +395,12 @@ class Monitor:
         r = r0
         osd = None
         while r < N:
-            stop, code = self._kernel(t, raw, corr, valid, r, min(N, r + chunk), out)
+            r1 = min(N, r + chunk)
+            stop, code = self._kernel(t, raw, corr, valid, r, r1, out)
+            e = stop + 1 if code != S.STOP_NONE else stop    # rows whose time stamps it read
+            tc = out[r:e, S.TIME_CODE]
+            if tc.shape[0] and (tc != self._time_code).any():
+                self._time_events(t, out[:, S.TIME_CODE], r, events, e)
             if rows is not None:
                 rows.fill(r, stop, self)
             r, osd = self._handle(stop, code, t, raw, corr, valid, has_valid, out, events, rows)
@@ -420,11 +433,7 @@ class Monitor:
             return stop, None
         osd = None
         if code == S.STOP_CLEARED:
-            if int(c[S.WINDOW_COUNT]) < self._hold_open:   # not every window refilled yet
-                c[S.DETECTED] = 1
-                c[S.CLEAR_RUN] = 0
-            else:
-                self._clear_suspects()
+            self._clear_suspects()
         elif code == S.STOP_INCOMPLETE:
             osd = self._on_incomplete(raw, corr, stop, valid[stop if has_valid else 0], out[stop])
         else:
@@ -434,6 +443,21 @@ class Monitor:
         return stop + 1, osd
 
     # ------------------------------------------------------------------ stops
+    def _time_events(self, t: np.ndarray, codes: np.ndarray, r0: int, events: list[Event],
+                     r1: int | None = None) -> None:
+        """Follow the time-stamp verdicts of rows r0 … r1−1 (``codes``, the kernel's output
+        column): one ``health`` event where a run of bad time stamps starts or changes its
+        kind, and where a new time base is taken (:func:`fdi.kernel.time_check`)."""
+        r1 = codes.shape[0] if r1 is None else r1
+        last = self._time_code
+        for r in range(r0, r1):
+            c = int(codes[r])
+            if c != last and c != S.TIME_OK:
+                events.append(Event(float(t[r]), None, "health",
+                                    "time " + S.TIME_STATUSES[c]))
+            last = c
+        self._time_code = last
+
     def _isolate(self, i: int, reason: str) -> None:
         self._status[i] = reason
         self._state.sensor[i, S.GOOD_SINCE_T] = _NAN
@@ -450,11 +474,24 @@ class Monitor:
             if code == S.HEALTH_STUCK:
                 value, limit = float(st.sensor[i, S.SAME_RUN]), float(lim.stuck_count)
             elif code == S.HEALTH_STALE:
-                value, limit = t - float(st.sensor[i, S.LAST_VALID_T]), lim.stale_timeout_s
+                value, limit = self._stale_for(t, i), lim.stale_timeout_s
             else:
                 value, limit = float(u[i]), lim.hi[i]
             events.append(Event(t, i + 1, "health", reason, value, limit))
             self._isolate(i, reason)
+
+    def _stale_for(self, t: float, i: int) -> float:
+        """How long sensor i has been silent (s): since its latest valid sample at a good
+        time stamp, or, where that is not known or the time stamps stopped, its missed
+        samples times the sample period (the stale clock's two counts)."""
+        st = self._state
+        fc = self._kset.fconst
+        since = t - float(st.sensor[i, S.LAST_VALID_T])
+        good = int(st.counters[S.TIME_STATUS]) in (S.TIME_OK, S.TIME_REBASED)
+        if good and since > float(fc[S.STALE_TIMEOUT_S]):
+            return since
+        return float(st.sensor[i, S.MISSED_RUN]) * (float(fc[S.STALE_TIMEOUT_S])
+                                                     / float(fc[S.STALE_SAMPLES]))
 
     def _on_readmit(self, t: float, i: int, events: list[Event]) -> None:
         sen = self._state.sensor
@@ -496,10 +533,19 @@ class Monitor:
             events.append(Event(t, sensor if single else None, "detected", reason, stat, thr,
                                 scale, mag if single else None, envelope=self._env))
             self._iso_due = self.settings.persistence
+            self._rows_seen = 1
             self._suspect(t, mdl, dec, w, events)
         if not code & S.STOP_ISOLATE:
             return
         rows = int(c[S.DETECTED_ROWS])
+        if rows < self._rows_seen:
+            # a new onset within the open detection (the kernel restarted its age when the
+            # evidence rose again from below the clearing levels): its hypotheses are
+            # decided afresh, not narrowed by the episode before (a false alarm)
+            self._iso_due = self.settings.persistence
+            self._fresh = True
+            self._no_fit = False
+        self._rows_seen = rows
         if self._env or rows < self._iso_due:               # out of the envelope: no exclusion
             return
         self._iso_due = self._next_attempt(rows)
@@ -567,7 +613,9 @@ class Monitor:
         if self._no_fit:
             return
         cols = every if dec is None else dec.consistent
-        if self._suspects and cols:
+        if self._fresh:
+            self._fresh = False
+        elif self._suspects and cols:
             before = {i - 1 for i in self._suspects}
             cols = tuple(j for j in cols if mdl.idx[j] in before)
         none_fits = dec is not None and not cols
@@ -622,8 +670,9 @@ class Monitor:
             # and unverified axes, until every window has filled again and cleared it: an
             # excursion must not make a persisting fault look verified
             c[S.DETECTED] = 1
+            c[S.HOLD_OPEN] = max(self._scales)      # the kernel's clear rule waits for it
             self._iso_due = self.settings.persistence
-            self._hold_open = max(self._scales)
+            self._rows_seen = 0                     # the same episode, on fresh windows
 
     def _attribute(self, mdl: SetModel, fired: int) -> tuple[int, float | None, str,
                                                             int | None]:
@@ -829,7 +878,8 @@ class _Rows:
                            protection_level=pl,
                            capability=CAPABILITY_NAMES[self.cap], events=events,
                            parity=out[:, lay.parity0:] if parity else None,
-                           envelope=self.envelope, unverified=self.unverified)
+                           envelope=self.envelope, unverified=self.unverified,
+                           time_status=_TIME_NAMES[out[:, S.TIME_CODE].astype(np.intp)])
 
 
 def _fill_rows(a: np.ndarray, r0: int, r1: int, row: np.ndarray) -> None:

@@ -251,7 +251,22 @@ class MonitorSettings:
         reconstruction of the healthy set over the residual's variance (its noise plus the
         reconstruction's, P = GΣGᵀ). 9 is a 3σ gate.
     stale_timeout_s : float
-        A sensor without a valid sample for longer than this is isolated ("stale").
+        A sensor without a valid sample for longer than this is isolated ("stale"). The
+        clock runs on the good time stamps and, beside them, on the sample count: more
+        than ``stale_timeout_s × sample_rate_hz`` samples in a row without a valid sample
+        of the sensor is stale too, whatever the time stamps say (a frozen, non-finite or
+        jumping time base never stops the clock).
+    max_time_step_s : float
+        A time stamp more than this after the last good one is implausible (``"jump"``):
+        the monitor keeps testing the sample but does not take its time for its clocks.
+        The same for one that is not finite (``"nonfinite"``) or earlier than the last
+        good one (``"backward"``); each run of bad time stamps is one ``health`` event
+        (sensor None, reason ``time nonfinite``, ``time backward`` or ``time jump``) and
+        every answer carries its verdict (``Answer.time_status``).
+    time_rebase_samples : int
+        This many bad time stamps in a row that are consistent among themselves (finite,
+        each within ``max_time_step_s`` after the one before) become the new time base
+        (a clock reset or a genuine jump: ``health`` event ``time rebased``).
     stuck_count : int
         This many identical consecutive raw values isolate a sensor ("stuck"; PX4: 100).
     raw_range : tuple of float or None
@@ -282,6 +297,8 @@ class MonitorSettings:
     readmit_dwell_s: float = 10.0
     readmit_gate: float = 9.0
     stale_timeout_s: float = 0.1
+    max_time_step_s: float = 3600.0
+    time_rebase_samples: int = 10
     stuck_count: int = 100
     raw_range: tuple[float, float] | None = None
     max_input: float | None = None
@@ -302,8 +319,12 @@ class MonitorSettings:
             raise ConfigError("clear_samples must be >= 1")
         if not 0.0 < self.clear_miss < 1.0:
             raise ConfigError("clear_miss must lie in (0, 1)")
-        if not self.stale_timeout_s > 0:
-            raise ConfigError("stale_timeout_s must be positive")
+        if not (self.stale_timeout_s > 0 and math.isfinite(self.stale_timeout_s)):
+            raise ConfigError("stale_timeout_s must be positive and finite")
+        if not (self.max_time_step_s > 0 and math.isfinite(self.max_time_step_s)):
+            raise ConfigError("max_time_step_s must be positive and finite")
+        if int(self.time_rebase_samples) < 2:
+            raise ConfigError("time_rebase_samples must be >= 2")
         if int(self.stuck_count) < 2:
             raise ConfigError("stuck_count must be >= 2")
         if self.readmit_dwell_s < 0:

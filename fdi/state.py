@@ -32,7 +32,8 @@ Detector state (:class:`DetectorState`):
   lengths, where and why the kernel stopped, the health verdict per sensor.
 
 The kernel takes each group whole as one flat array (the set's constants: ``KernelSet.packed``;
-the float state: ``DetectorState.values``, which also holds the kernel's scratch vectors),
+the float state: ``DetectorState.values``, which also holds the monitor's clock and the
+kernel's scratch vectors),
 because numba's dispatch costs about 45 ns per array argument and :meth:`Monitor.step` pays
 it on every sample; the named 2-D arrays above are views of them, and the kernel's
 scratch vectors y, p, z (n each), ω̂, the ω̂ of the last completed sample and of the one
@@ -55,6 +56,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba.extending import register_jitable
 
+from fdi.answer import TIME_STATUSES as _TIME_STATUSES
 from fdi.blocks import CAPABILITY_CODE as _CAPABILITY_CODE
 from fdi.detector import clear_thresholds
 
@@ -130,20 +132,38 @@ SCALES = Names.slots("scales (K_w, SCALE_COLS)",
                      "WINDOW THRESHOLD CHI2_SCALE RHO_GAIN OFFSET_GAIN CLEAR_THRESHOLD",
                      "SCALE_COLS")
 FCONST = Names.slots("fconst", "KAPPA BETA NU CUSUM_H CUSUM_CLEAR PL_A PL_B PL_C PL_D PL_E "
-                     "STALE_TIMEOUT_S READMIT_DWELL_S READMIT_GATE", "F_SLOTS")
+                     "STALE_TIMEOUT_S READMIT_DWELL_S READMIT_GATE STALE_SAMPLES "
+                     "MAX_TIME_STEP_S", "F_SLOTS")
+"""... STALE_SAMPLES: stale_timeout_s × the thresholds' sample rate (the stale clock on the
+sample count); MAX_TIME_STEP_S: the largest forward step of the time stamp taken as
+plausible (:attr:`fdi.settings.MonitorSettings.max_time_step_s`)."""
 ICONST = Names.slots("iconst", "DF N_WINDOWS HAS_CUSUM CAPABILITY HAS_OMEGA STUCK_COUNT "
-                     "PERSISTENCE CLEAR_SAMPLES READMISSION N_SENSORS ASK_ISOLATE", "I_SLOTS")
+                     "PERSISTENCE CLEAR_SAMPLES READMISSION N_SENSORS ASK_ISOLATE "
+                     "REBASE_SAMPLES", "I_SLOTS")
 CUSUM = Names.slots("cusum (CUSUM_ROWS, n)", "S_UP MIN_UP S_DOWN MIN_DOWN", "CUSUM_ROWS")
 SENSOR_STATE = Names.slots("sensor state (n, SENSOR_STATE_COLS)",
-                           "LAST_RAW LAST_VALID_T GOOD_SINCE_T SAME_RUN", "SENSOR_STATE_COLS")
+                           "LAST_RAW LAST_VALID_T GOOD_SINCE_T SAME_RUN MISSED_RUN",
+                           "SENSOR_STATE_COLS")
+"""LAST_VALID_T: time of the latest valid sample whose time stamp was good (NaN: unknown, a
+valid sample at a bad time stamp; the stale clock then runs on MISSED_RUN alone);
+MISSED_RUN: samples in a row without a valid sample of the sensor (the stale clock on the
+sample count)."""
+CLOCK = Names.slots("clock (CLOCK_SLOTS): the monitor's time base",
+                    "LAST_GOOD_T CAND_T", "CLOCK_SLOTS")
+"""LAST_GOOD_T: the latest good time stamp (NaN: none yet); CAND_T: the latest finite time
+stamp that was not good (a candidate new time base, :func:`fdi.kernel.time_check`)."""
 COUNTERS = Names.slots("counters (HEALTH0 + n)",
                        "STARTED RING_POS WINDOW_COUNT DETECTED DETECTED_ROWS ALARM_RUN "
                        "CLEAR_RUN STOP_ROW STOP_CODE FIRED READMIT_SENSOR PHASE HAS_VALID "
-                       "HAS_PARITY RING_LEN HEALTH0")
-"""HEALTH0 + i: the health verdict of sensor i this sample (the last n counters)."""
-OUT = Names.slots("output row", "OMEGA0*3 PROTECTION STATS0")
-"""ω̂ (3), the protection level, then K statistics, K thresholds, the parity
-(:class:`OutLayout`)."""
+                       "HAS_PARITY RING_LEN HOLD_OPEN TIME_STATUS REBASE_RUN HEALTH0")
+"""HOLD_OPEN: window count below which an open detection may not clear (set at envelope
+re-entry: the windows refill first); TIME_STATUS: the time-stamp verdict of this sample
+(:data:`TIME`); REBASE_RUN: bad but mutually consistent time stamps in a row (a new time
+base after ``REBASE_SAMPLES``); HEALTH0 + i: the health verdict of sensor i this sample
+(the last n counters)."""
+OUT = Names.slots("output row", "OMEGA0*3 PROTECTION TIME_CODE STATS0")
+"""ω̂ (3), the protection level, the time-stamp verdict (:data:`TIME`, as a float), then K
+statistics, K thresholds, the parity (:class:`OutLayout`)."""
 STOP = Names("stop codes", dict(STOP_NONE=0, STOP_HEALTH=1, STOP_READMIT=2,
                                 STOP_INCOMPLETE=3, STOP_DETECTED=4, STOP_ISOLATE=8,
                                 STOP_CLEARED=16, STOP_MASK=31, RETURN_DETECTED=32))
@@ -155,8 +175,13 @@ PHASES = Names.slots("phase: where the kernel resumes a stopped sample",
                      "PHASE_HEALTH PHASE_READMIT PHASE_PARITY")
 HEALTH = Names.slots("health verdicts",
                      "HEALTH_OK HEALTH_RANGE HEALTH_NONFINITE HEALTH_STUCK HEALTH_STALE")
-LAYOUT = (SENSORS, SCALES, FCONST, ICONST, CUSUM, SENSOR_STATE, COUNTERS, OUT, STOP, PHASES,
-          HEALTH)
+TIME = Names.slots("time-stamp verdicts",
+                   "TIME_OK TIME_NONFINITE TIME_BACKWARD TIME_JUMP TIME_REBASED")
+"""Per sample: a good time stamp; NaN or ±inf; earlier than the last good one; more than
+``max_time_step_s`` after it; the sample at which a run of bad but mutually consistent
+time stamps became the new time base (good from there on). :func:`fdi.kernel.time_check`."""
+LAYOUT = (SENSORS, SCALES, FCONST, ICONST, CUSUM, SENSOR_STATE, CLOCK, COUNTERS, OUT, STOP,
+          PHASES, HEALTH, TIME)
 """Every table of named integers: their names are module-level ints of this module (as the
 standard library's ``re`` exports its flags) and enumerators of the generated C."""
 
@@ -176,6 +201,8 @@ del _names
 
 HEALTH_REASON = {HEALTH.HEALTH_RANGE: "range", HEALTH.HEALTH_NONFINITE: "nonfinite",
                  HEALTH.HEALTH_STUCK: "stuck", HEALTH.HEALTH_STALE: "stale"}
+TIME_STATUSES = _TIME_STATUSES
+"""Time-stamp verdict names, in the order of :data:`TIME` (:data:`fdi.answer.TIME_STATUSES`)."""
 CAPABILITY_CODE = _CAPABILITY_CODE
 """Capability name → code: :data:`fdi.blocks.CAPABILITY_CODE` (positions in the one table,
 :data:`fdi.answer.CAPABILITIES`)."""
@@ -200,7 +227,8 @@ SET_PARTS = _parts((("SET_FCONST", FCONST.F_SLOTS, 0, 0),
                     ("SET_SCALES", 0, 0, SCALES.SCALE_COLS)), "SET_MATS")
 """Parts of the packed constants of a set (:attr:`KernelSet.packed`); ``SET_MATS``, last,
 holds (3·df + 3)·n entries."""
-STATE_PARTS = _parts((("STATE_SENSOR", 0, SENSOR_STATE.SENSOR_STATE_COLS, 0),
+STATE_PARTS = _parts((("STATE_CLOCK", CLOCK.CLOCK_SLOTS, 0, 0),
+                      ("STATE_SENSOR", 0, SENSOR_STATE.SENSOR_STATE_COLS, 0),
                       ("STATE_CUSUM", 0, CUSUM.CUSUM_ROWS, 0),
                       ("SCRATCH_Y", 0, 1, 0), ("SCRATCH_P", 0, 1, 0), ("SCRATCH_Z", 0, 1, 0),
                       ("SCRATCH_W", 3, 0, 0), ("SCRATCH_PREV", 3, 0, 0),
@@ -371,6 +399,8 @@ def pack_set(model, H: np.ndarray, sigma_diag: np.ndarray, lo: tuple[float, ...]
     fconst[f.STALE_TIMEOUT_S] = settings.stale_timeout_s
     fconst[f.READMIT_DWELL_S] = settings.readmit_dwell_s
     fconst[f.READMIT_GATE] = settings.readmit_gate
+    fconst[f.STALE_SAMPLES] = settings.stale_timeout_s * thresholds.sample_rate_hz
+    fconst[f.MAX_TIME_STEP_S] = settings.max_time_step_s
     i = ICONST
     iconst = np.zeros(i.I_SLOTS, np.int64)
     iconst[i.DF] = df
@@ -383,6 +413,7 @@ def pack_set(model, H: np.ndarray, sigma_diag: np.ndarray, lo: tuple[float, ...]
     iconst[i.CLEAR_SAMPLES] = settings.clear_samples
     iconst[i.READMISSION] = bool(settings.readmission)
     iconst[i.N_SENSORS] = n
+    iconst[i.REBASE_SAMPLES] = settings.time_rebase_samples
     # persistent alarms go to the monitor's isolation test wherever it can tell hypotheses
     # apart at all (df ≥ 2): a set that isolates may exclude, one that only detects narrows
     # its suspects (fdi.monitor)
@@ -416,6 +447,10 @@ class DetectorState:
         self.sensor[:, SENSOR_STATE.LAST_RAW] = np.nan
         self.sensor[:, SENSOR_STATE.LAST_VALID_T] = np.nan
         self.sensor[:, SENSOR_STATE.GOOD_SINCE_T] = np.nan
+        self.clock = span(self.values, part["STATE_CLOCK"], n, 0)
+        """The monitor's time base: last good time stamp, candidate new base (:data:`CLOCK`;
+        NaN: none)."""
+        self.clock[:] = np.nan
         self.cusum = span(self.values, part["STATE_CUSUM"], n, 0).reshape(CUSUM.CUSUM_ROWS, n)
         self.omega_prev = span(self.values, part["SCRATCH_PREV"], n, 0)
         """ω̂ of the last completed sample (rad/s; NaN before the first): the jitter term's
@@ -435,7 +470,7 @@ class DetectorState:
         self.cusum[:] = 0.0
         c = COUNTERS
         self.counters[[c.RING_POS, c.WINDOW_COUNT, c.DETECTED, c.DETECTED_ROWS, c.ALARM_RUN,
-                       c.CLEAR_RUN]] = 0
+                       c.CLEAR_RUN, c.HOLD_OPEN]] = 0
 
     @property
     def cumulative(self) -> np.ndarray:

@@ -8,7 +8,12 @@ ring of the last R = 2^K + 1 of them; the sum over the last w samples is c_t −
     T_w = thr_w · (1 + w·β/f_w + κ/f_w · Σ_w ρ)      (calibration error does not average)
 
 an alarm is D_w > T_w; the detection clears only while every D_w is below its clearing
-level (``clear_ratio·thr_w``, with the floor of :func:`fdi.detector.clear_thresholds`).
+level C_w·g_w, with C_w = ``clear_ratio·thr_w`` (and the floor of
+:func:`fdi.detector.clear_thresholds`) and g_w = T_w/thr_w the same inflation as the
+threshold's: the calibration error that raises the healthy statistic in a manoeuvre raises
+the level it must fall back below by as much (a fixed level under an inflated threshold
+kept detections open through whole flights: healthy statistics far below T_w, never below
+C_w).
 ``D`` is NaN and ``T`` the base threshold while fewer than w samples are in the windows.
 """
 
@@ -92,14 +97,14 @@ def window_update(z: np.ndarray, rho: float, df: int, windows: np.ndarray,
                 d = windows[R, j] - windows[o, j]
                 acc = acc + d * d
             D = acc * scales[k, CHI2_SCALE]
-            T = scales[k, THRESHOLD] * (scales[k, OFFSET_GAIN]
-                                        + scales[k, RHO_GAIN] * (windows[R, df] - windows[o, df]))
+            g = scales[k, OFFSET_GAIN] + scales[k, RHO_GAIN] * (windows[R, df] - windows[o, df])
+            T = scales[k, THRESHOLD] * g
             if D > T:
                 alarm = True
                 if D / T > best:
                     best = D / T
                     fired = k
-            if D >= scales[k, CLEAR_THRESHOLD]:
+            if D >= scales[k, CLEAR_THRESHOLD] * g:
                 clear = False
         else:
             D = np.nan

@@ -305,8 +305,10 @@ def generate_c(cal: Calibration, thresholds: Thresholds | None = None, *, kind: 
     cusum = thresholds.detector != "windows"
     tables = (f"{effect_text}"
               f"#define AXIS_SHARE {AXIS_SHARE!r}\n"
-              f"static const rimu_time TIME_CONST[2] = "
-              f"{{{_f64(settings.stale_timeout_s)}, {_f64(settings.readmit_dwell_s)}}};\n"
+              f"static const rimu_time TIME_CONST[4] = "
+              f"{{{_f64(settings.stale_timeout_s)}, {_f64(settings.readmit_dwell_s)}, "
+              f"{_f64(settings.stale_timeout_s * thresholds.sample_rate_hz)}, "
+              f"{_f64(settings.max_time_step_s)}}};\n"
               f"static const long long SCALE_W[RIMU_NW] = "
               f"{{{', '.join(str(int(w)) for w in thresholds.scales)}}};\n"
               f"#define SCALE_W_MAX {max(int(w) for w in thresholds.scales)}LL\n"
@@ -325,8 +327,9 @@ def generate_c(cal: Calibration, thresholds: Thresholds | None = None, *, kind: 
         "ONES": ", ".join(["1"] * n), "TABLES": tables, "SLOTS": S.c_enums(),
         "COUNTERS": str(S.HEALTH0 + n),
     }
-    state_bytes = (8 * 4 * n + real * (4 * n + (ring + 1) * (df_max + 1) + 3 * n + 9 + n + 1)
-                   + 8 * (S.HEALTH0 + n) + 8 * 4 + 3 + 8 + 4 + n)
+    state_bytes = (8 * 5 * n + 8 * 2
+                   + real * (4 * n + (ring + 1) * (df_max + 1) + 3 * n + 9 + n + 1)
+                   + 8 * (S.HEALTH0 + n) + 8 * 4 + 3 + 8 + 4 + 4 + 4 + n)
     ops = _ops_per_step(n, df_max, nw, cusum, n_terms)
     files = {"rimu_monitor.h": _fill(_template("rimu_monitor.h.in"), values),
              "rimu_monitor.c": _fill(_template("rimu_monitor.c.in"), values)}
