@@ -27,8 +27,8 @@ from fdi.errors import ConfigError
 from replay.flight_data import Flight
 from replay.time_offsets import imu_groups
 
-__all__ = ["BASELINE_SCHEMA", "SI_UNITS", "BaselineEvent", "BaselineResult", "Triads",
-           "answer_events", "triads_from_flight"]
+__all__ = ["BASELINE_SCHEMA", "MOUNTING_TOLERANCE_DEG", "SI_UNITS", "BaselineEvent",
+           "BaselineResult", "Triads", "answer_events", "triads_from_flight"]
 
 BASELINE_SCHEMA = "rimu.baseline/1"
 """Format of one baseline's answer (:meth:`BaselineResult.to_dict`)."""
@@ -38,6 +38,11 @@ SI_UNITS = {"gyro": ("rad/s", "rad/s", "rads"), "accel": ("m/s^2", "m/s2", "mps2
 autopilot logged them."""
 
 _AXES = ("x", "y", "z")
+
+MOUNTING_TOLERANCE_DEG = 10.0
+"""An IMU whose calibrated mounting differs from its logged axes by more than this (°) is
+read through that mounting's rotation: an autopilot user configures such a rotation (board
+or custom rotation); below it the log is taken as already in the body frame."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -100,11 +105,14 @@ def triads_from_flight(flight: Flight, cal: Calibration | None = None) -> Triads
     flight : Flight
         Two or more IMU groups of three axes (``imu1.x`` …, or the manifest's ``imu``).
     cal : Calibration, optional
-        Needed only when the samples are not SI (:data:`SI_UNITS`): then each IMU's
+        Needed when the samples are not SI (:data:`SI_UNITS`): then each IMU's
         ``SF·u − b`` is resolved onto the body axes through the inverse of its three rows
         of H̃. SI samples are used as logged (an autopilot log stores the body-frame rates
         after the autopilot's own calibration; giving the rules rimu's calibration would
-        give them what the autopilot does not have).
+        give them what the autopilot does not have), except that an IMU whose calibrated
+        mounting is more than :data:`MOUNTING_TOLERANCE_DEG` from its logged axes is
+        rotated by that mounting (the rotation nearest its rows of H̃: what an autopilot
+        user would configure), never scaled or de-biased.
 
     Raises
     ------
@@ -132,6 +140,7 @@ def triads_from_flight(flight: Flight, cal: Calibration | None = None) -> Triads
         y = raw * s.scale_factors - s.biases
         how = "calibrated: SF·u − b resolved onto the body axes (H⁻¹ per IMU)"
     N = raw.shape[0]
+    rotated = []
     vals = np.full((N, len(groups), 3), np.nan)
     valid = np.zeros((N, len(groups)), bool)
     cols_out = []
@@ -142,13 +151,40 @@ def triads_from_flight(flight: Flight, cal: Calibration | None = None) -> Triads
         v = ok[:, order].all(axis=1)
         if si:
             x = raw[:, order]
+            R = _mounting(cal, flight.kind, order)
+            if R is not None:
+                x = x @ R               # row form of ω = Rᵀ·u (u = R·ω)
+                rotated.append(g)
         else:
             H = np.asarray(cal.kind(flight.kind).H, float)[order]   # type: ignore[union-attr]
             x = np.linalg.solve(H, y[:, order].T).T
         vals[v, j] = x[v]
         valid[:, j] = v
+    if rotated:
+        how = (f"as logged, {', '.join(rotated)} rotated by the calibration's mounting "
+               f"(more than {MOUNTING_TOLERANCE_DEG:g} deg from the logged axes)")
     return Triads(t=np.asarray(flight.t, float), values=vals, valid=valid,
                   imus=tuple(groups), kind=flight.kind, sensors=tuple(cols_out), how=how)
+
+
+def _mounting(cal: Calibration | None, kind: str, order: list[int]) -> np.ndarray | None:
+    """The rotation nearest an IMU's rows of H̃ when it is more than
+    :data:`MOUNTING_TOLERANCE_DEG` from the identity (None otherwise, or without a
+    calibration)."""
+    if cal is None:
+        return None
+    try:
+        H = np.asarray(cal.kind(kind).H, float)[order]
+    except (ConfigError, IndexError):
+        return None
+    if H.shape != (3, 3) or not np.isfinite(H).all():
+        return None
+    U, _, Vt = np.linalg.svd(H)
+    R = U @ Vt
+    if np.linalg.det(R) < 0:
+        return None                    # a reflection: not a mounting
+    ang = np.degrees(np.arccos(np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0)))
+    return R if ang > MOUNTING_TOLERANCE_DEG else None
 
 
 @dataclass(frozen=True)

@@ -305,3 +305,28 @@ def test_monitor_file_baseline_plot_needs_baseline(tmp_path, capsys):
     rc = main(["monitor-file", str(tmp_path), "--cal", str(tmp_path / "c.json"),
                "--baseline-plot", str(tmp_path / "b.png")])
     assert rc == 2
+
+
+def test_a_mounting_far_from_the_logged_axes_is_rotated():
+    """An IMU mounted 90° about z (its rows of H̃ say so) is read through that rotation, as an
+    autopilot user would configure it; a mounting within 10° is read as logged."""
+    from dataclasses import replace
+    from types import SimpleNamespace
+
+    from replay.imu_set import ImuSetSpec, simulate_imu_set
+
+    f = simulate_imu_set(ImuSetSpec(imus=2, duration_s=4.0, seed=3))
+    Rz = np.array([[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])   # u = Rz·ω
+    raw = f.raw.copy()
+    raw[:, 3:6] = f.raw[:, 3:6] @ Rz.T
+    g = replace(f, raw=raw)
+    H = np.vstack([np.eye(3), Rz])
+    cal = SimpleNamespace(kind=lambda kind: SimpleNamespace(H=H))
+    tri = triads_from_flight(g, cal)
+    np.testing.assert_allclose(tri.values[:, 1], f.raw[:, 3:6], atol=1e-12)
+    assert "imu2 rotated" in tri.how
+    small = np.vstack([np.eye(3), np.eye(3) + 0.05 * np.array([[0, -1, 0], [1, 0, 0],
+                                                                [0, 0, 0]])])
+    tri = triads_from_flight(f, SimpleNamespace(kind=lambda kind: SimpleNamespace(H=small)))
+    assert tri.how == "as logged"
+    np.testing.assert_array_equal(tri.values[:, 1], f.raw[:, 3:6])
