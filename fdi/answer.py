@@ -26,7 +26,8 @@ CAPABILITIES = ("isolate", "detect", "reconstruct", "none")
 TIME_STATUSES = ("ok", "nonfinite", "backward", "jump", "rebased")
 """Verdicts on a sample's time stamp (``Answer.time_status``), in the order of the kernel's
 codes (:data:`fdi.state.TIME`)."""
-STATUSES = ("ok", "detected", "isolated", "stale", "nonfinite", "range", "stuck", "length")
+STATUSES = ("ok", "detected", "isolated", "stale", "nonfinite", "range", "stuck", "length",
+            "vibration")
 """Per-sensor status strings: ``"ok"``; ``"detected"`` (a fault is detected in the healthy
 set and not yet attributed); ``"isolated"`` (by the parity test); or the health check that
 isolated it."""

@@ -68,6 +68,7 @@ from fdi.state import (
     DETECTED,
     DETECTED_ROWS,
     DF,
+    ENV_OUT,
     FIRED,
     GOOD_SINCE_T,
     H_P_H,
@@ -92,6 +93,10 @@ from fdi.state import (
     MAX_TIME_STEP_S,
     MISSED_RUN,
     N_WINDOWS,
+    NOISE_BAND,
+    NOISE_CLIP,
+    NOISE_GAIN,
+    NOISE_MAX,
     OMEGA0,
     PERSISTENCE,
     PHASE,
@@ -135,8 +140,11 @@ from fdi.state import (
     STARTED,
     STATE_CLOCK,
     STATE_CUSUM,
+    STATE_NOISE,
     STATE_SENSOR,
+    STATE_VIB,
     STATE_WINDOWS,
+    STATE_ZPREV,
     STATS0,
     STOP_CLEARED,
     STOP_CODE,
@@ -147,6 +155,7 @@ from fdi.state import (
     STOP_NONE,
     STOP_READMIT,
     STOP_ROW,
+    STOP_VIBRATION,
     STUCK_COUNT,
     THRESHOLD,
     TIME_BACKWARD,
@@ -156,7 +165,14 @@ from fdi.state import (
     TIME_OK,
     TIME_REBASED,
     TIME_STATUS,
+    VIB_DWELL,
+    VIB_LEVEL,
+    VIB_ON,
+    VIB_RATIO,
+    VIB_RUN,
+    VIB_SENSOR,
     WINDOW_COUNT,
+    ZPREV_OK,
     offset,
 )
 from fdi.state import span as _span_py
@@ -467,12 +483,100 @@ def _untested_row(out, r, scales, fconst, nw, K, parity0):
 
 
 @njit(**_INLINE)
+def noise_scale(noise, fconst) -> float:
+    """s = min(K, max(1, v/(1 + band))): the factor the windows' thresholds and clearing
+    levels take for the in-flight noise level v (:func:`noise_update`, before this
+    sample's own contribution)."""
+    s = noise[0] / fconst[NOISE_BAND]
+    if not s > 1.0:                     # (also NaN)
+        return 1.0
+    m = fconst[NOISE_MAX]
+    return s if s < m else m
+
+
+@njit(**_INLINE)
+def noise_update(z, df, sensors, mats, fconst, iconst_vib_on, vib_dwell, noise, zprev, vib,
+                 counters) -> int:
+    """Add one complete sample to the noise levels; returns the sensor that passed the
+    vibration test for its dwell (−1: none).
+
+    From the difference of two consecutive whitened parities d = z_t − z_{t−1} (the last
+    complete sample of the same set; nothing out of the envelope): the level of the whole
+    parity, v += λ(min(|d|²/(2·df), clip·v) − v), and along each sensor's unit whitened
+    column e_i, v_i += λ(min((e_iᵀd)²/2, clip·v_i) − v_i); 1 is the calibrated level. A
+    difference removes what changes slowly (a bias, a drift) and keeps what is noise. The
+    vibration test: the sensor with the largest v_i, above ``VIB_LEVEL`` and more than
+    ``VIB_RATIO`` times the next largest, for ``vib_dwell`` samples in a row.
+    """
+    if counters[ENV_OUT] != 0:
+        return -1
+    n = sensors.shape[1]
+    if counters[ZPREV_OK] != 0:
+        lam = fconst[NOISE_GAIN]
+        clip = fconst[NOISE_CLIP]
+        acc = 0.0
+        for j in range(df):
+            d = z[j] - zprev[j]
+            acc = acc + d * d
+        q = acc / (2.0 * df)
+        v = noise[0]
+        if math.isfinite(q):
+            if q > clip * v:
+                q = clip * v
+            noise[0] = v + lam * (q - v)
+        u0 = 2 * df + 3
+        for i in range(n):
+            if sensors[IN_SET, i] == 0.0:
+                continue
+            a = 0.0
+            for j in range(df):
+                a = a + mats[u0 + j, i] * (z[j] - zprev[j])
+            q = 0.5 * (a * a)
+            vi = vib[i]
+            if math.isfinite(q):
+                if q > clip * vi:
+                    q = clip * vi
+                vib[i] = vi + lam * (q - vi)
+    for j in range(df):
+        zprev[j] = z[j]
+    counters[ZPREV_OK] = 1
+    if not iconst_vib_on:
+        return -1
+    top = -1
+    v1 = -np.inf
+    v2 = -np.inf
+    for i in range(n):
+        if sensors[IN_SET, i] == 0.0:
+            continue
+        x = vib[i]
+        if x > v1:
+            v2 = v1
+            v1 = x
+            top = i
+        elif x > v2:
+            v2 = x
+    if top >= 0 and v1 > fconst[VIB_LEVEL] and v1 > fconst[VIB_RATIO] * v2:
+        if counters[VIB_RUN] > 0 and counters[VIB_SENSOR] == top:
+            counters[VIB_RUN] += 1
+        else:
+            counters[VIB_RUN] = 1
+            counters[VIB_SENSOR] = top
+    else:
+        counters[VIB_RUN] = 0
+    if counters[VIB_RUN] >= vib_dwell:
+        counters[VIB_RUN] = 0
+        return top
+    return -1
+
+
+@njit(**_INLINE)
 def parity_tests(z, rho, df, sensors, scales, mats, fconst, has_cusum, windows, cusum,
-                 counters, K, out, r) -> tuple[bool, bool, int]:
-    """Windows and CUSUM bank of one complete sample; returns (alarm, clear, fired) for the
-    state machine."""
+                 counters, K, out, r, ns) -> tuple[bool, bool, int]:
+    """Windows (thresholds and clearing levels times the noise scale ``ns``) and CUSUM
+    bank of one complete sample; returns (alarm, clear, fired) for the state machine."""
     nw = scales.shape[0]
-    alarm, clear, fired, best = window_update(z, rho, df, windows, counters, scales, K, out, r)
+    alarm, clear, fired, best = window_update(z, rho, df, windows, counters, scales, K, out, r,
+                                              ns)
     if has_cusum:
         g = cusum_update(z, rho, df, sensors, mats, fconst, cusum)
         h = fconst[CUSUM_H]
@@ -536,11 +640,16 @@ def _advance(t, raw, corr, valid, r0, r1, kset, values, counters, out) -> int:
     stale_n = fconst[STALE_SAMPLES]
     max_step = fconst[MAX_TIME_STEP_S]
     rebase = int(kset[ic + REBASE_SAMPLES])
+    vib_on = kset[ic + VIB_ON] != 0.0
+    vib_dwell = int(kset[ic + VIB_DWELL])
     dwell_s = fconst[READMIT_DWELL_S]
     gate = fconst[READMIT_GATE]
     R = counters[RING_LEN]
     sensor = _span(values, STATE_SENSOR, n, 0).reshape(n, SENSOR_STATE_COLS)
     clock = _span(values, STATE_CLOCK, n, 0)
+    noise = _span(values, STATE_NOISE, n, 0)
+    zprev = _span(values, STATE_ZPREV, n, 0)
+    vib = _span(values, STATE_VIB, n, 0)
     cusum = _span(values, STATE_CUSUM, n, 0).reshape(CUSUM_ROWS, n)
     o_windows = offset(STATE_WINDOWS, n, 0)
     windows = values[o_windows:o_windows + (R + 1) * (df + 1)].reshape(R + 1, df + 1)
@@ -589,10 +698,15 @@ def _advance(t, raw, corr, valid, r0, r1, kset, values, counters, out) -> int:
         code = STOP_NONE
         if df > 0:
             zr = block[r - b0]              # z (first df entries) and ρ (entry n) of row r
+            ns = noise_scale(noise, fconst)
             alarm, clear, fired = parity_tests(zr, zr[n], df, sensors, scales, mats, fconst,
-                                               has_cusum, windows, cusum, counters, K, out, r)
+                                               has_cusum, windows, cusum, counters, K, out, r,
+                                               ns)
             code = detection_machine(alarm, clear, fired, ask_isolate, persistence,
                                      clear_samples, counters)
+            if noise_update(zr, df, sensors, mats, fconst, vib_on, vib_dwell, noise, zprev,
+                            vib, counters) >= 0:
+                code |= STOP_VIBRATION
         else:
             _untested_row(out, r, scales, fconst, nw, K, parity0)
         _shift(prev, before)                # the sample is complete: ω̂_{t−1} moves on

@@ -432,12 +432,15 @@ class Monitor:
             c[S.PHASE] = S.PHASE_PARITY
             return stop, None
         osd = None
-        if code == S.STOP_CLEARED:
-            self._clear_suspects()
-        elif code == S.STOP_INCOMPLETE:
+        if code == S.STOP_INCOMPLETE:
             osd = self._on_incomplete(raw, corr, stop, valid[stop if has_valid else 0], out[stop])
-        else:
-            self._on_detection(tr, code, raw, corr, stop, out[stop], events)
+        else:                                     # bits: cleared, detected/isolate, vibration
+            if code & S.STOP_CLEARED:
+                self._clear_suspects()
+            if code & (S.STOP_DETECTED | S.STOP_ISOLATE):
+                self._on_detection(tr, code, raw, corr, stop, out[stop], events)
+            if code & S.STOP_VIBRATION:
+                self._on_vibration(tr, raw, corr, stop, out[stop], events)
         if rows is not None:
             rows.fill(stop, stop + 1, self, osd)
         return stop + 1, osd
@@ -479,6 +482,22 @@ class Monitor:
                 value, limit = float(u[i]), lim.hi[i]
             events.append(Event(t, i + 1, "health", reason, value, limit))
             self._isolate(i, reason)
+
+    def _on_vibration(self, t: float, raw: np.ndarray, corr: np.ndarray, r: int,
+                      row: np.ndarray, events: list[Event]) -> None:
+        """A sensor whose noise along its own parity direction is far above every other's
+        (the kernel's vibration test, :func:`fdi.kernel.noise_update`): excluded as a fault
+        of its own kind, ``vibration``; ω̂ and PL of the sample from the set left."""
+        k = int(self._state.counters[S.VIB_SENSOR])
+        if self._env or not (self._mask >> k) & 1:
+            return
+        vib = self._state.vibration
+        others = [float(vib[i]) for i in self._model.idx if i != k]
+        events.append(Event(t, k + 1, "isolated", "vibration", float(vib[k]),
+                            self.settings.vibration_ratio * max(others) if others else _NAN,
+                            envelope=self._env))
+        self._isolate(k, "vibration")
+        reconstruct_row(raw, corr, r, self._kset.packed, self._state.values, row)
 
     def _stale_for(self, t: float, i: int) -> float:
         """How long sensor i has been silent (s): since its latest valid sample at a good
@@ -655,6 +674,7 @@ class Monitor:
     def _env_change(self, t: float, env: int, events: list[Event]) -> None:
         """Leaving, changing or re-entering the operating envelope."""
         old, self._env = self._env, env
+        self._state.counters[S.ENV_OUT] = 1 if env else 0   # the noise levels wait outside
         if env:
             events.append(Event(t, None, "envelope", _env_reason(env), envelope=env))
             return

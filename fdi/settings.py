@@ -267,6 +267,35 @@ class MonitorSettings:
         This many bad time stamps in a row that are consistent among themselves (finite,
         each within ``max_time_step_s`` after the one before) become the new time base
         (a clock reset or a genuine jump: ``health`` event ``time rebased``).
+    noise_window_s : float
+        Time constant (s) of the in-flight noise level v of the whitened parity: an
+        exponential mean (gain λ = 1/(noise_window_s·fs)) of q_t = |z_t − z_{t−1}|²/(2·df),
+        1 for healthy noise at the calibrated level. It reads differences, so a bias, a
+        step (after its one onset sample) or a drift of any speed, whose differences are
+        nothing, does not raise it: a slow fault cannot raise its own threshold.
+    noise_clip : float
+        Each q_t counts at most ``noise_clip``·v (one spike or a step's onset moves v by
+        at most λ·(noise_clip − 1)·v).
+    noise_band : float
+        The thresholds (and the clearing levels) follow v only beyond 1 + ``noise_band``:
+        scale s = min(K, max(1, v/(1 + noise_band))), so healthy noise at the calibrated
+        level (and its colour at one sample's lag) leaves the tuned thresholds as they are.
+    noise_scale_max : float
+        K, the bound of s: the thresholds never rise beyond K times the calibrated ones
+        (1: they never follow the flight's noise). A fault that makes noise can raise its
+        own threshold by at most K; with a set that isolates, the vibration test below
+        blames such a sensor.
+    vibration_ratio : float
+        The vibration test (sets that isolate): the same sensor has the largest noise level
+        v_i along its unit whitened parity column, more than ``vibration_ratio`` times the
+        next largest and above ``vibration_level`` (in units of the calibrated variance),
+        for ``vibration_dwell_s``: it is excluded (status and event ``"vibration"``).
+        In expectation v_i is largest for the noisy sensor itself (the others see its
+        noise through cos² of the angle between their columns), so the test never prefers
+        a healthy sensor; a set whose columns are too close to reach the ratio never
+        blames. 0 turns the test off.
+    vibration_level : float
+    vibration_dwell_s : float
     stuck_count : int
         This many identical consecutive raw values isolate a sensor ("stuck"; PX4: 100).
     raw_range : tuple of float or None
@@ -299,6 +328,13 @@ class MonitorSettings:
     stale_timeout_s: float = 0.1
     max_time_step_s: float = 3600.0
     time_rebase_samples: int = 10
+    noise_window_s: float = 2.0
+    noise_clip: float = 9.0
+    noise_band: float = 0.5
+    noise_scale_max: float = 25.0
+    vibration_ratio: float = 2.0
+    vibration_level: float = 4.0
+    vibration_dwell_s: float = 2.0
     stuck_count: int = 100
     raw_range: tuple[float, float] | None = None
     max_input: float | None = None
@@ -325,6 +361,18 @@ class MonitorSettings:
             raise ConfigError("max_time_step_s must be positive and finite")
         if int(self.time_rebase_samples) < 2:
             raise ConfigError("time_rebase_samples must be >= 2")
+        for name in ("noise_window_s", "noise_clip", "noise_scale_max", "vibration_level",
+                     "vibration_dwell_s"):
+            v = getattr(self, name)
+            if not (v > 0 and math.isfinite(v)):
+                raise ConfigError(f"{name} must be positive and finite")
+        if not (self.noise_band >= 0 and math.isfinite(self.noise_band)):
+            raise ConfigError("noise_band must be >= 0 and finite")
+        if self.noise_clip < 1 or self.noise_scale_max < 1:
+            raise ConfigError("noise_clip and noise_scale_max must be >= 1")
+        if not (self.vibration_ratio == 0 or (self.vibration_ratio > 1
+                                              and math.isfinite(self.vibration_ratio))):
+            raise ConfigError("vibration_ratio must be 0 (off) or finite and > 1")
         if int(self.stuck_count) < 2:
             raise ConfigError("stuck_count must be >= 2")
         if self.readmit_dwell_s < 0:

@@ -51,6 +51,7 @@ table.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -133,13 +134,16 @@ SCALES = Names.slots("scales (K_w, SCALE_COLS)",
                      "SCALE_COLS")
 FCONST = Names.slots("fconst", "KAPPA BETA NU CUSUM_H CUSUM_CLEAR PL_A PL_B PL_C PL_D PL_E "
                      "STALE_TIMEOUT_S READMIT_DWELL_S READMIT_GATE STALE_SAMPLES "
-                     "MAX_TIME_STEP_S", "F_SLOTS")
+                     "MAX_TIME_STEP_S NOISE_GAIN NOISE_CLIP NOISE_BAND NOISE_MAX VIB_RATIO "
+                     "VIB_LEVEL", "F_SLOTS")
 """... STALE_SAMPLES: stale_timeout_s × the thresholds' sample rate (the stale clock on the
 sample count); MAX_TIME_STEP_S: the largest forward step of the time stamp taken as
-plausible (:attr:`fdi.settings.MonitorSettings.max_time_step_s`)."""
+plausible (:attr:`fdi.settings.MonitorSettings.max_time_step_s`); NOISE_*: the in-flight
+noise scale (gain λ = 1/(noise_window_s·fs), clip, band, bound K); VIB_*: the vibration
+test (:func:`fdi.kernel.noise_update`)."""
 ICONST = Names.slots("iconst", "DF N_WINDOWS HAS_CUSUM CAPABILITY HAS_OMEGA STUCK_COUNT "
                      "PERSISTENCE CLEAR_SAMPLES READMISSION N_SENSORS ASK_ISOLATE "
-                     "REBASE_SAMPLES", "I_SLOTS")
+                     "REBASE_SAMPLES VIB_DWELL VIB_ON", "I_SLOTS")
 CUSUM = Names.slots("cusum (CUSUM_ROWS, n)", "S_UP MIN_UP S_DOWN MIN_DOWN", "CUSUM_ROWS")
 SENSOR_STATE = Names.slots("sensor state (n, SENSOR_STATE_COLS)",
                            "LAST_RAW LAST_VALID_T GOOD_SINCE_T SAME_RUN MISSED_RUN",
@@ -155,20 +159,28 @@ stamp that was not good (a candidate new time base, :func:`fdi.kernel.time_check
 COUNTERS = Names.slots("counters (HEALTH0 + n)",
                        "STARTED RING_POS WINDOW_COUNT DETECTED DETECTED_ROWS ALARM_RUN "
                        "CLEAR_RUN STOP_ROW STOP_CODE FIRED READMIT_SENSOR PHASE HAS_VALID "
-                       "HAS_PARITY RING_LEN HOLD_OPEN TIME_STATUS REBASE_RUN HEALTH0")
+                       "HAS_PARITY RING_LEN HOLD_OPEN TIME_STATUS REBASE_RUN ZPREV_OK ENV_OUT "
+                       "VIB_RUN VIB_SENSOR HEALTH0")
 """HOLD_OPEN: window count below which an open detection may not clear (set at envelope
 re-entry: the windows refill first); TIME_STATUS: the time-stamp verdict of this sample
 (:data:`TIME`); REBASE_RUN: bad but mutually consistent time stamps in a row (a new time
-base after ``REBASE_SAMPLES``); HEALTH0 + i: the health verdict of sensor i this sample
+base after ``REBASE_SAMPLES``); ZPREV_OK: the state holds the whitened parity of the last
+complete sample of this set (for the noise scale's differences); ENV_OUT: out of the
+envelope (the monitor sets it: the noise scale and the vibration test wait); VIB_RUN,
+VIB_SENSOR: samples in a row the same sensor passed the vibration test, and which;
+HEALTH0 + i: the health verdict of sensor i this sample
 (the last n counters)."""
 OUT = Names.slots("output row", "OMEGA0*3 PROTECTION TIME_CODE STATS0")
 """ω̂ (3), the protection level, the time-stamp verdict (:data:`TIME`, as a float), then K
 statistics, K thresholds, the parity (:class:`OutLayout`)."""
 STOP = Names("stop codes", dict(STOP_NONE=0, STOP_HEALTH=1, STOP_READMIT=2,
                                 STOP_INCOMPLETE=3, STOP_DETECTED=4, STOP_ISOLATE=8,
-                                STOP_CLEARED=16, STOP_MASK=31, RETURN_DETECTED=32))
+                                STOP_CLEARED=16, STOP_VIBRATION=32, STOP_MASK=63,
+                                RETURN_DETECTED=64))
 """Where the kernel stops (``counters[STOP_CODE]``) and hands a sample to the monitor:
-STOP_DETECTED | STOP_ISOLATE stop after the sample, STOP_CLEARED after a detection cleared;
+STOP_DETECTED | STOP_ISOLATE stop after the sample, STOP_CLEARED after a detection cleared,
+STOP_VIBRATION (or-ed with the others) after a sensor passed the vibration test
+(``counters[VIB_SENSOR]``);
 :func:`fdi.kernel.advance` returns the stop code (STOP_MASK) plus RETURN_DETECTED while a
 detection is active."""
 PHASES = Names.slots("phase: where the kernel resumes a stopped sample",
@@ -228,6 +240,8 @@ SET_PARTS = _parts((("SET_FCONST", FCONST.F_SLOTS, 0, 0),
 """Parts of the packed constants of a set (:attr:`KernelSet.packed`); ``SET_MATS``, last,
 holds (3·df + 3)·n entries."""
 STATE_PARTS = _parts((("STATE_CLOCK", CLOCK.CLOCK_SLOTS, 0, 0),
+                      ("STATE_NOISE", 1, 0, 0), ("STATE_ZPREV", 0, 1, 0),
+                      ("STATE_VIB", 0, 1, 0),
                       ("STATE_SENSOR", 0, SENSOR_STATE.SENSOR_STATE_COLS, 0),
                       ("STATE_CUSUM", 0, CUSUM.CUSUM_ROWS, 0),
                       ("SCRATCH_Y", 0, 1, 0), ("SCRATCH_P", 0, 1, 0), ("SCRATCH_Z", 0, 1, 0),
@@ -401,6 +415,12 @@ def pack_set(model, H: np.ndarray, sigma_diag: np.ndarray, lo: tuple[float, ...]
     fconst[f.READMIT_GATE] = settings.readmit_gate
     fconst[f.STALE_SAMPLES] = settings.stale_timeout_s * thresholds.sample_rate_hz
     fconst[f.MAX_TIME_STEP_S] = settings.max_time_step_s
+    fconst[f.NOISE_GAIN] = 1.0 / (settings.noise_window_s * thresholds.sample_rate_hz)
+    fconst[f.NOISE_CLIP] = settings.noise_clip
+    fconst[f.NOISE_BAND] = 1.0 + settings.noise_band
+    fconst[f.NOISE_MAX] = settings.noise_scale_max
+    fconst[f.VIB_RATIO] = settings.vibration_ratio
+    fconst[f.VIB_LEVEL] = settings.vibration_level
     i = ICONST
     iconst = np.zeros(i.I_SLOTS, np.int64)
     iconst[i.DF] = df
@@ -414,6 +434,11 @@ def pack_set(model, H: np.ndarray, sigma_diag: np.ndarray, lo: tuple[float, ...]
     iconst[i.READMISSION] = bool(settings.readmission)
     iconst[i.N_SENSORS] = n
     iconst[i.REBASE_SAMPLES] = settings.time_rebase_samples
+    iconst[i.VIB_DWELL] = max(1, math.ceil(settings.vibration_dwell_s
+                                           * thresholds.sample_rate_hz))
+    # the vibration test blames one sensor only where the set can tell sensors apart
+    iconst[i.VIB_ON] = (df >= 2 and model.capability == "isolate"
+                        and settings.vibration_ratio > 0)
     # persistent alarms go to the monitor's isolation test wherever it can tell hypotheses
     # apart at all (df ≥ 2): a set that isolates may exclude, one that only detects narrows
     # its suspects (fdi.monitor)
@@ -451,6 +476,12 @@ class DetectorState:
         """The monitor's time base: last good time stamp, candidate new base (:data:`CLOCK`;
         NaN: none)."""
         self.clock[:] = np.nan
+        self.noise = span(self.values, part["STATE_NOISE"], n, 0)
+        """v: the running noise level of the whitened parity, 1 at the calibrated level
+        (:func:`fdi.kernel.noise_update`)."""
+        self.noise[:] = 1.0
+        self.vibration = span(self.values, part["STATE_VIB"], n, 0)
+        """v_i: the running noise level along each sensor's unit whitened parity column."""
         self.cusum = span(self.values, part["STATE_CUSUM"], n, 0).reshape(CUSUM.CUSUM_ROWS, n)
         self.omega_prev = span(self.values, part["SCRATCH_PREV"], n, 0)
         """ω̂ of the last completed sample (rad/s; NaN before the first): the jitter term's
@@ -468,9 +499,10 @@ class DetectorState:
         self.windows = self.values[o:o + (self.ring + 1) * (df + 1)].reshape(self.ring + 1,
                                                                              df + 1)
         self.cusum[:] = 0.0
+        self.vibration[:] = 1.0             # the columns change with the set; v does not
         c = COUNTERS
         self.counters[[c.RING_POS, c.WINDOW_COUNT, c.DETECTED, c.DETECTED_ROWS, c.ALARM_RUN,
-                       c.CLEAR_RUN, c.HOLD_OPEN]] = 0
+                       c.CLEAR_RUN, c.HOLD_OPEN, c.ZPREV_OK, c.VIB_RUN]] = 0
 
     @property
     def cumulative(self) -> np.ndarray:

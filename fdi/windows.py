@@ -5,7 +5,8 @@ ring of the last R = 2^K + 1 of them; the sum over the last w samples is c_t −
 (O(1) per scale, seed 000's multi-resolution means as differences). Per scale::
 
     D_w = |Σ_w z|² / (w·f_w)                         (χ²(df) for healthy white noise)
-    T_w = thr_w · (1 + w·β/f_w + κ/f_w · Σ_w ρ)      (calibration error does not average)
+    T_w = thr_w · (1 + w·β/f_w + κ/f_w · Σ_w ρ) · s  (calibration error does not average;
+                                                       s: the in-flight noise scale)
 
 an alarm is D_w > T_w; the detection clears only while every D_w is below its clearing
 level C_w·g_w, with C_w = ``clear_ratio·thr_w`` (and the floor of
@@ -40,7 +41,7 @@ __all__ = ["window_update"]
 @njit(error_model="numpy", inline="always", _nrt=False)
 def window_update(z: np.ndarray, rho: float, df: int, windows: np.ndarray,
                   counters: np.ndarray, scales: np.ndarray, K: int, out: np.ndarray,
-                  r: int) -> tuple[bool, bool, int, float]:
+                  r: int, ns: float = 1.0) -> tuple[bool, bool, int, float]:
     """Add one complete sample and test every window scale.
 
     Parameters
@@ -62,6 +63,9 @@ def window_update(z: np.ndarray, rho: float, df: int, windows: np.ndarray,
         Output rows: statistics at STATS0 + k, thresholds at STATS0 + K + k.
     r : int
         Row of this sample.
+    ns : float
+        The in-flight noise scale s ≥ 1 (:func:`fdi.kernel.noise_scale`): thresholds and
+        clearing levels are taken s times (1: the calibrated noise).
 
     Returns
     -------
@@ -98,6 +102,7 @@ def window_update(z: np.ndarray, rho: float, df: int, windows: np.ndarray,
                 acc = acc + d * d
             D = acc * scales[k, CHI2_SCALE]
             g = scales[k, OFFSET_GAIN] + scales[k, RHO_GAIN] * (windows[R, df] - windows[o, df])
+            g = g * ns
             T = scales[k, THRESHOLD] * g
             if D > T:
                 alarm = True

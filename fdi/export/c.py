@@ -328,7 +328,7 @@ def generate_c(cal: Calibration, thresholds: Thresholds | None = None, *, kind: 
         "COUNTERS": str(S.HEALTH0 + n),
     }
     state_bytes = (8 * 5 * n + 8 * 2
-                   + real * (4 * n + (ring + 1) * (df_max + 1) + 3 * n + 9 + n + 1)
+                   + real * (4 * n + (ring + 1) * (df_max + 1) + 3 * n + 9 + n + 1 + 1 + 2 * n)
                    + 8 * (S.HEALTH0 + n) + 8 * 4 + 3 + 8 + 4 + 4 + 4 + n)
     ops = _ops_per_step(n, df_max, nw, cusum, n_terms)
     files = {"rimu_monitor.h": _fill(_template("rimu_monitor.h.in"), values),

@@ -241,7 +241,7 @@ class CMonitor:
             return f"parity scale {e.scale}"
         fixed = {1: "cusum", 2: "range", 3: "nonfinite", 4: "stuck", 5: "stale", 6: "dwell",
                  8: "in", 12: "time nonfinite", 13: "time backward", 14: "time jump",
-                 15: "time rebased"}
+                 15: "time rebased", 16: "vibration"}
         if r in fixed:
             return fixed[r]
         if r == 7:

@@ -293,6 +293,18 @@ def effects_case():
     return Case(cal, t, raw, force=force, temperature=temp, expect=("detected",))
 
 
+def vibration_case(tmp):
+    """Three IMUs, imu3.z at 3x its noise from 5 s: the noise scale follows, the vibration
+    test excludes it (status and reason ``vibration``)."""
+    from replay.faults import parse_fault
+    from replay.flight_sim import simulate_flight
+
+    cal = triads(tmp, 3, seed=2)
+    fl = simulate_flight(cal, 20.0, seed=3, faults=[parse_fault("noise:9:3x:5", cal)],
+                         max_rate_dps=100.0)
+    return Case(cal, fl.t, fl.raw, expect=("vibration",))
+
+
 CASES = {
     **{f"{cfg}-{det}": (lambda tmp, cfg=cfg, det=det: faults_case(cfg, det))
        for cfg in ("cone6", "tetrad") for det in ("windows", "both", "cusum")},
@@ -302,6 +314,7 @@ CASES = {
     **{f"random-faults-{k}": (lambda tmp, k=k: random_faults_case(k)) for k in range(8)},
     "readmission": lambda tmp: readmission_case(),
     "envelope-two-imus": envelope_case,
+    "vibration-three-imus": vibration_case,
     "effects": lambda tmp: effects_case(),
 }
 F32_CASES = ["cone6-both", "tetrad-10-min", "sequential", "bad-numbers-0", "bad-numbers-3",
