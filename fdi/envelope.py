@@ -25,7 +25,11 @@ Codes (a bitmask, 0 = inside the envelope)
   A set with a single estimate (one IMU) has nothing to confirm with and takes its
   sensor's word.
 - :data:`TUMBLE` (4): the vehicle spins beyond controlled flight. Either every independent
-  rate estimate exceeds ``tumble_rate_dps``, or the estimates disagree by a *spike* of more
+  rate estimate exceeds the tumble limit about some body axis (the larger of
+  ``tumble_rate_dps`` and ``tumble_factor`` times the vehicle's own range about it: the
+  calibration's ``validated_rate`` or the declared ``vehicle_rate_dps``; a simulated
+  manoeuvre at 300 °/s about every axis at once, 520 °/s in all, is not a tumble), or
+  the estimates disagree by a *spike* of more
   than ``disagree_spike_dps`` (disagreement above its own slow baseline, time constant
   ``disagree_baseline_s``) while every estimate sees at least ``disagree_context_rate_dps``.
 - :data:`DECLARED` (8): inside an interval the log itself declares (crash check, estimator
@@ -173,7 +177,16 @@ class EnvelopeSettings:
     """A saturated gyro counts when another estimate sees this fraction of its value
     (capped at the range)."""
     tumble_rate_dps: float = 400.0
-    """Rate (°/s) beyond which, seen by every estimate, the vehicle tumbles."""
+    """Least rate (°/s) about one body axis beyond which, seen by every estimate, the
+    vehicle tumbles; the limit rises with the vehicle's own range (``tumble_factor``)."""
+    tumble_factor: float = 1.25
+    """The tumble limit about each body axis is the larger of ``tumble_rate_dps`` and this
+    times the vehicle's range about it: the calibration's covered rate
+    (``validated_rate``) or the declared ``vehicle_rate_dps``, whichever is larger."""
+    vehicle_rate_dps: float = 0.0
+    """Declared largest body rate (°/s) of controlled flight about any axis (0: not
+    declared): a vehicle that manoeuvres at 300 °/s about each axis does not tumble at
+    400 °/s about one of them."""
     disagree_spike_dps: float = 100.0
     """Jump (°/s) of the disagreement between estimates above its slow baseline ..."""
     disagree_context_rate_dps: float = 200.0
@@ -450,10 +463,23 @@ class EnvelopeTracker:
                 acc_sat = hit & (shock_now | (ac.shape[1] <= 3))
         return gyro | acc_sat
 
+    def tumble_limit(self) -> np.ndarray:
+        """The tumble limit about each body axis (rad/s), shape (3,): the larger of
+        ``tumble_rate_dps`` and ``tumble_factor`` times the vehicle's range (its calibrated
+        ``validated_rate``, or the declared ``vehicle_rate_dps``)."""
+        s = self.settings
+        rng = np.full(3, s.vehicle_rate_dps * DPS)
+        if self.validated_rate is not None:
+            rng = np.maximum(rng, np.where(np.isfinite(self.validated_rate),
+                                           self.validated_rate, 0.0))
+        return np.maximum(s.tumble_rate_dps * DPS, s.tumble_factor * rng)
+
     def _tumble(self, t: np.ndarray, w: np.ndarray, wmin: np.ndarray) -> np.ndarray:
         s = self.settings
         B = t.shape[0]
-        fast = wmin > s.tumble_rate_dps * DPS
+        # every estimate beyond the limit about some body axis (the axis floor: a healthy
+        # manoeuvre of the vehicle's own range about each axis at once is not a tumble)
+        fast = np.any(_axis_floor(w) > self.tumble_limit(), axis=1)
         E = w.shape[0]
         if E < 2:
             return fast

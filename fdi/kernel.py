@@ -777,12 +777,14 @@ def _complete(sensors, valid, vr) -> bool:
 @njit(**_INLINE)
 def _start(t, sensor, counters) -> None:
     """The first sample, or the first of a new time base: every sensor's stale clock starts
-    at its time (NaN: a bad time stamp, the sample count decides) and the re-admission
+    at its time (NaN: a bad time stamp, the sample count decides; the sample itself is not
+    counted as missed, as the time clock counts intervals from it) and the re-admission
     dwells start again."""
     counters[STARTED] = 1
     for i in range(sensor.shape[0]):
         sensor[i, LAST_VALID_T] = t
         sensor[i, GOOD_SINCE_T] = np.nan
+        sensor[i, MISSED_RUN] = -1.0        # this sample is the origin of both clocks
 
 
 @njit(**_INLINE)

@@ -38,7 +38,7 @@ from fdi.blocks import CAPABILITY_CODE, CAPABILITY_NAMES, block_from_answers
 from fdi.calfile import Calibration
 from fdi.capability import moved_axes
 from fdi.detector import chi2_threshold, default_thresholds
-from fdi.envelope import reason_names
+from fdi.envelope import SATURATION, reason_names
 from fdi.errors import ConfigError
 from fdi.health import health_limits
 from fdi.isolation import IsolationDecision, decide, isolate, magnitude
@@ -472,6 +472,11 @@ class Monitor:
         for i in range(self.n):
             code = int(st.counters[S.HEALTH0 + i])
             if code == S.HEALTH_OK:
+                continue
+            if code == S.HEALTH_RANGE and self._env & SATURATION:
+                # at a saturation every IMU confirms, a sensor at its range is the envelope,
+                # not a fault: kept (the sample is tested, nothing is excluded out of the
+                # envelope, and the windows start afresh at re-entry)
                 continue
             reason = S.HEALTH_REASON[code]
             if code == S.HEALTH_STUCK:

@@ -34,6 +34,7 @@ from fdi.capability import AXIS_SHARE
 from fdi.detector import chi2_threshold, default_thresholds
 from fdi.effect_specs import RUNTIME_INPUTS
 from fdi.effects import Compensator
+from fdi.envelope import SATURATION
 from fdi.errors import ExportError
 from fdi.health import health_limits
 from fdi.isolation import rejection_level
@@ -305,6 +306,7 @@ def generate_c(cal: Calibration, thresholds: Thresholds | None = None, *, kind: 
     cusum = thresholds.detector != "windows"
     tables = (f"{effect_text}"
               f"#define AXIS_SHARE {AXIS_SHARE!r}\n"
+              f"#define ENV_SATURATION {SATURATION}UL  /* fdi.envelope.SATURATION */\n"
               f"static const rimu_time TIME_CONST[4] = "
               f"{{{_f64(settings.stale_timeout_s)}, {_f64(settings.readmit_dwell_s)}, "
               f"{_f64(settings.stale_timeout_s * thresholds.sample_rate_hz)}, "

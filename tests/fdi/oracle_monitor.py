@@ -100,6 +100,8 @@ class OracleMonitor:
         self.suspects: tuple[int, ...] = ()
         self.no_fit = False
         self.due = 0
+        self.rows_seen = 0
+        self.fresh = False
 
     def _base_thresholds(self) -> np.ndarray:
         df = self.model.df
@@ -210,7 +212,8 @@ class OracleMonitor:
                 continue
             s = np.sum(self.hist_z[-w:], axis=0)
             D = float(s @ s) / (w * f)
-            T = thr * (1.0 + w * mdl.beta / f + mdl.kappa / f * float(np.sum(self.hist_rho[-w:])))
+            gain = 1.0 + w * mdl.beta / f + mdl.kappa / f * float(np.sum(self.hist_rho[-w:]))
+            T = thr * gain
             stats.append(D)
             thrs.append(T)
             self.last_T = getattr(self, "last_T", {})
@@ -218,11 +221,11 @@ class OracleMonitor:
             ratios.append(D / T if D > T else -np.inf)
             # clearing level: half the threshold, never below the χ² level healthy noise
             # stays under for clear_samples samples on every scale but with clear_miss
-            # (union bound), never above the threshold
+            # (union bound), never above the threshold; inflated as the threshold is
             st = self.settings
             floor = chi2_threshold(st.clear_miss / (st.clear_samples * len(self.scales)),
                                    mdl.df)
-            clear &= D < min(thr, max(st.clear_ratio * thr, floor))
+            clear &= D < min(thr, max(st.clear_ratio * thr, floor)) * gain
         if self.cusum:
             U = mdl.U / np.linalg.norm(mdl.U, axis=0)
             r = U.T @ z
@@ -253,13 +256,21 @@ class OracleMonitor:
             events.append(("detected", sensor if single else None, reason, stats[fired],
                            thrs[fired], mag if single else None))
             self.due = self.settings.persistence
+            self.rows_seen = 1
             events += self._suspect(cons)
         else:
             self.det_rows += 1
+            if alarm and self.clear_run > 0:        # fell back below clearing, rises again:
+                self.det_rows = 1                   # a new onset
             self.alarm_run = self.alarm_run + 1 if alarm else 0
             self.clear_run = self.clear_run + 1 if clear else 0
         ask = mdl.df >= 2 and mdl.capability in ("isolate", "detect")
         if ask and self.alarm_run >= self.settings.persistence:
+            if self.det_rows < self.rows_seen:     # a new onset: decided afresh
+                self.due = self.settings.persistence
+                self.fresh = True
+                self.no_fit = False
+            self.rows_seen = self.det_rows
             if self.det_rows >= self.due:
                 nxt = [w for w in self.scales if w > self.det_rows]
                 self.due = nxt[0] if nxt else self.det_rows + max(self.scales)
@@ -285,6 +296,8 @@ class OracleMonitor:
             self.detected = False
             self.suspects = ()
             self.no_fit = False
+            self.rows_seen = 0
+            self.fresh = False
         return events
 
     def _hypotheses(self, fired: int):
@@ -322,7 +335,9 @@ class OracleMonitor:
         if self.no_fit:
             return []
         cand = set(range(mdl.m)) if cons is None else set(cons)
-        if self.suspects and cand:
+        if self.fresh:
+            self.fresh = False
+        elif self.suspects and cand:
             cand &= {mdl.idx.index(i - 1) for i in self.suspects}
         none_fits = cons is not None and not cand
         self.no_fit = none_fits

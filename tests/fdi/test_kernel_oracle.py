@@ -65,7 +65,9 @@ def _close(a, b, what: str, rtol: float = 1e-9, atol: float = 1e-12) -> None:
 
 def compare(cal, th, t, raw, valid, mset=None) -> list:
     """Run the kernel (Monitor.run) and the oracle on one block; assert agreement."""
-    mset = mset or MonitorSettings()
+    # the oracle is the recursion at the calibrated noise: the in-flight noise scale and
+    # the vibration test are off here (tests/fdi/test_flight_noise.py covers them)
+    mset = mset or MonitorSettings(noise_scale_max=1.0, vibration_ratio=0.0)
     res = Monitor(cal, th, settings=mset).run(t, raw, valid, parity=True)
     orc = OracleMonitor(cal, th, mset)
     ok = np.ones(raw.shape, bool) if valid is None else valid
@@ -146,7 +148,8 @@ def test_kernel_matches_oracle_on_faults_and_extreme_values(edits, seed, cfg, de
         else:
             raw[row, i] += 40.0 * size * sd[i]
     th = default_thresholds(cal, detector=detector)
-    compare(cal, th, t, raw, valid, MonitorSettings(stuck_count=20))
+    compare(cal, th, t, raw, valid, MonitorSettings(stuck_count=20, noise_scale_max=1.0,
+                                                    vibration_ratio=0.0))
 
 
 def test_subnormal_raw_values_are_plausible_numbers_not_faults():
