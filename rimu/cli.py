@@ -176,8 +176,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     if run is None:
         parser.print_help()
         return 2
+    from fdi.progress import session
+
+    name = " ".join(w for w in (getattr(args, "command", None), getattr(args, "what", None))
+                    if w)
     try:
-        return int(run(args) or 0)
+        with session(name or "rimu", enabled=not getattr(args, "no_progress", False)):
+            return int(run(args) or 0)
     except RimuError as exc:
         if args.debug:
             raise

@@ -86,8 +86,12 @@ def run_flight(path: str, cal_path: str, *, alpha: float = 0.01, as_json: bool =
 
     input_path(cal_path, "--cal")
     out = output_dir(report_dir, "--report") if report_dir else None
+    from fdi.progress import current
+
+    current().stage("reading the flight folder")
     flight = load_flight_dir(path)
     cal = load_calibration(cal_path)
+    current().stage("diagnosing (parity residual, effects)")
     doc = diagnose_flight(flight, cal, alpha=alpha)
     text = format_text(doc)
     js = json.dumps(doc, indent=1, allow_nan=False) + "\n"
@@ -96,7 +100,15 @@ def run_flight(path: str, cal_path: str, *, alpha: float = 0.01, as_json: bool =
         from calibration.inflight.report import write_flight_plots
 
         with atomic_dir(out) as tmp:        # the page, its plots and the JSON: all or none
+            current().stage("plots")
             pngs = write_flight_plots(flight, cal, tmp)
+            from replay.plots import monitor_picture
+
+            current().stage("the monitor over the flight, for its picture")
+            pngs.append(monitor_picture(
+                flight, cal, tmp / "monitor.png",
+                title=f"rimu monitor-file {path} (defaults): rates, statistic / threshold "
+                      "per window, events")[0])
             (tmp / "report.md").write_text("```\n" + text + "\n```\n\n" + "".join(
                 f"![{p.stem}]({p.name})\n" for p in pngs), encoding="utf-8")
             (tmp / "diagnosis.json").write_text(js, encoding="utf-8")

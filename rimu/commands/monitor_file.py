@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 import logging
 
 from rimu.argtypes import nonnegative_int, positive_float
@@ -20,7 +19,9 @@ def configure(p: argparse.ArgumentParser) -> None:
                    help="a rimu.thresholds or rimu.tuning (rimu tune) file made for this "
                         "calibration and sample rate (default: computed from the "
                         "calibration)")
-    p.add_argument("--report", metavar="FILE", help="write the rimu.report/1 JSON here")
+    p.add_argument("--report", metavar="FILE",
+                   help="write the rimu.report/1 JSON here, and its picture beside it "
+                        "(FILE with .png: rates, statistic / threshold per window, events)")
     p.add_argument("--max-events", type=nonnegative_int(), default=50,
                    help="events to print (default 50)")
     p.add_argument("--no-time-offsets", action="store_true",
@@ -42,8 +43,8 @@ def run(args: argparse.Namespace) -> int:
     from replay.chain import ChainOptions, chain_for_flight, run_flight
     from replay.flight import load_flight_dir
     from replay.report import format_report
-    from rimu.commands.replay import describe_chain
-    from rimu.outputs import atomic_write_text, flight_folder_hint, input_path, output_file
+    from rimu.commands.replay import describe_chain, picture_path, write_report
+    from rimu.outputs import flight_folder_hint, input_path, output_file
 
     flight_folder_hint(args.flight, "DIR", "rimu monitor-file")
     input_path(args.flight, "DIR", kind="dir")
@@ -52,6 +53,10 @@ def run(args: argparse.Namespace) -> int:
         input_path(args.thresholds, "--thresholds")
     if args.report:
         output_file(args.report, "--report")
+        output_file(picture_path(args.report), "--report (its picture)")
+    from fdi.progress import current
+
+    current().stage("reading the calibration and the flight folder")
     cal = load_calibration(args.cal)
     flight = load_flight_dir(args.flight)
     check_compatible(cal, flight.n, flight.raw_unit, str(args.flight), kind=flight.kind,
@@ -61,14 +66,14 @@ def run(args: argparse.Namespace) -> int:
     warning = other_flight_warning(cal, flight)
     if warning:
         logging.getLogger("rimu").warning(warning)
+    current().stage("thresholds and monitor")
     chain = chain_for_flight(flight, cal, ChainOptions(
         thresholds_file=args.thresholds, calibration_file=args.cal,
         false_alarms_per_hour=args.false_alarms_per_hour, effects=not args.no_effects,
         time_offsets=not args.no_time_offsets, envelope=not args.no_envelope))
     describe_chain(chain, flight)
+    current().stage(f"monitoring {flight.t.shape[0]} samples")
     _, report = run_flight(chain, flight)
     print(format_report(report, max_events=args.max_events))
-    if args.report:
-        atomic_write_text(args.report, json.dumps(report, indent=1, allow_nan=False) + "\n")
-        print(f"wrote {args.report}")
+    write_report(report, args.report, chain)
     return 0
