@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import argparse
 import logging
+from typing import Any
 
+from fdi.errors import ConfigError
 from rimu.argtypes import nonnegative_int, positive_float
 
 HELP = "run the monitor over a flight sample directory; print events and a summary"
@@ -36,6 +38,32 @@ def configure(p: argparse.ArgumentParser) -> None:
                    help="do not compensate the calibration's effect terms (default: the "
                         "terms whose inputs the flight carries are compensated: rate sign, "
                         "rate squared, specific force from its accelerometers, temperature)")
+    p.add_argument("--baseline", metavar="NAMES",
+                   help="also run the autopilots' own rules on the same samples and report "
+                        "when each would have flagged and whom it blamed, beside rimu's "
+                        "answer: a comma-separated list of px4, px4-others, ardupilot, or "
+                        "all (docs/baselines.md)")
+    p.add_argument("--baseline-plot", metavar="FILE",
+                   help="with --baseline: a PNG of the IMU rates, rimu's detections and "
+                        "exclusions and each baseline's flags and blames on one time axis")
+
+
+def _baselines(args: argparse.Namespace, names: tuple[str, ...], flight: Any, cal: Any,
+               report: dict[str, Any]) -> None:
+    """The autopilot rules on the flight's samples: text, the report's block, the plot."""
+    from replay.baselines import baselines_record, format_baselines, run_baselines
+    from rimu.outputs import atomic_file
+
+    triads, results = run_baselines(flight, names, cal)
+    rec = baselines_record(triads, results, flight, report)
+    report["baselines"] = rec
+    print(format_baselines(rec, max_events=min(args.max_events, 10)))
+    if args.baseline_plot:
+        from replay.baselines.plot import plot_baselines
+
+        with atomic_file(args.baseline_plot) as tmp:
+            plot_baselines(tmp, triads, results, report, faults=flight.faults)
+        print(f"wrote {args.baseline_plot}")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -54,6 +82,13 @@ def run(args: argparse.Namespace) -> int:
     if args.report:
         output_file(args.report, "--report")
         output_file(picture_path(args.report), "--report (its picture)")
+    from replay.baselines import parse_baselines
+
+    baselines = parse_baselines(args.baseline)
+    if args.baseline_plot:
+        if not baselines:
+            raise ConfigError("--baseline-plot needs --baseline NAMES")
+        output_file(args.baseline_plot, "--baseline-plot")
     from fdi.progress import current
 
     current().stage("reading the calibration and the flight folder")
@@ -75,5 +110,8 @@ def run(args: argparse.Namespace) -> int:
     current().stage(f"monitoring {flight.t.shape[0]} samples")
     _, report = run_flight(chain, flight)
     print(format_report(report, max_events=args.max_events))
+    if baselines:
+        current().stage("baselines")
+        _baselines(args, baselines, flight, cal, report)
     write_report(report, args.report, chain)
     return 0
