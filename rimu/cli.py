@@ -30,6 +30,7 @@ COMMANDS: dict[str, str] = {
     "evaluate": "rimu.commands.evaluate",
     "export": "rimu.commands.export",
     "ingest": "rimu.commands.ingest",
+    "inspect": "rimu.commands.inspect",
     "monitor": "rimu.commands.monitor",
     "monitor-file": "rimu.commands.monitor_file",
     "parity": "rimu.commands.parity",
