@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 import pkgutil
 import sys
+import warnings
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -40,7 +41,9 @@ def build(out: Path, modules: list[str] | None = None) -> list[str]:
 
     modules = public_modules() if modules is None else modules
     pdoc.render.configure(docformat="numpy", search=True, show_source=False)
-    pdoc.pdoc(*modules, output_directory=Path(out))
+    with warnings.catch_warnings():     # a package's __all__ names a module also listed
+        warnings.filterwarnings("ignore", message=".*has already been added")
+        pdoc.pdoc(*modules, output_directory=Path(out))
     return modules
 
 

@@ -62,7 +62,7 @@ def available(module: str) -> bool:
 
 
 _PLOTTING = {"calibrate": ("plot", "report"), "characterise": ("report",),
-             "diagnose": ("report",)}
+             "diagnose": ("report",), "monitor-file": ("baseline_plot",)}
 """Commands whose options, when given, make them draw figures at the end of their work."""
 
 

@@ -86,6 +86,8 @@ def test_ingest_names_the_logs_extra(tmp_path, suffix, dist):
     ("characterise", "flight", "--report", "rep"),
     ("calibrate", "session", "--out", "cal2.json", "--plot", "rep"),
     ("calibrate", "--in-flight", "flight", "--out", "cal2.json", "--report", "rep"),
+    ("monitor-file", "flight", "--cal", "cal.json", "--baseline", "px4",
+     "--baseline-plot", "b.png"),
 ], ids=lambda a: " ".join(a[:2]))
 def test_figures_name_the_plots_extra_before_any_work(tmp_path, args):
     """A command that would draw figures at the end of its work is refused before it
