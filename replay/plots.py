@@ -28,7 +28,7 @@ import numpy as np
 
 from fdi.units import DPS
 
-__all__ = ["MAX_BINS", "RunTrace", "monitor_picture", "plot_run", "scale_labels", "spans"]
+__all__ = ["MAX_BINS", "RunTrace", "plot_run", "scale_labels", "spans"]
 
 MAX_BINS = 4096
 """Time bins a :class:`RunTrace` keeps at most (about 0.3 MB)."""
@@ -315,24 +315,3 @@ def plot_run(trace: RunTrace, path: str | Path, *, report: Mapping[str, Any] | N
     plt.close(fig)
     return p
 
-
-def monitor_picture(flight: Any, cal: Any, path: str | Path, *,
-                    title: str | None = None) -> tuple[Path, dict[str, Any]]:
-    """Monitor ``flight`` with ``cal`` as ``rimu monitor-file`` does by default (thresholds
-    from the calibration at 1e-3 false alarms per hour, time offsets, effects, envelope)
-    and draw the run (:func:`plot_run`) into ``path``.
-
-    Returns
-    -------
-    path : Path
-    report : dict
-        The run's ``rimu.report/1`` dictionary.
-    """
-    from replay.chain import ChainOptions, chain_for_flight, run_flight
-
-    chain = chain_for_flight(flight, cal, ChainOptions())
-    _, report = run_flight(chain, flight)
-    acc = chain.report
-    p = plot_run(acc.trace, path, report=report, title=title,
-                 scale_names=scale_labels(chain.thresholds, acc.trace.scales))
-    return p, report
