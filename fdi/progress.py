@@ -1,6 +1,7 @@
 """Progress of long work on stderr: one helper for every command (host side only).
 
-:class:`Progress` shows nothing for work shorter than :data:`DELAY_S`. After that, on a
+:class:`Progress` shows nothing for work shorter than :data:`DELAY_S` (counted from the
+first stage or bar: start-up and input checks do not count). After that, on a
 terminal it redraws one status line (stage, bar, elapsed time, time left) a few times a
 second and clears it at the end; elsewhere (a log file, a pipe, CI) it prints one line per
 stage and, during a long stage or bar, one line every :data:`LINE_EVERY_S`, never two lines
@@ -137,6 +138,7 @@ class Progress:
         self.lines = 0                       # lines written (not a terminal)
         self._lock = threading.RLock()
         self._t0 = time.monotonic()
+        self._t_work: float | None = None    # when the first stage or bar began
         self._stage: str | None = None
         self._stage_t0 = self._t0
         self._stage_said = False
@@ -164,6 +166,8 @@ class Progress:
         with self._lock:
             self._stage, self._stage_t0, self._stage_said = text, time.monotonic(), False
             self._bar, self._clocked = None, clock
+            if self._t_work is None:
+                self._t_work = self._stage_t0
         self._tick()
 
     def clear(self) -> None:
@@ -179,6 +183,8 @@ class Progress:
         b = Bar(self, total, desc, unit)
         with self._lock:
             self._bar = b
+            if self._t_work is None:
+                self._t_work = b.t0
             if self._stage is None:
                 self._stage, self._stage_t0, self._stage_said = desc, b.t0, False
         self._tick()
@@ -231,7 +237,7 @@ class Progress:
         if not self.enabled:
             return
         now = time.monotonic()
-        if now - self._t0 < self.delay_s:
+        if self._t_work is None or now - self._t_work < self.delay_s:
             return
         with self._lock:
             if not self.enabled:

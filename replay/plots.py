@@ -57,7 +57,7 @@ class RunTrace:
         self.max_bins = max(2, int(max_bins) // 2 * 2)
         self.per_bin = 1  # samples per full bin
         self.scales = 0  # detector columns (K)
-        self._full: list[np.ndarray] = []  # blocks of full bins
+        self._buf: np.ndarray | None = None  # the full bins (allocated once: flat memory)
         self._n_full = 0
         self._open: np.ndarray | None = None  # the bin filling up
         self._open_n = 0
@@ -75,6 +75,7 @@ class RunTrace:
         thr = np.asarray(result.thresholds, float).reshape(N, -1)
         if not self._started:
             self.scales, self._started = stats.shape[1], True
+            self._buf = np.empty((self.max_bins, 18 + self.scales))
         if stats.shape[1] != self.scales:
             return  # another monitor's answers: not mixed in
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -91,40 +92,57 @@ class RunTrace:
                                 np.where(fin, omega, np.inf), np.where(fin, omega, -np.inf),
                                 unv, out.astype(float), ratio])
         k = 0
-        if self._open is not None:                  # fill the open bin first
-            take = min(self.per_bin - self._open_n, N)
-            self._open = _combine(np.vstack([self._open[None], rows[:take]]))
-            self._open_n += take
-            k = take
-            if self._open_n == self.per_bin:
-                self._push(self._open[None])
-                self._open, self._open_n = None, 0
-        rest = rows[k:]
-        full = rest.shape[0] // self.per_bin * self.per_bin
-        if full:
-            self._push(_combine(rest[:full].reshape(-1, self.per_bin, rest.shape[1]), axis=1))
-        if full < rest.shape[0]:
-            self._open = _combine(rest[full:])
-            self._open_n = rest.shape[0] - full
-        while self._n_full + (self._open is not None) > self.max_bins:
-            self._merge()
+        while k < N:                  # in time order: the open bin, full bins, a new open
+            if self._open is not None:
+                take = min(self.per_bin - self._open_n, N - k)
+                self._open = _combine(np.vstack([self._open[None], rows[k:k + take]]))
+                self._open_n += take
+                k += take
+                if self._open_n == self.per_bin:
+                    done, self._open, self._open_n = self._open, None, 0
+                    self._push(done[None])      # a merge may open the last bin again
+                continue
+            full = (N - k) // self.per_bin * self.per_bin
+            if full:
+                self._push(_combine(rows[k:k + full].reshape(-1, self.per_bin,
+                                                             rows.shape[1]), axis=1))
+                k += full
+                continue
+            self._open, self._open_n = _combine(rows[k:]), N - k
+            k = N
+        if self._n_full + (self._open is not None) > self.max_bins:
+            self._fit(self._buf[:self._n_full].copy())
 
     def _push(self, bins: np.ndarray) -> None:
-        self._full.append(bins)
-        self._n_full += bins.shape[0]
+        """Append full bins, merging neighbours (each bin then covers twice the samples)
+        until they and the open bin fit in :attr:`max_bins`."""
+        n, k = self._n_full, bins.shape[0]
+        if n + k + (self._open is not None) <= self.max_bins:
+            self._buf[n:n + k] = bins
+            self._n_full = n + k
+            return
+        self._fit(np.vstack([self._buf[:n], bins]))
 
-    def _merge(self) -> None:
-        """Neighbouring bins merged: each full bin now covers twice the samples."""
-        b = np.vstack(self._full) if self._full else np.zeros((0, 18 + self.scales))
+    def _fit(self, b: np.ndarray) -> None:
+        """Full bins ``b`` merged until they and the open bin fit, into the buffer."""
+        while b.shape[0] + (self._open is not None) > self.max_bins:
+            b = self._merge(b)
+        self._buf[:b.shape[0]] = b
+        self._n_full = b.shape[0]
+
+    def _merge(self, b: np.ndarray) -> np.ndarray:
+        """Neighbouring bins of ``b`` merged; an odd last one becomes (part of) the open
+        bin."""
         odd = b.shape[0] % 2
         pairs = b[: b.shape[0] - odd]
         self.per_bin *= 2
-        self._full = [_combine(pairs.reshape(-1, 2, b.shape[1]), axis=1)] if pairs.size else []
-        self._n_full = pairs.shape[0] // 2
+        out = (_combine(pairs.reshape(-1, 2, b.shape[1]), axis=1) if pairs.size
+               else b[:0])
         if odd:                                     # half a new bin: it opens again
             parts = [b[-1:]] + ([self._open[None]] if self._open is not None else [])
             self._open = _combine(np.vstack(parts))
             self._open_n = self.per_bin // 2 + self._open_n
+        return out
 
     def bins(self) -> dict[str, np.ndarray]:
         """The bins so far (the open one included), as arrays.
@@ -136,8 +154,8 @@ class RunTrace:
             had no finite ω̂); ``unverified`` (B, 3) bool; ``out_of_envelope`` (B,) bool;
             ``ratio`` (B, K) largest statistic / threshold per detector column.
         """
-        parts = list(self._full) + ([self._open[None]] if self._open is not None else [])
-        b = np.vstack(parts) if parts else np.zeros((0, 18 + self.scales))
+        full = self._buf[:self._n_full] if self._buf is not None else np.zeros((0, 18))
+        b = np.vstack([full, self._open[None]]) if self._open is not None else full.copy()
         cnt = b[:, 5:8]
         with np.errstate(invalid="ignore", divide="ignore"):
             mean = np.where(cnt > 0, b[:, 2:5] / cnt, np.nan)

@@ -90,8 +90,6 @@ def run(args: argparse.Namespace) -> int:
             raise ConfigError("--baseline-plot needs --baseline NAMES")
         output_file(args.baseline_plot, "--baseline-plot")
     from fdi.progress import current
-
-    current().stage("reading the calibration and the flight folder")
     cal = load_calibration(args.cal)
     flight = load_flight_dir(args.flight)
     check_compatible(cal, flight.n, flight.raw_unit, str(args.flight), kind=flight.kind,
@@ -101,7 +99,6 @@ def run(args: argparse.Namespace) -> int:
     warning = other_flight_warning(cal, flight)
     if warning:
         logging.getLogger("rimu").warning(warning)
-    current().stage("thresholds and monitor")
     chain = chain_for_flight(flight, cal, ChainOptions(
         thresholds_file=args.thresholds, calibration_file=args.cal,
         false_alarms_per_hour=args.false_alarms_per_hour, effects=not args.no_effects,

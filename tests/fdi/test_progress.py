@@ -136,9 +136,9 @@ def test_nothing_before_a_stage_and_a_stage_after_three_seconds(monkeypatch, cap
     from fdi.progress import current
 
     def slow(args):
-        time.sleep(1.0)                             # imports, input checks: nothing shown
+        time.sleep(2.0)                 # imports, input checks (not counted): nothing shown
         current().stage("long work")
-        time.sleep(3.8)
+        time.sleep(4.6)
         return 0
 
     monkeypatch.setattr(ch, "run", slow)
@@ -148,7 +148,7 @@ def test_nothing_before_a_stage_and_a_stage_after_three_seconds(monkeypatch, cap
     assert err[-1].startswith("rimu: characterise: done in"), err
 
     def refused(args):
-        time.sleep(3.5)
+        time.sleep(3.5)                 # a slow start, then a refusal: one line
         raise ConfigError("bad input")
 
     monkeypatch.setattr(ch, "run", refused)
@@ -182,7 +182,7 @@ def test_command_stages_named(monkeypatch, capsys, tmp_path):
     CAL.save(cal)
     assert main(["monitor-file", str(tmp_path / "f"), "--cal", str(cal)]) == 0
     err = capsys.readouterr().err
-    assert "rimu: monitor-file: reading the calibration and the flight folder" in err, err
+    assert "rimu: monitor-file: monitoring 200 samples" in err, err
 
 
 def test_live_monitor_on_a_quiet_bus_says_it_is_waiting(monkeypatch):

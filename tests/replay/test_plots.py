@@ -32,19 +32,20 @@ def _piece(res, a, b):
                        envelope=None if res.envelope is None else res.envelope[a:b])
 
 
-def test_trace_in_pieces_equals_trace_at_once_and_stays_bounded(run):
+@pytest.mark.parametrize("max_bins", [8, 64])
+def test_trace_in_pieces_equals_trace_at_once_and_stays_bounded(run, max_bins):
     _, _, res = run
     N = res.t.size
-    whole = RunTrace(max_bins=64)
+    whole = RunTrace(max_bins=max_bins)
     whole.update(res)
     rng = np.random.default_rng(1)
     cuts = np.sort(rng.choice(np.arange(1, N), size=40, replace=False))
-    parts = RunTrace(max_bins=64)
+    parts = RunTrace(max_bins=max_bins)
     for a, b in zip(np.r_[0, cuts], np.r_[cuts, N], strict=True):
         parts.update(_piece(res, a, b))
     bw, bp = whole.bins(), parts.bins()
-    assert whole.per_bin == parts.per_bin and whole.per_bin >= N / 64
-    assert bw["t0"].size <= 64 + 2
+    assert whole.per_bin == parts.per_bin and whole.per_bin >= N / max_bins
+    assert bw["t0"].size <= max_bins
     for k in ("t0", "t1", "mean", "min", "max", "unverified", "ratio"):
         np.testing.assert_allclose(bp[k], bw[k], rtol=1e-12, equal_nan=True, err_msg=k)
     # nothing lost by binning: extremes, first and last time, unverified time
