@@ -35,7 +35,7 @@ from fdi.export import generate_c, reachable_sets, write_c
 from fdi.export.host import STRICT_FLAGS, CMonitor, compile_module, find_compiler
 from fdi.monitor import Monitor
 from fdi.settings import MonitorSettings
-from thresholds.synthetic import synthetic_calibration
+from studies.synthetic import synthetic_calibration
 
 pytestmark = pytest.mark.skipif(find_compiler() is None,
                                 reason="no C compiler (cc) on the PATH")
