@@ -96,10 +96,10 @@ def test_four_triads_same_answers_within_the_carried_sets(tmp_path):
     mod, mon = _load(tmp_path / "m", cal, depth=2)
     assert mod.sets == 130 < 4096
     sd = cal.gyro.noise_sd[0]
-    t, raw = triad_flight(cal, 3000, [(1, 500, 20 * sd)], seed=5)
+    t, raw = triad_flight(cal, 2000, [(1, 500, 20 * sd)], seed=5)
     valid = np.ones(raw.shape, bool)
-    valid[1500:, 6:9] = False                          # imu3 goes silent
-    valid[1200:1203, 3:6] = False                      # imu2 misses three samples
+    valid[1300:, 6:9] = False                          # imu3 goes silent
+    valid[1000:1003, 3:6] = False                      # imu2 misses three samples
     case = Case(cal, t, raw, valid, expect=("isolated", "stale"))
     res = case.python()
     _check_expected(case, res)
@@ -219,14 +219,14 @@ def test_table_crc_matches_and_catches_a_changed_entry(tmp_path, precision):
     """rimu_monitor_table_crc() over the compiled tables equals RIMU_TABLE_CRC (computed by
     the generator from the same numbers); one pool entry changed in the source: it
     differs from the constant."""
-    cal = synthetic_calibration("cone6", seed=1)
+    cal = synthetic_calibration("tetrad", seed=1)
     mod = generate_c(cal, precision=precision, harness=True)
     lib = _lib(tmp_path / "a", mod)
     assert lib.rimu_monitor_table_crc() == mod.table_crc
     assert f"#define RIMU_TABLE_CRC {mod.table_crc:#010x}UL" in mod.files["rimu_monitor.h"]
     assert lib.rimu_monitor_identity().decode() == mod.identity
     text = mod.files["rimu_monitor.c"]
-    at = text.index("/* set 0x3f: V */") + len("/* set 0x3f: V */ ")
+    at = text.index("/* set 0xf: V */") + len("/* set 0xf: V */ ")
     end = text.index(",", at)
     old = text[at:end]
     new = repr(float(old.rstrip("f")) * (1 + 1e-6)) + ("f" if old.endswith("f") else "")
@@ -286,9 +286,9 @@ def test_mpu9250_set_exports_fits_and_answers_as_the_monitor(tmp_path, capsys):
     """ingest → calibrate --static → export: the float32 module's code and tables within
     256 KiB (`size` text, host object: the Cortex-M4 object is smaller) and cone6's within
     64 KiB; on the recording as it is (imu1.y is isolated by the parity) and with a step
-    on imu2.y, then imu1 silent (two more exclusions: a sensor, an IMU), the
-    float64 module answers as the monitor (assert_same) and the float32 one gives the same
-    events within its bound."""
+    on imu2.y, then imu1 silent (two more exclusions: a sensor, an IMU), it gives the
+    monitor's events, healthy sets and capabilities, its numbers within the float32 bound
+    (float64 bit-equality on 12 sensors: the four-triad test)."""
     from fdi.calfile import load_calibration
     from replay.flight_io import load_flight_dir
     from rimu.cli import main
@@ -304,18 +304,14 @@ def test_mpu9250_set_exports_fits_and_answers_as_the_monitor(tmp_path, capsys):
     names = [s.name for s in cal.gyro.sensors]
     assert cal.gyro.n == 12
     th = default_thresholds(cal)
-    mods = {}
-    for prec in ("float64", "float32"):
-        # float32: "auto" carries two exclusions within the flash budget; float64 asked to
-        mod = generate_c(cal, th, precision=prec, harness=True,
-                         depth="auto" if prec == "float32" else 2)
-        assert mod.depth == 2 and mod.sets == 130
-        out = tmp_path / prec
-        write_c(mod, out)
-        mods[prec] = CMonitor.load(out, compile_module(out), names)
-        if prec == "float32":
-            r = _cc(["-std=c99", "-O2", "-c", "rimu_monitor.c", "-o", "m.o"], out)
-            assert r.returncode == 0 and _text_bytes(out / "m.o") <= 256 << 10
+    # "auto" carries two exclusions within the flash budget
+    mod = generate_c(cal, th, precision="float32", harness=True)
+    assert mod.depth == 2 and mod.sets == 130
+    out = tmp_path / "float32"
+    write_c(mod, out)
+    mon = CMonitor.load(out, compile_module(out), names)
+    r = _cc(["-std=c99", "-O2", "-c", "rimu_monitor.c", "-o", "m.o"], out)
+    assert r.returncode == 0 and _text_bytes(out / "m.o") <= 256 << 10
     cone = tmp_path / "cone6"
     _written(cone, "float32")
     assert _cc(["-std=c99", "-O2", "-c", "rimu_monitor.c", "-o", "m.o"], cone).returncode == 0
@@ -331,7 +327,5 @@ def test_mpu9250_set_exports_fits_and_answers_as_the_monitor(tmp_path, capsys):
         res = Monitor(cal, th).run(flight.t, r_, v_, parity=True)
         seen = {e.type for e in res.events} | {e.reason for e in res.events}
         assert set(expect) <= seen, seen
-        for mon in mods.values():
-            mon.reset()
-        assert_same(res, mods["float64"].run(flight.t, r_, v_))
-        assert_float32_within_the_bound(res, mods["float32"].run(flight.t, r_, v_))
+        mon.reset()
+        assert_float32_within_the_bound(res, mon.run(flight.t, r_, v_))
