@@ -197,10 +197,11 @@ def reachable_sets(n: int, groups: tuple[str, ...], depth: int | None) -> list[i
 
     ``depth`` None: every one of the 2^n sets. Otherwise the sets reached by at most
     ``depth`` exclusions, each of one sensor (an isolation, a health verdict) or of a whole
-    IMU (``groups``: the IMU of each sensor, as :func:`replay.time_offsets.imu_groups`
-    names it; an IMU of one sensor is no group), and besides them every set of whole IMUs
-    (any number of dead IMUs) and the empty set: a set of m sensors rarely needs more than
-    two exclusions, and a dead IMU goes stale as a whole.
+    IMU (``groups``: the IMU of each sensor, the name before its last dot as
+    ``replay.time_offsets.imu_groups`` reads it; an IMU of one sensor is no group), and
+    besides them every set of whole IMUs (any number of dead IMUs) and the empty set: a
+    set of m sensors rarely needs more than two exclusions, and a dead IMU goes stale as a
+    whole.
     """
     full = (1 << n) - 1
     if depth is None or depth >= n:
@@ -440,7 +441,6 @@ def generate_c(cal: Calibration, thresholds: Thresholds | None = None, *, kind: 
         another kind or number of sensors (as the monitor).
     """
     from fdi.errors import ConfigError
-    from replay.time_offsets import imu_groups
 
     if precision not in PRECISIONS:
         raise ExportError(f"precision must be one of {PRECISIONS}, got {precision!r}")
@@ -469,7 +469,7 @@ def generate_c(cal: Calibration, thresholds: Thresholds | None = None, *, kind: 
         pool = sum(_pool_len(bin(m).count("1"), n) for m in masks)
         return len(masks) * rec_bytes + real * pool
 
-    groups = imu_groups(names)
+    groups = tuple(nm.rpartition(".")[0] for nm in names)  # the IMU: before the last dot
     if depth == "auto":
         if n <= ALL_SETS_UP_TO:
             depth = None
