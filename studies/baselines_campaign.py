@@ -112,19 +112,18 @@ def read_xsens(folder: Path) -> Flight:
     """One path of the four Xsens DOT units (IMU_1..4.csv: time s, Gyr deg/s, Acc m/s²) as
     a gyro flight of four IMU groups (the study's reader; the product's ingest is helper
     ``inflight``'s)."""
-    cols = None
-    gyr, acc, t = [], [], None
+    tables = []
     for k in range(1, 5):
         path = folder / f"IMU_{k}.csv"
         with open(path, encoding="utf-8") as fh:
             cols = fh.readline().strip().split(",")
-        a = np.loadtxt(path, delimiter=",", skiprows=1)
-        t = a[:, cols.index("time")] if t is None else t
-        n = min(t.shape[0], a.shape[0])
-        t = t[:n]
-        gyr = [g[:n] for g in gyr] + [a[:n, [cols.index(f"Gyr_{c}") for c in "XYZ"]] * DPS]
-        acc = [g[:n] for g in acc] + [a[:n, [cols.index(f"Acc_{c}") for c in "XYZ"]]]
-    assert t is not None
+        tables.append((cols, np.loadtxt(path, delimiter=",", skiprows=1)))
+    n = min(a.shape[0] for _, a in tables)
+    # one time base: the median of the four units' stamps (one unit's repeated or skipped
+    # stamp, as Vertical/path_4/IMU_1 has, does not move it)
+    t = np.median(np.column_stack([a[:n, c.index("time")] for c, a in tables]), axis=1)
+    gyr = [a[:n, [c.index(f"Gyr_{x}") for x in "XYZ"]] * DPS for c, a in tables]
+    acc = [a[:n, [c.index(f"Acc_{x}") for x in "XYZ"]] for c, a in tables]
     raw = np.concatenate(gyr, axis=1)
     names = tuple(f"imu{k}.{c}" for k in range(1, 5) for c in "xyz")
     imu = tuple(f"imu{k}" for k in range(1, 5) for _ in range(3))
