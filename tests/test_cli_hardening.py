@@ -24,7 +24,7 @@ from replay.flight import save_flight_dir, simulate_flight
 from rimu.argtypes import nonnegative_int, positive_float, positive_int
 from rimu.cli import main
 from rimu.outputs import atomic_dir, atomic_file, atomic_write_text, output_dir, output_file
-from thresholds.synthetic import synthetic_calibration
+from studies.synthetic import synthetic_calibration
 
 
 @pytest.fixture(scope="module")
@@ -127,7 +127,8 @@ def test_replay_writes_report_and_recording_atomically(files, tmp_path, capsys):
                  "--report", str(rep), "--rrd", str(rrd)]) == 0
     assert json.loads(rep.read_text())["samples"] == 100
     assert rrd.stat().st_size > 0
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["r.json", "x.rrd"], "no temp file"
+    # the report's picture beside it (issue 30: --report writes a PNG), and no temp file
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["r.json", "r.png", "x.rrd"]
 
 
 def test_failure_mid_replay_leaves_no_recording_or_report(files, tmp_path, capsys):
