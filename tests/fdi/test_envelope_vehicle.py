@@ -12,7 +12,7 @@ from test_isolation import triads
 from fdi.envelope import SATURATION, TUMBLE, EnvelopeSettings, EnvelopeTracker
 from fdi.monitor import Monitor
 from replay.flight_sim import simulate_flight
-from thresholds.synthetic import synthetic_calibration
+from studies.synthetic import synthetic_calibration
 
 DPS = np.pi / 180
 
