@@ -85,7 +85,7 @@ def run(args: argparse.Namespace) -> int:
     th = tu.thresholds
     corr = tu.assumptions["simulation_correction"]
     print(f"thresholds for {th.false_alarms_per_hour:g} false alarms/h, {th.n} {th.kind} "
-          f"sensors at {th.sample_rate_hz:g} Hz (correction {corr['factor']:.3f}: "
+          f"sensors at {th.sample_rate_hz:g} Hz (correction {corr['factor']:.3g}: "
           f"{corr['note']}; flights up to {corr['max_rate_dps']:.3g} deg/s, "
           f"{corr['max_rate_source']})")
     d0 = tu.detectable[0]
