@@ -316,30 +316,6 @@ def _bound(cal: Calibration, kind: str, bias_bound_dps: float | None
             f"bias_turn_on_sd; give --bias-bound-dps")
 
 
-def _own_flight(cal: Calibration, flight: Any) -> bool | None:
-    """True on the calibration's own power-up (its flight; the same recording read again:
-    same sample count, first and last times within 1 ms; or a part of the same log: same
-    source name, times inside the calibrated flight's), False on another, None when the
-    calibration records no flight."""
-    from calibration.inflight.timing import flight_identity
-
-    inflight = cal.extras.inflight
-    known = inflight.flight if inflight is not None else None
-    if known is None or not known.fingerprint:
-        return None
-    here = flight_identity(flight)
-    if here["fingerprint"] == known.fingerprint:
-        return True
-    if (here["samples"] == known.samples and known.t0_s is not None and known.t1_s is not None
-            and abs(here["t0_s"] - known.t0_s) < 1e-3 and abs(here["t1_s"] - known.t1_s) < 1e-3):
-        return True                 # the same recording read again (another format, float32)
-    if not known.source or here["source"] != known.source or not here["samples"]:
-        return False
-    t0, t1 = known.t0_s, known.t1_s
-    return (t0 is not None and t1 is not None and here["t0_s"] >= t0 - 1e-6
-            and here["t1_s"] <= t1 + 1e-6)
-
-
 def turn_on_for_flight(flight: Any, cal: Calibration, *, kind: str = "gyro",
                        mode: str = "auto", bias_bound_dps: float | None = None) -> TurnOn:
     """What to do about the turn-on bias on ``flight`` (module docstring).
@@ -374,7 +350,9 @@ def turn_on_for_flight(flight: Any, cal: Calibration, *, kind: str = "gyro",
 
     if mode == "off":
         return calibrated("--turn-on off")
-    own = _own_flight(cal, flight)
+    from calibration.inflight.fits_flight import same_power_up
+
+    own = same_power_up(cal, flight)
     if mode == "auto":
         if own:
             return calibrated("the calibration's own flight (same power-up)")

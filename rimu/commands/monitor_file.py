@@ -42,6 +42,10 @@ def configure(p: argparse.ArgumentParser) -> None:
                    metavar="DPS",
                    help="nominal turn-on bias bound per gyro (deg/s) when no rest stretch is "
                         "found (default: 3 x the calibration's bias_turn_on_sd, else 1)")
+    p.add_argument("--no-parameter-check", action="store_true",
+                   help="do not fit this flight to check every parameter of an in-flight "
+                        "calibration made on another flight (default: checked, and each "
+                        "parameter that does not fit is warned about)")
     p.add_argument("--no-effects", action="store_true",
                    help="do not compensate the calibration's effect terms (default: the "
                         "terms whose inputs the flight carries are compensated: rate sign, "
@@ -105,6 +109,11 @@ def run(args: argparse.Namespace) -> int:
     warning = other_flight_warning(cal, flight)
     if warning:
         logging.getLogger("rimu").warning(warning)
+    if not args.no_parameter_check:
+        from calibration.inflight.fits_flight import flight_mismatch
+
+        for w in flight_mismatch(cal, flight)[1]:      # every parameter, not only the offset
+            logging.getLogger("rimu").warning(w)
     chain = chain_for_flight(flight, cal, ChainOptions(
         thresholds_file=args.thresholds, calibration_file=args.cal,
         false_alarms_per_hour=args.false_alarms_per_hour, effects=not args.no_effects,
