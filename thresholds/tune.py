@@ -96,8 +96,8 @@ from thresholds.select import TUNING_SCHEMA
 
 __all__ = ["CORRECTION_MAX_RATE_DPS", "MAX_DEAD_TIME_SHARE", "MAX_SHARE_OF_TOP",
            "MIN_SIMULATED_RATE", "ZERO_COUNT_UPPER", "DetectableSize", "Tuning", "check_scales",
-           "correction_max_rate_dps", "detectable_sizes", "max_false_alarms_per_hour",
-           "max_upcrossing_rate", "tune", "upcrossing_probability"]
+           "correction_max_rate_dps", "detectable_at", "detectable_sizes",
+           "max_false_alarms_per_hour", "max_upcrossing_rate", "tune", "upcrossing_probability"]
 
 MAX_DEAD_TIME_SHARE = 0.1
 """Largest share of the mean time between false alarms that one alarm's shortest episode
@@ -297,20 +297,27 @@ def detectable_sizes(cal: Calibration, thresholds: Thresholds, *, kind: str = "g
     for w, a, f in zip(thresholds.scales, thresholds.alpha, thresholds.variance_factor,
                        strict=True):
         T = chi2_threshold(a, df) * (1.0 + w * beta / f)
-
-        def miss(b: float, T: float = T, w: int = int(w), f: float = f) -> float:
-            lam = w * np.sum((b * ui + g) ** 2, axis=1) / f
-            return float(np.mean(stats.ncx2.sf(T, df, lam))) - probability
-
-        b0 = math.sqrt(minimum_detectable_noncentrality(T, df, 1.0 - probability) * f
-                       / (w * u2[i]))
-        hi = 2.0 * b0
-        while miss(hi) < 0:
-            hi *= 2.0
-        b = optimize.brentq(miss, 0.0, hi, xtol=1e-9 * b0)
+        b = detectable_at(T, int(w), f, df, ui, g, float(u2[i]), probability)
         out.append(DetectableSize(int(w), w / thresholds.sample_rate_hz, b, b / conv, unit,
                                   b / sd, i + 1))
     return tuple(out)
+
+
+def detectable_at(T: float, w: int, f: float, df: int, ui: np.ndarray, g: np.ndarray,
+                  u2: float, probability: float = DETECTION_PROBABILITY) -> float:
+    """The step b (SI) one full w-sample window detects with ``probability`` against the
+    threshold T (χ² units, all inflations in): ``E_g[ncx2.sf(T, df, w·|b·u_i + g|²/f)]``
+    over the draws ``g`` (n_draws, df) of the bias error's parity offset; ``ui`` the worst
+    sensor's whitened column, ``u2 = |ui|²``."""
+    def miss(b: float) -> float:
+        lam = w * np.sum((b * ui + g) ** 2, axis=1) / f
+        return float(np.mean(stats.ncx2.sf(T, df, lam))) - probability
+
+    b0 = math.sqrt(minimum_detectable_noncentrality(T, df, 1.0 - probability) * f / (w * u2))
+    hi = 2.0 * b0
+    while miss(hi) < 0:
+        hi *= 2.0
+    return float(optimize.brentq(miss, 0.0, hi, xtol=1e-9 * b0))
 
 
 @dataclass(frozen=True)
