@@ -354,7 +354,7 @@ def _monitor(cal: Calibration, kind: str, *, thresholds_file: Any, calibration_f
     """The monitor and where its thresholds came from. The thresholds are chosen for
     ``cal`` (a file made for another calibration is refused); with a ``turn_on``
     (:class:`replay.turn_on.TurnOn`) the monitor runs on the biases it estimated at rest,
-    or on thresholds raised for its nominal bias bound (:mod:`thresholds.bias_bound`)."""
+    or on thresholds raised for its nominal bias bound (:mod:`fdi.bias_bound`)."""
     from thresholds.select import select
 
     if thresholds is not None:                          # given in the library (a Thresholds)
@@ -367,7 +367,7 @@ def _monitor(cal: Calibration, kind: str, *, thresholds_file: Any, calibration_f
         thr, how = choice.thresholds, choice.to_dict()
     mon_cal = cal
     if turn_on is not None and turn_on.method == "bound":
-        from thresholds.bias_bound import bounded_thresholds
+        from fdi.bias_bound import bounded_thresholds
 
         thr = bounded_thresholds(thr, cal, np.asarray(turn_on.bound, float), kind,
                                  turn_on.bound_source)

@@ -27,7 +27,7 @@ the same (:func:`turn_on_for_flight`):
    calibration's bias and its sd the bias sd (the monitor's bias-uncertainty inflation β,
    :mod:`fdi.reconstruction`).
 3. **No stretch**: the biases stay as calibrated, and the thresholds and protection level
-   cover a nominal bias bound (ARAIM's b_nom, :mod:`thresholds.bias_bound`): per sensor
+   cover a nominal bias bound (ARAIM's b_nom, :mod:`fdi.bias_bound`): per sensor
    :data:`BOUND_SIGMAS` times the calibration's ``bias_turn_on_sd`` (the run-to-run spread
    of several flights calibrated together), else ``--bias-bound-dps``, else
    :data:`DEFAULT_BIAS_BOUND_DPS`; which one is said.
@@ -60,7 +60,7 @@ __all__ = ["BOUND_SIGMAS", "DEFAULT_BIAS_BOUND_DPS", "MIN_REST_S", "MODES", "MOT
            "REST_GYRO_SD_DPS",
            "REST_GYRO_STEP_DPS", "REST_G_TOLERANCE", "REST_RATE_DPS", "REST_WINDOW_S",
            "RestStretch", "TurnOn", "apply_turn_on", "estimate_rest_bias", "find_rest",
-           "turn_on_for_flight"]
+           "same_power_up", "turn_on_for_flight"]
 
 G0 = 9.80665
 """Standard gravity (m/s²)."""
@@ -316,6 +316,30 @@ def _bound(cal: Calibration, kind: str, bias_bound_dps: float | None
             f"bias_turn_on_sd; give --bias-bound-dps")
 
 
+def same_power_up(cal: Calibration, flight: Any) -> bool | None:
+    """True on the calibration's own power-up (its flight; the same recording read again:
+    same sample count, first and last times within 1 ms; or a part of the same log: same
+    source name, times inside the calibrated flight's), False on another, None when the
+    calibration records no flight."""
+    from replay.time_offsets import flight_identity
+
+    inflight = cal.extras.inflight
+    known = inflight.flight if inflight is not None else None
+    if known is None or not known.fingerprint:
+        return None
+    here = flight_identity(flight)
+    if here["fingerprint"] == known.fingerprint:
+        return True
+    if (here["samples"] == known.samples and known.t0_s is not None and known.t1_s is not None
+            and abs(here["t0_s"] - known.t0_s) < 1e-3 and abs(here["t1_s"] - known.t1_s) < 1e-3):
+        return True                 # the same recording read again (another format, float32)
+    if not known.source or here["source"] != known.source or not here["samples"]:
+        return False
+    t0, t1 = known.t0_s, known.t1_s
+    return (t0 is not None and t1 is not None and here["t0_s"] >= t0 - 1e-6
+            and here["t1_s"] <= t1 + 1e-6)
+
+
 def turn_on_for_flight(flight: Any, cal: Calibration, *, kind: str = "gyro",
                        mode: str = "auto", bias_bound_dps: float | None = None) -> TurnOn:
     """What to do about the turn-on bias on ``flight`` (module docstring).
@@ -350,8 +374,6 @@ def turn_on_for_flight(flight: Any, cal: Calibration, *, kind: str = "gyro",
 
     if mode == "off":
         return calibrated("--turn-on off")
-    from calibration.inflight.fits_flight import same_power_up
-
     own = same_power_up(cal, flight)
     if mode == "auto":
         if own:
@@ -388,7 +410,7 @@ def _accel(flight: Any) -> np.ndarray | None:
 
 def apply_turn_on(cal: Calibration, turn_on: TurnOn) -> Calibration:
     """The calibration with the biases and bias sd the monitor uses (``rest``); unchanged
-    otherwise (the bound enters the thresholds, :mod:`thresholds.bias_bound`)."""
+    otherwise (the bound enters the thresholds, :mod:`fdi.bias_bound`)."""
     if turn_on.method != "rest":
         return cal
     s = cal.kind(turn_on.kind)

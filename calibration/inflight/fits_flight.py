@@ -34,9 +34,10 @@ from scipy import stats
 from fdi.calfile import Calibration
 from fdi.errors import RimuError
 from fdi.units import DPS
+from replay.turn_on import same_power_up
 
 __all__ = ["ParameterCheck", "flight_calibration", "flight_mismatch", "mismatch_warnings",
-           "parameter_checks", "same_power_up"]
+           "parameter_checks"]
 
 _AXES = "xyz"
 _MS = 1e-3
@@ -80,33 +81,10 @@ class ParameterCheck:
         return dict(self.__dict__)
 
 
-def same_power_up(cal: Calibration, flight: Any) -> bool | None:
-    """True on the calibration's own power-up (its flight; the same recording read again:
-    same sample count, first and last times within 1 ms; or a part of the same log: same
-    source name, times inside the calibrated flight's), False on another, None when the
-    calibration records no flight."""
-    from calibration.inflight.timing import flight_identity
-
-    inflight = cal.extras.inflight
-    known = inflight.flight if inflight is not None else None
-    if known is None or not known.fingerprint:
-        return None
-    here = flight_identity(flight)
-    if here["fingerprint"] == known.fingerprint:
-        return True
-    if (here["samples"] == known.samples and known.t0_s is not None and known.t1_s is not None
-            and abs(here["t0_s"] - known.t0_s) < 1e-3 and abs(here["t1_s"] - known.t1_s) < 1e-3):
-        return True                 # the same recording read again (another format, float32)
-    if not known.source or here["source"] != known.source or not here["samples"]:
-        return False
-    t0, t1 = known.t0_s, known.t1_s
-    return (t0 is not None and t1 is not None and here["t0_s"] >= t0 - 1e-6
-            and here["t1_s"] <= t1 + 1e-6)
-
-
 def flight_calibration(flight: Any) -> Calibration:
     """The flight's own in-flight calibration (``rimu calibrate --in-flight`` defaults)."""
-    from calibration.inflight import calibration_from_fit, fit_inflight
+    from calibration.inflight.calfile import calibration_from_fit
+    from calibration.inflight.fit import fit_inflight
 
     return calibration_from_fit(fit_inflight(flight), flight, tails=False)
 
@@ -237,8 +215,9 @@ def mismatch_warnings(checks: list[ParameterCheck]) -> list[str]:
 def flight_mismatch(cal: Calibration, flight: Any, *, alpha: float = 0.01
                     ) -> tuple[list[ParameterCheck], list[str]]:
     """Fit ``flight`` and compare (checks, warning lines); nothing on the calibration's own
-    power-up (:func:`same_power_up`) or for a calibration that is not in-flight; a flight
-    the in-flight fit refuses gives one warning saying so and no checks."""
+    power-up (:func:`replay.turn_on.same_power_up`) or for a calibration that is not
+    in-flight; a flight the in-flight fit refuses gives one warning saying so and no
+    checks."""
     if cal.extras.inflight_alignment is None or same_power_up(cal, flight):
         return [], []
     try:

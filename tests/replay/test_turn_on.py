@@ -16,7 +16,7 @@ from replay.turn_on import (
     find_rest,
     turn_on_for_flight,
 )
-from thresholds import synthetic_calibration
+from studies.synthetic import synthetic_calibration
 
 CAL = synthetic_calibration("cone6")
 FS = CAL.sample_rate_hz

@@ -7,7 +7,7 @@ import pytest
 
 from fdi.detector import chi2_threshold
 from replay.flight_sim import simulate_flight
-from thresholds import synthetic_calibration
+from studies.synthetic import synthetic_calibration
 from thresholds.profile import flight_detectable, profile_lines
 from thresholds.tune import _parity_geometry, detectable_at, tune
 

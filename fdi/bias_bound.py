@@ -135,6 +135,6 @@ def bounded_thresholds(thr: Thresholds, cal: Calibration, bound: np.ndarray,
         T.append(chi2_threshold(alpha[-1], df))
     note = (f"; raised for a nominal bias bound up to {float(B.max()):.3g} SI per sensor "
             f"({source or 'given'}): max whitened parity offset {g2:.3g} per sample, "
-            f"thresholds.bias_bound")
+            f"fdi.bias_bound")
     return replace(thr, alpha=tuple(alpha), variance_factor=tuple(vf), threshold=tuple(T),
                    notes=thr.notes + note)

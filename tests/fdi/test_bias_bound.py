@@ -1,4 +1,4 @@
-"""Thresholds that hold for any bias within a nominal bound (thresholds.bias_bound)."""
+"""Thresholds that hold for any bias within a nominal bound (fdi.bias_bound)."""
 
 from __future__ import annotations
 
@@ -8,17 +8,17 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from fdi.detector import default_thresholds
-from fdi.monitor import Monitor
-from fdi.units import DPS
-from thresholds import synthetic_calibration
-from thresholds.bias_bound import (
+from fdi.bias_bound import (
     _box_max,
     _whitened,
     bounded_thresholds,
     max_parity_offset,
     rate_shift_bound,
 )
+from fdi.detector import default_thresholds
+from fdi.monitor import Monitor
+from fdi.units import DPS
+from studies.synthetic import synthetic_calibration
 
 CAL = synthetic_calibration("cone6")
 
