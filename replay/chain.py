@@ -310,7 +310,9 @@ class MonitorChain:
         elif stepwise:
             result = self._step(piece, kw, on_event)
         else:
-            result = self.monitor.run(piece.t, piece.raw, piece.valid, **kw)
+            # the recording shows the parity vectors (the stepwise paths always have them)
+            result = self.monitor.run(piece.t, piece.raw, piece.valid,
+                                      parity=self.recorder is not None, **kw)
         if self.report is not None:
             self.report.update(result, piece.omega_true)
         if self.recorder is not None:

@@ -372,8 +372,8 @@ def simulated_rate(cal: Calibration, thr: Thresholds, *, hours: float, seed: int
     Flights last ``flight_s`` (default: about one expected false alarm each at the
     thresholds' budget, between 60 and 600 s): the rate varies from flight to flight with
     the drawn calibration error, so many flights are needed. Their manoeuvres reach
-    ``max_rate_dps`` (°/s) on each axis. ``bar``: a tqdm bar advanced by the simulated
-    hours.
+    ``max_rate_dps`` (°/s) on each axis. ``bar``: a progress bar (``update(hours)``)
+    advanced by the simulated hours.
     """
     from thresholds.campaign import RunSpec, run_one
 
@@ -523,7 +523,8 @@ def tune(cal: Calibration, *, false_alarms_per_hour: float, kind: str = "gyro",
     seed : int
         Seed of the correction flights.
     progress : bool
-        A tqdm bar on stderr over the simulated flight hours.
+        A bar over the simulated flight hours (:func:`fdi.progress.current`: shown by the
+        CLI on stderr once the work has taken 3 s).
     drift_horizon_s : float, optional
         How long after its data the calibration must hold (s): the horizon of the drift
         term (module docstring). Default: the span of the calibration data. Ignored when
@@ -577,10 +578,11 @@ def tune(cal: Calibration, *, false_alarms_per_hour: float, kind: str = "gyro",
     passes = []
     Rc = max(R, MIN_SIMULATED_RATE)
     n_pass = 2 if simulate_hours > 0 else 0
-    from tqdm import tqdm
+    from fdi.progress import current
 
-    bar = tqdm(total=round(n_pass * min(simulate_hours, 150.0 / Rc), 3), unit=" h",
-               desc="tune: simulated flight", disable=not progress or not n_pass, leave=False)
+    # the command's progress (fdi.progress): a bar on a terminal, a line every 10 s else
+    bar = (current().bar(n_pass * min(simulate_hours, 150.0 / Rc), "simulated flight",
+                         unit="h") if progress and n_pass else None)
     for p in range(n_pass):
         thr_c = _share_thresholds({**base, "false_alarms_per_hour": Rc},
                                   Rc / (3600.0 * fs) / len(sc) / gamma, df)
@@ -594,7 +596,8 @@ def tune(cal: Calibration, *, false_alarms_per_hour: float, kind: str = "gyro",
                        "rate_per_hour": cnt / hrs, "correction_before": gamma,
                        "bound_only": cnt == 0})
         gamma = max(gamma * meas / Rc, _least_correction(Rc, fs, sc, df))
-    bar.close()
+    if bar is not None:
+        bar.close()
     floor = _least_correction(R, fs, sc, df)
     capped = gamma < floor
     gamma = max(gamma, floor)

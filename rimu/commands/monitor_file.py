@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 import logging
 from typing import Any
 
@@ -22,7 +21,9 @@ def configure(p: argparse.ArgumentParser) -> None:
                    help="a rimu.thresholds or rimu.tuning (rimu tune) file made for this "
                         "calibration and sample rate (default: computed from the "
                         "calibration)")
-    p.add_argument("--report", metavar="FILE", help="write the rimu.report/1 JSON here")
+    p.add_argument("--report", metavar="FILE",
+                   help="write the rimu.report/1 JSON here, and its picture beside it "
+                        "(FILE with .png: rates, statistic / threshold per window, events)")
     p.add_argument("--max-events", type=nonnegative_int(), default=50,
                    help="events to print (default 50)")
     p.add_argument("--no-time-offsets", action="store_true",
@@ -83,8 +84,8 @@ def run(args: argparse.Namespace) -> int:
     from replay.chain import ChainOptions, chain_for_flight, run_flight
     from replay.flight import load_flight_dir
     from replay.report import format_report
-    from rimu.commands.replay import describe_chain
-    from rimu.outputs import atomic_write_text, flight_folder_hint, input_path, output_file
+    from rimu.commands.replay import describe_chain, picture_path, write_report
+    from rimu.outputs import flight_folder_hint, input_path, output_file
 
     flight_folder_hint(args.flight, "DIR", "rimu monitor-file")
     input_path(args.flight, "DIR", kind="dir")
@@ -93,6 +94,7 @@ def run(args: argparse.Namespace) -> int:
         input_path(args.thresholds, "--thresholds")
     if args.report:
         output_file(args.report, "--report")
+        output_file(picture_path(args.report), "--report (its picture)")
     from replay.baselines import parse_baselines
 
     baselines = parse_baselines(args.baseline)
@@ -100,6 +102,7 @@ def run(args: argparse.Namespace) -> int:
         if not baselines:
             raise ConfigError("--baseline-plot needs --baseline NAMES")
         output_file(args.baseline_plot, "--baseline-plot")
+    from fdi.progress import current
     cal = load_calibration(args.cal)
     flight = load_flight_dir(args.flight)
     check_compatible(cal, flight.n, flight.raw_unit, str(args.flight), kind=flight.kind,
@@ -120,13 +123,16 @@ def run(args: argparse.Namespace) -> int:
         time_offsets=not args.no_time_offsets, envelope=not args.no_envelope,
         turn_on=args.turn_on, bias_bound_dps=args.bias_bound_dps))
     describe_chain(chain, flight)
+<<<<<<< HEAD
     if chain.turn_on is not None and chain.turn_on.method != "calibrated":
         print(chain.turn_on.text(chain.sensor_names))
+=======
+    current().stage(f"monitoring {flight.t.shape[0]} samples")
+>>>>>>> main
     _, report = run_flight(chain, flight)
     print(format_report(report, max_events=args.max_events))
     if baselines:
+        current().stage("baselines")
         _baselines(args, baselines, flight, cal, report)
-    if args.report:
-        atomic_write_text(args.report, json.dumps(report, indent=1, allow_nan=False) + "\n")
-        print(f"wrote {args.report}")
+    write_report(report, args.report, chain)
     return 0
