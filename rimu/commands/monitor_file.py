@@ -123,12 +123,9 @@ def run(args: argparse.Namespace) -> int:
         time_offsets=not args.no_time_offsets, envelope=not args.no_envelope,
         turn_on=args.turn_on, bias_bound_dps=args.bias_bound_dps))
     describe_chain(chain, flight)
-<<<<<<< HEAD
     if chain.turn_on is not None and chain.turn_on.method != "calibrated":
         print(chain.turn_on.text(chain.sensor_names))
-=======
     current().stage(f"monitoring {flight.t.shape[0]} samples")
->>>>>>> main
     _, report = run_flight(chain, flight)
     print(format_report(report, max_events=args.max_events))
     if baselines:
