@@ -7,7 +7,7 @@ import logging
 from typing import Any
 
 from fdi.errors import ConfigError
-from rimu.argtypes import nonnegative_int, positive_float
+from rimu.argtypes import nonnegative_float, nonnegative_int, positive_float
 
 HELP = "run the monitor over a flight sample directory; print events and a summary"
 
@@ -34,6 +34,19 @@ def configure(p: argparse.ArgumentParser) -> None:
                         "saturation, tumbles and the log's declared crash events are marked; "
                         "the monitor excludes nothing there and restarts its windows after; "
                         "docs/envelope.md)")
+    p.add_argument("--turn-on", choices=("auto", "rest", "bound", "off"), default="auto",
+                   help="the turn-on bias on a flight other than the calibration's: auto "
+                        "(default) estimates it while the vehicle is at rest before take-off "
+                        "and otherwise covers a nominal bias bound in the thresholds; rest, "
+                        "bound, off (as calibrated); replay.turn_on")
+    p.add_argument("--bias-bound-dps", type=nonnegative_float(1e4), default=None,
+                   metavar="DPS",
+                   help="nominal turn-on bias bound per gyro (deg/s) when no rest stretch is "
+                        "found (default: 3 x the calibration's bias_turn_on_sd, else 1)")
+    p.add_argument("--no-parameter-check", action="store_true",
+                   help="do not fit this flight to check every parameter of an in-flight "
+                        "calibration made on another flight (default: checked, and each "
+                        "parameter that does not fit is warned about)")
     p.add_argument("--no-effects", action="store_true",
                    help="do not compensate the calibration's effect terms (default: the "
                         "terms whose inputs the flight carries are compensated: rate sign, "
@@ -99,11 +112,19 @@ def run(args: argparse.Namespace) -> int:
     warning = other_flight_warning(cal, flight)
     if warning:
         logging.getLogger("rimu").warning(warning)
+    if not args.no_parameter_check:
+        from calibration.inflight.fits_flight import flight_mismatch
+
+        for w in flight_mismatch(cal, flight)[1]:      # every parameter, not only the offset
+            logging.getLogger("rimu").warning(w)
     chain = chain_for_flight(flight, cal, ChainOptions(
         thresholds_file=args.thresholds, calibration_file=args.cal,
         false_alarms_per_hour=args.false_alarms_per_hour, effects=not args.no_effects,
-        time_offsets=not args.no_time_offsets, envelope=not args.no_envelope))
+        time_offsets=not args.no_time_offsets, envelope=not args.no_envelope,
+        turn_on=args.turn_on, bias_bound_dps=args.bias_bound_dps))
     describe_chain(chain, flight)
+    if chain.turn_on is not None and chain.turn_on.method != "calibrated":
+        print(chain.turn_on.text(chain.sensor_names))
     current().stage(f"monitoring {flight.t.shape[0]} samples")
     _, report = run_flight(chain, flight)
     print(format_report(report, max_events=args.max_events))

@@ -237,7 +237,8 @@ def test_table_crc_matches_and_catches_a_changed_entry(tmp_path, precision):
 
 def test_a_state_init_did_not_set_up_is_refused(tmp_path):
     """A zeroed state: rimu_monitor_step returns RIMU_E_STATE and answers capability none,
-    no healthy sensor, NaN rates and an infinite protection level; after init: RIMU_OK."""
+    no healthy sensor, NaN rates and an infinite protection level; after init: RIMU_OK.
+    rimu_monitor_period_ok: 1 within 0.5-1.5 periods of RIMU_SAMPLE_RATE_HZ, else 0."""
     _written(tmp_path)
     (tmp_path / "main.c").write_text(r'''
 #include <math.h>
@@ -256,6 +257,10 @@ int main(void)
     rimu_monitor_init(&st);
     r0 = rimu_monitor_step(&st, 0.01, raw, 0, &a);
     printf("%d %d\n", r0, a.capability);
+    printf("%d%d%d%d%d\n", rimu_monitor_period_ok(1.0 / RIMU_SAMPLE_RATE_HZ),
+           rimu_monitor_period_ok(0.4 / RIMU_SAMPLE_RATE_HZ),
+           rimu_monitor_period_ok(1.6 / RIMU_SAMPLE_RATE_HZ), rimu_monitor_period_ok(NAN),
+           rimu_monitor_period_ok(INFINITY));
     return 0;
 }
 ''')
@@ -265,6 +270,7 @@ int main(void)
                          check=True).stdout.split("\n")
     assert out[0] == "1 3 0 1 1"                      # RIMU_E_STATE, RIMU_CAP_NONE
     assert out[1] == "0 0"                            # RIMU_OK, isolate
+    assert out[2] == "10000"                          # the rate contract: one period only
 
 
 # ---------------------------------------------------------------- the 4×MPU9250 set
