@@ -65,13 +65,15 @@ from typing import Any
 import numpy as np
 
 from fdi.errors import ConfigError, FileFormatError
-from fdi.fileio import Fields, read_json_object, to_jsonable
+from fdi.fileio import Fields, NumberRule, check_numbers, read_json_object, to_jsonable
 from replay.faults import Fault, fault_from_dict
 from replay.flight_data import AUX_KINDS, AUX_UNITS, FLIGHT_TRUTH_SCHEMA, AuxChannels, Flight
 from replay.log_events import LogEvent, event_from_dict, event_to_dict
+from replay.time_base import check_rate
 
 __all__ = [
     "AUX_FILE",
+    "FLIGHT_NUMBER_RULES",
     "FLIGHT_SCHEMA",
     "FLIGHT_TRUTH_SCHEMA",
     "load_flight_dir",
@@ -81,6 +83,11 @@ __all__ = [
 ]
 
 FLIGHT_SCHEMA = "rimu.flight/1"
+FLIGHT_NUMBER_RULES: tuple[NumberRule, ...] = (
+    NumberRule("samples", 0.0, what="a count of rows"),
+)
+"""Ranges of the flight manifest's numbers beyond :data:`fdi.fileio.CONVENTION_RULES`
+(``sample_rate_hz`` > 0); every other number (event times, ``meta``) must be finite."""
 AUX_FILE = "aux.csv"
 """File of the channels kept beside the monitored sensors."""
 
@@ -384,6 +391,7 @@ def load_flight_dir(directory: str | Path) -> Flight:
     mpath = d / "manifest.json"
     man = read_json_object(mpath, FLIGHT_SCHEMA)
     mp = str(mpath)
+    check_numbers(man, mp, FLIGHT_NUMBER_RULES)
     f = Fields(man, mp)
     f.accept("schema")
     fs = _positive_rate(man, mp)
@@ -410,6 +418,7 @@ def load_flight_dir(directory: str | Path) -> Flight:
     valid = ~missing[:, 1:]
     raw[~valid] = np.nan
     _check_times(str(spath), t)
+    check_rate(fs, t, mp)
     aux = _aux_channels(d, man, mp, t)
     faults: tuple[Fault, ...] = ()
     truth: dict[str, Any] = {}

@@ -177,6 +177,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.print_help()
         return 2
     try:
+        from rimu.outputs import refuse_outputs_over_inputs
+
+        refuse_outputs_over_inputs(args)        # no command writes over or into its input
         return int(run(args) or 0)
     except RimuError as exc:
         if args.debug:
