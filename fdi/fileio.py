@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import difflib
 import fnmatch
+import functools
 import json
 import logging
 import math
@@ -49,8 +50,9 @@ import numpy as np
 from fdi.errors import FileFormatError
 
 __all__ = ["CONVENTION_RULES", "MAX_DEPTH", "MAX_FILE_BYTES", "MAX_NUMBER_CHARS", "REQUIRED",
-           "Fields", "NumberRule", "check_numbers", "check_schema", "read_json_object",
-           "read_text", "read_toml_object", "to_jsonable", "toml_key_line"]
+           "Fields", "NumberRule", "check_numbers", "check_schema", "number_rule",
+           "read_json_object", "read_text", "read_toml_object", "to_jsonable",
+           "toml_key_line"]
 
 MAX_FILE_BYTES = 256 << 20
 """Largest JSON or TOML file read (256 MiB; rimu's own are kilobytes to a few megabytes)."""
@@ -780,7 +782,8 @@ def check_numbers(doc: Any, path: str | Path, rules: Sequence[NumberRule] = (), 
         Naming the file, the field (``sensors.gyro[2].bias_sd``), what was expected and
         what the file holds.
     """
-    table = (*rules, *CONVENTION_RULES)
+    table = tuple(rules)
+    seen: dict[tuple[str, bool], Any] = {}
     for where, v in _leaves(doc):
         keys = ".".join(k for k in where if isinstance(k, str))
         if any(_match(keys, pat) for pat in skip):
@@ -792,8 +795,10 @@ def check_numbers(doc: Any, path: str | Path, rules: Sequence[NumberRule] = (), 
                                   f"an integer of {len(str(v))} digits",
                                   field=_path_name(where)) from None
         idx = [k for k in where if isinstance(k, int)]
-        rule = next((r for r in table if _match(keys, r.pattern)
-                     and (not r.diagonal or (len(idx) >= 2 and idx[-1] == idx[-2]))), None)
+        diag = len(idx) >= 2 and idx[-1] == idx[-2]
+        rule = seen.get((keys, diag), _DEFAULT)
+        if rule is _DEFAULT:
+            rule = seen[keys, diag] = _rule(keys, table, diag)
         if rule is None:
             if math.isfinite(x):
                 continue
@@ -801,3 +806,26 @@ def check_numbers(doc: Any, path: str | Path, rules: Sequence[NumberRule] = (), 
         if not rule.accepts(x):
             raise FileFormatError(str(path), f"expected {rule.expected()}, got {_show(v)}",
                                   field=_path_name(where))
+
+
+def number_rule(keys: str, rules: Sequence[NumberRule] = (),
+                indices: Sequence[int] = ()) -> NumberRule | None:
+    """The rule :func:`check_numbers` applies to a field (None: only finite).
+
+    Parameters
+    ----------
+    keys : str
+        The field's keys joined by dots, without indices (``sensors.gyro.bias_sd``).
+    rules : sequence of NumberRule
+        The schema's table (:data:`CONVENTION_RULES` follow it).
+    indices : sequence of int
+        The field's indices (0-based; only a ``diagonal`` rule looks at them).
+    """
+    idx = list(indices)
+    return _rule(keys, tuple(rules), len(idx) >= 2 and idx[-1] == idx[-2])
+
+
+@functools.lru_cache(maxsize=4096)
+def _rule(keys: str, rules: tuple[NumberRule, ...], diagonal: bool) -> NumberRule | None:
+    return next((r for r in (*rules, *CONVENTION_RULES) if _match(keys, r.pattern)
+                 and (not r.diagonal or diagonal)), None)

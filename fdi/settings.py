@@ -19,8 +19,8 @@ from fdi.fileio import Fields, NumberRule, check_numbers, read_json_object
 __all__ = [
     "DETECTORS",
     "NOISE_MODELS",
-    "THRESHOLDS_SCHEMA",
     "THRESHOLDS_NUMBER_RULES",
+    "THRESHOLDS_SCHEMA",
     "THRESHOLDS_SCHEMAS",
     "MonitorSettings",
     "Thresholds",

@@ -15,7 +15,6 @@ failure part-way leaves neither a half-written file nor a temporary one behind.
 from __future__ import annotations
 
 import contextlib
-import json
 import os
 import shutil
 import tempfile
@@ -172,10 +171,12 @@ def output_dir(path: str | os.PathLike, option: str, *, inputs=(),
         if not os.access(p, os.W_OK | os.X_OK):
             raise ConfigError(f"{option} {p}: directory is not writable")
         if schema is not None and (p / "manifest.json").is_file():
+            from fdi.errors import FileFormatError
+            from fdi.fileio import read_json_object
+
             try:
-                got = str(json.loads((p / "manifest.json").read_text(encoding="utf-8"))
-                          .get("schema", ""))
-            except (OSError, ValueError, AttributeError):
+                got = str(read_json_object(p / "manifest.json").get("schema", ""))
+            except FileFormatError:
                 got = "?"
             if not got.startswith(schema.split("/")[0] + "/"):
                 raise ConfigError(f"{option} {p}: holds a {got} folder, not a "
