@@ -548,7 +548,9 @@ MIN_SCALE_FACTOR_SI = 1e-15
 """Smallest scale factor read (a raw output of 10¹⁵ counts would be needed for 1 rad/s)."""
 _UNIT = 1.0 + 1e-9          # entries of an orthonormal parity matrix, with rounding
 CALIBRATION_NUMBER_RULES: tuple[NumberRule, ...] = (
-    NumberRule("parity*", -_UNIT, _UNIT, what="an entry of an orthonormal parity matrix"),
+    NumberRule("parity.*", -_UNIT, _UNIT, what="an entry of an orthonormal parity matrix"),
+    NumberRule("parity_accel.*", -_UNIT, _UNIT,
+               what="an entry of an orthonormal parity matrix"),
     NumberRule("latitude_deg", -90.0, 90.0, what="a latitude"),
     NumberRule("sensors.*.scale_factor", 0.0, lo_open=True, what="a scale factor"),
     NumberRule("residual_tails.*.scales.quantile", 0.0, what="a quantile of the statistic"),
@@ -897,6 +899,7 @@ def check_compatible(cal: Calibration, n_sensors: int, raw_unit: Any, source: st
     if int(n_sensors) != s.n:
         raise ConfigError(f"{source}: {int(n_sensors)} {kind} sensors, the {where} has {s.n}: "
                           "a calibration only applies to the sensor set it was made for")
+    _check_names(s, names, source, where, kind)
     if raw_unit is None:
         return
     units = [raw_unit] * s.n if isinstance(raw_unit, str) else list(raw_unit)
@@ -908,6 +911,28 @@ def check_compatible(cal: Calibration, n_sensors: int, raw_unit: Any, source: st
         who = names[i] if names is not None and i < len(names) else c.name
         raise ConfigError(f"{source}: {kind} sensor {i + 1} ({who}) is in {got!r}, the {where} "
                           f"expects raw outputs in {want!r}")
+
+
+def _check_names(s: SensorSet, names: Any, source: str, where: str, kind: str) -> None:
+    """Sensors are matched by position: the same names in another order are refused (the
+    columns were permuted), other names warned about in one line."""
+    import logging
+
+    if names is None:
+        return
+    got = [str(x) for x in names]
+    want = [c.name for c in s.sensors]
+    if got == want or len(got) != len(want):
+        return
+    if sorted(got) == sorted(want):
+        j = next(i for i, (a, b) in enumerate(zip(got, want, strict=True)) if a != b)
+        raise ConfigError(f"{source}: {kind} sensor {j + 1} is {got[j]!r} where the {where} "
+                          f"has {want[j]!r}: the same sensors in another order (a calibration "
+                          "applies by position; reorder the columns)")
+    pairs = ", ".join(f"{a}={b}" for a, b in zip(got, want, strict=True) if a != b)
+    logging.getLogger("rimu.calibration").warning(
+        f"{source}: its {kind} sensor names differ from the {where}'s; matched by position: "
+        f"{pairs[:200]}")
 
 
 def check_plausible(cal: Calibration, source: str) -> None:

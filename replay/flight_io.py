@@ -56,6 +56,7 @@ from __future__ import annotations
 
 import io
 import json
+import logging
 import math
 import re
 from collections.abc import Mapping, Sequence
@@ -69,7 +70,7 @@ from fdi.fileio import Fields, NumberRule, check_numbers, read_json_object, to_j
 from replay.faults import Fault, fault_from_dict
 from replay.flight_data import AUX_KINDS, AUX_UNITS, FLIGHT_TRUTH_SCHEMA, AuxChannels, Flight
 from replay.log_events import LogEvent, event_from_dict, event_to_dict
-from replay.time_base import check_rate
+from replay.time_base import check_rate, time_base
 
 __all__ = [
     "AUX_FILE",
@@ -225,14 +226,35 @@ def read_truth_sidecar(path: str | Path, *, samples: int | None = None, mmap: bo
 _EMPTY_CELL = re.compile(rb"(?<=,)(?=,|\n)|^(?=,)", re.MULTILINE)
 
 
+_CHUNK = 64 << 20
+
+
+def _read_text_bytes(path: Path) -> bytes:
+    """The bytes of a CSV file, read in chunks; a NUL byte (binary data, a sparse or
+    zero-filled file) stops the read at once with one line, before the rest is read."""
+    p = str(path)
+    parts, at = [], 0
+    try:
+        with open(path, "rb") as fh:
+            while chunk := fh.read(_CHUNK):
+                nul = chunk.find(b"\0")
+                if nul >= 0:
+                    line = sum(c.count(b"\n") for c in parts) + chunk.count(b"\n", 0, nul) + 1
+                    raise FileFormatError(p, f"binary data (a NUL byte at offset {at + nul}), "
+                                          "not CSV text: a damaged or zero-filled file",
+                                          line=line)
+                parts.append(chunk)
+                at += len(chunk)
+    except OSError as exc:
+        raise FileFormatError(p, f"cannot read ({exc.strerror})") from None
+    return b"".join(parts)
+
+
 def _load_samples(path: Path, ncol: int, columns: Sequence[str]) -> tuple[np.ndarray,
                                                                          np.ndarray]:
     """Numbers and missing-mask of a samples.csv: ((N, ncol) float, (N, ncol) bool)."""
     p = str(path)
-    try:
-        data = path.read_bytes()
-    except OSError as exc:
-        raise FileFormatError(p, f"cannot read ({exc.strerror})") from None
+    data = _read_text_bytes(path)
     data = data.replace(b"\r\n", b"\n")
     nl = data.find(b"\n")
     header = (data if nl < 0 else data[:nl]).decode("utf-8", "replace").strip()
@@ -326,8 +348,11 @@ def _check_times(sp: str, t: np.ndarray) -> None:
         j = int(np.flatnonzero(~np.isfinite(t))[0])
         raise FileFormatError(sp, "non-finite time", line=j + 2, field="t")
     if t.size > 1 and np.any(np.diff(t) < 0):
-        j = int(np.flatnonzero(np.diff(t) < 0)[0]) + 1
-        raise FileFormatError(sp, "time goes backwards", line=j + 2, field="t")
+        back = np.flatnonzero(np.diff(t) < 0)
+        j = int(back[0]) + 1
+        raise FileFormatError(sp, f"time goes backwards ({back.size} time stamp"
+                              f"{'s' * (back.size != 1)} earlier than the one before, the first "
+                              "here); sort the rows or re-ingest the log", line=j + 2, field="t")
 
 
 def _aux_channel(ch: Any, mp: str, where: str) -> tuple[str, str, str]:
@@ -419,6 +444,9 @@ def load_flight_dir(directory: str | Path) -> Flight:
     raw[~valid] = np.nan
     _check_times(str(spath), t)
     check_rate(fs, t, mp)
+    said = time_base(t, raw, fs).text()
+    if said:            # one line, every command that reads a flight folder
+        logging.getLogger("rimu.flight").warning(f"{d}: {said}")
     aux = _aux_channels(d, man, mp, t)
     faults: tuple[Fault, ...] = ()
     truth: dict[str, Any] = {}

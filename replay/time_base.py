@@ -20,7 +20,8 @@ import numpy as np
 
 from fdi.errors import FileFormatError
 
-__all__ = ["GAP_PERIODS", "RATE_TOLERANCE", "TimeBase", "check_rate", "time_base"]
+__all__ = ["GAP_PERIODS", "RATE_TOLERANCE", "TimeBase", "check_rate", "time_base",
+           "with_time_base"]
 
 GAP_PERIODS = 2.5
 """An interval between consecutive time stamps longer than this many sample periods is a
@@ -155,3 +156,15 @@ def check_rate(sample_rate_hz: float, t: np.ndarray, manifest: str) -> None:
         raise FileFormatError(manifest, f"{fs:g} Hz, but the time stamps show {median_hz:.4g} "
                               f"Hz (median interval) and {mean_hz:.4g} Hz (rows over the "
                               "span): correct the manifest's rate", field="sample_rate_hz")
+
+
+def with_time_base(cal: Any, flight: Any) -> Any:
+    """A calibration made from ``flight`` with ``extra["time_base"]`` recording the flight's
+    gaps, duplicates and empty rows (:meth:`TimeBase.to_dict`); unchanged for a clean one
+    (its file and fingerprint stay as they were)."""
+    from dataclasses import replace
+
+    tb = flight.time_base
+    if tb.clean:
+        return cal
+    return replace(cal, extra={**dict(cal.extra), "time_base": tb.to_dict()})

@@ -180,6 +180,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         from rimu.outputs import refuse_outputs_over_inputs
 
         refuse_outputs_over_inputs(args)        # no command writes over or into its input
+        from rimu.argtypes import refuse_ignored_options
+
+        refuse_ignored_options(args, f"rimu {args.command}")   # nothing ignored silently
         return int(run(args) or 0)
     except RimuError as exc:
         if args.debug:

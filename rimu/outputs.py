@@ -71,6 +71,10 @@ OUTPUT_OPTIONS = ("out", "report", "plot", "rrd")
 that names an existing file or folder is an input."""
 
 
+_OUTPUT_SUFFIXES = ("_plot", "_report", "_rrd", "_out")
+"""Argument names ending so are outputs too (``--baseline-plot``)."""
+
+
 def _paths(value) -> list[Path]:
     if isinstance(value, str | os.PathLike):
         return [Path(value)] if str(value) else []
@@ -97,8 +101,9 @@ def refuse_outputs_over_inputs(args, outputs: tuple[str, ...] = OUTPUT_OPTIONS) 
     """
     ns = vars(args)
     ins = [q for k, v in ns.items() if k not in outputs and not k.startswith("_")
+           and not k.endswith(_OUTPUT_SUFFIXES)
            for q in _paths(v) if _exists(q)]
-    for k in outputs:
+    for k in [k for k in ns if k in outputs or k.endswith(_OUTPUT_SUFFIXES)]:
         for p in _paths(ns.get(k)):
             _not_an_input(p, "--" + k.replace("_", "-"), ins)
 

@@ -129,6 +129,9 @@ def run(args: argparse.Namespace) -> int:
                        time_offset=not getattr(args, "no_time_offset", False))
     cal = calibration_from_fit(fit, flight,
                                drift_model=bool(getattr(args, "drift_model", False)))
+    from replay.time_base import with_time_base
+
+    cal = with_time_base(cal, flight)       # gaps, duplicates, empty rows: in the file too
     with atomic_file(out) as tmp:
         cal.save(tmp)
     print(summary_text(cal))

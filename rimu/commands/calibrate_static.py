@@ -32,6 +32,9 @@ def run(args: argparse.Namespace) -> int:
     input_path(args.static, "--static", kind="dir")
     flight = load_flight_dir(args.static)
     cal = calibrate_static(flight, reference=getattr(args, "reference", None))
+    from replay.time_base import with_time_base
+
+    cal = with_time_base(cal, flight)       # gaps, duplicates, empty rows: in the file too
     with atomic_file(out) as tmp:
         cal.save(tmp)
     print(static_text(cal.extras.static))

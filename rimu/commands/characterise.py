@@ -32,7 +32,8 @@ def run(args: argparse.Namespace) -> int:
     input_path(args.flight, "DIR", kind="dir")
     out = output_dir(args.report, "--report") if args.report else None
     flight = load_flight_dir(args.flight)
-    doc = to_jsonable(characterise_flight(flight, alpha=args.alpha))
+    doc = to_jsonable({**characterise_flight(flight, alpha=args.alpha),
+                       "time_base": flight.time_base.to_dict()})
     js = json.dumps(doc, indent=1, allow_nan=False) + "\n"
     summary = text(doc)
     print(js if args.json else summary, end="" if args.json else "\n")

@@ -102,6 +102,7 @@ def run(args: argparse.Namespace) -> int:
         time_offsets=not args.no_time_offsets, envelope=not args.no_envelope))
     describe_chain(chain, flight)
     _, report = run_flight(chain, flight)
+    report["time_base"] = flight.time_base.to_dict()     # the gaps it monitored across
     print(format_report(report, max_events=args.max_events))
     if baselines:
         _baselines(args, baselines, flight, cal, report)
