@@ -48,8 +48,8 @@ from fdi.calfile import Calibration
 from fdi.units import DPS
 from replay.flight_data import Flight
 
-__all__ = ["ALARM_TYPES", "REPORT_SCHEMA", "RunningReport", "build_report", "event_units",
-           "format_report", "format_summary"]
+__all__ = ["ALARM_TYPES", "REPORT_SCHEMA", "RunningReport", "build_report", "decoding_hint",
+           "event_units", "format_report", "format_summary"]
 
 REPORT_SCHEMA = "rimu.report/1"
 ALARM_TYPES = ("detected", "isolated", "health")
@@ -394,6 +394,30 @@ def _time_base_text(tb: Mapping[str, Any]) -> str:
     if tb.get("empty_rows"):
         parts.append(f"{tb['empty_rows']} row(s) without any finite value")
     return "; ".join(parts) if parts else "regular (no gap, no duplicate, no empty row)"
+
+
+def decoding_hint(report: Mapping[str, Any]) -> str | None:
+    """A warning when the run looks like a decoding error rather than a flight: more than
+    half the sensors isolated by the parity (not for non-finite or stale values), or more than half the samples out of the envelope
+    with saturation among the reasons (one wrong DBC factor, map unit or raw unit scales
+    every sensor alike); None otherwise."""
+    s = report.get("summary", {})
+    n = len(report.get("sensor_names", ()))
+    health = {e.get("sensor") for e in report.get("events", ()) if e.get("type") == "health"}
+    iso = [k for k in s.get("isolated_sensors") or () if k not in health]   # parity's own
+    out = float(s.get("envelope_out_fraction") or 0.0)
+    ranged = any("saturation" in p.get("reasons", ()) for p in s.get("envelope_periods") or ())
+    why = []
+    if n and len(iso) > n / 2:
+        why.append(f"{len(iso)} of {n} sensors isolated")
+    if out > 0.5 and ranged:
+        why.append(f"{100 * out:.0f} % of the samples out of the envelope, saturation among "
+                   "the reasons")
+    if not why:
+        return None
+    return (f"{' and '.join(why)}: a scale error common to every sensor (a DBC factor, the "
+            "channel map's unit, the raw unit, a calibration of another set) is more likely "
+            "than faults in all of them; check the decoded rates against the calibration")
 
 
 def format_report(report: Mapping[str, Any], *, max_events: int = 50) -> str:

@@ -17,6 +17,7 @@ import re
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 from scipy.stats import chi2
 
@@ -35,6 +36,8 @@ def world(tmp_path_factory) -> dict[str, Path]:
     assert main(["simulate", "flight", "--imus", "2", "--duration", "30", "--seed", "3",
                  "--out", str(d / "fl")]) == 0
     assert main(["calibrate", "--in-flight", str(d / "fl"), "--out", str(d / "cal.json")]) == 0
+    assert main(["simulate", "flight", "--imus", "2", "--duration", "30", "--seed", "4",
+                 "--max-rate", "0.001", "--out", str(d / "rest")]) == 0
     assert main(["simulate", "flight", "--cal", str(d / "cal.json"), "--duration", "2",
                  "--out", str(d / "log.asc")]) == 0
     thr = Thresholds(kind="gyro", n=6, sample_rate_hz=50.0, false_alarms_per_hour=1.0,
@@ -42,7 +45,7 @@ def world(tmp_path_factory) -> dict[str, Path]:
                      threshold=(float(chi2.isf(1e-7, 3)),) * 2)
     thr.save(d / "thr.json")
     (d / "out").mkdir()
-    return {"d": d, "fl": d / "fl", "cal": d / "cal.json", "log": d / "log.asc",
+    return {"d": d, "fl": d / "fl", "rest": d / "rest", "cal": d / "cal.json", "log": d / "log.asc",
             "map": d / "log.map.toml", "thr": d / "thr.json", "out": d / "out"}
 
 
@@ -322,3 +325,209 @@ def test_no_output_is_or_lies_inside_an_input(world, capsys):
     ]
     for argv in cases:
         refused(capsys, world, argv, "input")
+
+
+# -- no silent gap ----------------------------------------------------------------------------
+def _edit_samples(src: Path, dst: Path, edit) -> Path:
+    """A copy of the flight folder ``src`` whose rows (and aux rows) ``edit(i, cells)`` changes."""
+    import shutil
+
+    shutil.copytree(src, dst)
+    for f in ("truth.json", "truth_rates.npy"):
+        (dst / f).unlink(missing_ok=True)
+    for name in ("samples.csv", "aux.csv"):
+        p = dst / name
+        if not p.exists():
+            continue
+        head, *rows = p.read_text().splitlines()
+        out = [head]
+        for i, r in enumerate(rows):
+            c = r.split(",")
+            edit(i, c, name)
+            out.append(",".join(c))
+        p.write_text("\n".join(out) + "\n")
+    return dst
+
+
+@pytest.fixture(scope="module")
+def gappy(world) -> Path:
+    """The flight with a 1e6 s gap, 50 duplicate time stamps and 200 all-NaN rows."""
+    t = [float(r.split(",")[0]) for r in
+         (world["rest"] / "samples.csv").read_text().splitlines()[1:]]
+
+    def edit(i, c, name):
+        x = t[i] + (1e6 if i >= 1000 else 0.0)
+        if 300 < i <= 350:
+            x = t[300]
+        c[0] = repr(x)
+        if name == "samples.csv" and 600 <= i < 800:
+            c[1:] = ["nan"] * (len(c) - 1)
+
+    return _edit_samples(world["rest"], world["d"] / "gappy", edit)
+
+
+def _warnings(err: str) -> list[str]:
+    return [x for x in err.splitlines() if x.startswith("rimu: warning:")]
+
+
+def test_gaps_duplicates_and_empty_rows_are_said_by_every_flight_reader(world, gappy, capsys):
+    o = world["out"]
+    runs = {
+        "monitor-file": ["monitor-file", gappy, "--cal", world["cal"], "--report",
+                         o / "mf.json"],
+        "characterise": ["characterise", gappy, "--json"],
+        "calibrate --static": ["calibrate", "--static", gappy, "--out", o / "st.json"],
+    }
+    for cmd, argv in runs.items():
+        rc, out, err = run(capsys, world, argv)
+        assert rc == 0, (cmd, err)
+        said = [w for w in _warnings(err) if "in the time stamps" in w]
+        assert len(said) == 1, (cmd, err)
+        assert all(k in said[0] for k in ("2 gaps", "50 duplicate", "200 rows")), said
+        if cmd == "characterise":
+            tb = json.loads(out)["time_base"]
+        elif cmd == "monitor-file":
+            tb = json.loads((o / "mf.json").read_text())["time_base"]
+            span = tb["span_s"]
+            assert f"{span:.6g} s of time stamps" in out        # as ingest states it
+            assert "monitored across 2 gap(s)" in out
+        else:
+            tb = json.loads((o / "st.json").read_text())["extra"]["time_base"]
+        assert (tb["gaps"], tb["duplicate_time_stamps"], tb["empty_rows"]) == (2, 50, 200)
+        assert tb["gap_longest_s"] > 1e6 - 1
+
+
+def test_a_clean_flight_gets_no_warning_and_says_it_is_regular(world, capsys):
+    rc, out, err = run(capsys, world, ["monitor-file", world["fl"], "--cal", world["cal"]])
+    assert rc == 0 and not [w for w in _warnings(err) if "time stamps" in w], err
+    assert "time stamps: regular" in out
+    assert "alarms 0 inside the envelope, 0 outside it" in out
+
+
+def test_backward_time_stamps_refused_with_their_count(world, capsys):
+    def edit(i, c, name):
+        if i in (100, 500):
+            c[0] = "0.0"
+
+    back = _edit_samples(world["fl"], world["d"] / "back", edit)
+    line = refused(capsys, world, ["monitor-file", back, "--cal", world["cal"]],
+                   "time goes backwards (2 time stamps")
+    assert "samples.csv:102" in line
+
+
+def _renamed(world, name, names) -> Path:
+    import shutil
+
+    d = world["d"] / name
+    shutil.copytree(world["fl"], d)
+    man = json.loads((d / "manifest.json").read_text())
+    man["sensor_names"] = names(man["sensor_names"])
+    man["columns"] = ["t", *man["sensor_names"]]
+    (d / "manifest.json").write_text(json.dumps(man))
+    _, body = (d / "samples.csv").read_text().split("\n", 1)
+    (d / "samples.csv").write_text(",".join(man["columns"]) + "\n" + body)
+    return d
+
+
+def test_sensor_names_other_than_the_calibrations(world, capsys):
+    perm = _renamed(world, "perm", lambda n: [n[1], n[0], *n[2:]])
+    refused(capsys, world, ["monitor-file", perm, "--cal", world["cal"]], "another order")
+    other = _renamed(world, "other", lambda n: list("abcdef"))
+    rc, _, err = run(capsys, world, ["monitor-file", other, "--cal", world["cal"]])
+    assert rc == 0
+    assert any("matched by position" in w and "a=imu1.x" in w for w in _warnings(err)), err
+
+
+# -- up-front refusals --------------------------------------------------------------------------
+def test_a_zero_filled_samples_file_stops_the_command_at_once(world, capsys, tmp_path):
+    import os
+    import shutil
+
+    d = tmp_path / "sparse"          # outside the hashed inputs: 2 GiB would be read there
+    shutil.copytree(world["fl"], d)
+    os.truncate(d / "samples.csv", 2 << 30)            # 2 GiB, sparse: NUL bytes after the text
+    for argv in (["monitor-file", d, "--cal", world["cal"]], ["characterise", d]):
+        t0 = time.monotonic()
+        refused(capsys, world, argv, "NUL byte")
+        assert time.monotonic() - t0 < 30
+
+
+def test_work_that_cannot_finish_and_ignored_options_are_refused(world, capsys):
+    cal, o = world["cal"], world["out"]
+    line = refused(capsys, world, ["evaluate", "--cal", cal, "--runs", "100000", "--duration",
+                                   "86400", "--out", o / "ev"], "--yes")
+    assert "100000 flight(s)" in line and "budget" in line
+    for argv in (["export", "c", "--cal", cal, "--thresholds", world["thr"],
+                  "--false-alarms-per-hour", "5", "--out", o / "c"],
+                 ["monitor-file", world["fl"], "--cal", cal, "--thresholds", world["thr"],
+                  "--false-alarms-per-hour", "5"]):
+        refused(capsys, world, argv, "--false-alarms-per-hour cannot be combined")
+    refused(capsys, world, ["tune", "--cal", cal, "--false-alarms-per-hour", "1",
+                            "--drift-horizon-s", "100", "--out", o / "t.json"], "drift model")
+
+
+def test_a_dbc_factor_of_ten_gets_a_hint(world, capsys):
+    from replay.frames import DEFAULT_DBC
+
+    dbc = world["out"] / "x10.dbc"
+    dbc.write_text(Path(DEFAULT_DBC).read_text().replace("(1,0) [-3.4E+038",
+                                                         "(10,0) [-3.4E+038"))
+    base = ["replay", world["log"], "--cal", world["cal"], "--map", world["map"]]
+    rc, _, err = run(capsys, world, [*base, "--dbc", dbc])
+    assert rc == 0 and any("a DBC factor" in w for w in _warnings(err)), err
+    rc, _, err = run(capsys, world, base)
+    assert rc == 0 and not any("a DBC factor" in w for w in _warnings(err)), err
+
+
+# -- small lies ----------------------------------------------------------------------------------
+def test_evaluate_without_flights_prints_no_nan_rate(world, capsys):
+    rc, out, err = run(capsys, world, ["evaluate", "--cal", world["cal"], "--runs", "0",
+                                       "--sweep-runs", "2", "--no-progress",
+                                       "--out", world["out"] / "ev0"])
+    assert rc == 0, err
+    assert "nan" not in out and "no rate" in out
+    assert "evaluate: 0 flight(s) of 60 s + 2 short sweep run(s)" in out
+
+
+def test_repeat_never_prints_an_empty_interval_as_zero():
+    from calibration.repeat import run_to_run_sd
+    from rimu.commands.repeat import run_sd_text
+
+    # five estimates scattered far less than their sigma: the Q-profile interval is empty
+    tau, (lo, hi) = run_to_run_sd([0.0, 0.01, -0.01, 0.005, -0.005], [1.0] * 5)
+    assert tau == 0.0 and hi == 0.0
+    text = run_sd_text(tau, lo, hi)
+    assert "[0, 0]" not in text and "no interval" in text
+    assert run_sd_text(0.5, 0.1, 0.9).endswith("]")
+
+
+def test_parity_prints_the_calibrated_axes_its_help_promises(world, capsys):
+    rc, out, _ = run(capsys, world, ["parity", "cone6", "--misalignment", world["cal"]])
+    assert rc == 0 and "H_c (calibrated axes) =" in out and "V_c =" in out
+
+
+def test_static_drifts_say_their_frames_and_agree(world, capsys):
+    """The two drift vectors of one IMU are the same drift in two frames: equal norms."""
+    from fdi.calfile import load_calibration
+
+    rc, out, _ = run(capsys, world, ["calibrate", "--static", world["rest"], "--out",
+                                     world["out"] / "st2.json"])
+    assert rc == 0
+    assert "in imu2's axes" in out and "in imu1's axes" in out
+    st = load_calibration(world["out"] / "st2.json").extras.static
+    own = st.drift_attribution.own["imu2"].drift
+    rel = st.imus["imu2"].relative_drift
+    assert np.isclose(np.linalg.norm(own), np.linalg.norm(rel), rtol=1e-9)
+
+
+def test_tests_read_the_shared_data_through_rimu_shared_data():
+    """No test hard-codes ``../shared/data``: each path to it honours RIMU_SHARED_DATA."""
+    root = Path(__file__).resolve().parent
+    bad = []
+    for p in root.rglob("*.py"):
+        lines = p.read_text(encoding="utf-8").splitlines()
+        for j, ln in enumerate(lines):
+            if re.search(r'"shared"\s*/\s*"data"', ln) and not any(
+                    "RIMU_SHARED_DATA" in x for x in lines[max(0, j - 2):j + 1]):
+                bad.append(f"{p.relative_to(root)}:{j + 1}")
+    assert not bad, bad

@@ -104,6 +104,11 @@ def run(args: argparse.Namespace) -> int:
     _, report = run_flight(chain, flight)
     report["time_base"] = flight.time_base.to_dict()     # the gaps it monitored across
     print(format_report(report, max_events=args.max_events))
+    from replay.report import decoding_hint
+
+    hint = decoding_hint(report)
+    if hint:
+        logging.getLogger("rimu").warning(hint)
     if baselines:
         _baselines(args, baselines, flight, cal, report)
     if args.report:
