@@ -199,7 +199,7 @@ def test_cli_refuses_a_static_flight_in_one_line(tmp_path: Path) -> None:
 
 def test_cli_errors_are_one_line(tmp_path: Path) -> None:
     from replay.flight import simulate_flight
-    from thresholds.synthetic import synthetic_calibration
+    from studies.synthetic import synthetic_calibration
 
     cal = synthetic_calibration("cone6", seed=2)
     save_flight_dir(simulate_flight(cal, 2.0, seed=1), tmp_path / "plain")

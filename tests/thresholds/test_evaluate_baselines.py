@@ -62,7 +62,7 @@ def test_run_one_baselines_are_those_of_the_same_samples(cal3):
 
 def test_evaluate_cli_refuses_a_set_that_is_not_imus(tmp_path, capsys):
     from rimu.cli import main
-    from thresholds import synthetic_calibration
+    from studies.synthetic import synthetic_calibration
 
     cal = synthetic_calibration("cone6")
     cal.save(tmp_path / "c.json")
