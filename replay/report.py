@@ -398,9 +398,9 @@ def _time_base_text(tb: Mapping[str, Any]) -> str:
 
 def decoding_hint(report: Mapping[str, Any]) -> str | None:
     """A warning when the run looks like a decoding error rather than a flight: more than
-    half the sensors isolated by the parity (not for non-finite or stale values), or more than half the samples out of the envelope
-    with saturation among the reasons (one wrong DBC factor, map unit or raw unit scales
-    every sensor alike); None otherwise."""
+    half the sensors isolated by the parity (not for non-finite or stale values), or more
+    than half the samples out of the envelope with saturation among the reasons (one wrong
+    DBC factor, map unit or raw unit scales every sensor alike); None otherwise."""
     s = report.get("summary", {})
     n = len(report.get("sensor_names", ()))
     health = {e.get("sensor") for e in report.get("events", ()) if e.get("type") == "health"}
