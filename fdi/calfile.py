@@ -899,7 +899,14 @@ def check_compatible(cal: Calibration, n_sensors: int, raw_unit: Any, source: st
     if int(n_sensors) != s.n:
         raise ConfigError(f"{source}: {int(n_sensors)} {kind} sensors, the {where} has {s.n}: "
                           "a calibration only applies to the sensor set it was made for")
-    _check_names(s, names, source, where, kind)
+    _check_names(s, names, source, where, kind, warn=False)
+    _check_units(s, raw_unit, source, where, kind, names)
+    _check_names(s, names, source, where, kind, warn=True)     # warned once all else passed
+
+
+def _check_units(s: SensorSet, raw_unit: Any, source: str, where: str, kind: str,
+                 names: Any) -> None:
+    """The data's raw units against the calibration's (generic names pass)."""
     if raw_unit is None:
         return
     units = [raw_unit] * s.n if isinstance(raw_unit, str) else list(raw_unit)
@@ -913,7 +920,8 @@ def check_compatible(cal: Calibration, n_sensors: int, raw_unit: Any, source: st
                           f"expects raw outputs in {want!r}")
 
 
-def _check_names(s: SensorSet, names: Any, source: str, where: str, kind: str) -> None:
+def _check_names(s: SensorSet, names: Any, source: str, where: str, kind: str, *,
+                 warn: bool) -> None:
     """Sensors are matched by position: the same names in another order are refused (the
     columns were permuted), other names warned about in one line."""
     import logging
@@ -924,11 +932,13 @@ def _check_names(s: SensorSet, names: Any, source: str, where: str, kind: str) -
     want = [c.name for c in s.sensors]
     if got == want or len(got) != len(want):
         return
-    if sorted(got) == sorted(want):
+    if sorted(got) == sorted(want) and not warn:
         j = next(i for i, (a, b) in enumerate(zip(got, want, strict=True)) if a != b)
         raise ConfigError(f"{source}: {kind} sensor {j + 1} is {got[j]!r} where the {where} "
                           f"has {want[j]!r}: the same sensors in another order (a calibration "
                           "applies by position; reorder the columns)")
+    if not warn or sorted(got) == sorted(want):
+        return
     pairs = ", ".join(f"{a}={b}" for a, b in zip(got, want, strict=True) if a != b)
     logging.getLogger("rimu.calibration").warning(
         f"{source}: its {kind} sensor names differ from the {where}'s; matched by position: "

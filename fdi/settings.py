@@ -189,7 +189,6 @@ def thresholds_from_dict(doc: Any, path: str = "<thresholds>") -> Thresholds:
     """Build :class:`Thresholds` from its JSON dictionary (see :func:`load_thresholds`)."""
     r = Fields(doc, path)
     version = r.schema(THRESHOLDS_SCHEMAS)
-    check_numbers(doc, path, THRESHOLDS_NUMBER_RULES)
     scales = r.numbers("scales")
     bad = [x for x in scales if x < 1 or x != int(x) or x > MAX_SCALE]
     if bad:         # the monitor keeps a ring of max(scales) sums: 1e308 would hang it
@@ -216,6 +215,7 @@ def thresholds_from_dict(doc: Any, path: str = "<thresholds>") -> Thresholds:
         fields["calibration_fingerprint"] = fp
         fields["noise_model"] = r.choice("noise_model", NOISE_MODELS)
     r.finish()
+    check_numbers(doc, path, THRESHOLDS_NUMBER_RULES)     # what the typed reads leave
     if fields["detector"] != "windows" and not fields["cusum_threshold"] > 0:
         raise r.error("cusum_threshold", f"a {fields['detector']!r} detector needs a positive "
                       "CUSUM threshold")
