@@ -31,6 +31,7 @@ COMMANDS: dict[str, str] = {
     "evaluate": "rimu.commands.evaluate",
     "export": "rimu.commands.export",
     "ingest": "rimu.commands.ingest",
+    "inspect": "rimu.commands.inspect",
     "monitor": "rimu.commands.monitor",
     "monitor-file": "rimu.commands.monitor_file",
     "parity": "rimu.commands.parity",
@@ -187,14 +188,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     if (text := refusal(command, args)) is not None:  # an extra it needs at the end
         print(f"rimu: error: {text}", file=sys.stderr)
         return 2
+    from fdi.progress import session
+
     try:
+        from rimu.argtypes import refuse_ignored_options
         from rimu.outputs import refuse_outputs_over_inputs
 
         refuse_outputs_over_inputs(args)        # no command writes over or into its input
-        from rimu.argtypes import refuse_ignored_options
-
         refuse_ignored_options(args, f"rimu {args.command}")   # nothing ignored silently
-        return int(run(args) or 0)
+        with session(command or "rimu", enabled=not getattr(args, "no_progress", False)):
+            return int(run(args) or 0)
     except RimuError as exc:
         if args.debug:
             raise

@@ -123,10 +123,15 @@ def run(args: argparse.Namespace) -> int:
         from rimu.outputs import output_dir
 
         rep = output_dir(args.report, "--report", inputs=(args.in_flight,))
+    from fdi.progress import current
+
+    current().stage("reading the flight folder")
     flight = load_flight_dir(args.in_flight)
+    current().stage("fitting the set against its reference (axes, scale, bias, time offsets)")
     fit = fit_inflight(flight, reference=getattr(args, "reference", None),
                        model=getattr(args, "model", "auto"),
                        time_offset=not getattr(args, "no_time_offset", False))
+    current().stage("noise, tails and drift of the residual")
     cal = calibration_from_fit(fit, flight,
                                drift_model=bool(getattr(args, "drift_model", False)))
     from replay.time_base import with_time_base
@@ -151,6 +156,8 @@ def run(args: argparse.Namespace) -> int:
     if rep is not None:
         from calibration.inflight.report import write_flight_plots
         from rimu.outputs import atomic_dir
+
+        current().stage("plots")
 
         with atomic_dir(rep) as tmp:        # the page and its plots: all or none
             pngs = write_flight_plots(flight, cal, tmp)
