@@ -69,7 +69,7 @@ def main() -> int:
 
 def _run(args: argparse.Namespace) -> int:
     from calibration.ferraris import ferraris_calibrate
-    from calibration.ferraris_sim import imucal_like_truth, simulate_ferraris
+    from studies.ferraris_sim import imucal_like_truth, simulate_ferraris
 
     seq, truth, noise = preset("tetrad-paper")
     s = simulate_session(None, seq, truth, seed=0, noise=noise)

@@ -18,7 +18,7 @@ import time
 
 from _common import RESULTS, header, spread, write_results
 
-from thresholds import synthetic_calibration
+from studies.synthetic import synthetic_calibration
 from thresholds.evaluate import design, execute, simulation_task, summarise
 from thresholds.select import select
 

@@ -37,7 +37,8 @@ from threadpoolctl import threadpool_limits
 from fdi.export import generate_c, write_c
 from fdi.export.host import STRICT_FLAGS, CMonitor, compile_module
 from fdi.monitor import Monitor
-from thresholds import compute_thresholds, synthetic_calibration
+from studies.synthetic import synthetic_calibration
+from thresholds import compute_thresholds
 
 ARM_FLAGS = ("-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O2", "-mcpu=cortex-m4",
              "-mthumb", "-mfloat-abi=hard", "-mfpu=fpv4-sp-d16", "-ffunction-sections",

@@ -33,19 +33,15 @@ from threadpoolctl import threadpool_limits
 
 from fdi import state as S
 from fdi.monitor import Monitor
-from thresholds import (
-    compute_thresholds,
-    draw_truth,
-    raw_samples,
-    synthetic_calibration,
-)
+from studies.synthetic import draw_truth, raw_samples, synthetic_calibration
+from thresholds import compute_thresholds
 
 FS = 100.0
 _FIRST_USE = """
 import time, numpy as np
 t0 = time.perf_counter()
 from fdi.monitor import Monitor
-from thresholds import synthetic_calibration
+from studies.synthetic import synthetic_calibration
 t1 = time.perf_counter()
 cal = synthetic_calibration("cone6", seed=1)
 mon = Monitor(cal)

@@ -33,7 +33,7 @@ from _common import ROOT, header, spread, write_results
 
 from replay.can_write import write_flight_log
 from replay.flight import simulate_flight
-from thresholds.synthetic import synthetic_calibration
+from studies.synthetic import synthetic_calibration
 
 _HWM = ("hwm = [x for x in open('/proc/self/status') if x.startswith('VmHWM')][0]\n"
         "print('VmHWM', hwm.split()[1], file=sys.stderr)\n")

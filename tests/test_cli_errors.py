@@ -16,7 +16,7 @@ import pytest
 
 from replay.can_write import write_flight_log
 from replay.flight import save_flight_dir, simulate_flight
-from thresholds.synthetic import synthetic_calibration
+from studies.synthetic import synthetic_calibration
 
 ROOT = Path(__file__).resolve().parents[1]
 

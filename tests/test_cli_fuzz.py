@@ -35,12 +35,12 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from calibration.ferraris_sim import imucal_like_truth, simulate_ferraris
 from replay.can_write import write_flight_log
 from replay.flight import save_flight_dir, simulate_flight
 from rimu import argtypes
 from rimu.cli import build_parser, main
-from thresholds.synthetic import synthetic_calibration
+from studies.ferraris_sim import imucal_like_truth, simulate_ferraris
+from studies.synthetic import synthetic_calibration
 
 SPECIAL = ["nan", "NaN", "inf", "-inf", "+inf", "-1", "0", "-0", "0.0", "-0.0", "1e308",
            "1e400", "-1e400", "-5", "1", "3", "0.5", "1e-300", "5e-324", "abc", "", "1,5",

@@ -24,7 +24,7 @@ from replay.flight import save_flight_dir, simulate_flight
 from rimu.argtypes import nonnegative_int, positive_float, positive_int
 from rimu.cli import main
 from rimu.outputs import atomic_dir, atomic_file, atomic_write_text, output_dir, output_file
-from thresholds.synthetic import synthetic_calibration
+from studies.synthetic import synthetic_calibration
 
 
 @pytest.fixture(scope="module")

@@ -21,7 +21,6 @@ import can
 import numpy as np
 import pytest
 
-from calibration.ferraris_sim import imucal_like_truth, simulate_ferraris
 from fdi.calfile import CALIBRATION_SCHEMA
 from replay.can_write import write_flight_log
 from replay.flight import save_flight_dir, simulate_flight
@@ -29,7 +28,8 @@ from replay.live import StreamDecoder
 from replay.logio import resolve_map
 from rimu.cli import main
 from rimu.outputs import atomic_file, atomic_write_text
-from thresholds.synthetic import synthetic_calibration
+from studies.ferraris_sim import imucal_like_truth, simulate_ferraris
+from studies.synthetic import synthetic_calibration
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -20,7 +20,7 @@ from fdi.settings import load_thresholds
 from replay.channel_map import check_against_calibration, load_channel_map
 from replay.flight import load_flight_dir
 from replay.scenario import load_scenario
-from thresholds.synthetic import synthetic_calibration
+from studies.synthetic import synthetic_calibration
 
 DOC = Path(__file__).resolve().parents[1] / "docs" / "formats.md"
 _BLOCK = re.compile(r"<!-- example: (?P<path>[^ ]+) -->\n```[a-z]*\n(?P<body>.*?)```",

@@ -434,7 +434,7 @@ def test_writer_refuses_a_scale_factor_the_loader_would_refuse(tmp_path):
 
     from fdi.calfile import Calibration, SensorSet
     from fdi.errors import ConfigError
-    from thresholds.synthetic import synthetic_calibration
+    from studies.synthetic import synthetic_calibration
 
     cal = synthetic_calibration("tetrad", seed=1)
     s = cal.gyro

@@ -104,6 +104,13 @@ class RunResult:
     roc_detect : tuple of float
         Per ROC multiplier, the time of the first passage at or after the onset (inf:
         none), whatever passed before it: the ROC's detection.
+    baselines : tuple of replay.baselines.compare.BaselineRun
+        The autopilot rules asked for (``rimu evaluate --baseline``) on the same samples.
+    isolated_imu : int
+        The IMU (0-based) of :attr:`isolated` when the set is made of IMUs and baselines
+        were asked for (−1: none or unknown): rimu's isolation read as the baselines'.
+    faulted_imu : int
+        The IMU (0-based) of the faulted sensor, when baselines were asked for (−1: none).
     """
 
     spec: RunSpec
@@ -115,6 +122,9 @@ class RunResult:
     roc_first: tuple[float, ...]
     window_hit: tuple[float, ...] = ()
     roc_detect: tuple[float, ...] = ()
+    baselines: tuple[Any, ...] = ()
+    isolated_imu: int = -1
+    faulted_imu: int = -1
 
 
 def _fault(spec: RunSpec) -> tuple[Fault, ...]:
@@ -125,9 +135,27 @@ def _fault(spec: RunSpec) -> tuple[Fault, ...]:
                   f"{kind}:{spec.sensor}:{spec.size_label:g}:{spec.onset_s:g}"),)
 
 
+def _with_baselines(base: RunResult, flight: Any, cal: Calibration, spec: RunSpec,
+                    onset_s: float, baselines: tuple[str, ...]) -> RunResult:
+    """``base`` with the autopilot rules' answers on the same samples."""
+    from dataclasses import replace
+
+    from replay.baselines.compare import baseline_run, run_baselines
+
+    tri, res = run_baselines(flight, baselines, cal)
+    sensor = spec.sensor if spec.fault != "healthy" else 0
+    runs = tuple(baseline_run(r, tri, onset_s=onset_s, duration_s=float(spec.duration_s),
+                              sensor=sensor) for r in res.values())
+    imu = tri.imu_of_sensor(base.isolated) if base.isolated else -1
+    return replace(base, baselines=runs, isolated_imu=imu,
+                   faulted_imu=tri.imu_of_sensor(sensor) if sensor else -1)
+
+
 def run_one(cal: Calibration, thresholds: Thresholds, spec: RunSpec, *,
-            kind: str = "gyro") -> RunResult:
-    """Simulate one flight, run the monitor on it, and summarise (deterministic)."""
+            kind: str = "gyro", baselines: tuple[str, ...] = ()) -> RunResult:
+    """Simulate one flight, run the monitor on it, and summarise (deterministic);
+    ``baselines``: autopilot rules (:data:`replay.baselines.BASELINES`) run on the same
+    samples (not on sweep runs)."""
     flight = simulate_flight(cal, spec.duration_s, seed=spec.seed, faults=_fault(spec),
                              max_rate_dps=spec.max_rate_dps, kind=kind)
     sweep = spec.fault == "sweep"
@@ -135,6 +163,9 @@ def run_one(cal: Calibration, thresholds: Thresholds, spec: RunSpec, *,
     res = mon.run(flight.t, flight.raw, flight.valid)
     base = _summary(spec, res, float(spec.duration_s))
     if not sweep:
+        if baselines:
+            onset = spec.onset_s if spec.fault != "healthy" else math.inf
+            base = _with_baselines(base, flight, cal, spec, onset, baselines)
         return base
     t = res.t
     hits: tuple[float, ...] = ()
@@ -183,7 +214,7 @@ def _summary(spec: RunSpec, res: Any, duration_s: float) -> RunResult:
 
 
 def corpus_one(cal: Calibration, thresholds: Thresholds, index: int, path: str, *,
-               kind: str = "gyro") -> RunResult:
+               kind: str = "gyro", baselines: tuple[str, ...] = ()) -> RunResult:
     """One recorded flight folder (``rimu.flight/1``) through the monitor.
 
     The flight's truth record, when it has one, gives the fault (the first of its faults):
@@ -208,4 +239,10 @@ def corpus_one(cal: Calibration, thresholds: Thresholds, index: int, path: str, 
                    (f0.onset - t0) if f0 else math.inf, dur, math.nan)
     mon = Monitor(cal, thresholds, kind=kind)
     res = mon.run(flight.t - t0, flight.raw, flight.valid)
-    return _summary(spec, res, dur)
+    base = _summary(spec, res, dur)
+    if baselines:
+        from dataclasses import replace
+
+        shifted = replace(flight, t=flight.t - t0)
+        base = _with_baselines(base, shifted, cal, spec, spec.onset_s, baselines)
+    return base

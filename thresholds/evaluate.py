@@ -116,25 +116,27 @@ def _run_batch(task: Callable[[Any], RunResult], items: list[Any]) -> list[RunRe
     return [task(x) for x in items]
 
 
-def simulation_task(cal: Calibration, thresholds: Thresholds, kind: str = "gyro"
-                    ) -> Callable[[RunSpec], RunResult]:
-    """The picklable function that runs one simulated :class:`RunSpec`."""
-    return partial(_sim, cal, thresholds, kind)
+def simulation_task(cal: Calibration, thresholds: Thresholds, kind: str = "gyro",
+                    baselines: Sequence[str] = ()) -> Callable[[RunSpec], RunResult]:
+    """The picklable function that runs one simulated :class:`RunSpec` (``baselines``:
+    autopilot rules run on the same samples, :mod:`replay.baselines`)."""
+    return partial(_sim, cal, thresholds, kind, tuple(baselines))
 
 
-def corpus_task(cal: Calibration, thresholds: Thresholds, kind: str = "gyro"
-                ) -> Callable[[tuple[int, str]], RunResult]:
+def corpus_task(cal: Calibration, thresholds: Thresholds, kind: str = "gyro",
+                baselines: Sequence[str] = ()) -> Callable[[tuple[int, str]], RunResult]:
     """The picklable function that runs one ``(index, flight folder)`` of a corpus."""
-    return partial(_corpus, cal, thresholds, kind)
+    return partial(_corpus, cal, thresholds, kind, tuple(baselines))
 
 
-def _sim(cal: Calibration, thresholds: Thresholds, kind: str, spec: RunSpec) -> RunResult:
-    return run_one(cal, thresholds, spec, kind=kind)
+def _sim(cal: Calibration, thresholds: Thresholds, kind: str, baselines: tuple[str, ...],
+         spec: RunSpec) -> RunResult:
+    return run_one(cal, thresholds, spec, kind=kind, baselines=baselines)
 
 
-def _corpus(cal: Calibration, thresholds: Thresholds, kind: str, item: tuple[int, str]
-            ) -> RunResult:
-    return corpus_one(cal, thresholds, item[0], item[1], kind=kind)
+def _corpus(cal: Calibration, thresholds: Thresholds, kind: str, baselines: tuple[str, ...],
+            item: tuple[int, str]) -> RunResult:
+    return corpus_one(cal, thresholds, item[0], item[1], kind=kind, baselines=baselines)
 
 
 def execute(task: Callable[[Any], RunResult], items: Sequence[Any], *,
@@ -380,6 +382,46 @@ def _detectable(sweep: list[RunResult], thresholds: Thresholds, predicted: Seque
             "conditions": "step at rest, one full window, isolation off", "per_scale": rows}
 
 
+def _baseline_cells(main: list[RunResult]) -> dict[str, Any]:
+    """Per autopilot rule: false alarms counted as rimu's (first flag before the onset, per
+    hour of exposure until it) and, per fault cell, detection, right blame and delay;
+    rimu's isolation read per IMU beside them."""
+    names = [b.name for b in main[0].baselines] if main and main[0].baselines else []
+    out: dict[str, Any] = {"definitions": {
+        "false_alarm": "first flag of the rule before the fault onset, per hour of "
+                       "exposure until it (as rimu's false_alarms)",
+        "detected": "a flag at or after the onset", "blame_correct": "the first IMU blamed at "
+        "or after the onset is the faulted sensor's", "rimu_p_isolation_imu": "rimu's first "
+        "exclusion after the onset names a sensor of the faulted IMU"}, "rules": {}}
+    for k, nm in enumerate(names):
+        runs = [(r, r.baselines[k]) for r in main if len(r.baselines) > k]
+        nfa = sum(b.false_alarm for _, b in runs)
+        expo_h = sum(b.exposure_s for _, b in runs) / 3600.0
+        lo, hi = poisson_interval(nfa, expo_h)
+        cells: dict[tuple[str, float], list[Any]] = {}
+        for r, b in runs:
+            if r.spec.fault != "healthy":
+                cells.setdefault((r.spec.fault, r.spec.size_label), []).append((r, b))
+        rows = []
+        for (f, lab), rs in sorted(cells.items()):
+            n = len(rs)
+            kd = sum(b.detected for _, b in rs)
+            kb = sum(bool(b.blame_correct) for _, b in rs)
+            ki = sum(0 <= r.isolated_imu == r.faulted_imu for r, _ in rs)
+            d = np.array([b.delay_s for _, b in rs if b.detected])
+            rows.append({"fault": f, "size": lab, "unit": SIZE_UNITS.get(f, "SI"), "runs": n,
+                         "pd": kd / n, "pd_ci95": list(wilson_interval(kd, n)),
+                         "p_blame_correct": kb / n,
+                         "p_blame_correct_ci95": list(wilson_interval(kb, n)),
+                         "rimu_p_isolation_imu": ki / n,
+                         "delay_s_median": float(np.median(d)) if d.size else None})
+        out["rules"][nm] = {"false_alarms": {"count": nfa, "exposure_h": expo_h,
+                                             "per_hour": nfa / expo_h if expo_h else math.nan,
+                                             "ci95_per_hour": [lo, hi]},
+                            "faults": rows}
+    return out
+
+
 def summarise(results: Iterable[RunResult], thresholds: Thresholds, *, n_sensors: int,
               predicted: Sequence[Any] = ()) -> dict[str, Any]:
     """The numbers of ``evaluation.json`` (no timing; deterministic in the results).
@@ -409,4 +451,6 @@ def summarise(results: Iterable[RunResult], thresholds: Thresholds, *, n_sensors
     out["roc"] = [_roc_point(main, k) for k in range(len(ROC_MULTIPLIERS))]
     if sweep:
         out["detectable_sizes"] = _detectable(sweep, thresholds, predicted)
+    if any(r.baselines for r in main):
+        out["baselines"] = _baseline_cells(main)
     return out

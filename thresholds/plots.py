@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["plot_all"]
+__all__ = ["plot_all", "plot_baselines"]
 
 
 def _plt() -> Any:
@@ -131,3 +131,46 @@ def plot_all(ev: dict[str, Any], out: str | Path) -> list[Path]:
             fn(ev, out / name)
             paths.append(out / name)
     return paths
+
+
+def plot_baselines(ev: dict[str, Any], path: str | Path) -> Path:
+    """rimu beside the autopilot rules (``ev["baselines"]``), per fault cell: probability of
+    detection, of the right IMU blamed (rimu: its exclusion read per IMU) and the median
+    detection delay."""
+    plt = _plt()
+    rules = ev["baselines"]["rules"]
+    rimu = {(f["fault"], f["size"]): f for f in ev["faults"]}
+    cells = [(f["fault"], f["size"]) for f in next(iter(rules.values()))["faults"]]
+    labels = [f"{k} {s:g}" for k, s in cells]
+    x = np.arange(len(cells))
+    names = ["rimu", *rules]
+    w = 0.8 / len(names)
+    fig, axes = plt.subplots(3, 1, figsize=(max(6.0, 0.6 * len(cells) + 2), 8), sharex=True)
+    for j, nm in enumerate(names):
+        if nm == "rimu":
+            first = next(iter(rules.values()))["faults"]
+            pd = [rimu[c]["pd"] if c in rimu else np.nan for c in cells]
+            pb = [f["rimu_p_isolation_imu"] for f in first]
+            dl = [rimu[c]["delay_s_median"] if c in rimu else None for c in cells]
+        else:
+            fs = rules[nm]["faults"]
+            pd = [f["pd"] for f in fs]
+            pb = [f["p_blame_correct"] for f in fs]
+            dl = [f["delay_s_median"] for f in fs]
+        off = x - 0.4 + w * (j + 0.5)
+        axes[0].bar(off, pd, w, label=nm)
+        axes[1].bar(off, pb, w, label=nm)
+        axes[2].bar(off, [np.nan if d is None else max(d, 1e-3) for d in dl], w, label=nm)
+    axes[0].set_ylabel("P(detect)")
+    axes[1].set_ylabel("P(right IMU blamed)")
+    axes[2].set_ylabel("median delay (s)")
+    axes[2].set_yscale("log")
+    axes[0].legend(fontsize=7, ncol=len(names))
+    axes[2].set_xticks(x)
+    axes[2].set_xticklabels(labels, rotation=60, fontsize=7, ha="right")
+    axes[0].set_title("rimu and the autopilot rules on the same samples")
+    fig.tight_layout()
+    path = Path(path)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path

@@ -423,7 +423,7 @@ def _assumptions(cal: Calibration, thr: Thresholds, kind: str, df: int, beta: fl
             "residual_rms": [c.residual_rms for c in s.sensors],
             "calibration_step_residuals": "recorded in the calibration file" if steps
             else "not recorded",
-            "check": "thresholds.realnoise measures the tails of a real static recording"},
+            "check": "docs/noise-tails.md measures the tails of real static recordings"},
     }
 
 

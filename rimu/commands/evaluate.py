@@ -56,6 +56,11 @@ def configure(p: argparse.ArgumentParser) -> None:
     p.add_argument("--workers", type=positive_int(MAX_WORKERS), default=2,
                    help="LocalCluster workers (default 2)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--baseline", metavar="NAMES",
+                   help="also run the autopilots' own rules on the same samples of every "
+                        "run (px4, px4-others, ardupilot, or all; the set must be IMUs of "
+                        "three axes): their false alarms, detection, right blame and delay "
+                        "beside rimu's in evaluation.json, summary.md and baselines.png")
     p.add_argument("--out", required=True, metavar="DIR", help="output directory")
 
 
@@ -95,6 +100,43 @@ def _corpus_items(d: str) -> list[tuple[int, str]]:
     return [(k, str(p)) for k, (p, _) in enumerate(dirs)]
 
 
+def _check_triads(cal: object, kind: str, where: str) -> None:
+    """--baseline needs a set of IMUs of three axes (imu1.x …)."""
+    from replay.time_offsets import imu_groups
+
+    names = [c.name for c in cal.kind(kind).sensors]  # type: ignore[attr-defined]
+    groups: dict[str, int] = {}
+    for g in imu_groups(names):
+        groups[g] = groups.get(g, 0) + 1
+    if "" in groups or len(groups) < 2 or any(v != 3 for v in groups.values()):
+        raise ConfigError(f"--baseline: {where} is not a set of two or more IMUs of three "
+                          f"axes (sensors {', '.join(names[:6])}{' …' if len(names) > 6 else ''}"
+                          "): the autopilot rules compare whole IMUs")
+
+
+def _baseline_markdown(ev: dict) -> list[str]:
+    """The baselines' table of summary.md."""
+    b = ev.get("baselines")
+    if not b:
+        return []
+    lines = ["Autopilot rules on the same samples (--baseline; docs/baselines.md):", ""]
+    for nm, rule in b["rules"].items():
+        fa = rule["false_alarms"]
+        lo, hi = fa["ci95_per_hour"]
+        lines += [f"- {nm}: false alarms {fa['count']} in {fa['exposure_h']:.2f} h = "
+                  f"{fa['per_hour']:.3g}/h (95 % {lo:.3g} to {hi:.3g})", ""]
+        if rule["faults"]:
+            lines += ["| fault | size | runs | P(detect) | P(right blame) | rimu P(isolate, "
+                      "per IMU) | median delay s |", "|---|---|---|---|---|---|---|"]
+            for f in rule["faults"]:
+                d = "-" if f["delay_s_median"] is None else f"{f['delay_s_median']:.3g}"
+                lines.append(f"| {f['fault']} | {f['size']:g} {f['unit']} | {f['runs']} | "
+                             f"{f['pd']:.2f} | {f['p_blame_correct']:.2f} | "
+                             f"{f['rimu_p_isolation_imu']:.2f} | {d} |")
+            lines.append("")
+    return lines
+
+
 def markdown(ev: dict, how: dict) -> str:
     """A short Markdown summary of ``evaluation.json``."""
     fa = ev["false_alarms"]
@@ -129,14 +171,17 @@ def markdown(ev: dict, how: dict) -> str:
             lines.append(f"| {r['scale']} | {meas} | {r.get('predicted_sigma', float('nan')):.3g}"
                          f" | {r.get('ratio') or float('nan'):.3f} |")
         lines.append("")
+    lines += _baseline_markdown(ev)
     lines += ["Plots: roc.png, delay_vs_size.png, isolation_confusion.png"
-              + (", detectable_sizes.png" if "detectable_sizes" in ev else ""), ""]
+              + (", detectable_sizes.png" if "detectable_sizes" in ev else "")
+              + (", baselines.png" if "baselines" in ev else ""), ""]
     return "\n".join(lines)
 
 
 def run(args: argparse.Namespace) -> int:
     from fdi.calfile import load_calibration
     from fdi.fileio import to_jsonable
+    from replay.baselines import parse_baselines
     from rimu.outputs import atomic_dir, input_path, output_dir
     from thresholds.evaluate import (
         corpus_task,
@@ -150,6 +195,7 @@ def run(args: argparse.Namespace) -> int:
     from thresholds.tune import detectable_sizes
 
     kinds = _kinds(args.faults)
+    baselines = parse_baselines(args.baseline)
     input_path(args.cal, "--cal")
     if args.thresholds:
         input_path(args.thresholds, "--thresholds")
@@ -159,15 +205,17 @@ def run(args: argparse.Namespace) -> int:
                     false_alarms_per_hour=args.false_alarms_per_hour,
                     calibration_file=args.cal)
     thr = choice.thresholds
+    if baselines:
+        _check_triads(cal, args.kind, args.cal)
     if args.corpus:
         items = _corpus_items(args.corpus)
-        task = corpus_task(cal, thr, args.kind)
+        task = corpus_task(cal, thr, args.kind, baselines)
     else:
         n_sweep = args.sweep_runs if cal.kind(args.kind).n >= 4 else 0   # no parity: no sweep
         items = design(cal, thr, runs=args.runs, seed=args.seed, faults=kinds,
                        sweep_runs=n_sweep, kind=args.kind, duration_s=args.duration,
                        onset_s=args.duration / 2, max_rate_dps=args.max_rate)
-        task = simulation_task(cal, thr, args.kind)
+        task = simulation_task(cal, thr, args.kind, baselines)
     t0 = time.perf_counter()
     results = execute(task, items, scheduler=args.scheduler, progress=not args.no_progress,
                       workers=args.workers)
@@ -184,6 +232,10 @@ def run(args: argparse.Namespace) -> int:
         (tmp / "evaluation.json").write_text(json.dumps(to_jsonable(ev), indent=1) + "\n",
                                              encoding="utf-8")
         plot_all(ev, tmp)
+        if "baselines" in ev:
+            from thresholds.plots import plot_baselines
+
+            plot_baselines(ev, tmp / "baselines.png")
         (tmp / "summary.md").write_text(markdown(ev, choice.to_dict()), encoding="utf-8")
     fa = ev["false_alarms"]
     n_flights = sum(getattr(x, "fault", "") != "sweep" for x in items)
@@ -194,5 +246,12 @@ def run(args: argparse.Namespace) -> int:
     for f in ev["faults"]:
         print(f"  {f['fault']:8s} {f['size']:8.3g} {f['unit']:8s} Pd {f['pd']:.2f} "
               f"isolated {f['p_isolation']:.2f} runs {f['runs']}")
+    for nm, rule in ev.get("baselines", {}).get("rules", {}).items():
+        fa = rule["false_alarms"]
+        print(f"  baseline {nm}: false alarms {fa['count']} in {fa['exposure_h']:.2f} h")
+        for f in rule["faults"]:
+            print(f"    {f['fault']:8s} {f['size']:8.3g} {f['unit']:8s} Pd {f['pd']:.2f} "
+                  f"right blame {f['p_blame_correct']:.2f} (rimu per IMU "
+                  f"{f['rimu_p_isolation_imu']:.2f})")
     print(f"wrote {out / 'evaluation.json'}, summary.md and plots")
     return 0

@@ -5,7 +5,9 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+from typing import Any
 
+from fdi.errors import ConfigError
 from rimu.argtypes import nonnegative_int, positive_float
 
 HELP = "run the monitor over a flight sample directory; print events and a summary"
@@ -35,6 +37,32 @@ def configure(p: argparse.ArgumentParser) -> None:
                    help="do not compensate the calibration's effect terms (default: the "
                         "terms whose inputs the flight carries are compensated: rate sign, "
                         "rate squared, specific force from its accelerometers, temperature)")
+    p.add_argument("--baseline", metavar="NAMES",
+                   help="also run the autopilots' own rules on the same samples and report "
+                        "when each would have flagged and whom it blamed, beside rimu's "
+                        "answer: a comma-separated list of px4, px4-others, ardupilot, or "
+                        "all (docs/baselines.md)")
+    p.add_argument("--baseline-plot", metavar="FILE",
+                   help="with --baseline: a PNG of the IMU rates, rimu's detections and "
+                        "exclusions and each baseline's flags and blames on one time axis")
+
+
+def _baselines(args: argparse.Namespace, names: tuple[str, ...], flight: Any, cal: Any,
+               report: dict[str, Any]) -> None:
+    """The autopilot rules on the flight's samples: text, the report's block, the plot."""
+    from replay.baselines import baselines_record, format_baselines, run_baselines
+    from rimu.outputs import atomic_file
+
+    triads, results = run_baselines(flight, names, cal)
+    rec = baselines_record(triads, results, flight, report)
+    report["baselines"] = rec
+    print(format_baselines(rec, max_events=min(args.max_events, 10)))
+    if args.baseline_plot:
+        from replay.baselines.plot import plot_baselines
+
+        with atomic_file(args.baseline_plot) as tmp:
+            plot_baselines(tmp, triads, results, report, faults=flight.faults)
+        print(f"wrote {args.baseline_plot}")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -52,6 +80,13 @@ def run(args: argparse.Namespace) -> int:
         input_path(args.thresholds, "--thresholds")
     if args.report:
         output_file(args.report, "--report")
+    from replay.baselines import parse_baselines
+
+    baselines = parse_baselines(args.baseline)
+    if args.baseline_plot:
+        if not baselines:
+            raise ConfigError("--baseline-plot needs --baseline NAMES")
+        output_file(args.baseline_plot, "--baseline-plot")
     cal = load_calibration(args.cal)
     flight = load_flight_dir(args.flight)
     check_compatible(cal, flight.n, flight.raw_unit, str(args.flight), kind=flight.kind,
@@ -68,6 +103,8 @@ def run(args: argparse.Namespace) -> int:
     describe_chain(chain, flight)
     _, report = run_flight(chain, flight)
     print(format_report(report, max_events=args.max_events))
+    if baselines:
+        _baselines(args, baselines, flight, cal, report)
     if args.report:
         atomic_write_text(args.report, json.dumps(report, indent=1, allow_nan=False) + "\n")
         print(f"wrote {args.report}")

@@ -14,10 +14,10 @@ import scipy.stats
 
 from calibration.ferraris import FerrarisOptions, ferraris_calibrate
 from calibration.ferraris_io import load_ferraris
-from calibration.ferraris_sim import imucal_like_truth, simulate_ferraris
 from fdi.calfile import load_calibration, misalignment_angles
 from fdi.errors import CalibrationError, FileFormatError
 from rimu.cli import main
+from studies.ferraris_sim import imucal_like_truth, simulate_ferraris
 
 DATA = Path(os.environ.get("RIMU_SHARED_DATA",
                            Path(__file__).resolve().parents[2] / ".." / "shared" / "data")

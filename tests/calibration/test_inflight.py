@@ -218,7 +218,7 @@ def test_cli_calibrates_a_static_flight_saying_what_it_holds(tmp_path: Path) -> 
 
 def test_cli_errors_are_one_line(tmp_path: Path) -> None:
     from replay.flight import simulate_flight
-    from thresholds.synthetic import synthetic_calibration
+    from studies.synthetic import synthetic_calibration
 
     cal = synthetic_calibration("cone6", seed=2)
     save_flight_dir(simulate_flight(cal, 2.0, seed=1), tmp_path / "plain")

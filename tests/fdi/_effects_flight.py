@@ -16,7 +16,7 @@ from fdi.units import DPS
 from replay.flight import simulate_flight
 from replay.flight_data import AuxChannels
 from replay.imu_set import attitude_gravity
-from thresholds.synthetic import synthetic_calibration
+from studies.synthetic import synthetic_calibration
 
 __all__ = [
     "ACCEL_NOISE",

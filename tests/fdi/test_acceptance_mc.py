@@ -291,7 +291,7 @@ def test_cone6_ramp_detected_and_delay_against_oracle():
     CUSUM, the monitor's calibration-uncertainty inflation). Target: median delay under 2×
     the oracle's (asserted); the ratio is recorded per run.
     """
-    from thresholds.oracle import oracle_detect
+    from studies.oracle import oracle_detect
 
     cal, truth = calibrated("cone6")
     mon = monitor("cone6")

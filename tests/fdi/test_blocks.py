@@ -22,7 +22,7 @@ from fdi.blocks import CAPABILITY_CODE, block_from_answers, capability_names
 from fdi.monitor import Monitor
 from replay.flight import simulate_flight
 from replay.live import Pacer
-from thresholds.synthetic import synthetic_calibration
+from studies.synthetic import synthetic_calibration
 
 
 @pytest.fixture(scope="module")

@@ -14,7 +14,7 @@ import dataclasses
 import numpy as np
 
 from fdi.monitor import Monitor
-from thresholds.synthetic import draw_truth, raw_samples, synthetic_calibration
+from studies.synthetic import draw_truth, raw_samples, synthetic_calibration
 
 FS = 100.0
 

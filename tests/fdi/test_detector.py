@@ -17,7 +17,7 @@ from fdi.detector import (
 )
 from fdi.monitor import Monitor
 from fdi.settings import MonitorSettings
-from thresholds.synthetic import raw_samples, synthetic_calibration
+from studies.synthetic import raw_samples, synthetic_calibration
 
 
 def test_chi2_threshold_small_alpha_against_closed_forms():

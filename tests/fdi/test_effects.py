@@ -39,7 +39,7 @@ from fdi.monitor import Monitor
 from fdi.units import DPH
 from replay.effect_inputs import flight_effect_inputs
 from replay.flight import simulate_flight
-from thresholds.synthetic import synthetic_calibration
+from studies.synthetic import synthetic_calibration
 
 
 # -- the evaluator and the library agree -------------------------------------------------

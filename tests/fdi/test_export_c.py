@@ -37,7 +37,7 @@ from fdi.export import generate_c, write_c
 from fdi.export.host import CMonitor, compile_module, find_compiler
 from fdi.monitor import Monitor
 from fdi.settings import MonitorSettings
-from thresholds.synthetic import synthetic_calibration
+from studies.synthetic import synthetic_calibration
 
 pytestmark = pytest.mark.skipif(find_compiler() is None,
                                 reason="no C compiler (cc) on the PATH")
@@ -642,7 +642,7 @@ def test_same_answers_on_erle_flights(build, name, inject):
     if not path.exists():
         pytest.skip(f"{path} not found (set RIMU_SHARED_DATA)")
     from replay.chain import ChainOptions, chain_for_flight
-    from thresholds.field import inflight_calibration, load_erle
+    from studies.field import inflight_calibration, load_erle
 
     flight = load_erle(path)
     cal = inflight_calibration(flight)

@@ -21,7 +21,7 @@ from hypothesis import strategies as st
 
 from fdi.detector import default_thresholds
 from fdi.monitor import Monitor
-from thresholds.synthetic import raw_samples, synthetic_calibration
+from studies.synthetic import raw_samples, synthetic_calibration
 
 FS = 100.0
 _CAL: dict[str, tuple] = {}

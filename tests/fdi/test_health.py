@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 
 from fdi.monitor import Monitor
 from fdi.settings import MonitorSettings
-from thresholds.synthetic import raw_samples, synthetic_calibration
+from studies.synthetic import raw_samples, synthetic_calibration
 
 FS = 100.0
 CAL = synthetic_calibration("cone6", seed=1)

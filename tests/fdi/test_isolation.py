@@ -1,6 +1,6 @@
 """Statistical isolation: the decision's wrong-exclusion risk, verified exclusion, what a set
 of nearly aligned triads can and cannot tell apart, suspects and unverified axes, the
-operating envelope in the monitor. Truth from simulation (thresholds.synthetic)."""
+operating envelope in the monitor. Truth from simulation (studies.synthetic)."""
 
 from __future__ import annotations
 
@@ -18,7 +18,7 @@ from fdi.isolation import decide, rejection_level
 from fdi.monitor import Monitor
 from fdi.settings import MonitorSettings
 from fdi.units import DPS
-from thresholds.synthetic import draw_truth, raw_samples, synthetic_calibration
+from studies.synthetic import draw_truth, raw_samples, synthetic_calibration
 
 FS = 100.0
 

@@ -20,7 +20,7 @@ from oracle_monitor import OracleMonitor
 from fdi.detector import default_thresholds
 from fdi.monitor import Monitor
 from fdi.settings import MonitorSettings
-from thresholds.synthetic import draw_truth, raw_samples, synthetic_calibration
+from studies.synthetic import draw_truth, raw_samples, synthetic_calibration
 
 FS = 100.0
 _CAL: dict = {}

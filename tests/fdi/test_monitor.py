@@ -14,7 +14,7 @@ from fdi.detector import default_thresholds
 from fdi.errors import ConfigError
 from fdi.monitor import Monitor
 from fdi.settings import MonitorSettings
-from thresholds.synthetic import draw_truth, raw_samples, synthetic_calibration
+from studies.synthetic import draw_truth, raw_samples, synthetic_calibration
 
 FS = 100.0
 

@@ -26,7 +26,7 @@ from scipy import linalg, optimize, stats
 from fdi.detector import default_thresholds
 from fdi.monitor import Monitor
 from fdi.settings import MonitorSettings
-from thresholds.synthetic import raw_samples, synthetic_calibration
+from studies.synthetic import raw_samples, synthetic_calibration
 
 FS = 100.0
 P_MD = 0.01

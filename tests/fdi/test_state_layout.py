@@ -12,7 +12,7 @@ import pytest
 from fdi import state as S
 from fdi.export import generate_c
 from fdi.monitor import Monitor
-from thresholds.synthetic import synthetic_calibration
+from studies.synthetic import synthetic_calibration
 
 
 @pytest.mark.parametrize("n, nw, ring", [(4, 3, 9), (6, 8, 129), (9, 1, 2)])

@@ -112,7 +112,7 @@ def test_scenario_unknown_key_is_refused(tmp_path):
     """Every loader refuses keys it does not know (a typo would otherwise change nothing)."""
     from fdi.errors import FileFormatError
     from replay.scenario import load_scenario
-    from thresholds.synthetic import synthetic_calibration
+    from studies.synthetic import synthetic_calibration
 
     cal = synthetic_calibration("tetrad", seed=1)
     p = tmp_path / "s.toml"

@@ -32,7 +32,7 @@ from replay.channel_map import load_channel_map
 from replay.frames import load_dbc
 from replay.logio import read_log
 from rimu.cli import main
-from thresholds.synthetic import synthetic_calibration
+from studies.synthetic import synthetic_calibration
 
 FUZZ = settings(max_examples=int(os.environ.get("RIMU_FUZZ_EXAMPLES", "30")), deadline=None,
                 suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large,

@@ -182,7 +182,7 @@ def peak_rss_kib(argv: list[str]) -> int:
 @pytest.mark.slow
 @pytest.mark.skipif(not Path("/proc/self/status").is_file(), reason="needs Linux /proc")
 def test_replay_peak_memory_of_a_2h_log_within_1_3x_of_10_min(tmp_path):
-    from thresholds.synthetic import synthetic_calibration
+    from studies.synthetic import synthetic_calibration
 
     cal = synthetic_calibration("cone6", seed=4, sample_rate_hz=20.0)
     cp = tmp_path / "cal.json"

@@ -9,7 +9,9 @@ import pytest
 
 from fdi.errors import FileFormatError
 from fdi.settings import load_thresholds
-from thresholds import compute_thresholds, oracle_detect, raw_samples, synthetic_calibration
+from studies.oracle import oracle_detect
+from studies.synthetic import raw_samples, synthetic_calibration
+from thresholds import compute_thresholds
 
 CAL = synthetic_calibration("cone6", seed=2)
 

@@ -14,8 +14,8 @@ from calibration.drift import fit_drift_model
 from fdi.calfile import CALIBRATION_SCHEMA, CALIBRATION_SCHEMA_DRIFT, calibration_from_dict
 from fdi.drift import DriftModel, drift_variance_factors, offset_levels
 from fdi.errors import ConfigError, FileFormatError
-from thresholds.realnoise import static_calibration
-from thresholds.tails_holdout import without_tails
+from studies.realnoise import static_calibration
+from studies.tails_holdout import without_tails
 from thresholds.tune import tune
 
 NAMES = tuple(f"imu{k}_{a}" for k in range(1, 5) for a in "xyz")

@@ -7,7 +7,7 @@ import json
 import numpy as np
 import pytest
 
-from thresholds import synthetic_calibration
+from studies.synthetic import synthetic_calibration
 from thresholds.evaluate import (
     design,
     execute,

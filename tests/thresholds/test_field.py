@@ -1,4 +1,4 @@
-"""The definitions of the field evidence (thresholds.field): episodes, rates, resolution.
+"""The definitions of the field evidence (studies.field): episodes, rates, resolution.
 
 Fast and without measured data; the evidence itself is recomputed by the slow
 test_field_results.py.
@@ -13,7 +13,7 @@ import pytest
 from scipy import stats
 
 from fdi.answer import Event
-from thresholds.field import RESOLVE_EXPECTED, alarm_episodes, rate_row, split_flight
+from studies.field import RESOLVE_EXPECTED, alarm_episodes, rate_row, split_flight
 
 
 def _ev(t, kind, sensor=None):

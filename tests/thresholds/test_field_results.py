@@ -1,9 +1,9 @@
 """Issue 17's Must-hold list on measured data, recomputed from ``../shared/data``.
 
-One call (:func:`thresholds.field.field_results`, about 3 min) computes what
+One call (:func:`studies.field.field_results`, about 3 min) computes what
 ``docs/field-results.md`` shows: held-out false alarms of the two ArduCopter flights and the
 4×MPU9250 static set, runs from the start of each flight, faults injected into every
-sensor of both flights. Each claim of :func:`thresholds.field_claims.must_hold` is one test; the
+sensor of both flights. Each claim of :func:`studies.field_claims.must_hold` is one test; the
 claims and their numbers come from the issue (no tolerance chosen here). Skipped when the
 data are absent (``RIMU_SHARED_DATA`` overrides the folder).
 
@@ -49,8 +49,8 @@ def verdicts():
     missing = [str(p) for p in NEEDED if not p.exists()]
     if missing:
         pytest.skip(f"real data absent: {', '.join(missing)}")
-    from thresholds.field import field_results
-    from thresholds.field_claims import must_hold
+    from studies.field import field_results
+    from studies.field_claims import must_hold
 
     res = field_results(DATA, progress=False)
     return res, {c: (h, d) for c, h, d in must_hold(res)}

@@ -9,8 +9,10 @@ import numpy as np
 import pytest
 
 from fdi.monitor import Monitor
-from thresholds import compute_thresholds, draw_truth, oracle_detect, raw_samples
-from thresholds import synthetic_calibration as synth
+from studies.oracle import oracle_detect
+from studies.synthetic import draw_truth, raw_samples
+from studies.synthetic import synthetic_calibration as synth
+from thresholds import compute_thresholds
 
 FS = 100.0
 

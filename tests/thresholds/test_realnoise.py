@@ -25,7 +25,7 @@ ADIS = DATA / "smac_adis16405"
 def mpu_report():
     if not (MPU / "imu1_raw.mat").exists():
         pytest.skip(f"real data absent: {MPU}")
-    from thresholds.realnoise import load_mpu9250_static, static_holdout
+    from studies.realnoise import load_mpu9250_static, static_holdout
 
     t, y, names = load_mpu9250_static(MPU)
     assert y.shape == (41671, 12)
@@ -64,8 +64,8 @@ def test_thresholds_reduce_the_long_window_excess(mpu_report):
 def test_adis_noise_is_coloured():
     if not (ADIS / "adis_16405_imu1.rda").exists():
         pytest.skip(f"real data absent: {ADIS}")
+    from studies.realnoise import load_adis16405, noise_shape
     from thresholds.compute import allan_from_residuals
-    from thresholds.realnoise import load_adis16405, noise_shape
 
     fs, g = load_adis16405(ADIS)
     g = g[:200_000]

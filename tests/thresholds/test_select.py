@@ -7,7 +7,8 @@ import json
 import pytest
 
 from fdi.errors import ConfigError, FileFormatError
-from thresholds import compute_thresholds, synthetic_calibration
+from studies.synthetic import synthetic_calibration
+from thresholds import compute_thresholds
 from thresholds.select import TUNING_SCHEMA, select
 
 CAL = synthetic_calibration("cone6", seed=2)

@@ -21,7 +21,7 @@ from fdi.calfile import load_calibration
 from fdi.detector import default_thresholds
 from fdi.errors import FileFormatError
 from fdi.tails import ScaleTail, overbound_factor, tail_variance_factors
-from thresholds.realnoise import static_calibration
+from studies.realnoise import static_calibration
 
 H2 = np.vstack([np.eye(3), np.eye(3)])
 NAMES = tuple(f"imu{k}_{a}" for k in (1, 2) for a in "xyz")

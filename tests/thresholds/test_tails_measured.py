@@ -2,7 +2,7 @@
 
 Erle ArduCopter flights 41 and 83 (two IMUs, ``../shared/data/erle_pxf_dual_imu``) and the
 4×MPU9250 static set: each split in time, calibrated on one half, counted on the other,
-both ways (:mod:`thresholds.tails_holdout`; flights: the in-flight calibration's left-out
+both ways (:mod:`studies.tails_holdout`; flights: the in-flight calibration's left-out
 periods are not counted). Data read in place (``RIMU_SHARED_DATA`` overrides); skipped when
 absent. What is asserted is what docs/noise-tails.md states:
 
@@ -37,7 +37,7 @@ pytestmark = pytest.mark.slow
 def flights():
     if not all((DATA / f).exists() for f in FLIGHTS.values()):
         pytest.skip(f"real data absent: {DATA}")
-    from thresholds.tails_holdout import flight_holdout
+    from studies.tails_holdout import flight_holdout
 
     return {name: flight_holdout(read_erle(name), targets=TARGETS) for name in FLIGHTS}
 
@@ -48,7 +48,7 @@ def bare_41():
     models only."""
     if not (DATA / FLIGHTS["41"]).exists():
         pytest.skip(f"real data absent: {DATA}")
-    from thresholds.tails_holdout import flight_holdout
+    from studies.tails_holdout import flight_holdout
 
     return flight_holdout(read_erle("41"), targets=(), jitter=False)
 
@@ -96,8 +96,8 @@ def test_mpu_static_set_held_out():
     mpu = SHARED / "multi_imu_4x_mpu9250"
     if not (mpu / "imu1_raw.mat").exists():
         pytest.skip(f"real data absent: {mpu}")
-    from thresholds.realnoise import load_mpu9250_static
-    from thresholds.tails_holdout import static_holdout_tails
+    from studies.realnoise import load_mpu9250_static
+    from studies.tails_holdout import static_holdout_tails
 
     t, y, names = load_mpu9250_static(mpu)
     rep = static_holdout_tails(t, y, names, targets=TARGETS)

@@ -3,7 +3,7 @@ runs without the shared recordings (tests/thresholds/test_realnoise.py skips wit
 
 Four three-axis IMUs at rest, 43.5 Hz, 0.1 deg/s white noise; two channels carry Student-t
 noise with 3 degrees of freedom (same variance; tail index 1/3, the generalised Pareto
-shape of its exceedances). Tuned on the first half (thresholds.realnoise.static_holdout):
+shape of its exceedances). Tuned on the first half (studies.realnoise.static_holdout):
 the Gaussian design's single-sample statistic exceeds its level far more often than α on
 the held-out half, the tail-aware levels do not; on the all-Gaussian control neither does.
 """
@@ -11,7 +11,7 @@ the held-out half, the tail-aware levels do not; on the all-Gaussian control nei
 import numpy as np
 import pytest
 
-from thresholds.realnoise import static_holdout
+from studies.realnoise import static_holdout
 
 FS, N = 43.5, 20000
 SIG = 0.1 * np.pi / 180

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from fdi.errors import ConfigError
-from thresholds import synthetic_calibration
+from studies.synthetic import synthetic_calibration
 from thresholds.select import select
 from thresholds.tune import (
     CORRECTION_MAX_RATE_DPS,

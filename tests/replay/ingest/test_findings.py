@@ -1,7 +1,7 @@
 """Each finding of docs/findings.md, recomputed from the shared data (skipped without it).
 
-Every test recomputes its number through ``docs/make_findings.py`` (the script that wrote
-``docs/findings.json``), checks the documented value is the one the data give (to a tenth
+Every test recomputes its number through ``studies/make_findings.py`` (the script that wrote
+``studies/findings.json``), checks the documented value is the one the data give (to a tenth
 of its σ), and checks the claim the documentation makes with a tolerance of 3 σ, σ being
 the block scatter the number carries.
 """
@@ -21,14 +21,14 @@ ROOT = Path(__file__).resolve().parents[3]
 
 def _script():
     spec = importlib.util.spec_from_file_location("make_findings",
-                                                  ROOT / "docs" / "make_findings.py")
+                                                  ROOT / "studies" / "make_findings.py")
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
     return mod
 
 
 MF = _script()
-DOC = json.loads((ROOT / "docs" / "findings.json").read_text())
+DOC = json.loads((ROOT / "studies" / "findings.json").read_text())
 
 
 def _same(got, doc, sd):

@@ -1,8 +1,8 @@
-"""Characterise the measured recordings: writes ``docs/findings.json`` and ``docs/img/*.png``.
+"""Characterise the measured recordings: writes ``studies/findings.json`` and ``docs/img/*.png``.
 
 Run from the repository root (the data folder is read, never copied)::
 
-    PYTHONPATH=. python docs/make_findings.py [--data ../shared/data]
+    PYTHONPATH=. python studies/make_findings.py [--data ../shared/data]
 
 Every recording goes in through the ingest readers (:mod:`replay.ingest`), then through
 the generic statistics of :mod:`replay.ingest.characterise`. The dataset-specific parts
@@ -290,7 +290,7 @@ def main(argv: list[str] | None = None) -> int:
         res = compute(data, Path(tmp))
         if not args.no_plots:
             _plots(res, data, ROOT / "docs" / "img")
-    out = ROOT / "docs" / "findings.json"
+    out = ROOT / "studies" / "findings.json"
     out.write_text(json.dumps(to_jsonable(_public(res)), indent=1) + "\n", encoding="utf-8")
     print(f"wrote {out}")
     return 0

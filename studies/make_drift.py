@@ -4,8 +4,8 @@ What makes the held-out alarms of the 4×MPU9250 static set, and what the parity
 model predicts, from ``../shared/data`` (``RIMU_SHARED_DATA`` overrides); nothing of the
 recording is written but counts and fitted numbers. Run from the repository root::
 
-    python docs/make_drift.py            # diagnosis and figure, about 2 min
-    python docs/make_drift.py --holdout  # plus thresholds.field.holdout_static before and
+    python studies/make_drift.py            # diagnosis and figure, about 2 min
+    python studies/make_drift.py --holdout  # plus studies.field.holdout_static before and
                                          # after (about 6 more min)
 """
 
@@ -49,8 +49,8 @@ def diagnose(t: np.ndarray, y: np.ndarray, names: tuple[str, ...]) -> dict:
     exceed their thresholds (near a knock or not, per scale), and the drift numbers."""
     from calibration.tails import whitened_parity
     from fdi.monitor import Monitor
-    from thresholds.field import alarm_episodes
-    from thresholds.realnoise import (
+    from studies.field import alarm_episodes
+    from studies.realnoise import (
         MPU9250_CROSS_AXIS,
         MPU9250_SCALE_FACTOR_TOLERANCE,
         static_calibration,
@@ -161,7 +161,7 @@ def figure(t: np.ndarray, y: np.ndarray, names: tuple[str, ...], diag: dict,
 
 
 def main() -> None:
-    from thresholds.realnoise import load_mpu9250_static
+    from studies.realnoise import load_mpu9250_static
 
     if not (MPU / "imu1_raw.mat").exists():
         sys.exit(f"real data absent: {MPU}")
@@ -171,15 +171,15 @@ def main() -> None:
     out["timing_s"] = {"diagnosis": time.perf_counter() - t0}
     figure(t, y, names, out["diagnosis"], ROOT / "docs" / "img" / "drift.png")
     if "--holdout" in sys.argv:
-        from thresholds.field import holdout_static
+        from studies.field import holdout_static
 
         t1 = time.perf_counter()
         out["holdout_before"] = holdout_static(t, y, names, tails=False, drift=False)
         out["holdout_after"] = holdout_static(t, y, names)
         out["timing_s"]["holdout"] = time.perf_counter() - t1
-    (ROOT / "docs" / "drift.json").write_text(
+    (ROOT / "studies" / "drift.json").write_text(
         json.dumps(to_jsonable(out), indent=1, allow_nan=False) + "\n", encoding="utf-8")
-    print("wrote docs/drift.json, docs/img/drift.png")
+    print("wrote studies/drift.json, docs/img/drift.png")
 
 
 if __name__ == "__main__":

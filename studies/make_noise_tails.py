@@ -4,7 +4,7 @@ Reads the measured recordings in place from ``../shared/data`` (``RIMU_SHARED_DA
 overrides); nothing of them is written here but counts and fitted numbers. Run from the
 repository root::
 
-    python docs/make_noise_tails.py
+    python studies/make_noise_tails.py
 """
 
 from __future__ import annotations
@@ -20,8 +20,8 @@ sys.path.insert(0, str(ROOT / "tests" / "calibration"))
 from _erle import FLIGHTS, SHARED, read_erle  # noqa: E402
 
 from fdi.fileio import to_jsonable  # noqa: E402
-from thresholds.realnoise import load_mpu9250_static  # noqa: E402
-from thresholds.tails_holdout import flight_holdout, static_holdout_tails  # noqa: E402
+from studies.realnoise import load_mpu9250_static  # noqa: E402
+from studies.tails_holdout import flight_holdout, static_holdout_tails  # noqa: E402
 
 TARGETS = (1.0, 100.0, 1000.0)
 
@@ -48,7 +48,7 @@ def main() -> int:
         out[f"flight {name}"] = flight_holdout(read_erle(name), targets=TARGETS)
     t, y, names = load_mpu9250_static(SHARED / "multi_imu_4x_mpu9250")
     out["4xMPU9250 static"] = static_holdout_tails(t, y, names, targets=TARGETS)
-    (ROOT / "docs" / "noise_tails.json").write_text(
+    (ROOT / "studies" / "noise_tails.json").write_text(
         json.dumps(to_jsonable(out), indent=1) + "\n", encoding="utf-8")
     print("| recording | fitted on | target /h | expected at target | before: alarms | "
           "after: alarms (95 % interval /h) | resolvable | detectable °/s before / after | "

@@ -3,12 +3,12 @@
 What a vehicle would see, computed from real recordings with the library calls the command
 line makes (``rimu ingest`` → ``rimu calibrate --in-flight`` → ``rimu tune`` →
 ``rimu monitor-file``), so that one call recomputes every number of
-``docs/field-results.md`` (``docs/make_field_results.py``) and the slow test
+``docs/field-results.md`` (``studies/make_field_results.py``) and the slow test
 ``tests/thresholds/test_field_results.py``:
 
 - :func:`holdout_flight`, :func:`holdout_static_set` (the static set through
   ``rimu calibrate --static``; :func:`holdout_static` is the bench calibration of
-  :mod:`thresholds.realnoise` that ``docs/drift.md`` compares): split a recording in time,
+  :mod:`studies.realnoise` that ``docs/drift.md`` compares): split a recording in time,
   calibrate and tune on one part at several targets, count alarm episodes on the other
   part outside the out-of-envelope periods, both ways round; per target the expected
   count, the observed count with its exact Poisson interval, and whether the length
@@ -315,14 +315,14 @@ def holdout_static(t: np.ndarray, y: np.ndarray, names: tuple[str, ...],
                    targets: Sequence[float] = TARGETS_PER_HOUR, *,
                    progress: Callable[[], None] | None = None, tails: bool = True,
                    drift: bool = True) -> dict[str, Any]:
-    """The static set: static calibration (:func:`thresholds.realnoise.static_calibration`,
+    """The static set: static calibration (:func:`studies.realnoise.static_calibration`,
     with the MPU9250's datasheet tolerances for what rest cannot observe, the bias
     uncertainty of a later stretch, the residual's tail model and its parity drift model)
     of one half, thresholds tuned on it (the drift over the default horizon, the half's
     own length), the monitor (isolation on) over the other half. ``tails`` and ``drift``
     False: the calibration before ``docs/drift.md`` (for the comparison there)."""
     from fdi.monitor import Monitor
-    from thresholds.realnoise import (
+    from studies.realnoise import (
         MPU9250_CROSS_AXIS,
         MPU9250_SCALE_FACTOR_TOLERANCE,
         static_calibration,
@@ -648,7 +648,7 @@ def field_results(data: str | Path, *, targets: Sequence[float] = TARGETS_PER_HO
                                                   progress=tick)
     out["timing_s"]["4x mpu9250"] = time.perf_counter() - t0
     bar.close()
-    from thresholds.field_claims import summarise
+    from studies.field_claims import summarise
 
     out["summary"] = summarise(out)
     return out

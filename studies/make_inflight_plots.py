@@ -1,7 +1,7 @@
 """Figures of docs/inflight.md: the in-flight residual of erle flight 41 over time and the
 spread of error/σ over simulated flights.
 
-Run from the repository root: ``python docs/make_inflight_plots.py`` (reads the erle log
+Run from the repository root: ``python studies/make_inflight_plots.py`` (reads the erle log
 from ``../shared/data``; ``RIMU_SHARED_DATA`` overrides that folder). Writes
 ``docs/inflight_erle41.png`` and ``docs/inflight_mc.png``.
 """
@@ -21,7 +21,7 @@ from calibration.inflight.fit import decompose, fit_inflight
 from fdi.units import DPS
 from replay.imu_set import ImuSetSpec, simulate_imu_set
 
-DOCS = Path(__file__).resolve().parent
+DOCS = Path(__file__).resolve().parents[1] / "docs"
 SHARED = Path(os.environ.get("RIMU_SHARED_DATA", DOCS.parent / ".." / "shared" / "data"))
 
 

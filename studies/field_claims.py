@@ -1,16 +1,16 @@
-"""Issue 17's Must-hold list, read from :func:`thresholds.field.field_results`.
+"""Issue 17's Must-hold list, read from :func:`studies.field.field_results`.
 
 :func:`summarise` gives the figures the list speaks of, :func:`must_hold` the verdict of each
 claim with what was seen (``tests/thresholds/test_field_results.py`` asserts one claim per
-test; ``docs/make_field_results.py`` prints them). Definitions: the module docstring of
-:mod:`thresholds.field`.
+test; ``studies/make_field_results.py`` prints them). Definitions: the module docstring of
+:mod:`studies.field`.
 """
 
 from __future__ import annotations
 
 from typing import Any
 
-from thresholds.field import FAULT_S
+from studies.field import FAULT_S
 
 __all__ = ["must_hold", "summarise"]
 

@@ -1,14 +1,14 @@
-"""The monitor on measured data: writes ``docs/field-results.md``, ``docs/field-results.json``
+"""The monitor on measured data: writes ``docs/field-results.md``, ``studies/field-results.json``
 and ``docs/img/field_*.png``.
 
 Run from the repository root (the data folder is read, never copied)::
 
-    PYTHONPATH=. python docs/make_field_results.py [--data ../shared/data] [--baseline]
+    PYTHONPATH=. python studies/make_field_results.py [--data ../shared/data] [--baseline]
 
-Everything is computed by :func:`thresholds.field.field_results` (the library calls behind
+Everything is computed by :func:`studies.field.field_results` (the library calls behind
 ``rimu ingest``, ``rimu calibrate --in-flight``, ``rimu tune`` and ``rimu monitor-file``);
 this script only writes tables and plots. ``--baseline`` stores the run as the "before"
-figures as well; without it the baseline already in ``docs/field-results.json`` is kept
+figures as well; without it the baseline already in ``studies/field-results.json`` is kept
 and the run becomes the "now" column.
 """
 
@@ -31,10 +31,10 @@ if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
 from fdi.fileio import to_jsonable  # noqa: E402
-from thresholds.field import FAULT_S, FIELD_SCHEMA, field_results  # noqa: E402
-from thresholds.field_claims import must_hold  # noqa: E402
+from studies.field import FAULT_S, FIELD_SCHEMA, field_results  # noqa: E402
+from studies.field_claims import must_hold  # noqa: E402
 
-JSON_PATH = ROOT / "docs" / "field-results.json"
+JSON_PATH = ROOT / "studies" / "field-results.json"
 MD_PATH = ROOT / "docs" / "field-results.md"
 IMG = ROOT / "docs" / "img"
 
@@ -232,9 +232,9 @@ def _markdown(doc: dict, images: list[str]) -> str:
     runs = ([("before", before), ("now", now)] if before and before != now
             else [("baseline (before issue 17)" if before else "now", now)])
     L = ["# The monitor on measured data (issue 17)", "",
-         "Written by `docs/make_field_results.py` from `thresholds.field.field_results` "
+         "Written by `studies/make_field_results.py` from `studies.field.field_results` "
          f"(commit {now['commit']}, {now['elapsed_s']:.0f} s); the numbers are in "
-         "`docs/field-results.json`, the slow test `tests/thresholds/test_field_results.py` "
+         "`studies/field-results.json`, the slow test `tests/thresholds/test_field_results.py` "
          "recomputes them and checks the list below. *Before* (the baseline) is the run on "
          f"the code before issue 17 (commit {before['commit'] if before else '–'}); *now* is "
          "this run.", "",
@@ -248,7 +248,7 @@ def _markdown(doc: dict, images: list[str]) -> str:
          "validated rate range (its smallest axis; at rest for the bench set).", "",
          "## Must hold", ""]
     L += _holds_table(now, before)
-    L += ["", "Definitions (module docstring of `thresholds/field.py`): an *alarm episode* "
+    L += ["", "Definitions (module docstring of `studies/field.py`): an *alarm episode* "
           "starts at a `detected` or `health` event (or an `isolated`/`disagree` event no "
           "detection opened); *time in alarm* is the share of samples with a window statistic "
           "above its threshold, and what the target implies is the thresholds' per-sample "

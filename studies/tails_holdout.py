@@ -200,12 +200,12 @@ def static_holdout_tails(t: np.ndarray, y: np.ndarray, names: tuple[str, ...], *
                          simulate_hours: float = 0.0) -> dict[str, Any]:
     """Both ways of a time split of a static recording (N, n) rad/s (module docstring).
 
-    The calibration of a part is :func:`thresholds.realnoise.static_calibration` (aligned
+    The calibration of a part is :func:`studies.realnoise.static_calibration` (aligned
     triads, bias = mean, full covariance, Allan table) with the tail model of its residual
     (y − mean) added; the whole other part is counted (a bench has no envelope).
     """
     from calibration.tails import fit_tail_model
-    from thresholds.realnoise import static_calibration
+    from studies.realnoise import static_calibration
 
     t = np.asarray(t, float)
     y = np.asarray(y, float)

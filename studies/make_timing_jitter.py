@@ -3,12 +3,12 @@
 Per erle flight (41; 83 read with salvage): the fitted timing jitter of imu2, the excess
 kurtosis and GPD shape of the normalised single-sample statistic, the detectable sizes
 ``rimu tune`` states at 1, 100 and 1000 false alarms per hour and the held-out alarm counts
-(:func:`thresholds.tails_holdout.flight_holdout`, split in time, both ways), each before
+(:func:`studies.tails_holdout.flight_holdout`, split in time, both ways), each before
 (no jitter term, tails of the bare statistic) and after (jitter term, tails relative to the
 monitor's inflation). Reads the recordings in place from ``../shared/data``. Run from the
 repository root::
 
-    python docs/make_timing_jitter.py
+    python studies/make_timing_jitter.py
 """
 
 from __future__ import annotations
@@ -26,7 +26,7 @@ from _erle import FLIGHTS, SHARED, read_erle  # noqa: E402
 from calibration.inflight.calfile import calibration_from_fit  # noqa: E402
 from calibration.inflight.fit import fit_inflight  # noqa: E402
 from fdi.fileio import to_jsonable  # noqa: E402
-from thresholds.tails_holdout import flight_holdout  # noqa: E402
+from studies.tails_holdout import flight_holdout  # noqa: E402
 from thresholds.tune import detectable_sizes, tune  # noqa: E402
 
 TARGETS = (1.0, 100.0, 1000.0)
@@ -70,7 +70,7 @@ def main() -> None:
                                                        if k not in ("holdout", "tails")})),
                   flush=True)
         out[name] = rec
-    path = ROOT / "docs" / "timing_jitter.json"
+    path = ROOT / "studies" / "timing_jitter.json"
     path.write_text(json.dumps(to_jsonable(out), indent=1) + "\n")
     for name, rec in out.items():
         for label in ("before", "after"):
