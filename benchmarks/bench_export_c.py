@@ -15,8 +15,19 @@ healthy manoeuvring flight (rates up to 300 °/s), in the same run, interleaved 
   Cortex-M4F (float32 module, ``-mcpu=cortex-m4 -mthumb -mfloat-abi=hard
   -mfpu=fpv4-sp-d16 -O2``).
 
-Run: ``python benchmarks/bench_export_c.py [--block 1000000] [--steps 20000] [--repeat 5]``.
-Writes ``benchmarks/results/export_c.json``.
+On the target (``--target``, or ``--target-only``; needs ``arm-none-eabi-gcc``, newlib and
+``qemu-system-arm``, :mod:`fdi.export.target`): per configuration (cone6 windows, cone6
+windows + CUSUM, tetrad, four triads of 12 sensors, a 16-sensor array, float32; cone6
+float64), a 2000-sample 300 °/s flight with a step fault from the middle run under QEMU's
+Cortex-M4F (mps2-an386, ``-icount shift=0``): instructions per ``rimu_monitor_step``
+(mean and worst, 40-instruction resolution), the program's stack high-water (its ``main``
+holds the ``rimu_answer``), ``sizeof(rimu_answer)`` and ``sizeof(rimu_state)`` (RAM), and
+the module's flash (``.text`` + ``.rodata`` of its Cortex-M4F object); the answers checked
+bit-identical to the host build.
+
+Run: ``python benchmarks/bench_export_c.py [--block 1000000] [--steps 20000] [--repeat 5]
+[--target | --target-only]``. Writes ``benchmarks/results/export_c.json`` (or
+``export_c_target.json`` with ``--target-only``).
 """
 
 from __future__ import annotations
@@ -133,13 +144,123 @@ def bench_case(cfg: str, det: str, N: int, steps: int, repeat: int, work: Path) 
             "ops_per_step_bound": mod.ops_per_step, "sizes": sizes}
 
 
+def _config(name: str, tmp: Path):
+    """cone6 / tetrad, or four triads (12 sensors, IMUs 1° apart) and a 16-sensor array
+    (single axes on a spiral) as configuration files."""
+    import math
+    import warnings
+
+    if name in ("cone6", "tetrad"):
+        return synthetic_calibration(name, seed=1)
+    lines = ['schema = "rimu.configuration/1"', f'name = "{name}"']
+    if name == "triads4":
+        rng = np.random.default_rng(0)
+        for j in range(4):
+            ax = rng.standard_normal(3)
+            ax /= np.linalg.norm(ax)
+            a = math.radians(1.0) * (j > 0)
+            K = np.array([[0, -ax[2], ax[1]], [ax[2], 0, -ax[0]], [-ax[1], ax[0], 0]])
+            R = np.eye(3) + math.sin(a) * K + (1 - math.cos(a)) * K @ K
+            for k, axis in enumerate(R.T):
+                x, y, z = (float(v) for v in axis)
+                lines += ["[[sensors]]", f'name = "imu{j + 1}.{"xyz"[k]}"',
+                          f"axis = [{x!r}, {y!r}, {z!r}]"]
+    else:
+        for k in range(16):
+            z = 1 - 2 * (k + 0.5) / 16
+            r, phi = math.sqrt(1 - z * z), k * math.pi * (3 - math.sqrt(5))
+            lines += ["[[sensors]]", f'name = "g{k + 1}"',
+                      f"axis = [{r * math.cos(phi)!r}, {r * math.sin(phi)!r}, {z!r}]"]
+    p = tmp / f"{name}.toml"
+    p.write_text("\n".join(lines) + "\n")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return synthetic_calibration(str(p), seed=1, misalignment_rad=0.0)
+
+
+TARGET_CASES = (("cone6", "windows", "float32"), ("cone6", "both", "float32"),
+                ("tetrad", "windows", "float32"), ("triads4", "windows", "float32"),
+                ("array16", "windows", "float32"), ("cone6", "windows", "float64"))
+
+
+def bench_target(cfg: str, det: str, precision: str, N: int, tmp: Path) -> dict:
+    """One configuration on the Cortex-M4F under QEMU (module docstring)."""
+    from fdi.export.target import build_target, run_target
+
+    cal = _config(cfg, tmp)
+    th = compute_thresholds(cal, detector=det)
+    t, raw = flight(cal, N, seed=3)
+    sd = float(cal.gyro.noise_sd[0]) / float(cal.gyro.scale_factors[0])
+    raw[N // 2:, 1] += 25 * sd                          # a step on sensor 2
+    mod = generate_c(cal, th, precision=precision, harness=True)
+    folder = tmp / f"target_{cfg}_{det}_{precision}"
+    write_c(mod, folder)
+    names = [s.name for s in cal.gyro.sensors]
+    host = CMonitor.load(folder, compile_module(folder), names)
+    h = host.run(t, raw)
+    run = run_target(build_target(folder, t, raw), names, float32=precision == "float32",
+                     parity_len=host.P, K=host.K)
+    same = all(np.array_equal(np.ascontiguousarray(getattr(h, f), float).view(np.uint64),
+                              np.ascontiguousarray(getattr(run.result, f), float)
+                              .view(np.uint64))
+               for f in ("omega", "omega_sd", "parity", "statistics", "thresholds",
+                         "protection_level"))
+    same &= [(e.t, e.type, e.sensor, e.reason) for e in h.events] == \
+        [(e.t, e.type, e.sensor, e.reason) for e in run.result.events]
+    sec = sections(folder / "rimu_monitor.arm.o", shutil.which("arm-none-eabi-size") or "size")
+    return {"configuration": cfg, "detector": det, "precision": precision,
+            "sensors": cal.gyro.n, "sets_carried": mod.sets, "depth": mod.depth,
+            "samples": N, "events": len(h.events),
+            "instructions_per_step_mean": round(run.instructions_mean, 1),
+            "instructions_per_step_worst": run.instructions_worst,
+            "stack_high_water_bytes": run.stack_bytes, "answer_bytes": run.answer_bytes,
+            "state_bytes": run.state_bytes, "flash_text_bytes": sec["text"],
+            "flash_rodata_bytes": sec["rodata"],
+            "flash_bytes": sec["text"] + sec["rodata"],
+            "ram_bytes": run.state_bytes + run.stack_bytes,
+            "bit_identical_to_host": bool(same), "table_crc_ok": run.crc_ok}
+
+
+def run_targets(N: int, tmp: Path) -> list[dict]:
+    from fdi.export.target import ARM_FLAGS as TARGET_FLAGS
+    from fdi.export.target import find_toolchain
+
+    why = find_toolchain()
+    if why:
+        print(f"target: skipped ({why})")
+        return []
+    out = []
+    print(f"Cortex-M4F under QEMU mps2-an386 ({' '.join(TARGET_FLAGS)}):")
+    for cfg, det, prec in TARGET_CASES:
+        r = bench_target(cfg, det, prec, N, tmp)
+        out.append(r)
+        print(f"  {cfg:8s} {det:8s} {prec}: {r['sensors']} sensors, {r['sets_carried']} sets; "
+              f"{r['instructions_per_step_mean']:.0f} instructions/step mean, "
+              f"{r['instructions_per_step_worst']:.0f} worst; stack {r['stack_high_water_bytes']}"
+              f" B (answer {r['answer_bytes']} B), state {r['state_bytes']} B; flash "
+              f"{r['flash_bytes']} B (code {r['flash_text_bytes']}, tables "
+              f"{r['flash_rodata_bytes']}); bit-identical to the host: "
+              f"{r['bit_identical_to_host']}")
+    return out
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--block", type=int, default=1_000_000)
     ap.add_argument("--steps", type=int, default=20_000)
     ap.add_argument("--repeat", type=int, default=5)
-    ap.add_argument("--out", default=str(RESULTS / "export_c.json"))
+    ap.add_argument("--out", default=None)
+    ap.add_argument("--target", action="store_true", help="also run on the Cortex-M4F (QEMU)")
+    ap.add_argument("--target-only", action="store_true", help="only the Cortex-M4F part")
+    ap.add_argument("--target-samples", type=int, default=2000)
     args = ap.parse_args()
+    if args.target_only:
+        results = header("export_c_target", samples=args.target_samples, cases=[])
+        with tempfile.TemporaryDirectory() as tmp:
+            results["target"] = run_targets(args.target_samples, Path(tmp))
+        write_results(results, args.out or str(RESULTS / "export_c_target.json"))
+        return 0
+    args.out = args.out or str(RESULTS / "export_c.json")
     cc = subprocess.run(["cc", "--version"], capture_output=True, text=True).stdout
     results = header("export_c", blas_threads=1, block=args.block, steps=args.steps,
                      repeat=args.repeat, compiler=cc.splitlines()[0] if cc else None,
@@ -165,6 +286,8 @@ def main() -> int:
             print(f"{'':16s} state {r['sizes']['state_bytes']} B, tables "
                   f"{r['sizes']['table_bytes']} B; x86-64 code {x86['text']} B, rodata "
                   f"{x86['rodata']} B{armtxt}")
+        if args.target:
+            results["target"] = run_targets(args.target_samples, Path(tmp))
     write_results(results, args.out)
     return 0
 

@@ -1,4 +1,5 @@
-"""rimu.calibration: turntable sessions (simulated or recorded) → calibration files.
+"""calibration: turntable sessions (simulated or recorded) → calibration files (imported as
+``calibration``).
 
 Conventions are those of :mod:`fdi` (SI inside, MB frame, sensors numbered from 1 outside).
 """

@@ -325,7 +325,7 @@ def repeat_sessions(sessions: Sequence[Session], *, alpha: float = 0.01,
     calibrations : sequence of Calibration, optional
         The sessions' calibrations when already made (otherwise ``calibrate_checked``).
     progress : bool
-        A tqdm progress bar on stderr over the calibrations (each takes 1-3 s).
+        A progress bar over the calibrations (each takes 1-3 s; :mod:`fdi.progress`).
     **kw
         Passed to ``calibrate_checked`` (``noise_model``, ``allan``, ``earth_rate``, ...).
 
@@ -347,11 +347,11 @@ def repeat_sessions(sessions: Sequence[Session], *, alpha: float = 0.01,
     why = stack_mismatch(sessions) if stack is not False else "not asked for"
     if stack and why:
         raise ConfigError(f"{why}; stacking needs identical sequences")
-    from tqdm import tqdm
+    from fdi.progress import Progress, current
 
     total = (len(sessions) if calibrations is None else 0) + (why is None)
-    with tqdm(total=total, disable=not progress, unit="calibration", desc="repeat",
-              leave=False) as bar:
+    prog = current() if progress else Progress("repeat", enabled=False)
+    with prog.bar(total, "calibrations", unit="calibrations") as bar:
         if calibrations is None:
             calibrations = []
             for s in sessions:

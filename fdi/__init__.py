@@ -1,4 +1,7 @@
-"""rimu.fdi: geometry, parity space and the streaming fault detection and isolation runtime.
+"""fdi: geometry, parity space and the streaming fault detection and isolation runtime.
+
+Imported as ``fdi`` (``from fdi import Monitor``); rimu installs the packages ``fdi``,
+``calibration``, ``thresholds``, ``replay`` and the command line ``rimu``.
 
 Conventions (hold for every rimu package)
 -----------------------------------------

@@ -1,4 +1,4 @@
-"""Run-time compensation of a calibration's effect terms (``rimu.calibration/2`` ``effects``).
+"""Run-time compensation of a calibration's effect terms (``effects``, ``rimu.calibration/2`` on).
 
 A calibration may carry effect terms beyond the linear sensor model (``rimu calibrate
 --effects``, ``rimu diagnose``): each adds ``estimate · g(inputs; params)`` to one sensor's

@@ -1,4 +1,5 @@
-"""rimu.replay: flights (simulated or recorded), fault injection, CAN replay and reports."""
+"""replay: flights (simulated or recorded), fault injection, CAN replay and reports (imported
+as ``replay``)."""
 
 from fdi.lazy import attach
 

@@ -74,9 +74,10 @@ def read_frames(path: str | Path, *, strict: bool = False, progress: bool = True
     g = FrameGather(sink, chunk_frames)
     bar = None
     if progress and p.stat().st_size > PROGRESS_MIN_BYTES:
-        from tqdm import tqdm
+        from fdi.progress import current
 
-        bar = tqdm(desc=f"reading {p.name}", unit=" frames", unit_scale=True, leave=False)
+        # the command's progress (fdi.progress): a count of frames read
+        bar = current().bar(None, f"reading {p.name}", unit="frames")
     try:
         reader_for(p)(p, g, acct, strict, bar)
     finally:

@@ -115,14 +115,18 @@ class MonitorChain:
     thresholds_how : dict, optional
         Where the thresholds came from (:meth:`thresholds.select.ThresholdChoice.to_dict`),
         for the report.
+    turn_on : replay.turn_on.TurnOn, optional
+        What was done about the turn-on bias (:func:`replay.turn_on.turn_on_for_flight`),
+        for the report.
     """
 
     def __init__(self, monitor: Any, cal: Calibration, *, cmap: ChannelMap | None = None,
                  imu: Sequence[str] = (), aux_groups: Sequence[str] | None = None,
                  time_offsets: bool = True, injector: Any = None,
                  report: RunningReport | None = None, envelope: Any = None,
-                 thresholds_how: dict[str, Any] | None = None) -> None:
+                 thresholds_how: dict[str, Any] | None = None, turn_on: Any = None) -> None:
         self.monitor = monitor
+        self.turn_on = turn_on
         self.cal = cal
         self.cmap = cmap
         self.kind = monitor.kind
@@ -172,6 +176,8 @@ class MonitorChain:
         out: dict[str, Any] = {}
         if self.thresholds_how is not None:
             out["thresholds"] = self.thresholds_how
+        if self.turn_on is not None:
+            out["turn_on_bias"] = self.turn_on.to_dict()
         if self.time_offsets_ms:
             out["time_offsets_applied_ms"] = self.time_offsets_ms
             out["time_offsets_delay_s"] = self.delay_s
@@ -304,7 +310,9 @@ class MonitorChain:
         elif stepwise:
             result = self._step(piece, kw, on_event)
         else:
-            result = self.monitor.run(piece.t, piece.raw, piece.valid, **kw)
+            # the recording shows the parity vectors (the stepwise paths always have them)
+            result = self.monitor.run(piece.t, piece.raw, piece.valid,
+                                      parity=self.recorder is not None, **kw)
         if self.report is not None:
             self.report.update(result, piece.omega_true)
         if self.recorder is not None:
@@ -343,18 +351,34 @@ def _compensated(mon: Monitor, cal: Calibration, kind: str, *, effects: bool,
 
 
 def _monitor(cal: Calibration, kind: str, *, thresholds_file: Any, calibration_file: Any,
-             false_alarms_per_hour: Any, settings: Any, thresholds: Any = None
-             ) -> tuple[Monitor, dict[str, Any]]:
+             false_alarms_per_hour: Any, settings: Any, thresholds: Any = None,
+             turn_on: Any = None) -> tuple[Monitor, dict[str, Any]]:
+    """The monitor and where its thresholds came from. The thresholds are chosen for
+    ``cal`` (a file made for another calibration is refused); with a ``turn_on``
+    (:class:`replay.turn_on.TurnOn`) the monitor runs on the biases it estimated at rest,
+    or on thresholds raised for its nominal bias bound (:mod:`fdi.bias_bound`)."""
     from thresholds.select import select
 
     if thresholds is not None:                          # given in the library (a Thresholds)
-        return (Monitor(cal, thresholds, kind=kind, settings=settings),
-                {"source": "given", "false_alarms_per_hour":
-                 float(thresholds.false_alarms_per_hour)})
-    choice = select(cal, kind=kind, thresholds_file=thresholds_file,
-                    false_alarms_per_hour=false_alarms_per_hour,
-                    calibration_file=calibration_file)
-    return Monitor(cal, choice.thresholds, kind=kind, settings=settings), choice.to_dict()
+        thr, how = thresholds, {"source": "given", "false_alarms_per_hour":
+                                float(thresholds.false_alarms_per_hour)}
+    else:
+        choice = select(cal, kind=kind, thresholds_file=thresholds_file,
+                        false_alarms_per_hour=false_alarms_per_hour,
+                        calibration_file=calibration_file)
+        thr, how = choice.thresholds, choice.to_dict()
+    mon_cal = cal
+    if turn_on is not None and turn_on.method == "bound":
+        from fdi.bias_bound import bounded_thresholds
+
+        thr = bounded_thresholds(thr, cal, np.asarray(turn_on.bound, float), kind,
+                                 turn_on.bound_source)
+        how = {**how, "bias_bound": turn_on.bound_source}
+    elif turn_on is not None:
+        from replay.turn_on import apply_turn_on
+
+        mon_cal = apply_turn_on(cal, turn_on)
+    return Monitor(mon_cal, thr, kind=kind, settings=settings), how
 
 
 @dataclass(frozen=True)
@@ -385,6 +409,13 @@ class ChainOptions:
         Protection levels kept for an exact median (a live run gives a small number).
     thresholds : Thresholds or None
         Thresholds given in the library (win over ``thresholds_file``).
+    turn_on : str
+        What to do about the turn-on bias on a flight (:data:`replay.turn_on.MODES`;
+        ``--turn-on``): ``"auto"`` estimates it at rest before take-off on another flight
+        than the calibration's, else covers a nominal bias bound.
+    bias_bound_dps : float or None
+        ``--bias-bound-dps``: the nominal bias bound per gyro (°/s) over the calibration's
+        ``bias_turn_on_sd`` and the default.
     """
 
     thresholds_file: Any = None
@@ -397,6 +428,8 @@ class ChainOptions:
     report: bool = True
     median_exact_max: int | None = None
     thresholds: Any = None
+    turn_on: str = "auto"
+    bias_bound_dps: float | None = None
 
 
 def _report(opts: ChainOptions) -> RunningReport | None:
@@ -437,11 +470,18 @@ def _envelope(choice: Any, cal: Calibration, kind: str, groups: Sequence[str],
 
 def chain_for_flight(flight: Flight, cal: Calibration, opts: ChainOptions = ChainOptions()
                      ) -> MonitorChain:
-    """A chain for a recorded flight (folder): effect inputs from its own channels."""
+    """A chain for a recorded flight (folder): effect inputs from its own channels; the
+    turn-on bias estimated at rest before take-off or covered by a bound
+    (:func:`replay.turn_on.turn_on_for_flight`, ``opts.turn_on``)."""
+    from replay.turn_on import apply_turn_on, turn_on_for_flight
+
+    ton = turn_on_for_flight(flight, cal, kind=flight.kind, mode=opts.turn_on,
+                             bias_bound_dps=opts.bias_bound_dps)
     mon, how = _monitor(cal, flight.kind, thresholds_file=opts.thresholds_file,
                         calibration_file=opts.calibration_file,
                         false_alarms_per_hour=opts.false_alarms_per_hour,
-                        settings=opts.settings, thresholds=opts.thresholds)
+                        settings=opts.settings, thresholds=opts.thresholds, turn_on=ton)
+    cal = apply_turn_on(cal, ton)
     avail: dict[str, list[int]] = {}
     if opts.effects and cal.effects:
         _, _, avail = flight_effect_inputs(flight)
@@ -451,7 +491,8 @@ def chain_for_flight(flight: Flight, cal: Calibration, opts: ChainOptions = Chai
                     imu_groups(mon.sensor_names, flight.imu),
                     declared_intervals(getattr(flight, "events", ())))
     return MonitorChain(comp, cal, imu=flight.imu, time_offsets=opts.time_offsets,
-                        report=_report(opts), envelope=env, thresholds_how=how)
+                        report=_report(opts), envelope=env, thresholds_how=how,
+                        turn_on=ton)
 
 
 def _aux_groups(cmap: ChannelMap, groups: Sequence[str]) -> tuple[str, ...]:

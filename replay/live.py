@@ -38,9 +38,23 @@ from replay.effect_inputs import row_inputs
 from replay.logio import aux_channels
 from replay.raw_frames import RawFrames, norm_channel
 
-__all__ = ["Pacer", "StreamDecoder", "block_from_answers", "format_event", "run_live"]
+__all__ = ["STATUS_EVERY_S", "Pacer", "StreamDecoder", "block_from_answers", "format_event",
+           "print_event", "run_live"]
+
+STATUS_EVERY_S = 5.0
+"""``rimu monitor`` says what the bus gave (frames, last sample time, or "waiting") this
+often (s), on stderr (:mod:`fdi.progress`)."""
 
 _Sample = tuple[float, np.ndarray, np.ndarray]
+
+
+def print_event(e: Event, names: Sequence[str] = ()) -> None:
+    """Print an event as it happens (on stdout, the progress line on a terminal erased
+    first: :meth:`fdi.progress.Progress.clear`)."""
+    from fdi.progress import current
+
+    current().clear()
+    print(format_event(e, names), flush=True)
 
 
 def format_event(e: Event, names: Sequence[str] = ()) -> str:
@@ -219,11 +233,29 @@ def run_live(bus: can.BusABC, decoder: StreamDecoder, monitor: Any, *,
             return
         piece = replace(header, t=smp.t - decoder.t_first + t_start, raw=smp.raw,
                         valid=smp.valid, aux=aux_channels(decoder.cmap, smp.aux))
+        last_t[:] = [float(piece.t[-1])]
         keep(chain.feed(piece, stepwise=True, on_event=on_event))
+
+    from fdi.progress import current
+
+    prog = current()           # the command's progress: what the bus gave, every few s
+    said = t0
+    last_t: list[float] = []
+
+    def status(now: float) -> None:
+        if got == 0:
+            prog.stage(f"waiting: no frame received in {now - t0:.0f} s", clock=False)
+        else:
+            idle = f"; none for {now - last_rx:.0f} s" if now - last_rx >= 1.0 else ""
+            ts = f", last sample t={last_t[0]:.2f} s" if last_t else ", no sample decoded"
+            prog.stage(f"{got} frames received{ts}{idle}", clock=False)
 
     try:
         while True:
             now = time.monotonic()
+            if now - said >= STATUS_EVERY_S:
+                said = now
+                status(now)
             if duration_s is not None and now - t0 >= duration_s:
                 break
             if max_frames is not None and got >= max_frames:

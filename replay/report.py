@@ -47,6 +47,7 @@ import numpy as np
 from fdi.calfile import Calibration
 from fdi.units import DPS
 from replay.flight_data import Flight
+from replay.plots import RunTrace
 
 __all__ = ["ALARM_TYPES", "REPORT_SCHEMA", "RunningReport", "build_report", "event_units",
            "format_report", "format_summary"]
@@ -173,7 +174,8 @@ class RunningReport:
 
     :meth:`update` takes each piece of the monitor's answers (``Monitor.run`` over a block
     of samples, or a few live answers) with the true rates of those samples when known; it
-    keeps the events, the last health and capability, counts and sums, never the answers.
+    keeps the events, the last health and capability, counts and sums, never the answers,
+    and a binned :class:`~replay.plots.RunTrace` for the run's picture (``trace``).
     :meth:`build` makes the ``rimu.report/1`` dictionary (:func:`build_report` is one
     update and a build).
 
@@ -200,6 +202,7 @@ class RunningReport:
         self.n_unverified = 0
         self._unv_axis = np.zeros(3, np.int64)
         self.n_verified = 0
+        self.trace = RunTrace()
 
     def update(self, result: Any, omega_true: np.ndarray | None = None) -> None:
         """Add one piece of answers (``BlockResult``) and the true rates of its samples."""
@@ -207,6 +210,7 @@ class RunningReport:
         self.events.extend(result.events)
         if N == 0:
             return
+        self.trace.update(result)
         self.samples += N
         healthy = np.asarray(result.healthy, bool)
         self.healthy_end = healthy[-1].tolist()

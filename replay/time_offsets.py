@@ -44,8 +44,8 @@ from fdi.calfile import Calibration
 from fdi.errors import ConfigError
 from replay.flight_data import Flight
 
-__all__ = ["MAX_TIME_OFFSET_S", "StreamAligner", "apply_time_offsets", "imu_groups",
-           "moved_aux_channels", "time_offsets_s"]
+__all__ = ["MAX_TIME_OFFSET_S", "StreamAligner", "apply_time_offsets", "flight_identity",
+           "imu_groups", "moved_aux_channels", "time_offsets_s"]
 
 MAX_TIME_OFFSET_S = 1.0
 """Largest |τ| applied (s); a calibration with a larger offset is refused (a lag of a
@@ -287,3 +287,19 @@ def _concat(a: Flight, b: Flight) -> Flight:
         tru = np.concatenate([a.omega_true, b.omega_true])
     return replace(b, t=np.concatenate([a.t, b.t]), raw=np.concatenate([a.raw, b.raw]),
                    valid=np.concatenate([a.valid, b.valid]), omega_true=tru, aux=aux)
+
+
+def flight_identity(flight: Flight) -> dict[str, object]:
+    """What identifies a flight: its source log (file name), sample count, first and last
+    time (s) and a fingerprint of its samples (sha256 of the times and rates, rounded to
+    1e-9, first 16 hex digits)."""
+    import hashlib
+    from pathlib import PurePath
+
+    t = np.asarray(flight.t, float)
+    h = hashlib.sha256()
+    h.update(np.round(t, 9).tobytes())
+    h.update(np.round(np.nan_to_num(np.asarray(flight.raw, float)), 9).tobytes())
+    return {"source": PurePath(str(flight.source)).name, "samples": int(t.shape[0]),
+            "t0_s": float(t[0]) if t.size else 0.0, "t1_s": float(t[-1]) if t.size else 0.0,
+            "fingerprint": h.hexdigest()[:16]}

@@ -19,6 +19,7 @@ from collections.abc import Sequence
 
 from fdi.errors import RimuError  # light: fdi's package imports lazily (fdi.lazy)
 from rimu import __version__
+from rimu.optional import missing_text, refusal
 
 __all__ = ["COMMANDS", "build_parser", "main"]
 
@@ -30,6 +31,7 @@ COMMANDS: dict[str, str] = {
     "evaluate": "rimu.commands.evaluate",
     "export": "rimu.commands.export",
     "ingest": "rimu.commands.ingest",
+    "inspect": "rimu.commands.inspect",
     "monitor": "rimu.commands.monitor",
     "monitor-file": "rimu.commands.monitor_file",
     "parity": "rimu.commands.parity",
@@ -166,7 +168,13 @@ def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the CLI; returns the exit code."""
     argv = list(sys.argv[1:] if argv is None else argv)
-    parser = build_parser(argv)
+    try:
+        parser = build_parser(argv)
+    except ModuleNotFoundError as exc:  # a command module needs an extra at import
+        if (text := missing_text(exc)) is None or "--debug" in argv:
+            raise
+        print(f"rimu: error: {text}", file=sys.stderr)
+        return 2
     try:
         args = parser.parse_args(argv)
     except SystemExit as exc:       # --help, --version, or a usage error (one line, exit 2)
@@ -176,12 +184,24 @@ def main(argv: Sequence[str] | None = None) -> int:
     if run is None:
         parser.print_help()
         return 2
+    command = " ".join(w for w in (args.command, getattr(args, "what", None)) if w)
+    if (text := refusal(command, args)) is not None:  # an extra it needs at the end
+        print(f"rimu: error: {text}", file=sys.stderr)
+        return 2
+    from fdi.progress import session
+
     try:
-        return int(run(args) or 0)
+        with session(command or "rimu", enabled=not getattr(args, "no_progress", False)):
+            return int(run(args) or 0)
     except RimuError as exc:
         if args.debug:
             raise
         print(f"rimu: error: {exc}", file=sys.stderr)
+        return 2
+    except ModuleNotFoundError as exc:  # an optional package (rimu/optional.py) is missing
+        if (text := missing_text(exc, command)) is None or args.debug:
+            raise
+        print(f"rimu: error: {text}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("rimu: interrupted", file=sys.stderr)

@@ -32,3 +32,11 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
             item.add_marker(skip_campaign)
         elif "slow" in item.keywords and not slow:
             item.add_marker(skip_slow)
+
+
+@pytest.fixture(autouse=True)
+def _no_progress_lines(monkeypatch: pytest.MonkeyPatch) -> None:
+    """No progress lines on stderr (fdi.progress) in tests that count a command's stderr
+    lines: on a loaded machine a command's work can pass the 3 s after which progress is
+    shown. tests/fdi/test_progress.py turns it back on where it is under test."""
+    monkeypatch.setenv("RIMU_PROGRESS", "0")

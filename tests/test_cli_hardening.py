@@ -127,7 +127,8 @@ def test_replay_writes_report_and_recording_atomically(files, tmp_path, capsys):
                  "--report", str(rep), "--rrd", str(rrd)]) == 0
     assert json.loads(rep.read_text())["samples"] == 100
     assert rrd.stat().st_size > 0
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["r.json", "x.rrd"], "no temp file"
+    # the report's picture beside it (issue 30: --report writes a PNG), and no temp file
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["r.json", "r.png", "x.rrd"]
 
 
 def test_failure_mid_replay_leaves_no_recording_or_report(files, tmp_path, capsys):

@@ -31,3 +31,17 @@ def test_demo_end_to_end(tmp_path, capsys):
     times = [e["t"] for e in report["events"]]
     assert times == sorted(times)
     assert (out / "replay.rrd").stat().st_size > 0
+    # the picture, drawn without a display (matplotlib Agg), and the parity in the recording
+    import matplotlib.image
+    import numpy as np
+    import rerun.chunk
+
+    img = matplotlib.image.imread(out / "replay.png")
+    assert img.shape[0] > 500
+    rows = [r for ch in rerun.chunk.RrdReader(out / "replay.rrd").stream()
+            if str(ch.entity_path) == "/parity" and not ch.is_static
+            for r in ch.to_record_batch().column("Scalars:scalars").to_pylist()]
+    par = np.array(rows, float)
+    assert par.shape == (report["samples"], 3)
+    assert np.isfinite(par).any(axis=1).all()       # was 6000 x 3 NaN on the block path
+    assert "replay.png" in text and "--web-viewer" in text

@@ -1,5 +1,5 @@
 """thresholds: detection thresholds from calibration statistics, their selection and tuning
-for a false-alarm rate (imported as ``thresholds``; there is no ``rimu.thresholds``).
+for a false-alarm rate (imported as ``thresholds``).
 
 Evaluation campaigns (:mod:`thresholds.evaluate`, :mod:`thresholds.campaign`) are imported
 from their modules: they use the flight simulation and the readers of :mod:`replay`. The

@@ -154,7 +154,7 @@ def execute(task: Callable[[Any], RunResult], items: Sequence[Any], *,
         ``"serial"`` (this process), ``"local"`` (a Dask LocalCluster of ``workers``
         single-threaded worker processes) or a scheduler address ``tcp://HOST:PORT``.
     progress : bool
-        A tqdm progress bar on stderr.
+        A progress bar on stderr (:mod:`fdi.progress`).
     batch : int
         Runs per Dask task.
 
@@ -181,9 +181,11 @@ def execute(task: Callable[[Any], RunResult], items: Sequence[Any], *,
 
 
 def _bar(total: int, progress: bool) -> Any:
-    from tqdm import tqdm
+    from fdi.progress import Progress, current
 
-    return tqdm(total=total, disable=not progress, unit="run", desc="evaluate", leave=False)
+    # the command's progress (fdi.progress); a silent one when not asked for
+    return (current() if progress else Progress("evaluate", enabled=False)).bar(
+        total, "simulated runs", unit="runs")
 
 
 def _execute_dask(task: Callable[[Any], RunResult], items: list[Any], scheduler: str,

@@ -94,9 +94,10 @@ from fdi.tails import TailChoice, tail_variance_factors
 from fdi.units import DPS
 from thresholds.select import TUNING_SCHEMA
 
-__all__ = ["CORRECTION_MAX_RATE_DPS", "MAX_DEAD_TIME_SHARE", "MIN_SIMULATED_RATE",
-           "DetectableSize", "Tuning", "check_scales", "correction_max_rate_dps",
-           "detectable_sizes", "max_false_alarms_per_hour", "tune", "upcrossing_probability"]
+__all__ = ["CORRECTION_MAX_RATE_DPS", "MAX_DEAD_TIME_SHARE", "MAX_SHARE_OF_TOP",
+           "MIN_SIMULATED_RATE", "ZERO_COUNT_UPPER", "DetectableSize", "Tuning", "check_scales",
+           "correction_max_rate_dps", "detectable_at", "detectable_sizes",
+           "max_false_alarms_per_hour", "max_upcrossing_rate", "tune", "upcrossing_probability"]
 
 MAX_DEAD_TIME_SHARE = 0.1
 """Largest share of the mean time between false alarms that one alarm's shortest episode
@@ -139,12 +140,47 @@ def upcrossing_probability(alpha: float, df: int, w: int) -> float:
     return float(v)
 
 
+_ALPHA_MAX = 0.45
+"""Largest per-sample alpha searched (the upcrossing probability peaks below 1/2)."""
+
+
+def max_upcrossing_rate(df: int, w: int) -> float:
+    """The largest upcrossing probability a w-sample window reaches (at alpha 0.45): a
+    share above it cannot be met by any threshold."""
+    return upcrossing_probability(_ALPHA_MAX, df, w)
+
+
 def _alpha_for_upcrossings(rate: float, df: int, w: int) -> float:
-    """Per-sample alpha whose upcrossing probability is ``rate`` (per sample)."""
+    """Per-sample alpha whose upcrossing probability is ``rate`` (per sample).
+
+    Raises
+    ------
+    ConfigError
+        A rate no threshold of this window can give (above :func:`max_upcrossing_rate`).
+    """
     rate = min(rate, 0.2)
+    top = max_upcrossing_rate(df, w)
+    if rate >= top:
+        raise ConfigError(f"scale {w}: {rate:.3g} upcrossings per sample asked, a {w}-sample "
+                          f"window gives at most {top:.3g}: no threshold meets this share")
     g = lambda la: math.log(upcrossing_probability(math.exp(la), df, w)) - math.log(rate)  # noqa: E731
     lo = math.log(rate) - 1e-12
-    return math.exp(optimize.brentq(g, lo, math.log(0.45), xtol=1e-10))
+    return math.exp(optimize.brentq(g, lo, math.log(_ALPHA_MAX), xtol=1e-10))
+
+
+ZERO_COUNT_UPPER = -math.log(0.05)
+"""Alarms taken for a correction pass that counted none: the 95 % upper bound (Poisson)."""
+MAX_SHARE_OF_TOP = 0.5
+"""A scale's share of the episode rate stays below this fraction of the most its window
+can give (:func:`max_upcrossing_rate`); the correction is held there."""
+
+
+def _least_correction(rate_per_hour: float, fs: float, scales: tuple[int, ...], df: int
+                      ) -> float:
+    """The smallest correction γ that keeps every scale's share ``rate/(3600·fs·K·γ)`` below
+    :data:`MAX_SHARE_OF_TOP` of what its window can give."""
+    share = rate_per_hour / (3600.0 * fs) / len(scales)
+    return max(share / (MAX_SHARE_OF_TOP * max_upcrossing_rate(df, w)) for w in scales)
 
 
 def max_false_alarms_per_hour(sample_rate_hz: float) -> float:
@@ -261,20 +297,27 @@ def detectable_sizes(cal: Calibration, thresholds: Thresholds, *, kind: str = "g
     for w, a, f in zip(thresholds.scales, thresholds.alpha, thresholds.variance_factor,
                        strict=True):
         T = chi2_threshold(a, df) * (1.0 + w * beta / f)
-
-        def miss(b: float, T: float = T, w: int = int(w), f: float = f) -> float:
-            lam = w * np.sum((b * ui + g) ** 2, axis=1) / f
-            return float(np.mean(stats.ncx2.sf(T, df, lam))) - probability
-
-        b0 = math.sqrt(minimum_detectable_noncentrality(T, df, 1.0 - probability) * f
-                       / (w * u2[i]))
-        hi = 2.0 * b0
-        while miss(hi) < 0:
-            hi *= 2.0
-        b = optimize.brentq(miss, 0.0, hi, xtol=1e-9 * b0)
+        b = detectable_at(T, int(w), f, df, ui, g, float(u2[i]), probability)
         out.append(DetectableSize(int(w), w / thresholds.sample_rate_hz, b, b / conv, unit,
                                   b / sd, i + 1))
     return tuple(out)
+
+
+def detectable_at(T: float, w: int, f: float, df: int, ui: np.ndarray, g: np.ndarray,
+                  u2: float, probability: float = DETECTION_PROBABILITY) -> float:
+    """The step b (SI) one full w-sample window detects with ``probability`` against the
+    threshold T (χ² units, all inflations in): ``E_g[ncx2.sf(T, df, w·|b·u_i + g|²/f)]``
+    over the draws ``g`` (n_draws, df) of the bias error's parity offset; ``ui`` the worst
+    sensor's whitened column, ``u2 = |ui|²``."""
+    def miss(b: float) -> float:
+        lam = w * np.sum((b * ui + g) ** 2, axis=1) / f
+        return float(np.mean(stats.ncx2.sf(T, df, lam))) - probability
+
+    b0 = math.sqrt(minimum_detectable_noncentrality(T, df, 1.0 - probability) * f / (w * u2))
+    hi = 2.0 * b0
+    while miss(hi) < 0:
+        hi *= 2.0
+    return float(optimize.brentq(miss, 0.0, hi, xtol=1e-9 * b0))
 
 
 @dataclass(frozen=True)
@@ -329,8 +372,8 @@ def simulated_rate(cal: Calibration, thr: Thresholds, *, hours: float, seed: int
     Flights last ``flight_s`` (default: about one expected false alarm each at the
     thresholds' budget, between 60 and 600 s): the rate varies from flight to flight with
     the drawn calibration error, so many flights are needed. Their manoeuvres reach
-    ``max_rate_dps`` (°/s) on each axis. ``bar``: a tqdm bar advanced by the simulated
-    hours.
+    ``max_rate_dps`` (°/s) on each axis. ``bar``: a progress bar (``update(hours)``)
+    advanced by the simulated hours.
     """
     from thresholds.campaign import RunSpec, run_one
 
@@ -480,7 +523,8 @@ def tune(cal: Calibration, *, false_alarms_per_hour: float, kind: str = "gyro",
     seed : int
         Seed of the correction flights.
     progress : bool
-        A tqdm bar on stderr over the simulated flight hours.
+        A bar over the simulated flight hours (:func:`fdi.progress.current`: shown by the
+        CLI on stderr once the work has taken 3 s).
     drift_horizon_s : float, optional
         How long after its data the calibration must hold (s): the horizon of the drift
         term (module docstring). Default: the span of the calibration data. Ignored when
@@ -534,21 +578,29 @@ def tune(cal: Calibration, *, false_alarms_per_hour: float, kind: str = "gyro",
     passes = []
     Rc = max(R, MIN_SIMULATED_RATE)
     n_pass = 2 if simulate_hours > 0 else 0
-    from tqdm import tqdm
+    from fdi.progress import current
 
-    bar = tqdm(total=round(n_pass * min(simulate_hours, 150.0 / Rc), 3), unit=" h",
-               desc="tune: simulated flight", disable=not progress or not n_pass, leave=False)
+    # the command's progress (fdi.progress): a bar on a terminal, a line every 10 s else
+    bar = (current().bar(n_pass * min(simulate_hours, 150.0 / Rc), "simulated flight",
+                         unit="h") if progress and n_pass else None)
     for p in range(n_pass):
         thr_c = _share_thresholds({**base, "false_alarms_per_hour": Rc},
                                   Rc / (3600.0 * fs) / len(sc) / gamma, df)
         cnt, hrs = simulated_rate(cal, thr_c, hours=min(simulate_hours, 150.0 / Rc),
                                   seed=seed + 1000 * p, kind=kind, bar=bar,
                                   max_rate_dps=float(max_rate_dps))
-        meas = max(cnt, 0.5) / hrs
+        # no alarm at all measures no rate, only a bound: the 95 % upper bound of the
+        # count (-ln 0.05 = 3.0 alarms) makes the step a conservative one
+        meas = (cnt if cnt > 0 else ZERO_COUNT_UPPER) / hrs
         passes.append({"target_per_hour": Rc, "false_alarms": cnt, "exposure_h": hrs,
-                       "rate_per_hour": cnt / hrs, "correction_before": gamma})
-        gamma = gamma * meas / Rc
-    bar.close()
+                       "rate_per_hour": cnt / hrs, "correction_before": gamma,
+                       "bound_only": cnt == 0})
+        gamma = max(gamma * meas / Rc, _least_correction(Rc, fs, sc, df))
+    if bar is not None:
+        bar.close()
+    floor = _least_correction(R, fs, sc, df)
+    capped = gamma < floor
+    gamma = max(gamma, floor)
     thr = _share_thresholds(base, per_sample / len(sc) / gamma, df)
     # the simulated correction is measured on Gaussian flights with the Allan factors; the
     # measured tails then inflate the variance per scale at the alpha it ended with
@@ -584,8 +636,13 @@ def tune(cal: Calibration, *, false_alarms_per_hour: float, kind: str = "gyro",
         "max_rate_dps": float(max_rate_dps),
         "max_rate_source": rate_source,
         "extrapolated": R < MIN_SIMULATED_RATE and bool(passes),
+        "capped": bool(capped),
         "note": ("not simulated: analytic shares only (conservative)" if not passes
                  else f"measured at {Rc:g}/h and carried over to {R:g}/h" if R < Rc
-                 else "measured at the target")}
+                 else "measured at the target")
+        + ("; no alarm in a pass: its 95 % upper bound used (a conservative step)"
+           if any(p["bound_only"] for p in passes) else "")
+        + ("; held at the least correction every scale's share allows"
+           if capped else "")}
     ass["created"] = datetime.now(UTC).isoformat(timespec="seconds")
     return Tuning(thr, detectable_sizes(cal, thr, kind=kind), ass, choices)

@@ -569,6 +569,11 @@ def diagnose_flight(flight: Flight, cal: Calibration, *, alpha: float = 0.01,
         raise ConfigError(f"{flight.source}: only {int(keep.sum())} usable samples")
     other = other_flight_warning(cal, flight)
     warnings = [other] if other else []
+    # every parameter of the calibration against this flight's own fit (issue 27)
+    from calibration.inflight.fits_flight import flight_mismatch
+
+    checks, misfit = flight_mismatch(cal, flight, alpha=alpha)
+    warnings += misfit
     per_imu = {}
     not_testable: list[dict[str, str]] = []
     for g, r in res.items():
@@ -618,6 +623,7 @@ def diagnose_flight(flight: Flight, cal: Calibration, *, alpha: float = 0.01,
             "effects": effects, "unexplained": bool(detail), "unexplained_detail": detail,
             "not_testable": not_testable,
             "timing": timing, "time_offset_sign": SIGN_CONVENTION, "warnings": warnings,
+            "parameter_checks": [c.to_dict() for c in checks],
             "drift_attribution": _attribution(p1, groups, H, ref, alpha),
             "calibration_kind": ("in-flight" if cal.extras.inflight is not None else
                                  "static" if cal.extras.static is not None else "turntable"),

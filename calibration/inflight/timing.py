@@ -16,30 +16,17 @@ another.
 
 from __future__ import annotations
 
-import numpy as np
-
 from fdi.calfile import Calibration
 from replay.flight_data import Flight
-from replay.time_offsets import apply_time_offsets, moved_aux_channels, time_offsets_s
+from replay.time_offsets import (
+    apply_time_offsets,
+    flight_identity,
+    moved_aux_channels,
+    time_offsets_s,
+)
 
 __all__ = ["apply_time_offsets", "flight_identity", "moved_aux_channels", "other_flight_warning",
            "time_offsets_s"]
-
-
-def flight_identity(flight: Flight) -> dict[str, object]:
-    """What identifies a flight: its source log (file name), sample count, first and last
-    time (s) and a fingerprint of its samples (sha256 of the times and rates, rounded to
-    1e-9, first 16 hex digits)."""
-    import hashlib
-    from pathlib import PurePath
-
-    t = np.asarray(flight.t, float)
-    h = hashlib.sha256()
-    h.update(np.round(t, 9).tobytes())
-    h.update(np.round(np.nan_to_num(np.asarray(flight.raw, float)), 9).tobytes())
-    return {"source": PurePath(str(flight.source)).name, "samples": int(t.shape[0]),
-            "t0_s": float(t[0]) if t.size else 0.0, "t1_s": float(t[-1]) if t.size else 0.0,
-            "fingerprint": h.hexdigest()[:16]}
 
 
 def other_flight_warning(cal: Calibration, flight: Flight) -> str | None:

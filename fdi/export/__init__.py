@@ -1,5 +1,14 @@
-"""The monitor in other forms: a self-contained C99 module (:mod:`fdi.export.c`)."""
+"""Export of the monitor to other languages: :func:`generate_c` (``rimu export c``)."""
 
-from fdi.export.c import MAX_RING, MAX_TABLE_BYTES, PRECISIONS, CModule, generate_c, write_c
+from fdi.export.c import (
+    MAX_RING,
+    MAX_TABLE_BYTES,
+    PRECISIONS,
+    CModule,
+    generate_c,
+    reachable_sets,
+    write_c,
+)
 
-__all__ = ["MAX_RING", "MAX_TABLE_BYTES", "PRECISIONS", "CModule", "generate_c", "write_c"]
+__all__ = ["MAX_RING", "MAX_TABLE_BYTES", "PRECISIONS", "CModule", "generate_c",
+           "reachable_sets", "write_c"]

@@ -30,6 +30,9 @@ __all__ = ["STRICT_FLAGS", "CMonitor", "CResult", "compile_module", "find_compil
 STRICT_FLAGS = ("-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O2")
 """The flags the module must compile under without a warning."""
 EVENT_TYPES = ("detected", "isolated", "disagree", "health", "readmitted", "envelope")
+C_STATUSES = (*STATUSES, "untabled")
+"""``RIMU_STATUS_*`` by code: fdi's statuses, then 8 ``untabled`` (left out of a set the
+module carries no table for)."""
 
 
 def find_compiler(cc: str = "cc") -> str | None:
@@ -210,7 +213,7 @@ class CMonitor:
         if count > max_ev:
             raise ExportError(f"{count} events in {N} samples: more than the {max_ev} kept")
         events = [self._event(evs[k]) for k in range(count)]
-        status = np.array(STATUSES, dtype=object)[out["status"]]
+        status = np.array(C_STATUSES, dtype=object)[out["status"]]
         return CResult(t=ta, omega=out["omega"], omega_sd=out["omega_sd"],
                        healthy=out["healthy"].astype(bool), status=status,
                        parity=out["parity"], statistics=out["statistics"],

@@ -179,6 +179,59 @@ def _index(r: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return o[order], np.concatenate(lens)[order], np.concatenate(names)[order]
 
 
+def _scan(r: Any, data: bytes) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Starts, lengths and type ids of the messages of ``data``, found by walking the
+    framing and resynchronising after damage (pymavlink's indexer stops at the first
+    unknown message id: one flipped id byte hid the rest of the log).
+
+    A message is the sync bytes and a type with a FMT definition, its length that type's.
+    When no message header follows it, the walk resumes at the next byte after its start
+    where a header is itself followed by a header or the end of the file (a message whose
+    id byte was flipped to a longer type does not swallow the messages after it; the
+    message before the break is distrusted by :func:`_stretches`). A message that runs past
+    the end of the file is the last one (the truncation is reported there).
+    """
+    lens = {int(k): int(f.len) for k, f in r.formats.items()}
+    n = len(data)
+    h0, h1 = _HEAD
+
+    def header(q: int) -> int:
+        """The length of the message whose header starts at q, or 0."""
+        if q + 3 <= n and data[q] == h0 and data[q + 1] == h1:
+            return lens.get(data[q + 2], 0)
+        return 0
+
+    def good(q: int) -> int:
+        """The length of the message at q when it is followed by a header or the end."""
+        ln = header(q)
+        if ln < 3:
+            return 0
+        e = q + ln
+        return ln if e >= n or header(e) else 0
+
+    starts: list[int] = []
+    out_len: list[int] = []
+    types: list[int] = []
+    pos = 0
+    while pos + 3 <= n:
+        ln = header(pos)
+        if ln >= 3:
+            starts.append(pos)
+            out_len.append(ln)
+            types.append(data[pos + 2])
+            if pos + ln >= n or header(pos + ln):
+                pos += ln
+                continue
+        q = data.find(_HEAD, pos + 1)
+        while q != -1 and not good(q):
+            q = data.find(_HEAD, q + 1)
+        if q == -1:
+            break
+        pos = q
+    return (np.asarray(starts, np.int64), np.asarray(out_len, np.int64),
+            np.asarray(types, np.int64))
+
+
 def _an(name: str) -> str:
     """``name`` with its indefinite article (``an IMU``, ``a GPS``)."""
     return f"{'an' if name[:1] in 'AEIOU' else 'a'} {name}"
@@ -193,7 +246,7 @@ def _damaged_header(r: Any, data: bytes, a: int, b: int) -> str | None:
     return fmt.name if fmt is not None and fmt.len == b - a else None
 
 
-def _stretches(r: Any, data: bytes) -> tuple[list[dict[str, Any]], set[int]]:
+def _stretches(r: Any, data: bytes) -> tuple[list[dict[str, Any]], dict[int, int]]:
     """Every damaged stretch of the log and the starts of the messages to trust.
 
     pymavlink resynchronises on the next header of a known format; a message is trusted
@@ -202,7 +255,7 @@ def _stretches(r: Any, data: bytes) -> tuple[list[dict[str, Any]], set[int]]:
     too (DataFlash has no checksum: its body may hold the first corrupt bytes), unless the
     break is exactly one message whose sync bytes alone are damaged.
     """
-    o, ln, ty = _index(r)
+    o, ln, ty = _scan(r, data)
     n_data = int(r.data_len)
     out: list[dict[str, Any]] = []
     keep: list[int] = []                 # indices into o of trusted messages
@@ -253,7 +306,7 @@ def _stretches(r: Any, data: bytes) -> tuple[list[dict[str, Any]], set[int]]:
         dropped = ty[inside & ~kept]
         x["dropped_messages"] = {r.formats[int(k)].name: int(np.sum(dropped == k))
                                  for k in np.unique(dropped)}
-    return out, {int(o[i]) for i in keep}
+    return out, {int(o[i]): int(ty[i]) for i in keep}
 
 
 def _lost_samples(stretches: list[dict[str, Any]], streams: list[ImuStream],
@@ -303,28 +356,51 @@ def _own_time(m: Any) -> float | None:
     return None
 
 
+def _in_order(r: Any, wanted: list[str], limit: int) -> Any:
+    """(start, message) of the ``wanted`` types in file order, through pymavlink's index."""
+    while True:
+        m = r.recv_match(type=wanted)
+        if m is None or r.offset > limit:
+            return
+        yield int(r.offset) - int(r.formats[r.name_to_id[m.get_type()]].len), m
+
+
+def _at(r: Any, wanted: list[str], trusted: dict[int, int]) -> Any:
+    """(start, message) of the ``wanted`` types among the trusted messages (start: type id),
+    each parsed by pymavlink where it starts (past damage its index does not reach)."""
+    ids = {r.name_to_id[t] for t in wanted}
+    for start in sorted(trusted):
+        if trusted[start] not in ids:
+            continue
+        r.offset = start
+        r.remaining = int(r.data_len) - start
+        try:
+            m = r._parse_next()
+        except Exception:                 # a damaged body pymavlink cannot unpack
+            continue
+        if m is not None and r.offset - int(r.formats[trusted[start]].len) == start:
+            yield start, m
+
+
 def _collect(r: Any, types: list[str], fields: dict[str, tuple[str | None, ...]],
              limit: int, raw_events: list[list[Any]] | None = None,
-             trusted: set[int] | None = None
+             trusted: dict[int, int] | None = None
              ) -> dict[tuple[str, int], dict[str, list[float]]]:
-    """The IMU messages before byte ``limit`` (and, with ``trusted``, only the messages whose
-    start is in it), as columns per (type, instance), ``"off"`` holding each one's start;
-    the ``EVENT_TYPES`` messages go to ``raw_events`` as [time before s, time after s, type,
-    fields] (the last IMU time before it and the first after it, or its own time)."""
+    """The IMU messages before byte ``limit`` (with ``trusted``, {start: type id}, only
+    those messages, wherever they are), as columns per (type, instance), ``"off"`` holding
+    each one's start; the ``EVENT_TYPES`` messages go to ``raw_events`` as [time before s,
+    time after s, type, fields] (the last IMU time before it and the first after it, or
+    its own time)."""
     cols: dict[tuple[str, int], dict[str, list[float]]] = {}
     ev_types = [e for e in EVENT_TYPES if e in r.name_to_id] if raw_events is not None \
         else []
     last_imu = float("nan")
     waiting: list[list[Any]] = []
     with _quiet():
-        while True:
-            m = r.recv_match(type=types + ev_types)
-            if m is None or r.offset > limit:
-                break
+        source = (_in_order(r, types + ev_types, limit) if trusted is None
+                  else _at(r, types + ev_types, trusted))
+        for start, m in source:
             t = m.get_type()
-            start = int(r.offset) - int(r.formats[r.name_to_id[t]].len)
-            if trusted is not None and start not in trusted:
-                continue
             if t in EVENT_TYPES:
                 own = _own_time(m)
                 rec = [own if own is not None else last_imu,
@@ -406,15 +482,29 @@ def read_ardupilot(path: str | Path, *, salvage: bool = False) -> LogRead:
     """
     p = str(path)
     r = _open(p)
-    types = [t for t in IMU_TYPES if t in r.name_to_id and r.counts[r.name_to_id[t]] > 0]
+    damage = _first_damage(r)
+    counts = {t: int(r.counts[r.name_to_id[t]]) for t in (*IMU_TYPES, *EVENT_TYPES)
+              if t in r.name_to_id}
+    stretches: list[dict[str, Any]] = []
+    trusted: dict[int, int] = {}
+    if damage is not None:
+        # pymavlink's index stops at the first unknown message id: count from rimu's own
+        # walk of the framing (_scan), which resynchronises after the damage
+        try:
+            data = Path(p).read_bytes()[:int(r.data_len)]
+        except OSError as exc:
+            raise FileFormatError(p, f"cannot read ({exc.strerror})") from None
+        stretches, trusted = _stretches(r, data)
+        found = np.bincount(np.fromiter(trusted.values(), np.int64, len(trusted)),
+                            minlength=256)
+        counts = {t: int(found[r.name_to_id[t]]) for t in counts}
+    types = [t for t in IMU_TYPES if counts.get(t, 0) > 0]
     if not types:
         raise FileFormatError(p, f"no IMU messages ({', '.join(IMU_TYPES)}) in the log")
-    damage = _first_damage(r)
     fields = {t: _imu_fields(p, r.formats[r.name_to_id[t]], t) for t in types}
-    meta: dict[str, Any] = {"messages": {t: int(r.counts[r.name_to_id[t]]) for t in types},
+    meta: dict[str, Any] = {"messages": {t: counts[t] for t in types},
                             "bytes": int(r.data_len)}
-    meta["events"] = {e: int(r.counts[r.name_to_id[e]]) for e in EVENT_TYPES
-                      if e in r.name_to_id}
+    meta["events"] = {e: counts[e] for e in EVENT_TYPES if e in counts}
     empty = [t for t in IMU_TYPES if t in r.name_to_id and t not in types]
     if empty:
         meta["warnings"] = [f"the log's format declares {t} but holds no {t} sample (that "
@@ -424,11 +514,6 @@ def read_ardupilot(path: str | Path, *, salvage: bool = False) -> LogRead:
         cols = _collect(r, types, fields, r.data_len, raw_events)
         return LogRead(p, "ardupilot", tuple(_streams(cols, fields)), None, meta,
                        events=ardupilot_events(raw_events))
-    try:
-        data = Path(p).read_bytes()[:int(r.data_len)]
-    except OSError as exc:
-        raise FileFormatError(p, f"cannot read ({exc.strerror})") from None
-    stretches, trusted = _stretches(r, data)
     cols = _collect(r, types, fields, r.data_len + 1, raw_events, trusted)
     streams = _streams(cols, fields)
     offsets = {s.name: np.asarray(cols[key]["off"], np.int64) for s, key in zip(

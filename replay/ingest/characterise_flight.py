@@ -228,8 +228,29 @@ def text(doc: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
+_AXIS_COLOURS = {"x": "tab:blue", "y": "tab:orange", "z": "tab:green"}
+_ALLAN_CI = 0.683
+"""Confidence of the Allan deviation bands (1 sigma), allantools' chi-square interval."""
+
+
+def _axis_colour(name: str, k: int) -> str:
+    """One colour per axis family: the name's last letter (``imu1.x``, ``gx``) when it is
+    x, y or z, else the k-th of three."""
+    last = name.strip()[-1:].lower()
+    return _AXIS_COLOURS.get(last, list(_AXIS_COLOURS.values())[k % 3])
+
+
 def write_plots(doc: dict[str, Any], flight: Flight, out: Path) -> list[Path]:
-    """PNG plots of the report into ``out``: Allan deviation, slow drift (10-s means)."""
+    """PNG plots of the report into ``out``.
+
+    - ``allan.png``: one panel per IMU, one colour per axis family (x, y, z): the Allan
+      deviation with its 68 % confidence band (allantools' chi-square interval for white
+      rate noise, ``edf_simple``) and, dashed, the fitted noise terms
+      σ(τ)² = N²/τ + B²·2ln2/π + K²τ/3 with N, B, K in the legend;
+    - ``drift.png``: one panel per IMU, the 10-s means of each axis minus their average,
+      with the fitted linear drift and its z.
+    """
+    import allantools
     import matplotlib
 
     matplotlib.use("Agg")
@@ -237,15 +258,38 @@ def write_plots(doc: dict[str, Any], flight: Flight, out: Path) -> list[Path]:
 
     out.mkdir(parents=True, exist_ok=True)
     paths = []
-    fig, ax = plt.subplots(figsize=(7, 4.5))
-    for r in doc["imus"].values():
-        for a, al in zip(r["axes"], r["allan"], strict=True):
-            ax.loglog(al["tau_s"], al["adev_dps"], label=a, lw=1)
-    ax.set_xlabel("tau [s]")
-    ax.set_ylabel("Allan deviation [deg/s]")
-    ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=6, ncol=3)
-    ax.set_title("Allan deviation")
+    imus = list(doc["imus"].items())
+    n_samples = int(doc.get("samples", flight.t.shape[0]))
+    fs = float(doc.get("sample_rate_hz", flight.sample_rate_hz))
+    fig, axes = plt.subplots(1, len(imus), figsize=(4.2 * len(imus) + 1.5, 4.6),
+                             squeeze=False, sharey=True)
+    for ax, (g, r) in zip(axes[0], imus, strict=True):
+        for k, (a, al) in enumerate(zip(r["axes"], r["allan"], strict=True)):
+            c = _axis_colour(a, k)
+            tau = np.asarray(al["tau_s"], float)
+            dev = np.asarray(al["adev_dps"], float)
+            lo, hi = np.empty_like(dev), np.empty_like(dev)
+            for j, (tj, dj) in enumerate(zip(tau, dev, strict=True)):
+                m = max(1, round(tj * fs))
+                edf = allantools.edf_simple(n_samples, m, 0)
+                lo[j], hi[j] = allantools.confidence_interval(dj, ci=_ALLAN_CI, edf=edf)
+            ax.fill_between(tau, lo, hi, color=c, alpha=0.25, lw=0)
+            ax.loglog(tau, dev, color=c, lw=1.2, label=a)
+            n_ = r["arw_deg_rth"][k] / 60.0                     # deg/s/sqrt(Hz)
+            b_ = r["bias_instability_dph"][k] / 3600.0          # deg/s
+            k_ = r["rate_random_walk_dph_rth"][k] / 3600.0 / 60.0
+            fit = np.sqrt(n_ ** 2 / tau + b_ ** 2 * 2 * math.log(2) / math.pi
+                          + k_ ** 2 * tau / 3.0)
+            ax.loglog(tau, fit, color=c, lw=0.9, ls="--",
+                      label=f"fit: N {r['arw_deg_rth'][k]:.3g} deg/rt-h, "
+                            f"B {r['bias_instability_dph'][k]:.3g} deg/h, "
+                            f"K {r['rate_random_walk_dph_rth'][k]:.3g} deg/h/rt-h")
+        ax.set_xlabel("tau [s]")
+        ax.set_title(f"{g}", fontsize=10)
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=6, loc="lower left")
+    axes[0][0].set_ylabel("Allan deviation [deg/s] (band: 68 % confidence)")
+    fig.suptitle("Allan deviation and fitted noise terms (dashed)", fontsize=10)
     p = out / "allan.png"
     fig.tight_layout()
     fig.savefig(p, dpi=110)
@@ -256,16 +300,29 @@ def write_plots(doc: dict[str, Any], flight: Flight, out: Path) -> list[Path]:
     q = max(1, round(10 * flight.sample_rate_hz))
     nb = t.shape[0] // q
     if nb >= 2:
-        fig, ax = plt.subplots(figsize=(7, 4.5))
+        groups = flight.imu_groups() if flight.imu else {"set": list(range(flight.n))}
+        fig, axes = plt.subplots(len(groups), 1, figsize=(8, 2.4 * len(groups) + 0.8),
+                                 squeeze=False, sharex=True)
         tb = t[:nb * q].reshape(nb, q).mean(axis=1)
-        for k, nm in enumerate(flight.sensor_names):
-            xb = x[:nb * q, k].reshape(nb, q).mean(axis=1)
-            ax.plot(tb, (xb - xb.mean()) / DPS, lw=1, label=nm)
-        ax.set_xlabel("t [s]")
-        ax.set_ylabel("10-s mean minus its average [deg/s]")
-        ax.set_title("slow drift")
-        ax.legend(fontsize=6, ncol=3)
-        ax.grid(True, alpha=0.3)
+        for ax, (g, idx) in zip(axes[:, 0], groups.items(), strict=True):
+            r = doc["imus"].get(g, {})
+            for k, i in enumerate(idx):
+                nm = flight.sensor_names[i]
+                c = _axis_colour(nm, k)
+                xb = x[:nb * q, i].reshape(nb, q).mean(axis=1) / DPS
+                xb = xb - xb.mean()
+                ch = r.get("drift_dps", [None] * len(idx))[k]
+                z = r.get("drift_z", [None] * len(idx))[k]
+                ax.plot(tb, xb, color=c, lw=1,
+                        label=nm if ch is None else f"{nm}: {ch:+.3g} deg/s (z {z:+.1f})")
+                if ch is not None:
+                    ax.plot(tb[[0, -1]], [-ch / 2, ch / 2], color=c, lw=0.8, ls="--")
+            ax.set_ylabel(f"{g} [deg/s]")
+            ax.grid(True, alpha=0.3)
+            ax.legend(fontsize=7, loc="upper left", ncol=3)
+        axes[-1][0].set_xlabel("t [s]")
+        fig.suptitle("slow drift: 10-s means minus their average; dashed: the fitted "
+                     "linear change", fontsize=10)
         p = out / "drift.png"
         fig.tight_layout()
         fig.savefig(p, dpi=110)

@@ -62,16 +62,19 @@ def read_any(path: str | Path, fmt: str = "auto", *, map_path: str | Path | None
     if not Path(path).exists():
         from fdi.errors import FileFormatError
         raise FileFormatError(str(path), "cannot read (no such file)")
+    from replay.ingest.plausible import mark_implausible
+
+    # no format here has a checksum over its samples: implausible values are marked
     if fmt in ("ardupilot", "px4"):
         if map_path is not None:
             raise ConfigError(f"--map is for mat, csv and rda logs, not {fmt}")
         if fmt == "ardupilot":
             from replay.ingest.ardupilot import read_ardupilot
-            return read_ardupilot(path, salvage=salvage)
+            return mark_implausible(read_ardupilot(path, salvage=salvage))
         from replay.ingest.px4 import read_px4
-        return read_px4(path, salvage=salvage, topic=px4_topic)
+        return mark_implausible(read_px4(path, salvage=salvage, topic=px4_topic))
     from replay.ingest.tabular import read_tabular
-    return read_tabular(path, fmt, map_path=map_path, salvage=salvage)
+    return mark_implausible(read_tabular(path, fmt, map_path=map_path, salvage=salvage))
 
 
 def merge_reads(reads: list[LogRead]) -> LogRead:

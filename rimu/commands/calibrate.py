@@ -259,12 +259,16 @@ def run(args: argparse.Namespace) -> int:
         input_path(args.compare, "--compare")
     if args.plot:
         output_dir(args.plot, "--plot", inputs=(args.session,))
+    from fdi.progress import current
+
+    current().stage("reading the session")
     session = load_session(args.session)
     truth = None
     if args.compare:
         from calibration.truth import load_truth
 
         truth, effects, effect_sensors = load_truth(args.compare)
+    current().stage("calibrating (rate test, multi-position test, noise, model adequacy)")
     cal = calibrate_with_check(session, args, bias_method=args.bias_method,
                                denoise=not args.no_denoise, noise_model=args.noise_model)
     check_plausible(cal, str(args.session))
@@ -285,6 +289,7 @@ def run(args: argparse.Namespace) -> int:
     if args.plot:
         from calibration.plots import write_plots
 
+        current().stage("plots")
         for p in write_plots(session, cal, args.plot):
             print(f"wrote {p}")
     return 0

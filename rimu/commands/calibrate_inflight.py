@@ -215,13 +215,18 @@ def run(args: argparse.Namespace) -> int:
         rep = output_dir(args.report, "--report", inputs=tuple(dirs))
     window = parse_window(getattr(args, "window", None))
     prior = _prior(args)
+    from fdi.progress import current
+
     flights, fits = [], []
     for d in dirs:
+        current().stage(f"reading the flight folder {d}")
         flight = load_flight_dir(d)
         win = flight_window(flight) if window == "flight" else window
         if window == "flight":
             print(f"{d}: the log's events give the flight {win[0]:.2f}-{win[1]:.2f} s")
         flights.append(flight)
+        current().stage("fitting the set against its reference (axes, scale, bias, time "
+                        "offsets)")
         fits.append(fit_inflight(flight, reference=getattr(args, "reference", None),
                                  model=getattr(args, "model", "auto"),
                                  time_offset=not getattr(args, "no_time_offset", False),
@@ -236,6 +241,7 @@ def run(args: argparse.Namespace) -> int:
         values = tuple(flight_values(f, fl) for f, fl in zip(fits, flights, strict=True))
     else:
         fit, flight = fits[0], flights[0]
+    current().stage("noise, tails and drift of the residual")
     cal = calibration_from_fit(fit, flight,
                                drift_model=bool(getattr(args, "drift_model", False)),
                                turn_on_sd=turn_on, flights=values)
@@ -266,6 +272,8 @@ def run(args: argparse.Namespace) -> int:
     if rep is not None:
         from calibration.inflight.report import write_flight_plots
         from rimu.outputs import atomic_dir
+
+        current().stage("plots")
 
         with atomic_dir(rep) as tmp:        # the page and its plots: all or none
             pngs = write_flight_plots(flight, cal, tmp)

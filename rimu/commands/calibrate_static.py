@@ -30,7 +30,11 @@ def run(args: argparse.Namespace) -> int:
 
     out = output_file(args.out, "--out")
     input_path(args.static, "--static", kind="dir")
+    from fdi.progress import current
+
+    current().stage("reading the flight folder")
     flight = load_flight_dir(args.static)
+    current().stage("calibrating at rest (biases, alignment, drift, tails)")
     cal = calibrate_static(flight, reference=getattr(args, "reference", None))
     with atomic_file(out) as tmp:
         cal.save(tmp)

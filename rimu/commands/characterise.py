@@ -31,7 +31,11 @@ def run(args: argparse.Namespace) -> int:
 
     input_path(args.flight, "DIR", kind="dir")
     out = output_dir(args.report, "--report") if args.report else None
+    from fdi.progress import current
+
+    current().stage("reading the flight folder")
     flight = load_flight_dir(args.flight)
+    current().stage("characterising (noise density, Allan deviation, tails, lines, drift)")
     doc = to_jsonable(characterise_flight(flight, alpha=args.alpha))
     js = json.dumps(doc, indent=1, allow_nan=False) + "\n"
     summary = text(doc)
@@ -39,6 +43,7 @@ def run(args: argparse.Namespace) -> int:
     if out is not None:
         out = Path(out)
         out.mkdir(parents=True, exist_ok=True)
+        current().stage("plots")
         pngs = write_plots(doc, flight, out)
         atomic_write_text(out / "characterise.json", js)
         atomic_write_text(out / "report.md", "```\n" + summary + "\n```\n\n" + "".join(

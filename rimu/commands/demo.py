@@ -4,7 +4,9 @@
 2. calibrate it and compare with the truth sidecar,
 3. compute detection thresholds for 1e-3 false alarms per hour,
 4. simulate a manoeuvring flight with two successive sensor faults and write it as a CAN log,
-5. replay the log through the monitor, print events and the report,
+5. replay the log through the monitor, print events and the report, draw ``replay.png``
+   (rates with the unverified spans shaded, statistic against threshold per window, the
+   events and the injected faults: :mod:`replay.plots`, no display needed),
 6. write a rerun recording of the replay.
 """
 
@@ -65,7 +67,8 @@ def _demo(args: argparse.Namespace, out: Path, final: Path) -> None:
     from replay.faults import parse_fault
     from replay.flight import simulate_flight
     from replay.logio import read_log
-    from replay.report import build_report, format_summary
+    from replay.plots import plot_run, scale_labels
+    from replay.report import RunningReport, format_summary
     from thresholds import compute_thresholds
 
     _say(1, "simulating a cone6 turntable session (seed 001 Tables 1-2, preset cone-paper)")
@@ -103,8 +106,11 @@ def _demo(args: argparse.Namespace, out: Path, final: Path) -> None:
     _say(5, "replaying the log through the monitor")
     replayed, frames = read_log(log_path, cal, progress=False)
     mon = Monitor(cal, thr)
-    result = mon.run(replayed.t, replayed.raw, replayed.valid)
-    report = build_report(result, replayed, cal, frames=frames)
+    result = mon.run(replayed.t, replayed.raw, replayed.valid, parity=True)
+    acc = RunningReport()
+    om = replayed.omega_true
+    acc.update(result, om if om is not None and len(om) == len(result.t) else None)
+    report = acc.build(replayed, cal, frames=frames)
     report["source"] = str(final / "flight.blf")
     names = [c.name for c in cal.gyro.sensors]
     for e in report["events"]:
@@ -115,6 +121,10 @@ def _demo(args: argparse.Namespace, out: Path, final: Path) -> None:
     rep_path = out / "report.json"
     rep_path.write_text(json.dumps(report, indent=1, allow_nan=False) + "\n", encoding="utf-8")
     print(f"  -> {final / 'report.json'}")
+    plot_run(acc.trace, out / "replay.png", report=report,
+             scale_names=scale_labels(thr, result.statistics.shape[1]),
+             title=f"rimu demo: faults {', '.join(specs)}")
+    print(f"  -> {final / 'replay.png'}  (rates, statistic / threshold per window, events)")
 
     _say(6, "rerun recording")
     if args.no_rrd:
@@ -124,4 +134,6 @@ def _demo(args: argparse.Namespace, out: Path, final: Path) -> None:
 
         rrd = out / "replay.rrd"
         record(result, replayed, cal, path=rrd, thresholds=thr)
-        print(f"  -> {final / 'replay.rrd'}  (open with: rerun {final / 'replay.rrd'})")
+        print(f"  -> {final / 'replay.rrd'}  (open with: rerun {final / 'replay.rrd'}; "
+              f"without a display: rerun {final / 'replay.rrd'} --web-viewer, then a browser "
+              "at the address it prints)")

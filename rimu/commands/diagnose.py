@@ -160,8 +160,10 @@ def run(args: argparse.Namespace) -> int:
     from calibration.diagnose import diagnose
     from calibration.session_io import load_session
     from fdi.calfile import load_calibration
+    from fdi.progress import current
     from rimu.outputs import atomic_dir, atomic_file
 
+    current().stage("reading the session")
     session = load_session(args.session)
     cal = load_calibration(args.cal)
     truth = None
@@ -169,6 +171,7 @@ def run(args: argparse.Namespace) -> int:
         from calibration.truth import load_truth
 
         truth = load_truth(args.truth)
+    current().stage("diagnosing (residual, effects, refit)")
     d = diagnose(session, cal, alpha=args.alpha, truth=truth, cal_path=str(args.cal),
                  sensor_class=args.sensor_class)
     page = None

@@ -7,6 +7,8 @@ to :func:`run_flight`; see :mod:`calibration.inflight.diagnose` for the method.
 from __future__ import annotations
 
 import json
+from pathlib import Path
+from typing import Any
 
 from calibration.inflight.diagnose import DRIFT_EFFECT, diagnose_flight
 from fdi.calfile import load_calibration
@@ -78,6 +80,21 @@ def format_text(doc: dict) -> str:
     return "\n".join(lines)
 
 
+def _monitor_picture(flight: Any, cal: Any, png: Path, *, title: str) -> Path:
+    """The monitor over ``flight`` as ``rimu monitor-file`` runs it by default (thresholds
+    from the calibration, time offsets, effects, envelope), drawn by
+    :func:`replay.plots.plot_run` into ``png``."""
+    from replay.chain import ChainOptions, chain_for_flight
+    from replay.chain import run_flight as monitor_flight
+    from replay.plots import plot_run, scale_labels
+
+    chain = chain_for_flight(flight, cal, ChainOptions())
+    _, report = monitor_flight(chain, flight)
+    acc = chain.report
+    return plot_run(acc.trace, png, report=report, title=title,
+                    scale_names=scale_labels(chain.thresholds, acc.trace.scales))
+
+
 def run_flight(path: str, cal_path: str, *, alpha: float = 0.01, as_json: bool = False,
                report_dir: str | None = None) -> int:
     """``rimu diagnose`` on a flight folder: print the report (or the JSON with ``as_json``);
@@ -86,8 +103,12 @@ def run_flight(path: str, cal_path: str, *, alpha: float = 0.01, as_json: bool =
 
     input_path(cal_path, "--cal")
     out = output_dir(report_dir, "--report") if report_dir else None
+    from fdi.progress import current
+
+    current().stage("reading the flight folder")
     flight = load_flight_dir(path)
     cal = load_calibration(cal_path)
+    current().stage("diagnosing (parity residual, effects)")
     doc = diagnose_flight(flight, cal, alpha=alpha)
     text = format_text(doc)
     js = json.dumps(doc, indent=1, allow_nan=False) + "\n"
@@ -96,7 +117,13 @@ def run_flight(path: str, cal_path: str, *, alpha: float = 0.01, as_json: bool =
         from calibration.inflight.report import write_flight_plots
 
         with atomic_dir(out) as tmp:        # the page, its plots and the JSON: all or none
+            current().stage("plots")
             pngs = write_flight_plots(flight, cal, tmp)
+            current().stage("the monitor over the flight, for its picture")
+            pngs.append(_monitor_picture(
+                flight, cal, tmp / "monitor.png",
+                title=f"rimu monitor-file {path} (defaults): rates, statistic / threshold "
+                      "per window, events"))
             (tmp / "report.md").write_text("```\n" + text + "\n```\n\n" + "".join(
                 f"![{p.stem}]({p.name})\n" for p in pngs), encoding="utf-8")
             (tmp / "diagnosis.json").write_text(js, encoding="utf-8")

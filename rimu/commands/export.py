@@ -29,6 +29,11 @@ def configure(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-effects", action="store_true",
                    help="do not compensate the calibration's effect terms (as rimu "
                         "monitor-file --no-effects)")
+    p.add_argument("--depth", metavar="D", default="auto",
+                   help="healthy sets carried: 'all' (every one of the 2^n), or D: those "
+                        "within D exclusions, of a sensor or a whole IMU each, and every set "
+                        "of whole IMUs (default auto: all up to 9 sensors, else the largest "
+                        "D <= 2 whose tables fit 224 KiB, 1 at least)")
     p.add_argument("--harness", action="store_true",
                    help="also write rimu_harness.c (samples.csv on stdin, answers as CSV on "
                         "stdout) and rimu_block.c (a block entry for ctypes)")
@@ -36,10 +41,23 @@ def configure(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from fdi.calfile import load_calibration
+    from fdi.errors import ConfigError
     from fdi.export import generate_c
+    from fdi.export.c import API_VERSION
     from rimu.outputs import atomic_dir, input_path, output_dir
     from thresholds.select import select
 
+    depth: int | str | None = args.depth
+    if args.depth == "all":
+        depth = None
+    elif args.depth != "auto":
+        try:
+            depth = int(args.depth)
+        except ValueError:
+            depth = -1
+        if depth < 0:
+            raise ConfigError(f"--depth: expected all, auto or a whole number, got "
+                              f"{args.depth!r}")
     input_path(args.cal, "--cal")
     if args.thresholds:
         input_path(args.thresholds, "--thresholds")
@@ -56,13 +74,18 @@ def run(args: argparse.Namespace) -> int:
     mod = generate_c(cal, choice.thresholds, kind=args.kind,
                      precision="float32" if args.float32 else "float64",
                      harness=args.harness, thresholds_note=note,
-                     effects=not args.no_effects)
+                     effects=not args.no_effects, depth=depth)
     with atomic_dir(final) as tmp:
         for name, text in mod.files.items():
             (tmp / name).write_text(text, encoding="utf-8")
     print(f"wrote {final}/: {', '.join(mod.files)}")
+    carried = ("every set" if mod.depth is None
+               else f"up to {mod.depth} exclusion{'s' if mod.depth != 1 else ''} of a sensor "
+                  f"or an IMU")
     print(f"calibration fingerprint {mod.fingerprint}; {mod.n} {args.kind} sensors, "
-          f"{mod.sets} healthy-set tables; {mod.precision}")
+          f"{mod.sets} healthy-set tables ({carried}); {mod.precision}")
+    print(f"identity {mod.identity}; table CRC-32 {mod.table_crc:#010x}; "
+          f"API version {API_VERSION}")
     print(f"state {mod.state_bytes} bytes, tables {mod.table_bytes} bytes, worst case "
           f"{mod.ops_per_step} arithmetic operations per step")
     if mod.applied_terms or mod.not_applied:

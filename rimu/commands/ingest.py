@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 from pathlib import Path
 
 HELP = ("read a flight log or bench recording (ArduPilot .BIN, PX4 .ulg, .mat, CSV, R .rda) "
@@ -13,8 +12,6 @@ HELP = ("read a flight log or bench recording (ArduPilot .BIN, PX4 .ulg, .mat, C
 FORMATS = ("auto", "ardupilot", "px4", "mat", "csv", "rda")
 """``--format`` (:data:`replay.ingest.readers.FORMATS`; kept here so that ``--help`` does
 not import the readers; a test checks they agree)."""
-PROGRESS_BYTES = 50e6
-"""Inputs larger than this (bytes, all logs together) get a progress bar on stderr."""
 REPORT_FILE = "ingest_report.json"
 """The accounting file written beside the flight (``rimu.ingest-report/1``)."""
 
@@ -36,7 +33,7 @@ def configure(p: argparse.ArgumentParser) -> None:
     p.add_argument("--reference", metavar="IMU",
                    help="IMU whose time stamps are the time base (default: most samples)")
     p.add_argument("--no-progress", action="store_true",
-                   help="no progress bar (shown for inputs over 50 MB)")
+                   help="no progress on stderr (shown when the work takes over 3 s)")
     p.add_argument("--salvage", action="store_true",
                    help="on a truncated or corrupt log, write the samples before the damage "
                         "(default: refuse, exit 2)")
@@ -57,30 +54,25 @@ def run(args: argparse.Namespace) -> int:
         input_path(args.map_path, "--map")
     out = output_dir(args.out, "--out", inputs=(*args.logs, args.map_path),
                      schema="rimu.flight/1")
-    from tqdm import tqdm
+    from fdi.progress import current
 
-    big = sum(os.path.getsize(x) for x in args.logs) > PROGRESS_BYTES
-    with tqdm(total=len(args.logs) + 2, unit=" step", leave=False,
-              disable=args.no_progress or not big) as bar:
-        reads = []
-        for log in args.logs:
-            bar.set_description(f"ingest: reading {Path(log).name}")
-            reads.append(read_any(log, args.format, map_path=args.map_path,
-                                  salvage=args.salvage, px4_topic=args.px4_topic))
-            bar.update()
-        read = merge_reads(reads)
-        bar.set_description("ingest: aligning")
-        flight, report = align_streams(read, reference=args.reference, salvage=args.salvage)
-        envelope = uncalibrated_summary(flight)
-        if envelope is not None:
-            report["envelope"] = envelope
-        bar.update()
-        bar.set_description(f"ingest: writing {out}")
-        with atomic_dir(out) as tmp:        # the flight and its report: all or nothing
-            save_flight_dir(flight, tmp)
-            (tmp / REPORT_FILE).write_text(json.dumps(to_jsonable(report), indent=1) + "\n",
-                                           encoding="utf-8")
-        bar.update()
+    prog = current()                    # stages shown once the work has taken 3 s
+    reads = []
+    for log in args.logs:
+        prog.stage(f"reading {Path(log).name}")
+        reads.append(read_any(log, args.format, map_path=args.map_path,
+                              salvage=args.salvage, px4_topic=args.px4_topic))
+    read = merge_reads(reads)
+    prog.stage("aligning the streams on one time base")
+    flight, report = align_streams(read, reference=args.reference, salvage=args.salvage)
+    envelope = uncalibrated_summary(flight)
+    if envelope is not None:
+        report["envelope"] = envelope
+    prog.stage(f"writing {out}")
+    with atomic_dir(out) as tmp:        # the flight and its report: all or nothing
+        save_flight_dir(flight, tmp)
+        (tmp / REPORT_FILE).write_text(json.dumps(to_jsonable(report), indent=1) + "\n",
+                                       encoding="utf-8")
     tb = report["time_base"]
     print(f"wrote {out}: {flight.t.shape[0]} samples of {len(report['imus'])} IMU(s) "
           f"({flight.n} gyro axes) at {tb['sample_rate_hz']:.4g} Hz, "

@@ -42,7 +42,7 @@ def run(args: argparse.Namespace) -> int:
     import can
 
     from replay.chain import chain_for_map, format_aux, report_bus
-    from replay.live import StreamDecoder, format_event
+    from replay.live import StreamDecoder, print_event
     from replay.logio import resolve_map
     from replay.report import format_report
 
@@ -69,7 +69,7 @@ def run(args: argparse.Namespace) -> int:
         report, frames = report_bus(
             chain, bus, StreamDecoder(db, cmap, cal.sample_rate_hz),
             source=f"{args.interface}:{args.channel}", window=args.window,
-            on_event=lambda e: print(format_event(e, names), flush=True),
+            on_event=lambda e: print_event(e, names),
             duration_s=args.duration, max_frames=args.max_frames,
             idle_timeout_s=args.idle_timeout)
     finally:
@@ -82,5 +82,5 @@ def run(args: argparse.Namespace) -> int:
     print(format_report(report, max_events=0))
     if "auxiliary" in report:
         print(format_aux(report["auxiliary"]))
-    write_report(report, args.report)
+    write_report(report, args.report, chain)
     return 0

@@ -3,12 +3,11 @@
 from __future__ import annotations
 
 import argparse
-import json
 import logging
 from typing import Any
 
 from fdi.errors import ConfigError
-from rimu.argtypes import nonnegative_int, positive_float
+from rimu.argtypes import nonnegative_float, nonnegative_int, positive_float
 
 HELP = "run the monitor over a flight sample directory; print events and a summary"
 
@@ -22,7 +21,9 @@ def configure(p: argparse.ArgumentParser) -> None:
                    help="a rimu.thresholds or rimu.tuning (rimu tune) file made for this "
                         "calibration and sample rate (default: computed from the "
                         "calibration)")
-    p.add_argument("--report", metavar="FILE", help="write the rimu.report/1 JSON here")
+    p.add_argument("--report", metavar="FILE",
+                   help="write the rimu.report/1 JSON here, and its picture beside it "
+                        "(FILE with .png: rates, statistic / threshold per window, events)")
     p.add_argument("--max-events", type=nonnegative_int(), default=50,
                    help="events to print (default 50)")
     p.add_argument("--no-time-offsets", action="store_true",
@@ -33,6 +34,19 @@ def configure(p: argparse.ArgumentParser) -> None:
                         "saturation, tumbles and the log's declared crash events are marked; "
                         "the monitor excludes nothing there and restarts its windows after; "
                         "docs/envelope.md)")
+    p.add_argument("--turn-on", choices=("auto", "rest", "bound", "off"), default="auto",
+                   help="the turn-on bias on a flight other than the calibration's: auto "
+                        "(default) estimates it while the vehicle is at rest before take-off "
+                        "and otherwise covers a nominal bias bound in the thresholds; rest, "
+                        "bound, off (as calibrated); replay.turn_on")
+    p.add_argument("--bias-bound-dps", type=nonnegative_float(1e4), default=None,
+                   metavar="DPS",
+                   help="nominal turn-on bias bound per gyro (deg/s) when no rest stretch is "
+                        "found (default: 3 x the calibration's bias_turn_on_sd, else 1)")
+    p.add_argument("--no-parameter-check", action="store_true",
+                   help="do not fit this flight to check every parameter of an in-flight "
+                        "calibration made on another flight (default: checked, and each "
+                        "parameter that does not fit is warned about)")
     p.add_argument("--no-effects", action="store_true",
                    help="do not compensate the calibration's effect terms (default: the "
                         "terms whose inputs the flight carries are compensated: rate sign, "
@@ -70,8 +84,8 @@ def run(args: argparse.Namespace) -> int:
     from replay.chain import ChainOptions, chain_for_flight, run_flight
     from replay.flight import load_flight_dir
     from replay.report import format_report
-    from rimu.commands.replay import describe_chain
-    from rimu.outputs import atomic_write_text, flight_folder_hint, input_path, output_file
+    from rimu.commands.replay import describe_chain, picture_path, write_report
+    from rimu.outputs import flight_folder_hint, input_path, output_file
 
     flight_folder_hint(args.flight, "DIR", "rimu monitor-file")
     input_path(args.flight, "DIR", kind="dir")
@@ -80,6 +94,7 @@ def run(args: argparse.Namespace) -> int:
         input_path(args.thresholds, "--thresholds")
     if args.report:
         output_file(args.report, "--report")
+        output_file(picture_path(args.report), "--report (its picture)")
     from replay.baselines import parse_baselines
 
     baselines = parse_baselines(args.baseline)
@@ -87,6 +102,7 @@ def run(args: argparse.Namespace) -> int:
         if not baselines:
             raise ConfigError("--baseline-plot needs --baseline NAMES")
         output_file(args.baseline_plot, "--baseline-plot")
+    from fdi.progress import current
     cal = load_calibration(args.cal)
     flight = load_flight_dir(args.flight)
     check_compatible(cal, flight.n, flight.raw_unit, str(args.flight), kind=flight.kind,
@@ -96,16 +112,24 @@ def run(args: argparse.Namespace) -> int:
     warning = other_flight_warning(cal, flight)
     if warning:
         logging.getLogger("rimu").warning(warning)
+    if not args.no_parameter_check:
+        from calibration.inflight.fits_flight import flight_mismatch
+
+        for w in flight_mismatch(cal, flight)[1]:      # every parameter, not only the offset
+            logging.getLogger("rimu").warning(w)
     chain = chain_for_flight(flight, cal, ChainOptions(
         thresholds_file=args.thresholds, calibration_file=args.cal,
         false_alarms_per_hour=args.false_alarms_per_hour, effects=not args.no_effects,
-        time_offsets=not args.no_time_offsets, envelope=not args.no_envelope))
+        time_offsets=not args.no_time_offsets, envelope=not args.no_envelope,
+        turn_on=args.turn_on, bias_bound_dps=args.bias_bound_dps))
     describe_chain(chain, flight)
+    if chain.turn_on is not None and chain.turn_on.method != "calibrated":
+        print(chain.turn_on.text(chain.sensor_names))
+    current().stage(f"monitoring {flight.t.shape[0]} samples")
     _, report = run_flight(chain, flight)
     print(format_report(report, max_events=args.max_events))
     if baselines:
+        current().stage("baselines")
         _baselines(args, baselines, flight, cal, report)
-    if args.report:
-        atomic_write_text(args.report, json.dumps(report, indent=1, allow_nan=False) + "\n")
-        print(f"wrote {args.report}")
+    write_report(report, args.report, chain)
     return 0

@@ -6,6 +6,8 @@ import argparse
 import contextlib
 import json
 import logging
+import os
+from pathlib import Path
 from typing import Any
 
 from fdi.errors import ConfigError
@@ -30,7 +32,9 @@ def add_monitor_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--false-alarms-per-hour", type=positive_float(1e9), metavar="X",
                    help="compute thresholds for this false-alarm budget (default 1e-3 "
                         "per hour)")
-    p.add_argument("--report", metavar="FILE", help="write the rimu.report/1 JSON here")
+    p.add_argument("--report", metavar="FILE",
+                   help="write the rimu.report/1 JSON here, and its picture beside it "
+                        "(FILE with .png: rates, statistic / threshold per window, events)")
     p.add_argument("--max-events", type=nonnegative_int(), default=50,
                    help="events to print (default 50)")
     p.add_argument("--no-effects", action="store_true",
@@ -97,13 +101,31 @@ def describe_chain(chain: Any, flight: Any = None) -> None:
                if chain.delay_s > 0 else ""), flush=True)
 
 
-def write_report(report: dict, path: str | None) -> None:
-    """Write a report as JSON (no NaN), atomically."""
+def picture_path(report_path: str | os.PathLike) -> Path:
+    """The PNG written beside a ``--report`` JSON: ``r.json`` → ``r.png``."""
+    p = Path(report_path)
+    q = p.with_suffix(".png")
+    return q if q != p else p.with_name(p.name + ".png")
+
+
+def write_report(report: dict, path: str | None, chain: Any = None) -> None:
+    """Write a report as JSON (no NaN), atomically; with the ``chain`` that made it, also
+    its picture (:func:`picture_path`, :func:`replay.plots.plot_run`)."""
     if path:
-        from rimu.outputs import atomic_write_text
+        from rimu.outputs import atomic_file, atomic_write_text
 
         atomic_write_text(path, json.dumps(report, indent=1, allow_nan=False) + "\n")
         print(f"wrote {path}")
+        acc = getattr(chain, "report", None)
+        if acc is not None:
+            from replay.plots import plot_run, scale_labels
+
+            png = picture_path(path)
+            with atomic_file(png) as tmp:
+                plot_run(acc.trace, tmp, report=report,
+                         scale_names=scale_labels(chain.thresholds, acc.trace.scales))
+            print(f"wrote {png} (rates with unverified spans, statistic / threshold per "
+                  "window, envelope periods, events)")
 
 
 def check_monitor_paths(args: argparse.Namespace) -> None:
@@ -117,6 +139,7 @@ def check_monitor_paths(args: argparse.Namespace) -> None:
             input_path(val, opt)
     if args.report:
         output_file(args.report, "--report")
+        output_file(picture_path(args.report), "--report (its picture)")
 
 
 def has_display() -> bool:
@@ -131,7 +154,7 @@ def has_display() -> bool:
 
 def run(args: argparse.Namespace) -> int:
     from replay.chain import chain_for_map, format_aux, report_log
-    from replay.live import Pacer, format_event
+    from replay.live import Pacer, print_event
     from replay.logio import LogStream, resolve_map
     from replay.report import format_report
     from rimu.outputs import atomic_file, input_path, output_file
@@ -147,7 +170,8 @@ def run(args: argparse.Namespace) -> int:
         if not args.rrd:
             raise ConfigError("--spawn: no display to open the rerun viewer on (DISPLAY is "
                               "not set); write the recording with --rrd FILE and open it with "
-                              "'rerun FILE' where there is one")
+                              "'rerun FILE' where there is one, or 'rerun FILE --web-viewer' "
+                              "and a browser")
         logging.getLogger("rimu").warning("--spawn: no display; writing the recording to "
                                           f"{args.rrd} only")
         spawn = False
@@ -167,7 +191,7 @@ def run(args: argparse.Namespace) -> int:
     chain = chain_for_map(cal, cmap, chain_options(args), injector=injector)
     describe_chain(chain)
     names = header.sensor_names
-    pacer = Pacer(lambda e: print(format_event(e, names), flush=True)) if args.realtime \
+    pacer = Pacer(lambda e: print_event(e, names)) if args.realtime \
         else None
     with contextlib.ExitStack() as stack:
         if args.rrd or spawn:
@@ -184,5 +208,5 @@ def run(args: argparse.Namespace) -> int:
             report["timing_s"]["rerun"] = tim["log_s"] + tim["flush_s"]
     if args.rrd:
         print(f"wrote {args.rrd} ({report['timing_s']['rerun']:.2f} s)")
-    write_report(report, args.report)
+    write_report(report, args.report, chain)
     return 0

@@ -64,6 +64,10 @@ def configure(p: argparse.ArgumentParser) -> None:
                    help="largest body rate of the simulated correction flights (deg/s; "
                         "default: inside the calibration's validated rate range, at most "
                         "300; 0: at rest)")
+    p.add_argument("--flight", metavar="DIR",
+                   help="a flight folder (rimu.flight/1) of this set: also state the "
+                        "detectable sizes over that flight's own profile (median, p90 over "
+                        "its samples; the thresholds rise with the rate in flight)")
     p.add_argument("--out", required=True, metavar="FILE",
                    help="write the rimu.tuning/1 file here (for --thresholds)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -75,6 +79,8 @@ def run(args: argparse.Namespace) -> int:
     from thresholds.tune import tune
 
     input_path(args.cal, "--cal")
+    if args.flight:
+        input_path(args.flight, "--flight", kind="dir")
     out = output_file(args.out, "--out", inputs=(args.cal,))
     scales = _scales(args.scales) if args.scales else 7
     cal = load_calibration(args.cal)
@@ -85,7 +91,7 @@ def run(args: argparse.Namespace) -> int:
     th = tu.thresholds
     corr = tu.assumptions["simulation_correction"]
     print(f"thresholds for {th.false_alarms_per_hour:g} false alarms/h, {th.n} {th.kind} "
-          f"sensors at {th.sample_rate_hz:g} Hz (correction {corr['factor']:.3f}: "
+          f"sensors at {th.sample_rate_hz:g} Hz (correction {corr['factor']:.3g}: "
           f"{corr['note']}; flights up to {corr['max_rate_dps']:.3g} deg/s, "
           f"{corr['max_rate_source']})")
     d0 = tu.detectable[0]
@@ -97,7 +103,21 @@ def run(args: argparse.Namespace) -> int:
               f"{d.size_unit_value:12.4g} {d.unit:5s} {d.size_sigma:7.2f}")
     names = [c.name for c in cal.kind(args.kind).sensors]
     who = f"{d0.sensor} ({names[d0.sensor - 1]})" if 1 <= d0.sensor <= len(names) else d0.sensor
-    print(f"detectable sizes: one full window, at rest, worst sensor {who}")
+    print(f"detectable sizes: one full window, at rest, worst sensor {who}"
+          + ("" if args.flight else "; in flight the thresholds rise with the rate: "
+             "--flight DIR states the sizes over a flight's own profile"))
+    if args.flight:
+        from fdi.calfile import check_compatible
+        from replay.flight import load_flight_dir
+        from thresholds.profile import flight_detectable, profile_lines
+
+        flight = load_flight_dir(args.flight)
+        check_compatible(cal, flight.n, flight.raw_unit, str(args.flight), kind=flight.kind,
+                         names=flight.sensor_names, cal_source=args.cal)
+        prof = flight_detectable(cal, th, flight, kind=args.kind)
+        for line in profile_lines(prof):
+            print(line)
+        tu.assumptions["detectable_in_flight"] = prof.to_dict()
     print(f"noise model: {th.noise_model} (residual tails of the calibration, per scale):")
     for c in tu.choices:
         print(f"  {c.text()}")

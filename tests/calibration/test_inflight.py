@@ -185,6 +185,10 @@ def test_cli_simulate_calibrate_diagnose(tmp_path: Path) -> None:
     assert json.loads((tmp_path / "rep" / "diagnosis.json").read_text()) == doc
     assert (tmp_path / "rep" / "residual.png").stat().st_size > 1000
     assert "residual.png" in (tmp_path / "rep" / "report.md").read_text()
+    # the monitor's picture (replay.plots) with diagnose's and beside monitor-file's report
+    assert (tmp_path / "rep" / "monitor.png").stat().st_size > 10_000
+    assert "monitor.png" in (tmp_path / "rep" / "report.md").read_text()
+    assert (tmp_path / "rep.png").stat().st_size > 10_000
     # diagnose applies the calibration's offset exactly: nothing of the 5 ms is left
     assert "time_skew" not in {e["name"] for e in doc["effects"]}
     (tm,) = doc["timing"]

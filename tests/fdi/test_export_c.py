@@ -480,19 +480,22 @@ MUTATIONS = {
 
 
 TABLE_MUTATIONS = {
-    # (line of the full set's initializer, factor): see fdi.export.c._set_initializer
-    "table entry V": (5, 1 + 1e-9),          # the first entry of the parity matrix V
-    "table entry c": (8, 2.0),               # the isolation decision's rejection level
+    # (label of a table entry of the full set, factor): see fdi.export.c.generate_c
+    "table entry V": ("V", 1 + 1e-9),            # the first entry of the parity matrix V
+    "table entry c": ("rejection_level", 2.0),   # the isolation decision's rejection level
 }
 
 
-def _mutate_table(text: str, line: int, factor: float) -> str:
-    """The first non-zero number of one line of the full set's table, times ``factor``."""
+def _mutate_table(text: str, label: str, factor: float) -> str:
+    """The first non-zero number after ``label`` in the full set's tables, times
+    ``factor`` (V lives in the pool, the rejection level in the set's record)."""
     import re
 
-    start = text.index("/* set 0x3f:")
-    for _ in range(line):
-        start = text.index("\n", start) + 1
+    if label == "V":
+        start = text.index("/* set 0x3f: V */") + len("/* set 0x3f: V */")
+    else:
+        start = text.index(f"/* {label} */", text.index("/* set 0x3f: sensors"))
+        start += len(f"/* {label} */")
     end = text.index("\n", start)
     for m in re.finditer(r"-?(?:\d+\.\d*|\d+)(?:e[+-]?\d+)?", text[start:end]):
         v = float(m.group())
@@ -548,9 +551,9 @@ def test_refuses_what_it_cannot_carry(monkeypatch):
         generate_c(big, precision="float32")
     with pytest.raises(ConfigError, match="thresholds are for 6"):
         generate_c(cal, default_thresholds(synthetic_calibration("cone6", seed=1)))
-    monkeypatch.setattr(export_c, "MAX_TABLE_BYTES", 20_000)
-    with pytest.raises(ExportError, match=r"4 gyro sensors: the 2\^4 healthy-set tables would "
-                                          r"take 0\.0 MiB"):
+    monkeypatch.setattr(export_c, "MAX_TABLE_BYTES", 2_000)
+    with pytest.raises(ExportError, match=r"4 gyro sensors: the tables of 16 healthy sets "
+                                          r"would take 0\.0 MiB"):
         generate_c(cal)
 
 

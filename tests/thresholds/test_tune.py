@@ -230,3 +230,24 @@ def test_a_set_calibrated_at_rest_meets_its_target_at_rest():
                 max_rate_dps=CORRECTION_MAX_RATE_DPS)
     n2, h2 = simulated_rate(cal, fast.thresholds, hours=hours, seed=424242, max_rate_dps=0.3)
     assert n2 / h2 > 2 * target, (n2, h2, n2 / h2)
+
+
+def test_a_calibration_whose_flights_raise_no_alarm_is_tuned_not_crashed():
+    """Bias sds so large that the correction flights raise no alarm at all (as a short
+    static calibration's do): tune used to divide by the zero count (correction 0.000 at
+    1/h, ``f(a) and f(b) must have different signs`` at 60/h). Now a pass without alarms
+    steps by the count's 95 % upper bound, the correction is held where every scale's
+    share can be met, and both targets give thresholds (issue 27)."""
+    from fdi.units import DPS
+    from thresholds.tune import max_upcrossing_rate
+
+    s = CAL.gyro
+    sens = tuple(replace(c, bias_sd=c.bias_sd * 1000 + 0.5 * DPS) for c in s.sensors)
+    cal = replace(CAL, sets={**CAL.sets, "gyro": replace(s, sensors=sens)})
+    for target in (1.0, 60.0):
+        tu = tune(cal, false_alarms_per_hour=target, simulate_hours=0.3)
+        corr = tu.assumptions["simulation_correction"]
+        assert all(p["false_alarms"] == 0 and p["bound_only"] for p in corr["passes"])
+        assert corr["factor"] > 1e-3 and "upper bound" in corr["note"]
+        share = target / (3600 * cal.sample_rate_hz) / len(tu.thresholds.scales) / corr["factor"]
+        assert all(share < max_upcrossing_rate(3, w) for w in tu.thresholds.scales)

@@ -1,0 +1,35 @@
+"""Cross-flight evidence on the erle flights (studies/cross_flight.py, docs/next-flight.md).
+
+Calibrated and tuned (1/h) on one flight, monitored on the other. What holds and is checked
+here: no exclusion in either pair, before or after; the chain finds the rest stretch before
+take-off on both flights and moves the biases by what it measured there; the parameter
+check names the scale, time offset and noise mismatch of both pairs. The issue's
+must-hold on alarms (at most one per pair) and unverified time (at most 10 %) is NOT met
+(docs/next-flight.md gives the numbers): the calibration's noise model and detections that
+do not clear are the kernel's part of issue 27.
+"""
+
+from __future__ import annotations
+
+import pytest
+
+from tests.replay.ingest.ingest_helpers import data_file
+
+
+@pytest.mark.slow
+def test_erle_pairs_exclude_nothing_and_name_what_does_not_fit():
+    from studies.cross_flight import ERLE, cross_pairs, load_log
+
+    folder, names = ERLE
+    flights = {n.split("_")[-1].split(".")[0]: load_log(data_file(folder, n)) for n in names}
+    doc = cross_pairs(flights, steps=False)
+    assert len(doc["pairs"]) == 2
+    for r in doc["pairs"]:
+        assert r["before"]["excluded"] == [] and r["after"]["excluded"] == [], r
+        assert r["turn_on"]["method"] == "rest", r["turn_on"]
+        rest = r["turn_on"]["rest"]
+        assert rest["samples"] >= 100 and rest["takeoff_s"] > rest["t1_s"]
+        flagged = {(m["imu"], m["parameter"]) for m in r["misfit"]}
+        assert {("imu2", "scale"), ("imu2", "time offset")} <= flagged, flagged
+        assert any(p == "noise" for _, p in flagged)
+    assert doc["after"]["hours"] > 0 and doc["after"]["ci95_per_hour"][0] >= 0
