@@ -78,6 +78,13 @@ relative to the reference IMU (0 for the reference and for turntable calibration
 uncertainty. A timing error δt makes the output err by ``h_iᵀω̇·δt``, so the monitor widens
 its thresholds with ``τ_i²·(h_iᵀω̇)²`` while the body accelerates (:mod:`fdi.kernel`).
 
+Optional per sensor (a ``/3`` file without it loads with None, "not measured"):
+``bias_turn_on_sd``, in ``bias_unit``: the run-to-run standard deviation of the sensor's
+turn-on bias, measured over several flights calibrated together (``rimu calibrate
+--in-flight F1 F2 ...``, :mod:`calibration.inflight.multi`). ``bias`` is what holds on the
+flights it was fitted on; on the next power-up the bias may lie anywhere within about
+this spread.
+
 ``extra`` keeps what each calibration stage recorded. The entries rimu's code reads (the
 in-flight timing, the warnings, the noise model, the turntable fit's checks, ...) are typed
 in :mod:`fdi.extras` and read through :attr:`Calibration.extras`; the loader checks them and
@@ -100,7 +107,7 @@ from fdi.adequacy import VERDICTS
 from fdi.drift import DriftModel, drift_model_from_fields
 from fdi.errors import ConfigError
 from fdi.extras import CalibrationExtras, extras_from_dict
-from fdi.fileio import Fields, read_json_object, to_jsonable
+from fdi.fileio import Fields, NumberRule, check_numbers, read_json_object, to_jsonable
 from fdi.tails import TailModel, tail_model_from_fields
 from fdi.units import (
     MS,
@@ -112,6 +119,7 @@ from fdi.units import (
 )
 
 __all__ = [
+    "CALIBRATION_NUMBER_RULES",
     "CALIBRATION_SCHEMA",
     "CALIBRATION_SCHEMAS",
     "CALIBRATION_SCHEMA_DRIFT",
@@ -206,6 +214,9 @@ class SensorCal:
     timing_jitter, timing_jitter_sd : float
         Standard deviation τ of the sampling-time error relative to the reference IMU (s)
         and its uncertainty (s); 0 for the reference and for turntable calibrations.
+    bias_turn_on_sd : float or None
+        Run-to-run standard deviation of the turn-on bias over several power-ups (rad/s or
+        m/s², as ``bias``); None when not measured.
     """
 
     name: str
@@ -223,6 +234,7 @@ class SensorCal:
     residual_rms: float = float("nan")
     timing_jitter: float = 0.0
     timing_jitter_sd: float = 0.0
+    bias_turn_on_sd: float | None = None
 
     @property
     def misalignment(self) -> np.ndarray:
@@ -536,10 +548,36 @@ def _sensor_to_dict(c: SensorCal) -> dict[str, Any]:
         "residual_rms": None if not math.isfinite(c.residual_rms) else c.residual_rms,
         **({"timing_jitter_ms": c.timing_jitter / MS, "timing_jitter_ms_sd":
             c.timing_jitter_sd / MS} if c.timing_jitter or c.timing_jitter_sd else {}),
+        **({} if c.bias_turn_on_sd is None else {"bias_turn_on_sd": c.bias_turn_on_sd / bf}),
     }
 
 
 # -- reading ---------------------------------------------------------------------------
+MAX_SCALE_FACTOR_SI = 1e6
+"""Largest scale factor read (rad/s or m/s² per raw unit): no sensor's raw unit is worth a
+million rad/s; a larger one is a unit mistake (the monitor would trust any value it gives)."""
+MIN_SCALE_FACTOR_SI = 1e-15
+"""Smallest scale factor read (a raw output of 10¹⁵ counts would be needed for 1 rad/s)."""
+_UNIT = 1.0 + 1e-9          # entries of an orthonormal parity matrix, with rounding
+CALIBRATION_NUMBER_RULES: tuple[NumberRule, ...] = (
+    NumberRule("parity.*", -_UNIT, _UNIT, what="an entry of an orthonormal parity matrix"),
+    NumberRule("parity_accel.*", -_UNIT, _UNIT,
+               what="an entry of an orthonormal parity matrix"),
+    NumberRule("latitude_deg", -90.0, 90.0, what="a latitude"),
+    NumberRule("sensors.*.scale_factor", 0.0, lo_open=True, what="a scale factor"),
+    NumberRule("residual_tails.*.scales.quantile", 0.0, what="a quantile of the statistic"),
+    NumberRule("residual_tails.*.scales.quantile_upper", 0.0, lo_open=True,
+               what="a quantile bound of the statistic"),
+    NumberRule("residual_tails.*.scales.scale", 1.0, what="a window length"),
+    NumberRule("residual_tails.*.scales.gpd.threshold", 0.0, what="a threshold"),
+    NumberRule("parity_drift.*.blocks", 0.0, what="a count"),
+    NumberRule("*.time_offset_ms", what="a time offset (ms)"),
+)
+"""Ranges of the calibration file's numbers beyond :data:`fdi.fileio.CONVENTION_RULES`
+(``*_sd`` >= 0, covariance diagonals >= 0, Allan ``tau_s`` > 0 and ``adev`` >= 0, ...); every
+other number, in ``extra`` too, must be finite. Checked on load (:func:`calibration_from_dict`),
+so every command that reads a calibration refuses the same values."""
+
 _WRITTEN_ONLY = ("parity", "parity_accel")
 """Top-level keys the writer adds for other tools (derived from the axes; not read back)."""
 
@@ -560,9 +598,15 @@ def calibration_from_dict(doc: Mapping[str, Any], path: str = "<calibration>") -
     """Build a :class:`Calibration` from its JSON dictionary (see :func:`load_calibration`)."""
     r = Fields(doc, path)
     version = r.schema(CALIBRATION_SCHEMAS)
+    check_numbers(doc, path, CALIBRATION_NUMBER_RULES)
     rate = r.number("sample_rate_hz", positive=True)
     sensors = r.mapping("sensors")
     noise = r.mapping("noise_covariance")
+    noise_rate = noise.number("sample_rate_hz", None, positive=True)
+    if noise_rate is not None and not math.isclose(noise_rate, rate, rel_tol=1e-9):
+        raise noise.error("sample_rate_hz", f"{noise_rate:g} Hz, but the file's "
+                          f"sample_rate_hz is {rate:g} Hz (the covariance holds per sample "
+                          "at one rate)")
     mm = r.mapping("misalignment_matrices", {})
     allan = r.mapping("allan", {})
     if not sensors.keys():
@@ -570,7 +614,7 @@ def calibration_from_dict(doc: Mapping[str, Any], path: str = "<calibration>") -
     sets = {kind: _sensor_set(sensors, noise, mm, allan, kind)
             for kind in KINDS if kind in sensors}
     sensors.finish()
-    noise.accept("unit", "sample_rate_hz")
+    noise.accept("unit")
     for sub in (noise, mm, allan):
         sub.finish(accept=sets)
     if version in (CALIBRATION_SCHEMA, CALIBRATION_SCHEMA_DRIFT):
@@ -745,6 +789,18 @@ def _check_covariance(r: Fields, cov: np.ndarray, key: str) -> None:
         raise r.error(key, "nearly singular (condition number above 1e12)")
 
 
+def _input_error_cov(e: Fields) -> np.ndarray:
+    """``input_error_cov``: a symmetric positive semi-definite 3×3 (zeros when absent)."""
+    c = e.array("input_error_cov", (3, 3), np.zeros((3, 3)))
+    scale = float(np.max(np.abs(c)))
+    if not np.allclose(c, c.T, rtol=1e-9, atol=1e-12 * scale):
+        raise e.error("input_error_cov", "expected a symmetric matrix")
+    if scale and float(np.linalg.eigvalsh(c).min()) < -1e-9 * scale:
+        raise e.error("input_error_cov", "expected a positive semi-definite matrix (a "
+                      "covariance)")
+    return c
+
+
 def _unit_axis(e: Fields, key: str) -> np.ndarray:
     a = e.array(key, (3,))
     if abs(np.linalg.norm(a) - 1.0) > 1e-6:
@@ -767,6 +823,12 @@ def _scale_factor_si(e: Fields) -> tuple[float, float, str]:
     if not (math.isfinite(sf_si) and math.isfinite(sfsd_si) and sf_si > 0):
         raise e.error("scale_factor", f"{sf!r} (sd {sfsd!r}) {sfu} is out of range in SI "
                       "units")
+    if not MIN_SCALE_FACTOR_SI <= sf_si <= MAX_SCALE_FACTOR_SI:
+        raise e.error("scale_factor", f"{sf!r} {sfu} is {sf_si:.3g} SI units per raw unit, "
+                      f"outside [{MIN_SCALE_FACTOR_SI:g}, {MAX_SCALE_FACTOR_SI:g}]: a unit "
+                      "mistake?")
+    if not sfsd_si >= 0:
+        raise e.error("scale_factor_sd", f"expected a standard deviation (>= 0), got {sfsd!r}")
     return sf_si, sfsd_si, sfu
 
 
@@ -785,6 +847,24 @@ def _bias_si(e: Fields) -> tuple[float, float, str]:
     return bias, bias_sd, bu
 
 
+def _raw_unit(e: Fields) -> str:
+    """``raw_unit``, required: without it the unit check against the data would pass
+    anything (``"raw"`` says "unknown" explicitly)."""
+    return e.string("raw_unit", nonempty=False).strip()
+
+
+def _turn_on_sd(e: Fields, bias_unit: str) -> float | None:
+    """``bias_turn_on_sd`` in SI (None when absent: not measured)."""
+    v = e.number("bias_turn_on_sd", None, nonnegative=True)
+    if v is None:
+        return None
+    x = v * input_unit_factor(bias_unit)
+    if not math.isfinite(x * x):
+        raise e.error("bias_turn_on_sd", f"expected a standard deviation (>= 0, squarable), "
+                      f"got {v!r} {bias_unit}")
+    return x
+
+
 def _sensor_from(e: Fields) -> SensorCal:
     axis, nom = _unit_axis(e, "axis"), _unit_axis(e, "axis_nominal")
     sf, sf_sd, sfu = _scale_factor_si(e)
@@ -793,12 +873,13 @@ def _sensor_from(e: Fields) -> SensorCal:
     c = SensorCal(
         name=str(e.get("name")), axis=axis, axis_nominal=nom, scale_factor=sf,
         scale_factor_sd=sf_sd, bias=bias, bias_sd=bias_sd,
-        input_error_cov=e.array("input_error_cov", (3, 3), np.zeros((3, 3))),
+        input_error_cov=_input_error_cov(e),
         misalignment_sd=e.array("misalignment_mrad_sd", (2,)) * 1e-3,
-        raw_unit=str(e.get("raw_unit", "raw")), scale_factor_unit=sfu, bias_unit=bu,
+        raw_unit=_raw_unit(e), scale_factor_unit=sfu, bias_unit=bu,
         residual_rms=e.number("residual_rms", float("nan")),
         timing_jitter=e.number("timing_jitter_ms", 0.0, nonnegative=True) * MS,
-        timing_jitter_sd=e.number("timing_jitter_ms_sd", 0.0, nonnegative=True) * MS)
+        timing_jitter_sd=e.number("timing_jitter_ms_sd", 0.0, nonnegative=True) * MS,
+        bias_turn_on_sd=_turn_on_sd(e, bu))
     e.finish()
     return c
 
@@ -843,6 +924,14 @@ def check_compatible(cal: Calibration, n_sensors: int, raw_unit: Any, source: st
     if int(n_sensors) != s.n:
         raise ConfigError(f"{source}: {int(n_sensors)} {kind} sensors, the {where} has {s.n}: "
                           "a calibration only applies to the sensor set it was made for")
+    _check_names(s, names, source, where, kind, warn=False)
+    _check_units(s, raw_unit, source, where, kind, names)
+    _check_names(s, names, source, where, kind, warn=True)     # warned once all else passed
+
+
+def _check_units(s: SensorSet, raw_unit: Any, source: str, where: str, kind: str,
+                 names: Any) -> None:
+    """The data's raw units against the calibration's (generic names pass)."""
     if raw_unit is None:
         return
     units = [raw_unit] * s.n if isinstance(raw_unit, str) else list(raw_unit)
@@ -854,6 +943,31 @@ def check_compatible(cal: Calibration, n_sensors: int, raw_unit: Any, source: st
         who = names[i] if names is not None and i < len(names) else c.name
         raise ConfigError(f"{source}: {kind} sensor {i + 1} ({who}) is in {got!r}, the {where} "
                           f"expects raw outputs in {want!r}")
+
+
+def _check_names(s: SensorSet, names: Any, source: str, where: str, kind: str, *,
+                 warn: bool) -> None:
+    """Sensors are matched by position: the same names in another order are refused (the
+    columns were permuted), other names warned about in one line."""
+    import logging
+
+    if names is None:
+        return
+    got = [str(x) for x in names]
+    want = [c.name for c in s.sensors]
+    if got == want or len(got) != len(want):
+        return
+    if sorted(got) == sorted(want) and not warn:
+        j = next(i for i, (a, b) in enumerate(zip(got, want, strict=True)) if a != b)
+        raise ConfigError(f"{source}: {kind} sensor {j + 1} is {got[j]!r} where the {where} "
+                          f"has {want[j]!r}: the same sensors in another order (a calibration "
+                          "applies by position; reorder the columns)")
+    if not warn or sorted(got) == sorted(want):
+        return
+    pairs = ", ".join(f"{a}={b}" for a, b in zip(got, want, strict=True) if a != b)
+    logging.getLogger("rimu.calibration").warning(
+        f"{source}: its {kind} sensor names differ from the {where}'s; matched by position: "
+        f"{pairs[:200]}")
 
 
 def check_plausible(cal: Calibration, source: str) -> None:
@@ -894,5 +1008,5 @@ def check_plausible(cal: Calibration, source: str) -> None:
             "in deg/s and the latitude right?")
 
 
-__all__ = sorted([*__all__, "GENERIC_RAW_UNITS", "IMPLAUSIBLE_ALPHA", "check_compatible",
-                  "check_plausible"])
+__all__ = sorted([*__all__, "GENERIC_RAW_UNITS", "IMPLAUSIBLE_ALPHA", "MAX_SCALE_FACTOR_SI",
+                  "MIN_SCALE_FACTOR_SI", "check_compatible", "check_plausible"])
