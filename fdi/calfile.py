@@ -78,6 +78,13 @@ relative to the reference IMU (0 for the reference and for turntable calibration
 uncertainty. A timing error δt makes the output err by ``h_iᵀω̇·δt``, so the monitor widens
 its thresholds with ``τ_i²·(h_iᵀω̇)²`` while the body accelerates (:mod:`fdi.kernel`).
 
+Optional per sensor (a ``/3`` file without it loads with None, "not measured"):
+``bias_turn_on_sd``, in ``bias_unit``: the run-to-run standard deviation of the sensor's
+turn-on bias, measured over several flights calibrated together (``rimu calibrate
+--in-flight F1 F2 ...``, :mod:`calibration.inflight.multi`). ``bias`` is what holds on the
+flights it was fitted on; on the next power-up the bias may lie anywhere within about
+this spread.
+
 ``extra`` keeps what each calibration stage recorded. The entries rimu's code reads (the
 in-flight timing, the warnings, the noise model, the turntable fit's checks, ...) are typed
 in :mod:`fdi.extras` and read through :attr:`Calibration.extras`; the loader checks them and
@@ -206,6 +213,9 @@ class SensorCal:
     timing_jitter, timing_jitter_sd : float
         Standard deviation τ of the sampling-time error relative to the reference IMU (s)
         and its uncertainty (s); 0 for the reference and for turntable calibrations.
+    bias_turn_on_sd : float or None
+        Run-to-run standard deviation of the turn-on bias over several power-ups (rad/s or
+        m/s², as ``bias``); None when not measured.
     """
 
     name: str
@@ -223,6 +233,7 @@ class SensorCal:
     residual_rms: float = float("nan")
     timing_jitter: float = 0.0
     timing_jitter_sd: float = 0.0
+    bias_turn_on_sd: float | None = None
 
     @property
     def misalignment(self) -> np.ndarray:
@@ -536,6 +547,7 @@ def _sensor_to_dict(c: SensorCal) -> dict[str, Any]:
         "residual_rms": None if not math.isfinite(c.residual_rms) else c.residual_rms,
         **({"timing_jitter_ms": c.timing_jitter / MS, "timing_jitter_ms_sd":
             c.timing_jitter_sd / MS} if c.timing_jitter or c.timing_jitter_sd else {}),
+        **({} if c.bias_turn_on_sd is None else {"bias_turn_on_sd": c.bias_turn_on_sd / bf}),
     }
 
 
@@ -785,6 +797,18 @@ def _bias_si(e: Fields) -> tuple[float, float, str]:
     return bias, bias_sd, bu
 
 
+def _turn_on_sd(e: Fields, bias_unit: str) -> float | None:
+    """``bias_turn_on_sd`` in SI (None when absent: not measured)."""
+    v = e.number("bias_turn_on_sd", None, nonnegative=True)
+    if v is None:
+        return None
+    x = v * input_unit_factor(bias_unit)
+    if not math.isfinite(x * x):
+        raise e.error("bias_turn_on_sd", f"expected a standard deviation (>= 0, squarable), "
+                      f"got {v!r} {bias_unit}")
+    return x
+
+
 def _sensor_from(e: Fields) -> SensorCal:
     axis, nom = _unit_axis(e, "axis"), _unit_axis(e, "axis_nominal")
     sf, sf_sd, sfu = _scale_factor_si(e)
@@ -798,7 +822,8 @@ def _sensor_from(e: Fields) -> SensorCal:
         raw_unit=str(e.get("raw_unit", "raw")), scale_factor_unit=sfu, bias_unit=bu,
         residual_rms=e.number("residual_rms", float("nan")),
         timing_jitter=e.number("timing_jitter_ms", 0.0, nonnegative=True) * MS,
-        timing_jitter_sd=e.number("timing_jitter_ms_sd", 0.0, nonnegative=True) * MS)
+        timing_jitter_sd=e.number("timing_jitter_ms_sd", 0.0, nonnegative=True) * MS,
+        bias_turn_on_sd=_turn_on_sd(e, bu))
     e.finish()
     return c
 

@@ -26,12 +26,12 @@ this calibration has seen (:data:`fdi.envelope.RANGE`).
 
 from __future__ import annotations
 
-import itertools
 import math
+from dataclasses import replace
 
 import numpy as np
 
-from calibration.inflight.fit import ImuAlignment, InflightFit, decompose
+from calibration.inflight.fit import ImuAlignment, InflightFit, axis_noise
 from calibration.inflight.offset_check import SIGN_CONVENTION
 from calibration.inflight.timing import flight_identity
 from calibration.residual_models import with_residual_models
@@ -42,47 +42,30 @@ from fdi.extras import (
     INFLIGHT_LAYOUT,
     CalibrationExtras,
     FlightIdentity,
+    FlightValues,
     ImuTiming,
     InflightAlignment,
     InflightTiming,
     LeftOut,
     Method,
+    ParameterRecord,
 )
 from fdi.extras import ImuAlignment as ImuAlignmentRecord
 from fdi.units import RAW_UNITS
 from replay.envelope import flight_accel
 from replay.flight_data import Flight
 
-__all__ = ["INFLIGHT_METHOD", "calibration_from_fit", "noise_split", "sensor_residuals"]
+__all__ = ["INFLIGHT_METHOD", "calibration_from_fit", "flight_values", "noise_split",
+           "sensor_residuals"]
 
 INFLIGHT_METHOD = "in-flight alignment to a reference IMU (calibration.inflight/1)"
 _AXES = "xyz"
 
 
-def _psd_floor(C: np.ndarray, floor: np.ndarray) -> np.ndarray:
-    w, V = np.linalg.eigh(0.5 * (C + C.T))
-    return (V * np.maximum(w, float(np.min(floor)))) @ V.T
-
-
 def noise_split(fit: InflightFit) -> dict[str, np.ndarray]:
-    """Per-sample noise covariance (3×3, rad²/s²) of every IMU (module docstring)."""
-    res = {g: a.residual for g, a in fit.alignments.items()}
-    covs = {g: np.cov(r[np.all(np.isfinite(r), axis=1)].T) for g, r in res.items()}
-    names = list(res)
-    if len(names) >= 2:
-        est = []
-        for i, j in itertools.combinations(names, 2):
-            both = np.all(np.isfinite(res[i]), axis=1) & np.all(np.isfinite(res[j]), axis=1)
-            d = np.cov((res[i][both] - res[j][both]).T)
-            est.append((covs[i] + covs[j] - d) / 2)
-        Sr = np.mean(est, axis=0)
-    else:
-        Sr = covs[names[0]] / 2
-    floor = 1e-3 * np.mean([np.trace(c) / 3 for c in covs.values()]) * np.ones(3)
-    out = {fit.reference: _psd_floor(Sr, floor)}
-    for g in names:
-        out[g] = _psd_floor(covs[g] - Sr, floor)
-    return out
+    """Per-sample noise covariance (3×3, rad²/s², each IMU's own frame) of every IMU
+    (module docstring; :func:`calibration.inflight.fit.axis_noise`)."""
+    return axis_noise(fit.alignments, fit.reference)[1]
 
 
 def _allan(fit: InflightFit, noise: dict[str, np.ndarray]) -> AllanTable | None:
@@ -129,7 +112,9 @@ def sensor_residuals(fit: InflightFit, flight: Flight) -> np.ndarray:
 
 
 def calibration_from_fit(fit: InflightFit, flight: Flight, *, tails: bool = True,
-                         jitter: bool = True, drift_model: bool = False) -> Calibration:
+                         jitter: bool = True, drift_model: bool = False,
+                         turn_on_sd: dict[str, np.ndarray] | None = None,
+                         flights: tuple[FlightValues, ...] = ()) -> Calibration:
     """The ``rimu.calibration/3`` calibration of a flight's gyro set (module docstring).
 
     With ``tails`` the residual's tail model per window scale is fitted and kept
@@ -141,7 +126,9 @@ def calibration_from_fit(fit: InflightFit, flight: Flight, *, tails: bool = True
     ``drift_model`` the slow drift of the residual's whitened parity is kept too
     (:mod:`calibration.drift`; ``rimu calibrate --in-flight --drift-model``): ``tune`` then
     covers the drift expected over its horizon, at a price in detectable size
-    (``docs/drift.md``).
+    (``docs/drift.md``). ``turn_on_sd`` (per IMU group, per axis, rad/s) gives each
+    sensor's ``bias_turn_on_sd`` and ``flights`` each flight's own values
+    (:mod:`calibration.inflight.multi`).
     """
     noise = noise_split(fit)
     groups = flight.imu_groups()
@@ -164,6 +151,8 @@ def calibration_from_fit(fit: InflightFit, flight: Flight, *, tails: bool = True
                 if not jitter:
                     jit, jit_sd = 0.0, 0.0
             g_k = float(np.linalg.norm(A_k))
+            ton = (None if turn_on_sd is None or g not in turn_on_sd
+                   else float(turn_on_sd[g][k]) / g_k)
             h = A_k / g_k
             nom = np.zeros(3)
             nom[int(np.argmax(np.abs(h)))] = np.sign(h[int(np.argmax(np.abs(h)))])
@@ -177,7 +166,8 @@ def calibration_from_fit(fit: InflightFit, flight: Flight, *, tails: bool = True
                 scale_factor=1.0 / g_k, scale_factor_sd=float(np.sqrt(h @ C @ h)) / g_k**2,
                 bias=c / g_k, bias_sd=c_sd / g_k, input_error_cov=C, misalignment_sd=ms,
                 raw_unit=flight.raw_unit, scale_factor_unit=sfu, bias_unit="deg/h",
-                residual_rms=rms, timing_jitter=jit, timing_jitter_sd=jit_sd))
+                residual_rms=rms, timing_jitter=jit, timing_jitter_sd=jit_sd,
+                bias_turn_on_sd=ton))
     H = np.array([c.axis for c in sensors])
     sf = np.array([c.scale_factor for c in sensors])
     b = np.array([c.bias for c in sensors])
@@ -195,6 +185,8 @@ def calibration_from_fit(fit: InflightFit, flight: Flight, *, tails: bool = True
                                   inflation=jitter,
                                   source="in-flight alignment residual (samples the fit used)")
     timing, alignment = fit_records(fit, flight)
+    if flights:
+        alignment = replace(alignment, flights=tuple(flights))
     return Calibration(configuration=f"{len(groups)} IMUs in flight", sets={"gyro": gs},
         sample_rate_hz=fit.sample_rate_hz,
         extra=CalibrationExtras(method=Method(INFLIGHT_METHOD), source=fit.source,
@@ -212,9 +204,9 @@ def _rows(m: np.ndarray) -> tuple[tuple[float, ...], ...]:
     return tuple(tuple(r) for r in np.asarray(m, float).tolist())
 
 
-def _alignment(a: ImuAlignment) -> ImuAlignmentRecord:
+def _alignment(a: ImuAlignment, axis_sd: np.ndarray) -> ImuAlignmentRecord:
     """The typed record of one IMU's fitted alignment."""
-    parts = decompose(a.A, a.A_cov)
+    parts = a.parts()
     r = a.residual[np.all(np.isfinite(a.residual), axis=1)]
     lag1 = [float(np.corrcoef(r[1:, k], r[:-1, k])[0, 1]) for k in range(3)]
     return ImuAlignmentRecord(
@@ -224,7 +216,23 @@ def _alignment(a: ImuAlignment) -> ImuAlignmentRecord:
         bias=tuple(a.c.tolist()), bias_sd=tuple(np.sqrt(np.diag(a.c_cov)).tolist()),
         residual_rms=tuple(np.sqrt(np.mean(r**2, axis=0)).tolist()),
         residual_lag1_autocorrelation=tuple(lag1), hac_lags=a.lags, samples=int(r.shape[0]),
-        excitation=a.excitation.to_dict(), notes=tuple(a.notes))
+        excitation=_finite_dict(a.excitation.to_dict()), notes=tuple(a.notes),
+        mounting=_rows(a.mounting),
+        parameters=tuple(ParameterRecord(
+            p.name, p.value, p.sd, p.prior_sd, p.status,
+            p.excitation if math.isfinite(p.excitation) else None) for p in a.parameters),
+        axis_noise=tuple(np.asarray(axis_sd, float).tolist()))
+
+
+def _finite_dict(d: dict) -> dict:
+    """Non-finite numbers in lists as None (JSON has no inf)."""
+    def f(v):
+        if isinstance(v, list):
+            return [f(x) for x in v]
+        if isinstance(v, float) and not math.isfinite(v):
+            return None
+        return v
+    return {k: f(v) for k, v in d.items()}
 
 
 def fit_records(fit: InflightFit, flight: Flight) -> tuple[InflightTiming, InflightAlignment]:
@@ -239,8 +247,30 @@ def fit_records(fit: InflightFit, flight: Flight) -> tuple[InflightTiming, Infli
                            timing_jitter_sd_s=a.timing_jitter_sd_s, check=a.check)
               for g, a in fit.alignments.items()})
     alignment = InflightAlignment(
-        imus={g: _alignment(a) for g, a in fit.alignments.items()},
+        imus={g: _alignment(a, fit.axis_noise.get(g, ())) for g, a in fit.alignments.items()},
         left_out=tuple(LeftOut(s.t0_s, s.t1_s, s.reason, s.detail) for s in fit.left_out),
         samples_used=int(fit.used.sum()), samples=int(fit.used.shape[0]),
-        samples_nonfinite=int(getattr(fit, "nonfinite", 0)))
+        samples_nonfinite=int(getattr(fit, "nonfinite", 0)),
+        findings=tuple(x.text() for x in fit.findings),
+        reference_noise=tuple(np.asarray(fit.axis_noise.get(fit.reference, ()),
+                                         float).tolist()),
+        prior={} if fit.prior is None else fit.prior.to_dict(fit.sample_rate_hz),
+        window_s=() if fit.window is None else tuple(float(x) for x in fit.window))
     return timing, alignment
+
+
+def flight_values(fit: InflightFit, flight: Flight) -> FlightValues:
+    """One flight's own values (its biases, offsets, jitter and the parts of E), for
+    ``extra.inflight.flights`` of a joint calibration."""
+    imus = {}
+    for g, a in fit.alignments.items():
+        parts = a.parts()
+        imus[g] = {"bias_dph": tuple(a.c.tolist()),
+                   "bias_dph_sd": tuple(np.sqrt(np.diag(a.c_cov)).tolist()),
+                   "time_offset_ms": (a.time_offset_s,),
+                   "time_offset_ms_sd": (a.time_offset_sd_s,),
+                   "timing_jitter_ms": (_finite0(a.timing_jitter_s),),
+                   **{k: tuple(v.tolist()) for k, (v, _) in parts.items()},
+                   **{f"{k}_sd": tuple(sd.tolist()) for k, (_, sd) in parts.items()}}
+    return FlightValues(source=fit.source, flight=FlightIdentity(**flight_identity(flight)),
+                        imus=imus)

@@ -31,6 +31,7 @@ residual covariance (two IMUs of equal noise).
 from __future__ import annotations
 
 import functools
+import itertools
 import math
 from dataclasses import dataclass, field, replace
 
@@ -40,20 +41,32 @@ from scipy.interpolate import CubicSpline
 
 from calibration.inflight.jitter import JitterFit, fit_timing_jitter
 from calibration.inflight.offset_check import check_offset
-from calibration.inflight.regression import StackedFit, stacked_lstsq
+from calibration.inflight.prior import PARAMETERS, Prior, mounting_text, nearest_mounting
+from calibration.inflight.regression import StackedFit, stacked_lstsq, stacked_ridge
 from calibration.inflight.segments import Segment, find_segments, keep_mask
 from fdi.errors import CalibrationError, ConfigError
 from fdi.extras import OffsetCheck
 from replay.flight_data import Flight
 
-__all__ = ["EXCITATION_MIN", "MODELS", "VIF_MAX", "Excitation", "ImuAlignment",
-           "InflightFit", "decompose", "fit_inflight", "fit_pair", "imu_rates"]
+__all__ = ["ESTIMATED", "EXCITATION_MIN", "FINDING_RATIO", "HELD", "INFORMED", "MODELS",
+           "TAU_EXCITATION_MIN", "VIF_MAX", "AxisFinding", "Excitation", "ImuAlignment",
+           "InflightFit",
+           "ParameterStatus", "axis_noise", "decompose", "fit_inflight", "fit_pair",
+           "fit_pair_prior", "imu_rates"]
 
 VIF_MAX = 1e3
 """Largest variance inflation factor of a parameter that is still separable."""
 EXCITATION_MIN = 10.0
 """Smallest ratio of a regressor's RMS variation to the noise it carries."""
 MODELS = ("auto", "full", "rotation")
+TAU_EXCITATION_MIN = 3.0
+"""Smallest ratio for the time offset (with the prior): the errors-in-variables bias of a
+coefficient is a fraction ``1/(1 + ratio²)`` of the coefficient itself; a gain is near 1,
+so 1 % of it (ratio 10) is a 10,000 ppm scale error, while the time offset is small
+itself, and 10 % of it (ratio 3) lies within its sd before the first-order correction."""
+FINDING_RATIO = 3.0
+"""An IMU axis whose own noise exceeds this many times the median of the same body axis on
+the other IMUs is a finding (vibration, a loose mount, a failing sensor)."""
 _GN_ITER = 6
 _EDGE = 3
 """Samples left out on each side of a dropped block (the spline bridges it)."""
@@ -103,6 +116,39 @@ class Excitation:
                 "rank": self.rank, "ratio_min": EXCITATION_MIN, "vif_max": VIF_MAX}
 
 
+ESTIMATED = "estimated"
+HELD = "held at prior"
+INFORMED = 0.5
+"""A parameter counts as estimated when its posterior sd is at most this fraction of its
+prior sd (the data carry at least three times the prior's information)."""
+
+
+@dataclass(frozen=True)
+class ParameterStatus:
+    """One parameter of an alignment: its value, sd, prior sd and whether the flight
+    estimated it or it stays at the prior.
+
+    Attributes
+    ----------
+    name : str
+        :data:`calibration.inflight.prior.PARAMETERS` or ``"time offset"``.
+    value, sd, prior_sd : float
+        rad, fraction or s.
+    status : str
+        :data:`ESTIMATED` or :data:`HELD`.
+    excitation : float
+        RMS variation of its regressor over the reference noise on that axis (the
+        largest over the reference axes it involves).
+    """
+
+    name: str
+    value: float
+    sd: float
+    prior_sd: float
+    status: str
+    excitation: float
+
+
 @dataclass(frozen=True, eq=False)
 class ImuAlignment:
     """In-flight calibration of one IMU against the reference (SI).
@@ -150,6 +196,15 @@ class ImuAlignment:
     check: OffsetCheck | None = None
     timing_jitter_s: float = 0.0
     timing_jitter_sd_s: float = 0.0
+    mounting: np.ndarray = field(default_factory=lambda: np.eye(3))
+    parameters: tuple[ParameterStatus, ...] = ()
+
+    @property
+    def small(self) -> tuple[np.ndarray, np.ndarray]:
+        """``E = A·Rᵀ − I`` (the part beyond the mounting R) and the covariance of vec(E)."""
+        R = np.asarray(self.mounting, float)
+        B = np.kron(np.eye(3), R)                   # vec(E) = B·vec(A) − vec(I)
+        return self.A @ R.T - np.eye(3), B @ self.A_cov @ B.T
 
     @property
     def offset_check(self) -> dict[str, object]:
@@ -157,8 +212,14 @@ class ImuAlignment:
         return {} if self.check is None else self.check.to_dict()
 
     def parts(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
-        """Rotation, scale and non-orthogonality of A with their sds (rad, fraction)."""
-        return decompose(self.A, self.A_cov)
+        """Rotation, scale and non-orthogonality beyond the mounting with their sds (rad,
+        fraction): the parts of ``I + E``, ``A = (I + E)·R``."""
+        E, C = self.small
+        return decompose(np.eye(3) + E, C)
+
+    def held(self) -> list[str]:
+        """Names of the parameters held at the prior (not excited by the motion)."""
+        return [p.name for p in self.parameters if p.status == HELD]
 
 
 @dataclass(frozen=True, eq=False)
@@ -190,6 +251,10 @@ class InflightFit:
     source: str = ""
     extra: dict[str, object] = field(default_factory=dict)
     nonfinite: int = 0
+    findings: tuple[AxisFinding, ...] = ()
+    axis_noise: dict[str, np.ndarray] = field(default_factory=dict)
+    prior: Prior | None = None
+    window: tuple[float, float] | None = None
 
 
 def _decomposition_matrix() -> np.ndarray:
@@ -476,9 +541,124 @@ def _gain(model: str, beta: np.ndarray) -> np.ndarray:
                                  [-th[1], th[0], 0.0]])
 
 
+@dataclass(frozen=True)
+class AxisFinding:
+    """An IMU axis far noisier than the same body axis on the other IMUs.
+
+    Attributes
+    ----------
+    imu : str
+    axis : str
+        The IMU's own axis (``"x"``, ...).
+    noise_sd : float
+        Its own noise sd in flight (rad/s; the three-cornered hat of the residuals).
+    others_sd : float
+        Median of the other IMUs' noise sd on the same body axis (rad/s).
+    """
+
+    imu: str
+    axis: str
+    noise_sd: float
+    others_sd: float
+
+    def text(self) -> str:
+        """``"imu1.x: 9.5 deg/s vibration against 1.5 deg/s on the others"``."""
+        return (f"{self.imu}.{self.axis}: {np.degrees(self.noise_sd):.3g} deg/s vibration "
+                f"against {np.degrees(self.others_sd):.3g} deg/s on the others (kept: its "
+                "channel is weighted by its own noise)")
+
+
+def axis_noise(alignments: dict[str, ImuAlignment], reference: str
+               ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """Noise covariance of the reference (its frame) and of each IMU (its own frame).
+
+    The residual of IMU j is ``r_j = n_j − A_j·n_ref``; in the reference frame
+    (``r̃_j = R_jᵀ·r_j``) the three-cornered hat gives
+    ``Σ_ref = (Cov r̃_i + Cov r̃_j − Cov(r̃_i − r̃_j))/2`` averaged over pairs, and
+    ``Σ_j = Cov r_j − R_j·Σ_ref·R_jᵀ`` (per axis the median over pairs, bounded by the
+    smallest residual variance on that axis). With one IMU besides the reference the two share
+    the residual equally (the data cannot split it).
+
+    Returns
+    -------
+    Sr : ndarray, shape (3, 3)
+    own : dict of str to ndarray (3, 3)
+        Including the reference; rad²/s².
+    """
+    res = {g: a.residual for g, a in alignments.items()}
+    rot = {g: res[g] @ np.asarray(a.mounting, float) for g, a in alignments.items()}
+    fin = {g: np.all(np.isfinite(r), axis=1) for g, r in res.items()}
+    covs = {g: np.cov(res[g][fin[g]].T) for g in res}
+    names = list(res)
+    if len(names) >= 2:
+        est = []
+        for i, j in itertools.combinations(names, 2):
+            both = fin[i] & fin[j]
+            ci, cj = np.cov(rot[i][both].T), np.cov(rot[j][both].T)
+            d = np.cov((rot[i][both] - rot[j][both]).T)
+            est.append((ci + cj - d) / 2)
+        Sr = np.mean(est, axis=0)
+        # robust per axis: the median over pairs (two IMUs sharing an error inflate their
+        # pair's estimate), at most the smallest residual variance on that axis (the
+        # reference's noise is in every residual); the correlations of the mean estimate
+        var = np.clip(np.median([np.diag(e) for e in est], axis=0), 0, None)
+        var = np.minimum(var, np.min([np.var(rot[g][fin[g]], axis=0) for g in names],
+                                     axis=0))
+        d0 = np.sqrt(np.clip(np.diag(Sr), 1e-30, None))
+        corr = np.clip(Sr / np.outer(d0, d0), -1, 1)
+        np.fill_diagonal(corr, 1.0)
+        Sr = corr * np.sqrt(np.outer(var, var))
+    else:
+        R = np.asarray(alignments[names[0]].mounting, float)
+        Sr = R.T @ covs[names[0]] @ R / 2
+    floor = 1e-3 * float(np.mean([np.trace(c) / 3 for c in covs.values()]))
+    Sr = _psd(Sr, floor)
+    own = {reference: Sr}
+    for g, a in alignments.items():
+        R = np.asarray(a.mounting, float)
+        own[g] = _psd(covs[g] - R @ Sr @ R.T, floor)
+    return Sr, own
+
+
+def _psd(C: np.ndarray, floor: float) -> np.ndarray:
+    w, V = np.linalg.eigh(0.5 * (C + C.T))
+    return (V * np.maximum(w, floor)) @ V.T
+
+
+def _findings(alignments: dict[str, ImuAlignment], reference: str,
+              own: dict[str, np.ndarray]) -> tuple[AxisFinding, ...]:
+    """Axes whose own noise exceeds :data:`FINDING_RATIO` × the others' on that body axis
+    (needs three IMUs or more: with two the residual cannot be split)."""
+    if len(own) < 3:
+        return ()
+    mount = {reference: np.eye(3), **{g: np.asarray(a.mounting, float)
+                                      for g, a in alignments.items()}}
+    body = {g: np.sqrt(np.clip(np.diag(mount[g].T @ own[g] @ mount[g]), 0, None))
+            for g in own}
+    out = []
+    for g in own:
+        for k in range(3):
+            m = int(np.argmax(np.abs(mount[g][k])))      # body axis of the IMU's axis k
+            others = float(np.median([body[h][m] for h in own if h != g]))
+            mine = float(np.sqrt(max(own[g][k, k], 0.0)))
+            if others > 0 and mine > FINDING_RATIO * others:
+                out.append(AxisFinding(g, _AXES[k], mine, others))
+    return tuple(out)
+
+
 def fit_inflight(flight: Flight, *, reference: str | None = None, model: str = "auto",
-                 time_offset: bool = True) -> InflightFit:
+                 time_offset: bool = True, prior: Prior | None = None,
+                 window: tuple[float, float] | None = None,
+                 mountings: dict[str, np.ndarray] | None = None,
+                 check: bool = True) -> InflightFit:
     """Align every IMU of a flight to the reference IMU.
+
+    Each IMU's mounting is found first (the nearest rotation by multiples of 90°,
+    :func:`calibration.inflight.prior.nearest_mounting`, unless ``mountings`` declares it),
+    then its small misalignment, scale, non-orthogonality, bias and time offset are fitted
+    with the prior (:func:`fit_pair_prior`) in two passes: the first gives the residuals
+    from which each IMU's own noise per axis is split (:func:`axis_noise`), the second
+    judges excitation against the reference's own noise per axis.
 
     Parameters
     ----------
@@ -487,18 +667,27 @@ def fit_inflight(flight: Flight, *, reference: str | None = None, model: str = "
     reference : str, optional
         IMU group of the reference (default: the first).
     model : str
-        ``"auto"``, ``"full"`` or ``"rotation"``.
+        ``"auto"`` (= ``"full"``), ``"full"`` or ``"rotation"``.
     time_offset : bool
+    prior : Prior, optional
+        Default :class:`~calibration.inflight.prior.Prior`.
+    window : (float, float), optional
+        Only samples with ``t0 <= t <= t1`` (s).
+    mountings : dict of str to ndarray (3, 3), optional
+        Declared mountings (signed permutations) of some IMUs.
+    check : bool
+        Check the time offsets' sds (:mod:`.offset_check`).
 
     Raises
     ------
     ConfigError
-        Unknown reference or model, fewer than two IMUs.
+        Unknown reference or model, fewer than two IMUs, an empty window.
     CalibrationError
-        The flight does not excite a parameter (the message names it).
+        Too few usable samples (the message names the IMU and what to do).
     """
     if model not in MODELS:
         raise ConfigError(f"model {model!r} is not one of {MODELS}")
+    prior = Prior() if prior is None else prior
     rates = imu_rates(flight)
     ref = reference or next(iter(rates))
     if ref not in rates:
@@ -506,35 +695,275 @@ def fit_inflight(flight: Flight, *, reference: str | None = None, model: str = "
                           f"(IMUs: {', '.join(rates)})")
     segs = find_segments(flight)
     kept = keep_mask(flight.t, segs)
-    # a sample with a non-finite rate in any IMU is left out of every pair, and counted
+    if window is not None:
+        t0, t1 = window
+        inw = (flight.t >= t0) & (flight.t <= t1)
+        if not inw.any():
+            raise ConfigError(f"{flight.source}: the window {t0:g}:{t1:g} s holds no sample "
+                              f"(the record spans {flight.t[0]:.3f}-{flight.t[-1]:.3f} s)")
+        kept = kept & inw
     finite = np.all([np.all(np.isfinite(r), axis=1) for r in rates.values()], axis=0)
     used = kept & finite
-    try:
-        out = _fit_all(flight, rates, ref, used, model, time_offset)
-    except CalibrationError as exc:
-        raise CalibrationError(f"{flight.source}: {exc}") from None
-    return InflightFit(reference=ref, imus=tuple(rates), alignments=out, used=used,
-                       left_out=tuple(segs), sample_rate_hz=flight.sample_rate_hz,
-                       source=flight.source, nonfinite=int((kept & ~finite).sum()))
-
-
-def _fit_all(flight: Flight, rates: dict[str, np.ndarray], ref: str, used: np.ndarray,
-             model: str, time_offset: bool) -> dict[str, ImuAlignment]:
-    out = {}
+    fitm = "rotation" if model == "rotation" else "full"
+    mount = {}
     for g, y in rates.items():
         if g == ref:
             continue
-        kw = dict(time_offset=time_offset, label=g, sample_rate_hz=flight.sample_rate_hz)
-        if model == "auto":
-            try:
-                out[g] = fit_pair(flight.t, rates[ref], y, used, model="full", **kw)
-            except CalibrationError as exc:
-                if "time offset" in str(exc) or "bias" in str(exc):
-                    raise
-                a = fit_pair(flight.t, rates[ref], y, used, model="rotation", **kw)
-                out[g] = replace(a, notes=(*a.notes, (
-                    f"scale factors and non-orthogonality not fitted ({exc}); taken equal "
-                    f"to the reference's")))
+        if mountings and g in mountings:
+            mount[g] = np.asarray(mountings[g], float)
         else:
-            out[g] = fit_pair(flight.t, rates[ref], y, used, model=model, **kw)
-    return out
+            u = used & np.all(np.isfinite(y), axis=1)
+            mount[g] = nearest_mounting(rates[ref][u], y[u])[0] if u.sum() >= 50 \
+                else np.eye(3)
+    kw = dict(prior=prior, model=fitm, time_offset=time_offset,
+              sample_rate_hz=flight.sample_rate_hz)
+    try:
+        first = {g: fit_pair_prior(flight.t, rates[ref], y, used, mounting=mount[g], label=g,
+                                   check=False, jitter=False, gate=False, **kw)
+                 for g, y in rates.items() if g != ref}
+        Sr, _ = axis_noise(first, ref)
+        out = {g: fit_pair_prior(flight.t, rates[ref], y, used, mounting=mount[g], label=g,
+                                 ref_noise=Sr, check=check, **kw)
+               for g, y in rates.items() if g != ref}
+    except CalibrationError as exc:
+        raise CalibrationError(f"{flight.source}: {exc}") from None
+    _, own = axis_noise(out, ref)
+    return InflightFit(reference=ref, imus=tuple(rates), alignments=out, used=used,
+                       left_out=tuple(segs), sample_rate_hz=flight.sample_rate_hz,
+                       source=flight.source, nonfinite=int((kept & ~finite).sum()),
+                       findings=_findings(out, ref, own),
+                       axis_noise={g: np.sqrt(np.clip(np.diag(c), 0, None))
+                                   for g, c in own.items()},
+                       prior=prior, window=window)
+
+
+# -- with a prior: every IMU calibrated, what the motion does not excite held ------------
+def _rotation_basis() -> np.ndarray:
+    """(9, 3): vec([θ]×) = T·θ (row-major)."""
+    T = np.zeros((9, 3))
+    T[7, 0], T[5, 0] = 1.0, -1.0
+    T[2, 1], T[6, 1] = 1.0, -1.0
+    T[3, 2], T[1, 2] = 1.0, -1.0
+    return T
+
+
+def _columns_of(basis: np.ndarray) -> list[list[int]]:
+    """For each parameter (column of ``basis``), the columns m of E it involves."""
+    return [sorted({i % 3 for i in np.flatnonzero(np.abs(basis[:, j]) > 0)})
+            for j in range(basis.shape[1])]
+
+
+def fit_pair_prior(t: np.ndarray, y_ref: np.ndarray, y: np.ndarray, used: np.ndarray, *,
+                   prior: Prior, mounting: np.ndarray | None = None, model: str = "full",
+                   time_offset: bool = True, label: str = "imu",
+                   sample_rate_hz: float | None = None, ref_noise: np.ndarray | None = None,
+                   check: bool = True, jitter: bool = True, gate: bool = True
+                   ) -> ImuAlignment:
+    """Fit ``y = (I + E)·R·y_ref(t+τ) + c`` with a prior on E and τ (:mod:`.prior`).
+
+    Every reference axis whose rate varies by at least :data:`EXCITATION_MIN` times the
+    reference's own noise on that axis informs the columns of E it multiplies; the columns
+    of an axis that does not stay at the prior (their regressors reduced to their mean:
+    the data cannot tell their variation from the noise, its errors-in-variables bias would
+    be large, and the mean keeps the prior's uncertainty of ``E·z̄`` in the bias). τ is
+    fitted when the angular acceleration varies by :data:`TAU_EXCITATION_MIN` times the
+    noise of the differentiated reference, and held at 0 ± the prior's sd otherwise. The
+    estimate is the posterior mode with the HAC sandwich covariance
+    (:func:`calibration.inflight.regression.stacked_ridge`), channels weighted by the
+    inverse variance of their own residual (one IMU's vibrating axis weighs only its own
+    channel), corrected for the reference noise in the regressors (:func:`_debias`).
+
+    Parameters
+    ----------
+    t : ndarray, shape (N,)
+    y_ref, y : ndarray, shape (N, 3)
+        Reference and IMU gyro outputs (rad/s).
+    used : ndarray of bool, shape (N,)
+    prior : Prior
+    mounting : ndarray, shape (3, 3), optional
+        R (a signed permutation); identity when None.
+    model : str
+        ``"full"`` (E free: rotation, scale, non-orthogonality) or ``"rotation"`` (E = [θ]×).
+    time_offset : bool
+    label : str
+    sample_rate_hz : float, optional
+    ref_noise : ndarray, shape (3, 3), optional
+        Noise covariance of the reference (rad²/s², its own frame); when None, half the
+        pair's residual covariance (two IMUs of equal noise).
+    check, jitter : bool
+        As :func:`fit_pair`.
+    gate : bool
+        Judge excitation (default). Without it every parameter is fitted with its prior
+        (the first pass, whose residual gives the noise the excitation is judged against:
+        a lag left in the residual would inflate it). With it and no ``ref_noise``, that
+        first pass is run here.
+
+    Raises
+    ------
+    CalibrationError
+        Too few usable samples (the message names the IMU and what to do).
+    """
+    fs = float(sample_rate_hz or (1.0 / np.median(np.diff(t))))
+    if gate and ref_noise is None:
+        a0 = fit_pair_prior(t, y_ref, y, used, prior=prior, mounting=mounting, model=model,
+                            time_offset=time_offset, label=label, sample_rate_hz=fs,
+                            check=False, jitter=False, gate=False)
+        r0 = a0.residual[np.all(np.isfinite(a0.residual), axis=1)]
+        R0 = np.eye(3) if mounting is None else np.asarray(mounting, float)
+        ref_noise = R0.T @ np.cov(r0.T) @ R0 / 2
+        tau0 = a0.time_offset_s
+    else:
+        tau0 = 0.0
+    R = np.eye(3) if mounting is None else np.asarray(mounting, float)
+    ok = used & np.all(np.isfinite(y_ref), axis=1) & np.all(np.isfinite(y), axis=1)
+    if ok.sum() < 50:
+        raise CalibrationError(
+            f"{label}: only {int(ok.sum())} samples where it and the reference both have "
+            "finite rates (need 50): choose a longer part of the record (--window)")
+    core = ok & ndimage.binary_erosion(ok, structure=np.ones(2 * _EDGE + 1, bool),
+                                       border_value=True)
+    basis = np.linalg.inv(_decomposition_matrix()) if model == "full" else _rotation_basis()
+    sds = prior.sds() if model == "full" else prior.sds()[:3]
+    names = list(PARAMETERS) if model == "full" else list(PARAMETERS[:3])
+    involves = _columns_of(basis)
+    q = basis.shape[1]
+    tau_sd = prior.tau_sd(fs)
+    tt = t[ok]
+    spline = CubicSpline(tt, y_ref[ok], axis=0)
+    tau = tau0
+    E = np.zeros((3, 3))
+    fit_tau = time_offset
+    w = None
+    Sr_given = None if ref_noise is None else R @ np.asarray(ref_noise, float) @ R.T
+    col_ratio = np.full(3, np.inf)
+    tau_ratio = np.inf
+    fit = X = inside = dz = None
+    for it in range(_GN_ITER if time_offset else 2):
+        inside = (tt + tau >= tt[0]) & (tt + tau <= tt[-1]) & core[ok]
+        z = spline(tt + tau) @ R.T
+        dz = spline(tt + tau, 1) @ R.T
+        zi, dzi = z[inside], dz[inside]
+        Y = y[ok][inside] - zi
+        n = zi.shape[0]
+        if w is None:
+            w = 1.0 / np.maximum(np.var(Y, axis=0), 1e-30)
+            Sr = Sr_given if Sr_given is not None else np.diag(0.5 / w)
+        sig_r = np.sqrt(np.clip(np.diag(Sr), 1e-30, None))
+        if it == 0 or Sr_given is None:
+            col_ratio = np.std(zi, axis=0) / sig_r
+            A_now = np.eye(3) + E
+            tau_ratio = float(np.max(np.std(dzi @ A_now.T, axis=0) / (fs * sig_r)))
+            fit_tau = time_offset and (tau_ratio >= TAU_EXCITATION_MIN or not gate)
+            if not fit_tau:
+                tau = 0.0
+        excited = (col_ratio >= EXCITATION_MIN) | (not gate)
+        # an axis not excited keeps only its mean in the regressors: the data then say
+        # nothing of its columns beyond their product with the mean rate (the reference's
+        # bias, confounded with c), so c carries the prior's uncertainty of E·z̄
+        # (the variation left out is "considered": its effect through the prior's spread
+        # of E goes into the covariance of what is estimated, stacked_ridge)
+        zx = np.where(excited[None, :], zi, zi.mean(axis=0, keepdims=True))
+        XE = np.zeros((n, 3, 9))
+        XC = np.zeros((n, 3, 9))
+        for k in range(3):
+            XE[:, k, 3 * k:3 * k + 3] = zx
+            XC[:, k, 3 * k:3 * k + 3] = zi - zx
+        p = q + 3 + fit_tau
+        X = np.zeros((n, 3, p))
+        X[:, :, :q] = XE @ basis
+        for k in range(3):
+            X[:, k, q + k] = 1.0
+        A_now = np.eye(3) + E
+        if fit_tau:
+            X[:, :, -1] = dzi @ A_now.T
+        Lam = np.zeros((p, p))
+        Lam[:q, :q] = np.diag(1.0 / sds**2)
+        mu = np.zeros(p)
+        if fit_tau:
+            Lam[-1, -1] = 1.0 / tau_sd**2
+            mu[-1] = -tau
+        v, kappa = _spline_noise(round(float((tau * fs) % 1.0), 3))
+        mE = -n * v * ((A_now @ Sr) * excited[None, :] * w[:, None]).ravel()
+        mom = np.zeros(p)
+        mom[:q] = basis.T @ mE
+        if fit_tau:
+            mom[-1] = -n * kappa * fs * float(np.sum(w * np.diag(A_now @ Sr @ A_now.T)))
+        Xc = np.zeros_like(X)
+        Xc[:, :, :q] = XC @ basis
+        fit = stacked_ridge(X, Y, w, mu, Lam, moment=mom,
+                            consider=Xc if np.any(~excited) else None)
+        E = (basis @ fit.beta[:q]).reshape(3, 3)
+        w = 1.0 / np.maximum(np.var(fit.residual, axis=0), 1e-30)
+        if Sr_given is None:
+            Sr = np.cov(fit.residual.T) / 2
+        if fit_tau:
+            step = float(fit.beta[-1])
+            tau += step
+            if abs(step) < 1e-3 * max(fit.sd[-1], 1e-9):
+                break
+    A = (np.eye(3) + E) @ R
+    cov = fit.cov
+    Ecov = basis @ cov[:q, :q] @ basis.T
+    K = np.kron(np.eye(3), R.T)                      # vec(A) = K·vec(I + E)
+    A_cov = K @ Ecov @ K.T
+    ci = slice(q, q + 3)
+    sd = np.sqrt(np.clip(np.diag(cov), 0, None))
+    params = []
+    for j in range(q):
+        r = float(max(col_ratio[m] for m in involves[j]))
+        st = ESTIMATED if sd[j] <= INFORMED * sds[j] else HELD
+        params.append(ParameterStatus(names[j], float(fit.beta[j]), float(sd[j]),
+                                      float(sds[j]), st, r))
+    sd_tau = float(sd[-1]) if fit_tau else tau_sd
+    tau_status = ESTIMATED if fit_tau and sd_tau <= INFORMED * tau_sd else HELD
+    if time_offset:
+        params.append(ParameterStatus("time offset", tau if fit_tau else 0.0, sd_tau, tau_sd,
+                                      tau_status, tau_ratio))
+    residual = np.full(y.shape, np.nan)
+    rows = np.flatnonzero(ok)[inside]
+    residual[rows] = fit.residual
+    ex_names = [*names, "bias x", "bias y", "bias z"] + (["time offset"] if fit_tau else [])
+    exc = _excitation(X, ex_names, list(range(q, q + 3)), np.ones(p))
+    ratio = np.array([pp.excitation for pp in params[:q]]
+                     + ([tau_ratio] if fit_tau else []))
+    exc = replace(exc, ratio=ratio)
+    notes = ["posterior mode with the prior as pseudo-observations; channels weighted by "
+             "their own residual variance; corrected for the reference noise in the "
+             "regressors (first order)"]
+    held = [pp.name for pp in params if pp.status == HELD]
+    if held:
+        notes.append("held at the prior (the flight does not excite them): "
+                     + ", ".join(held))
+    if not np.allclose(R, np.eye(3)):
+        notes.append(f"mounting {mounting_text(R)}")
+    chk: OffsetCheck | None = None
+    if fit_tau and check:
+        fitted = np.zeros(t.shape[0], bool)
+        fitted[rows] = True
+        data_cols = [j for j in range(q) if np.any(np.std(X[:, :, j], axis=0) > 0)]
+        data_cols += list(range(q, p))
+        sw = np.sqrt(w)
+
+        def piece(mask: np.ndarray) -> tuple[float, float, str]:
+            kw = dict(time_offset=True, label=label, sample_rate_hz=fs, check=False,
+                      jitter=False)
+            a = fit_pair(t, y_ref, y, mask, model="fixed", gain=A, **kw)
+            return a.time_offset_s, a.time_offset_sd_s, a.model
+
+        try:
+            chk = check_offset(t, fitted, X[:, :, data_cols] * sw[None, :, None],
+                               fit.residual * sw, sd_tau, fs, piece)
+            sd_tau = max(sd_tau, 1e-3 * (1e3 * chk.sd_s))
+        except np.linalg.LinAlgError:
+            notes.append("time offset: the piece and bootstrap checks could not be computed "
+                         "(singular design); HAC sd reported")
+        params[-1] = replace(params[-1], sd=sd_tau)
+    jit = (fit_timing_jitter(fit.residual, dz[inside] @ (np.eye(3) + E).T, lags=fit.lags)
+           if jitter else JitterFit(0.0, 0.0, 0.0, 0.0, np.zeros((3, 3)), 0))
+    return ImuAlignment(imu=label, model=model, A=A, A_cov=A_cov, c=fit.beta[ci],
+                        c_cov=cov[ci, ci], time_offset_s=tau if fit_tau else 0.0,
+                        time_offset_sd_s=sd_tau if time_offset else 0.0,
+                        residual=residual, lags=fit.lags, excitation=exc, notes=tuple(notes),
+                        check=chk, timing_jitter_s=jit.tau_s,
+                        timing_jitter_sd_s=jit.tau_sd_s, mounting=R,
+                        parameters=tuple(params))

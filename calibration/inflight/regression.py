@@ -25,7 +25,8 @@ from scipy import stats
 
 from fdi.errors import CalibrationError
 
-__all__ = ["StackedFit", "andrews_lags", "long_run_covariance", "stacked_lstsq", "wald_test"]
+__all__ = ["StackedFit", "andrews_lags", "long_run_covariance", "stacked_lstsq",
+           "stacked_ridge", "wald_test"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -141,6 +142,87 @@ def stacked_lstsq(X: np.ndarray, Y: np.ndarray, *, lags: int | None = None) -> S
     dof = max(N * m - p, 1)
     cov_white = Minv * float(np.sum(e * e)) / dof
     return StackedFit(beta, 0.5 * (cov + cov.T), e, L, cov_white)
+
+
+def stacked_ridge(X: np.ndarray, Y: np.ndarray, weights: np.ndarray, prior_mean: np.ndarray,
+                  prior_precision: np.ndarray, *, lags: int | None = None,
+                  moment: np.ndarray | None = None,
+                  consider: np.ndarray | None = None) -> StackedFit:
+    """Weighted least squares with a Gaussian prior as pseudo-observations, HAC covariance.
+
+    The maximum a posteriori estimate of ``Y[t, c] = X[t, c, :]·β + e[t, c]`` with channel
+    weights ``w_c`` (``1/Var e_c``) and the prior ``β ~ N(μ, Λ⁻¹)``::
+
+        β̂ = (H + Λ)⁻¹·(Σ_t,c w_c·X[t,c]·Y[t,c] + Λμ − m),   H = Σ_t,c w_c·X[t,c]·X[t,c]ᵀ
+
+    (``m`` an optional known bias of the data moment, removed: the reference noise in the
+    regressors, :func:`calibration.inflight.fit._debias`). Its error
+    ``(H + Λ)⁻¹·(Σ s_t + Λ(μ − β))`` with the weighted scores ``s_t = Σ_c w_c·X[t,c]·e[t,c]``
+    and the prior independent of the noise has the sandwich covariance::
+
+        cov(β̂) = (H + Λ)⁻¹·(N·Ω + Λ)·(H + Λ)⁻¹
+
+    with Ω the Newey–West long-run covariance of the scores (module docstring): the HAC
+    covariance where the data inform β, the prior's covariance ``Λ⁻¹`` along the
+    directions they do not, and ``(H + Λ)⁻¹`` for white noise of the stated weights.
+
+    ``consider`` (the Schmidt "consider" covariance): regressors ``X_c`` of a part of the
+    signal the fit leaves out, ``X_c·β`` with the same β (the variation of a regressor
+    held at the prior). It adds ``(H + Λ)⁻¹·X_cᵀWY``-type error ``Σ w·X·X_c·β``, so the
+    error becomes ``(H + Λ)⁻¹·(Σ s_t + J·(β − μ))`` with ``J = Σ w·X·X_cᵀ − Λ`` over the
+    parameters with a prior, and ``N·Ω + J·Λ⁻¹·Jᵀ`` replaces ``N·Ω + Λ``.
+
+    Parameters
+    ----------
+    X : ndarray, shape (N, m, p)
+    Y : ndarray, shape (N, m)
+    weights : ndarray, shape (m,)
+        ``1/Var e_c`` per channel (1/(unit of Y)²).
+    prior_mean : ndarray, shape (p,)
+    prior_precision : ndarray, shape (p, p)
+        ``Λ`` (0 rows and columns: no prior on that parameter).
+    lags : int, optional
+    moment : ndarray, shape (p,), optional
+    consider : ndarray, shape (N, m, p), optional
+        Regressors left out of the fit whose effect the covariance carries.
+
+    Returns
+    -------
+    StackedFit
+        ``cov_white`` is ``(H + Λ)⁻¹``.
+
+    Raises
+    ------
+    CalibrationError
+        When ``H + Λ`` is singular (a parameter with neither data nor prior).
+    """
+    X = np.asarray(X, float)
+    Y = np.asarray(Y, float)
+    w = np.asarray(weights, float)
+    N = X.shape[0]
+    Xw = X * w[None, :, None]
+    M = np.einsum("tcp,tcq->pq", Xw, X, optimize=True) + prior_precision
+    rhs = np.einsum("tcp,tc->p", Xw, Y, optimize=True) + prior_precision @ prior_mean
+    if moment is not None:
+        rhs = rhs - moment
+    try:
+        Minv = np.linalg.inv(M)
+    except np.linalg.LinAlgError:
+        raise CalibrationError("the regression is singular (a parameter has neither data "
+                               "nor a prior)") from None
+    beta = Minv @ rhs
+    e = Y - np.einsum("tcp,p->tc", X, beta, optimize=True)
+    scores = np.einsum("tcp,tc->tp", Xw, e, optimize=True)
+    L = andrews_lags(scores) if lags is None else int(lags)
+    omega = long_run_covariance(scores, L)
+    idx = np.flatnonzero(np.diag(prior_precision) > 0)
+    J = -prior_precision[:, idx]
+    if consider is not None:
+        J = J + np.einsum("tcp,tcq->pq", Xw, np.asarray(consider, float)[:, :, idx],
+                          optimize=True)
+    P = np.linalg.inv(prior_precision[np.ix_(idx, idx)]) if idx.size else np.zeros((0, 0))
+    cov = Minv @ (N * omega + J @ P @ J.T) @ Minv
+    return StackedFit(beta, 0.5 * (cov + cov.T), e, L, 0.5 * (Minv + Minv.T))
 
 
 def wald_test(fit: StackedFit, idx: np.ndarray | list[int]) -> tuple[float, int, float]:

@@ -18,15 +18,17 @@ events of the ``crash`` category count (:data:`replay.log_events.DEFAULT_DECLARE
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 
 import numpy as np
 
 from fdi.envelope import REASONS, SHOCK, EnvelopeSettings
+from fdi.errors import ConfigError
 from replay.envelope import flight_envelope, flying_mask
 from replay.flight_data import Flight
 
-__all__ = ["PAD_S", "Segment", "find_segments", "keep_mask"]
+__all__ = ["PAD_S", "Segment", "find_segments", "flight_window", "keep_mask"]
 
 PAD_S = 0.5
 """Margin (s) added before every segment (and after gaps and invalid samples)."""
@@ -126,3 +128,31 @@ def keep_mask(t: np.ndarray, segments: list[Segment]) -> np.ndarray:
     for g in segments:
         keep &= ~((t >= g.t0_s) & (t <= g.t1_s))
     return keep
+
+
+_START = re.compile(r"(?<!DIS)ARMED|NOT_LANDED|TAKE_?OFF|take-?off", re.IGNORECASE)
+_END = re.compile(r"LAND_COMPLETE(?!_MAYBE)|DISARMED|(?<!NOT_)LANDED", re.IGNORECASE)
+
+
+def flight_window(flight: Flight) -> tuple[float, float]:
+    """The span from the log's first arm/take-off event to its last land/disarm event (s).
+
+    Reads the flight folder's ``events`` (:mod:`replay.log_events`): a start is an event
+    whose text says armed, not landed or take-off, an end one that says land complete,
+    landed or disarmed, after the start. Without an end the record's last sample ends it.
+
+    Raises
+    ------
+    ConfigError
+        The folder carries no such start event (the message says to give ``--window``).
+    """
+    ev = sorted(flight.events, key=lambda e: e.t_s)
+    starts = [e.t_s for e in ev if _START.search(e.text)]
+    if not starts:
+        raise ConfigError(f"{flight.source}: --window flight: the folder's events hold no "
+                          "arm or take-off event; give the part of the record as "
+                          "--window T0:T1 (seconds)")
+    t0 = starts[0]
+    ends = [e.t_s for e in ev if _END.search(e.text) and e.t_s > t0]
+    t1 = ends[-1] if ends else float(flight.t[-1])
+    return float(t0), float(t1)

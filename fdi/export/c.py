@@ -602,7 +602,8 @@ def generate_c(cal: Calibration, thresholds: Thresholds | None = None, *, kind: 
         "F_SLOTS": str(S.F_SLOTS), "I_SLOTS": str(S.I_SLOTS),
         "SENSOR_COLS": str(S.SENSOR_COLS), "SCALE_COLS": str(S.SCALE_COLS),
         "DEPTH": "every set" if depth is None else
-                 f"up to {depth} exclusions, of a sensor or a whole IMU each, and every set "
+                 f"up to {depth} exclusion{'s' if depth != 1 else ''}, of a sensor or a whole IMU "
+                 f"each, and every set "
                  f"of whole IMUs",
     }
     table_bytes = len(masks) * rec_bytes + real * pool_len + real * S.SENSOR_COLS * n

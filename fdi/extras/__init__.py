@@ -43,7 +43,9 @@ from fdi.extras.ferraris import (
 )
 from fdi.extras.inflight import (
     ALIGNMENT_UNITS,
+    PARAMETER_STATUSES,
     FlightIdentity,
+    FlightValues,
     ImuAlignment,
     ImuTiming,
     InflightAlignment,
@@ -52,6 +54,7 @@ from fdi.extras.inflight import (
     OffsetCheck,
     OffsetConsistency,
     OffsetPiece,
+    ParameterRecord,
     inflight_to_dict,
     offset_check_from_dict,
 )
@@ -90,6 +93,7 @@ __all__ = [
     "ATTRIBUTION_UNIT",
     "FERRARIS_LAYOUT",
     "INFLIGHT_LAYOUT",
+    "PARAMETER_STATUSES",
     "PARITY_SD_KEYS",
     "RESIDUAL_UNITS",
     "SD_FACTOR_KEYS",
@@ -101,6 +105,7 @@ __all__ = [
     "EarthRateRecord",
     "FerrarisRecord",
     "FlightIdentity",
+    "FlightValues",
     "GyroBias",
     "ImuAlignment",
     "ImuTiming",
@@ -114,6 +119,7 @@ __all__ = [
     "OffsetConsistency",
     "OffsetPiece",
     "OwnDrift",
+    "ParameterRecord",
     "RateTest",
     "ResidualStep",
     "StaticAlignment",

@@ -15,10 +15,14 @@ from fdi.extras.read import floats, matrix, ms_field, plain, strings
 from fdi.fileio import Fields
 from fdi.units import DPH, DPS, MS
 
-__all__ = ["ALIGNMENT_UNITS", "FlightIdentity", "ImuAlignment", "ImuTiming", "InflightAlignment",
-           "InflightTiming", "LeftOut", "OffsetCheck", "OffsetConsistency", "OffsetPiece",
+__all__ = ["ALIGNMENT_UNITS", "PARAMETER_STATUSES", "FlightIdentity", "FlightValues",
+           "ImuAlignment", "ImuTiming", "InflightAlignment", "InflightTiming", "LeftOut",
+           "OffsetCheck", "OffsetConsistency", "OffsetPiece", "ParameterRecord",
            "inflight_to_dict", "offset_check_from_dict", "read_inflight_alignment",
            "read_inflight_timing"]
+
+PARAMETER_STATUSES = ("estimated", "held at prior")
+"""``extra.inflight.imus.<imu>.parameters[k].status``: from the flight, or the prior's."""
 
 ALIGNMENT_UNITS = {"rotation": "rad", "scale": "fraction", "nonorthogonality": "rad"}
 """``extra.inflight.units``: the units of the parts of the gain matrix."""
@@ -328,6 +332,113 @@ class LeftOut:
 
 
 @dataclass(frozen=True)
+class ParameterRecord:
+    """One parameter of an IMU's alignment (``extra.inflight.imus.<imu>.parameters[k]``).
+
+    Attributes
+    ----------
+    name : str
+        ``"rotation x"`` ... ``"nonorthogonality yz"``, ``"time offset"``.
+    value, sd, prior_sd : float
+        rad, fraction, or s for the time offset (file: ``value``, ``sd``, ``prior_sd``; the
+        time offset in ms).
+    status : str
+        One of :data:`PARAMETER_STATUSES`.
+    excitation : float or None
+        RMS variation of its regressor over the reference noise (None: unbounded).
+    """
+
+    name: str
+    value: float
+    sd: float
+    prior_sd: float
+    status: str
+    excitation: float | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON record (the time offset in ms)."""
+        f = 1e3 if self.name == "time offset" else 1.0
+        return {"name": self.name, "value": f * self.value, "sd": f * self.sd,
+                "prior_sd": f * self.prior_sd, "status": self.status,
+                "excitation": self.excitation}
+
+
+_FLIGHT_KEYS = {"bias_dph": DPH, "bias_dph_sd": DPH, "time_offset_ms": MS,
+                "time_offset_ms_sd": MS, "timing_jitter_ms": MS, "rotation": 1.0,
+                "rotation_sd": 1.0, "scale": 1.0, "scale_sd": 1.0, "nonorthogonality": 1.0,
+                "nonorthogonality_sd": 1.0}
+"""Keys of ``extra.inflight.flights[k].imus.<imu>`` and their unit in SI."""
+
+
+@dataclass(frozen=True)
+class FlightValues:
+    """What one flight of several calibrated together gave (``extra.inflight.flights[k]``).
+
+    Attributes
+    ----------
+    source : str
+        The flight folder.
+    flight : FlightIdentity or None
+    imus : dict of str to dict
+        Per IMU group other than the reference: ``bias`` and ``bias_sd`` (rad/s, file
+        ``bias_dph``), ``time_offset_s`` and its sd, ``timing_jitter_s`` (file ms),
+        ``rotation``, ``scale`` and ``nonorthogonality`` with their sds (rad, fraction).
+    """
+
+    source: str
+    flight: FlightIdentity | None = None
+    imus: Mapping[str, Mapping[str, tuple[float, ...]]] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON record."""
+        return {"source": self.source,
+                **({} if self.flight is None else {"flight": self.flight.to_dict()}),
+                "imus": {g: {k: _per(v[k], _FLIGHT_KEYS[k]) for k in _FLIGHT_KEYS if k in v}
+                         for g, v in self.imus.items()}}
+
+
+def _flight_values(r: Fields) -> FlightValues:
+    imus = r.mapping("imus", {})
+    out = {}
+    for g in imus.keys():
+        m = imus.mapping(g)
+        out[g] = {k: floats(m, k, scale=u) for k, u in _FLIGHT_KEYS.items() if k in m}
+        m.finish()
+    fv = FlightValues(source=r.string("source", "", nonempty=False), flight=_flight(r),
+                      imus=out)
+    return fv
+
+
+def _parameter(r: Fields) -> ParameterRecord:
+    name = r.string("name")
+    f = MS if name == "time offset" else 1.0
+    status = r.string("status")
+    if status not in PARAMETER_STATUSES:
+        raise r.error("status", f"expected one of {', '.join(PARAMETER_STATUSES)}, "
+                      f"got {status!r}")
+    ex = r.number("excitation", None, nonnegative=True)
+    return ParameterRecord(name=name, value=r.number("value") * f,
+                           sd=r.number("sd", nonnegative=True) * f,
+                           prior_sd=r.number("prior_sd", nonnegative=True) * f,
+                           status=status, excitation=ex)
+
+
+def _mounting(r: Fields) -> tuple[tuple[float, ...], ...]:
+    """``mounting``: a signed permutation (rotation by multiples of 90°); () when absent."""
+    m = matrix(r, "mounting")
+    if not m:
+        return ()
+    M = np.asarray(m, float)
+    ok = (M.shape == (3, 3) and np.all(np.isin(M, (-1.0, 0.0, 1.0)))
+          and np.all(np.sum(np.abs(M), axis=0) == 1) and np.all(np.sum(np.abs(M), axis=1) == 1)
+          and round(float(np.linalg.det(M))) == 1)
+    if not ok:
+        raise r.error("mounting", "expected a 3x3 rotation by multiples of 90 deg (one +1 or "
+                      f"-1 per row and column, determinant +1), got {m!r}")
+    return m
+
+
+@dataclass(frozen=True)
 class ImuAlignment:
     """The fitted alignment of one IMU to the reference (``extra.inflight.imus.<imu>``).
 
@@ -357,6 +468,13 @@ class ImuAlignment:
     samples : int
         Samples of the fit's residual.
     notes : tuple of str
+    mounting : tuple of tuple of float
+        The nominal mounting R (a rotation by multiples of 90°, ``A = (I + E)·R``; the
+        parts above are those of E; ``()``: identity, not recorded).
+    parameters : tuple of ParameterRecord
+        Each parameter estimated or held at the prior.
+    axis_noise : tuple of float
+        The IMU's own noise sd per axis in flight (rad/s; file ``axis_noise_dps``).
     """
 
     model: str = ""
@@ -376,6 +494,9 @@ class ImuAlignment:
     samples: int = 0
     excitation: Mapping[str, Any] = field(default_factory=dict)
     notes: tuple[str, ...] = ()
+    mounting: tuple[tuple[float, ...], ...] = ()
+    parameters: tuple[ParameterRecord, ...] = ()
+    axis_noise: tuple[float, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -390,6 +511,17 @@ class InflightAlignment:
     left_out : tuple of LeftOut
     samples_used, samples, samples_nonfinite : int
         Samples the fit used, of the flight, and left out for a non-finite rate.
+    findings : tuple of str
+        IMU axes far noisier than their peers (``"imu1.x: 9.5 deg/s vibration against ..."``).
+    reference_noise : tuple of float
+        The reference's own noise sd per axis (rad/s; file ``reference_noise_dps``).
+    prior : dict
+        The prior's sds (``misalignment_mrad_sd``, ``scale_sd``, ``nonorthogonality_mrad_sd``,
+        ``time_offset_ms_sd``).
+    window_s : tuple of float
+        ``(t0, t1)`` the part of the record used (s), ``()`` for all of it.
+    flights : tuple of FlightValues
+        With several flights calibrated together: each flight's own values.
     """
 
     imus: Mapping[str, ImuAlignment] = field(default_factory=dict)
@@ -397,6 +529,11 @@ class InflightAlignment:
     samples_used: int = 0
     samples: int = 0
     samples_nonfinite: int = 0
+    findings: tuple[str, ...] = ()
+    reference_noise: tuple[float, ...] = ()
+    prior: Mapping[str, float] = field(default_factory=dict)
+    window_s: tuple[float, ...] = ()
+    flights: tuple[FlightValues, ...] = ()
 
 
 def _imu_alignment(r: Fields) -> ImuAlignment:
@@ -408,7 +545,10 @@ def _imu_alignment(r: Fields) -> ImuAlignment:
         bias=floats(r, "bias_dph", scale=DPH), bias_sd=floats(r, "bias_dph_sd", scale=DPH),
         residual_rms=floats(r, "residual_rms_dps", scale=DPS),
         hac_lags=r.integer("hac_lags", 0, lo=0), samples=r.integer("samples", 0, lo=0),
-        excitation=r.free("excitation", {}), notes=strings(r, "notes"))
+        excitation=r.free("excitation", {}), notes=strings(r, "notes"),
+        mounting=_mounting(r),
+        parameters=tuple(_parameter(p) for p in r.tables("parameters", [], nonempty=False)),
+        axis_noise=floats(r, "axis_noise_dps", scale=DPS))
 
 
 def read_inflight_alignment(r: Fields) -> InflightAlignment | None:
@@ -424,7 +564,13 @@ def read_inflight_alignment(r: Fields) -> InflightAlignment | None:
     return InflightAlignment(
         imus={g: _imu_alignment(imus.mapping(g)) for g in imus.keys()}, left_out=left,
         samples_used=f.integer("samples_used", 0, lo=0), samples=f.integer("samples", 0, lo=0),
-        samples_nonfinite=f.integer("samples_nonfinite", 0, lo=0))
+        samples_nonfinite=f.integer("samples_nonfinite", 0, lo=0),
+        findings=strings(f, "findings"),
+        reference_noise=floats(f, "reference_noise_dps", scale=DPS),
+        prior={k: f.mapping("prior").number(k, nonnegative=True)
+               for k in f.mapping("prior", {}).keys()} if "prior" in f else {},
+        window_s=floats(f, "window_s"),
+        flights=tuple(_flight_values(e) for e in f.tables("flights", [], nonempty=False)))
 
 
 
@@ -447,7 +593,10 @@ def _imu_to_dict(t: ImuTiming | None, a: ImuAlignment | None) -> dict[str, Any]:
             "residual_rms_dps": _per(a.residual_rms, DPS),
             "residual_lag1_autocorrelation": list(a.residual_lag1_autocorrelation),
             "hac_lags": a.hac_lags, "samples": a.samples, "excitation": dict(a.excitation),
-            "notes": list(a.notes)}
+            "notes": list(a.notes),
+            **({"mounting": _rows(a.mounting)} if a.mounting else {}),
+            **({"parameters": [p.to_dict() for p in a.parameters]} if a.parameters else {}),
+            **({"axis_noise_dps": _per(a.axis_noise, DPS)} if a.axis_noise else {})}
 
 
 def inflight_to_dict(timing: InflightTiming | None,
@@ -463,4 +612,11 @@ def inflight_to_dict(timing: InflightTiming | None,
             "imus": {g: _imu_to_dict(timing.imus.get(g), alignment.imus.get(g)) for g in imus},
             "left_out": [e.to_dict() for e in alignment.left_out],
             "samples_used": alignment.samples_used, "samples": alignment.samples,
-            "samples_nonfinite": alignment.samples_nonfinite}
+            "samples_nonfinite": alignment.samples_nonfinite,
+            **({"findings": list(alignment.findings)} if alignment.findings else {}),
+            **({"reference_noise_dps": _per(alignment.reference_noise, DPS)}
+               if alignment.reference_noise else {}),
+            **({"prior": dict(alignment.prior)} if alignment.prior else {}),
+            **({"window_s": list(alignment.window_s)} if alignment.window_s else {}),
+            **({"flights": [v.to_dict() for v in alignment.flights]}
+               if alignment.flights else {})}

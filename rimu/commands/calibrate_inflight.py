@@ -13,7 +13,8 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:
     from fdi.calfile import Calibration
 
-__all__ = ["MODELS", "configure_options", "covered_range_text", "run", "summary_text"]
+__all__ = ["MODELS", "configure_options", "covered_range_text", "parse_window", "run",
+           "summary_text"]
 
 MODELS = ("auto", "full", "rotation")
 """``--model`` (:data:`calibration.inflight.fit.MODELS`; kept here so that ``--help`` does
@@ -22,14 +23,33 @@ not import the fit; a test checks they agree)."""
 
 def configure_options(p: argparse.ArgumentParser) -> None:
     """The options ``rimu calibrate`` adds for ``--in-flight``."""
-    p.add_argument("--in-flight", metavar="DIR",
+    p.add_argument("--in-flight", metavar="DIR", nargs="+",
                    help="calibrate the IMUs of a flight folder (rimu.flight/1) against one of "
-                        "them: alignment, bias and time offset from the recorded motion")
+                        "them: alignment, bias and time offset from the recorded motion; what "
+                        "the motion does not excite is held at the prior (--prior-*) and the "
+                        "output says so. Several folders (one IMU set, several power-ups): "
+                        "mounting, misalignment and scale fitted jointly, bias and time "
+                        "offset per flight, their run-to-run spread written "
+                        "(bias_turn_on_sd)")
+    p.add_argument("--window", metavar="T0:T1",
+                   help="with --in-flight: use only the part of the record from T0 to T1 s "
+                        "(either may be empty: '30:' or ':95'), or 'flight' for the span "
+                        "between the log's own arm/take-off and land/disarm events")
+    p.add_argument("--prior-misalignment-deg", type=float, default=2.0, metavar="DEG",
+                   help="with --in-flight: 1-sigma tolerance of each IMU's mounting about "
+                        "its nominal (default 2)")
+    p.add_argument("--prior-scale-pct", type=float, default=3.0, metavar="PCT",
+                   help="with --in-flight: 1-sigma relative scale-factor tolerance (a "
+                        "datasheet's; default 3)")
+    p.add_argument("--prior-nonorthogonality-pct", type=float, default=2.0, metavar="PCT",
+                   help="with --in-flight: 1-sigma cross-axis tolerance (default 2)")
     p.add_argument("--reference", metavar="IMU",
                    help="with --in-flight: reference IMU group (default: the first)")
     p.add_argument("--model", choices=MODELS, default="auto",
-                   help="with --in-flight: 'full' (rotation, scale, non-orthogonality), "
-                        "'rotation', or 'auto' (full when the motion excites it; default)")
+                   help="with --in-flight: 'full' (rotation, scale, non-orthogonality, each "
+                        "estimated or held at the prior), 'rotation' (scale and "
+                        "non-orthogonality equal to the reference's), or 'auto' (= full; "
+                        "default)")
     p.add_argument("--no-time-offset", action="store_true",
                    help="with --in-flight: do not fit the time offsets")
     p.add_argument("--drift-model", action="store_true",
@@ -82,9 +102,30 @@ def summary_text(cal: Calibration) -> str:
     if doc.samples_nonfinite:
         lines.append(f"  left out {doc.samples_nonfinite} samples with a non-finite rate "
                      "in some IMU")
+    if doc.window_s:
+        lines.append(f"  part of the record used: {doc.window_s[0]:.2f}-{doc.window_s[1]:.2f} s")
+    if doc.prior:
+        pr = doc.prior
+        lines.append(f"  prior (held where the motion does not excite): mounting "
+                     f"±{pr.get('misalignment_mrad_sd', 0) / 17.453293:.2g} deg, scale "
+                     f"±{100 * pr.get('scale_sd', 0):.2g} %, non-orthogonality "
+                     f"±{pr.get('nonorthogonality_mrad_sd', 0) / 10:.2g} %, time offset "
+                     f"±{pr.get('time_offset_ms_sd', 0):.3g} ms (1 sigma)")
+    for x in doc.findings:
+        lines.append(f"  finding: {x}")
     for g, r in doc.imus.items():
         t = timing.imus.get(g, ImuTiming(time_offset_s=None))
         th, ths = 1e3 * np.asarray(r.rotation), 1e3 * np.asarray(r.rotation_sd)
+        if r.mounting and not np.allclose(r.mounting, np.eye(3)):
+            from calibration.inflight.prior import mounting_text
+
+            lines.append(f"  {g}: mounted {mounting_text(np.asarray(r.mounting))} against "
+                         f"{timing.reference}; the parts below are beyond that mounting")
+        if r.parameters:
+            est = [p.name for p in r.parameters if p.status == "estimated"]
+            held = [p.name for p in r.parameters if p.status != "estimated"]
+            lines.append(f"  {g}: estimated: {', '.join(est) or 'none'}; held at the prior: "
+                         f"{', '.join(held) or 'none'}")
         lines.append(f"  {g} ({r.model}): rotation [" + ", ".join(
             f"{a:+.3f} ± {b:.3f}" for a, b in zip(th, ths, strict=True)) + "] mrad")
         if r.model == "full":
@@ -103,37 +144,115 @@ def summary_text(cal: Calibration) -> str:
             lines.append(f"      timing jitter {g}: {t.timing_jitter_s / MS:.2f} ± "
                          f"{t.timing_jitter_sd_s / MS:.2f} ms (thresholds widen with it while "
                          "the body accelerates)")
-        lines.extend(f"      note: {n}" for n in r.notes)
+        lines.extend(f"      note: {n}" for n in r.notes if not n.startswith("held at the prior"))
+    for v in doc.flights:
+        lines.append(f"  flight {v.source}:")
+        for g, d in v.imus.items():
+            lines.append(f"    {g}: bias [" + ", ".join(f"{x / DPH:+.1f}" for x in d["bias_dph"])
+                         + "] deg/h, time offset "
+                         + f"{d['time_offset_ms'][0] / MS:+.3f} ms")
     if timing.time_offset_sign:
         lines.append(f"  sign: {timing.time_offset_sign}")
     return "\n".join(lines)
 
 
+def parse_window(text: str | None) -> tuple[float, float] | str | None:
+    """``--window``: ``"T0:T1"`` (either side may be empty) as seconds, ``"flight"``, None.
+
+    Raises
+    ------
+    ConfigError
+        Not two numbers with T0 < T1 (the message shows the form).
+    """
+    import math
+
+    from fdi.errors import ConfigError
+
+    if text is None:
+        return None
+    if text.strip() == "flight":
+        return "flight"
+    parts = text.split(":")
+    try:
+        if len(parts) != 2:
+            raise ValueError
+        t0 = float(parts[0]) if parts[0].strip() else -math.inf
+        t1 = float(parts[1]) if parts[1].strip() else math.inf
+    except ValueError:
+        raise ConfigError(f"--window {text!r}: expected T0:T1 in seconds (e.g. 30:95, 30: or "
+                          ":95) or 'flight'") from None
+    if math.isnan(t0) or math.isnan(t1) or not t0 < t1:
+        raise ConfigError(f"--window {text!r}: T0 must be smaller than T1")
+    return t0, t1
+
+
+def _prior(args: argparse.Namespace):
+    import math
+
+    from calibration.inflight.prior import Prior
+
+    return Prior(misalignment_sd=math.radians(getattr(args, "prior_misalignment_deg", 2.0)),
+                 scale_sd=getattr(args, "prior_scale_pct", 3.0) / 100.0,
+                 nonorthogonality_sd=getattr(args, "prior_nonorthogonality_pct", 2.0) / 100.0)
+
+
 def run(args: argparse.Namespace) -> int:
     """Run ``rimu calibrate --in-flight``."""
-    from calibration.inflight.calfile import calibration_from_fit
+    from calibration.inflight.calfile import calibration_from_fit, flight_values
     from calibration.inflight.fit import fit_inflight
+    from calibration.inflight.segments import flight_window
     from replay.flight_io import load_flight_dir
     from rimu.outputs import atomic_file, input_path, output_file
 
-    input_path(args.in_flight, "--in-flight", kind="dir")
-    out = output_file(args.out, "--out", inputs=(args.in_flight,))
+    dirs = args.in_flight if isinstance(args.in_flight, list | tuple) else [args.in_flight]
+    for d in dirs:
+        input_path(d, "--in-flight", kind="dir")
+    out = output_file(args.out, "--out", inputs=tuple(dirs))
     rep = None
     if getattr(args, "report", None):
         from rimu.outputs import output_dir
 
-        rep = output_dir(args.report, "--report", inputs=(args.in_flight,))
+        rep = output_dir(args.report, "--report", inputs=tuple(dirs))
+    window = parse_window(getattr(args, "window", None))
+    prior = _prior(args)
     from fdi.progress import current
 
-    current().stage("reading the flight folder")
-    flight = load_flight_dir(args.in_flight)
-    current().stage("fitting the set against its reference (axes, scale, bias, time offsets)")
-    fit = fit_inflight(flight, reference=getattr(args, "reference", None),
-                       model=getattr(args, "model", "auto"),
-                       time_offset=not getattr(args, "no_time_offset", False))
+    flights, fits = [], []
+    for d in dirs:
+        current().stage(f"reading the flight folder {d}")
+        flight = load_flight_dir(d)
+        win = flight_window(flight) if window == "flight" else window
+        if window == "flight":
+            print(f"{d}: the log's events give the flight {win[0]:.2f}-{win[1]:.2f} s")
+        flights.append(flight)
+        current().stage("fitting the set against its reference (axes, scale, bias, time "
+                        "offsets)")
+        fits.append(fit_inflight(flight, reference=getattr(args, "reference", None),
+                                 model=getattr(args, "model", "auto"),
+                                 time_offset=not getattr(args, "no_time_offset", False),
+                                 prior=prior, window=win))
+    turn_on, values = None, ()
+    if len(fits) > 1:
+        from calibration.inflight.multi import combine_fits
+
+        joint = combine_fits(fits)
+        fit, flight = joint.fit, flights[joint.base]
+        turn_on = joint.turn_on_sd
+        values = tuple(flight_values(f, fl) for f, fl in zip(fits, flights, strict=True))
+    else:
+        fit, flight = fits[0], flights[0]
     current().stage("noise, tails and drift of the residual")
     cal = calibration_from_fit(fit, flight,
-                               drift_model=bool(getattr(args, "drift_model", False)))
+                               drift_model=bool(getattr(args, "drift_model", False)),
+                               turn_on_sd=turn_on, flights=values)
+    if len(fits) > 1:
+        for n in joint.notes:
+            print(f"note: {n}")
+        from fdi.units import DPH
+
+        print("turn-on bias run-to-run sd over " + f"{len(fits)} flights (bias_turn_on_sd): "
+              + "; ".join(f"{c.name} {c.bias_turn_on_sd / DPH:.0f} deg/h" for c in cal.gyro.sensors
+                          if c.bias_turn_on_sd is not None))
     with atomic_file(out) as tmp:
         cal.save(tmp)
     print(summary_text(cal))

@@ -80,7 +80,8 @@ def run(args: argparse.Namespace) -> int:
             (tmp / name).write_text(text, encoding="utf-8")
     print(f"wrote {final}/: {', '.join(mod.files)}")
     carried = ("every set" if mod.depth is None
-               else f"up to {mod.depth} exclusions of a sensor or an IMU")
+               else f"up to {mod.depth} exclusion{'s' if mod.depth != 1 else ''} of a sensor "
+                  f"or an IMU")
     print(f"calibration fingerprint {mod.fingerprint}; {mod.n} {args.kind} sensors, "
           f"{mod.sets} healthy-set tables ({carried}); {mod.precision}")
     print(f"identity {mod.identity}; table CRC-32 {mod.table_crc:#010x}; "

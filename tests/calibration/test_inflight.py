@@ -17,7 +17,6 @@ from calibration.inflight.diagnose import diagnose_flight
 from calibration.inflight.fit import decompose, fit_inflight
 from calibration.inflight.regression import long_run_covariance, stacked_lstsq
 from fdi.calfile import load_calibration
-from fdi.errors import CalibrationError
 from fdi.units import DPS, G0
 from replay.flight_io import save_flight_dir
 from replay.imu_set import ImuEffects, ImuSetSpec, simulate_imu_set
@@ -78,16 +77,30 @@ def test_alignment_bias_and_time_offset_within_3_sigma() -> None:
     assert np.all(np.abs((a.c - tr["c"]) / np.sqrt(np.diag(a.c_cov))) < 3)
 
 
-def test_static_flight_is_refused_naming_the_parameter() -> None:
+def test_static_flight_holds_every_gain_at_the_prior_with_its_sd() -> None:
+    """Was: refused ("does not excite rotation about x"). Issue 27 asks for a calibration
+    that says what it does not know: a flight at rest excites no gain parameter, so every
+    one is held at the prior mean with the prior's sd (the bias is still estimated)."""
+    from calibration.inflight.fit import HELD
+    from calibration.inflight.prior import Prior
+
     f = _flight(max_rate_dps=0.01)
-    with pytest.raises(CalibrationError, match=r"imu2: the flight does not excite rotation "
-                                               r"about [xyz]"):
-        fit_inflight(f)
+    a = fit_inflight(f).alignments["imu2"]
+    pr = Prior()
+    gains = [p for p in a.parameters if p.name != "time offset"]
+    assert len(gains) == 9 and all(p.status == HELD for p in gains)
+    assert all(abs(p.value) < 1e-3 * p.prior_sd for p in gains)
+    assert np.allclose([p.sd for p in gains], pr.sds(), rtol=1e-3)
+    tr = f.truth["relative_to_reference"]["imu2"]
+    assert np.all(np.abs((a.c - tr["c"]) / np.sqrt(np.diag(a.c_cov))) < 4)
 
 
-def test_one_axis_motion_falls_back_to_rotation_or_refuses() -> None:
-    """Rates about x only: rotation about x is not observable; the message says so."""
+def test_one_axis_motion_holds_rotation_about_x_at_the_prior() -> None:
+    """Rates about x only: rotation about x is not observable. Was: refused naming it; now
+    (issue 27) held at the prior with the prior's sd, and scale x estimated."""
     from dataclasses import replace
+
+    from calibration.inflight.fit import ESTIMATED, HELD
 
     f = _flight()
     keep_x = f.raw.copy()
@@ -98,8 +111,11 @@ def test_one_axis_motion_falls_back_to_rotation_or_refuses() -> None:
     for j in (1, 2):
         G = np.array(tr[f"imu{j}"]["gain_matrix"])
         keep_x[:, 3 * j - 3:3 * j] = w @ G.T + 2e-3 * rng.standard_normal((w.shape[0], 3))
-    with pytest.raises(CalibrationError, match="rotation about x"):
-        fit_inflight(replace(f, raw=keep_x))
+    a = fit_inflight(replace(f, raw=keep_x)).alignments["imu2"]
+    st = {p.name: p for p in a.parameters}
+    assert st["rotation x"].status == HELD
+    assert st["rotation x"].sd > 0.9 * st["rotation x"].prior_sd
+    assert st["scale x"].status == ESTIMATED
 
 
 def test_calibration_file_round_trips_and_monitor_is_quiet(tmp_path: Path) -> None:
@@ -191,14 +207,17 @@ def test_cli_simulate_calibrate_diagnose(tmp_path: Path) -> None:
     assert doc["timing"][0]["left"] and doc["timing"][0]["calibration_ms"] == 0.0
 
 
-def test_cli_refuses_a_static_flight_in_one_line(tmp_path: Path) -> None:
+def test_cli_calibrates_a_static_flight_saying_what_it_holds(tmp_path: Path) -> None:
+    """Was: refused in one line. Now a calibration whose output names every parameter held
+    at the prior (issue 27), and whose file carries the prior's sd."""
     d = tmp_path / "f"
     save_flight_dir(_flight(max_rate_dps=0.01), d)
     r = _rimu("calibrate", "--in-flight", str(d), "--out", str(tmp_path / "cal.json"))
-    assert r.returncode == 2
-    lines = r.stderr.strip().splitlines()
-    assert len(lines) == 1 and "does not excite rotation about" in lines[0]
-    assert not (tmp_path / "cal.json").exists()
+    assert r.returncode == 0, r.stderr
+    assert "imu2: estimated: none; held at the prior: rotation x" in r.stdout
+    doc = json.loads((tmp_path / "cal.json").read_text())
+    g = doc["sensors"]["gyro"][3]
+    assert 1e3 * 0.5 * np.radians(2.0) < min(g["misalignment_mrad_sd"])
 
 
 def test_cli_errors_are_one_line(tmp_path: Path) -> None:

@@ -1,4 +1,5 @@
-"""Cross-flight evidence on the erle flights (studies/cross_flight.py, docs/next-flight.md).
+"""Cross-flight evidence on the erle flights (studies/cross_flight.py, docs/next-flight.md;
+``pytest --campaign tests/replay/test_cross_flight.py``).
 
 Calibrated and tuned (1/h) on one flight, monitored on the other. What holds and is checked
 here: no exclusion in either pair, before or after; the chain finds the rest stretch before
@@ -16,7 +17,7 @@ import pytest
 from tests.replay.ingest.ingest_helpers import data_file
 
 
-@pytest.mark.slow
+@pytest.mark.campaign          # two tunes and four fits: about 2 min on a loaded machine
 def test_erle_pairs_exclude_nothing_and_name_what_does_not_fit():
     from studies.cross_flight import ERLE, cross_pairs, load_log
 
