@@ -107,7 +107,7 @@ from fdi.adequacy import VERDICTS
 from fdi.drift import DriftModel, drift_model_from_fields
 from fdi.errors import ConfigError
 from fdi.extras import CalibrationExtras, extras_from_dict
-from fdi.fileio import Fields, read_json_object, to_jsonable
+from fdi.fileio import Fields, NumberRule, check_numbers, read_json_object, to_jsonable
 from fdi.tails import TailModel, tail_model_from_fields
 from fdi.units import (
     MS,
@@ -119,6 +119,7 @@ from fdi.units import (
 )
 
 __all__ = [
+    "CALIBRATION_NUMBER_RULES",
     "CALIBRATION_SCHEMA",
     "CALIBRATION_SCHEMAS",
     "CALIBRATION_SCHEMA_DRIFT",
@@ -552,6 +553,31 @@ def _sensor_to_dict(c: SensorCal) -> dict[str, Any]:
 
 
 # -- reading ---------------------------------------------------------------------------
+MAX_SCALE_FACTOR_SI = 1e6
+"""Largest scale factor read (rad/s or m/s² per raw unit): no sensor's raw unit is worth a
+million rad/s; a larger one is a unit mistake (the monitor would trust any value it gives)."""
+MIN_SCALE_FACTOR_SI = 1e-15
+"""Smallest scale factor read (a raw output of 10¹⁵ counts would be needed for 1 rad/s)."""
+_UNIT = 1.0 + 1e-9          # entries of an orthonormal parity matrix, with rounding
+CALIBRATION_NUMBER_RULES: tuple[NumberRule, ...] = (
+    NumberRule("parity.*", -_UNIT, _UNIT, what="an entry of an orthonormal parity matrix"),
+    NumberRule("parity_accel.*", -_UNIT, _UNIT,
+               what="an entry of an orthonormal parity matrix"),
+    NumberRule("latitude_deg", -90.0, 90.0, what="a latitude"),
+    NumberRule("sensors.*.scale_factor", 0.0, lo_open=True, what="a scale factor"),
+    NumberRule("residual_tails.*.scales.quantile", 0.0, what="a quantile of the statistic"),
+    NumberRule("residual_tails.*.scales.quantile_upper", 0.0, lo_open=True,
+               what="a quantile bound of the statistic"),
+    NumberRule("residual_tails.*.scales.scale", 1.0, what="a window length"),
+    NumberRule("residual_tails.*.scales.gpd.threshold", 0.0, what="a threshold"),
+    NumberRule("parity_drift.*.blocks", 0.0, what="a count"),
+    NumberRule("*.time_offset_ms", what="a time offset (ms)"),
+)
+"""Ranges of the calibration file's numbers beyond :data:`fdi.fileio.CONVENTION_RULES`
+(``*_sd`` >= 0, covariance diagonals >= 0, Allan ``tau_s`` > 0 and ``adev`` >= 0, ...); every
+other number, in ``extra`` too, must be finite. Checked on load (:func:`calibration_from_dict`),
+so every command that reads a calibration refuses the same values."""
+
 _WRITTEN_ONLY = ("parity", "parity_accel")
 """Top-level keys the writer adds for other tools (derived from the axes; not read back)."""
 
@@ -572,9 +598,15 @@ def calibration_from_dict(doc: Mapping[str, Any], path: str = "<calibration>") -
     """Build a :class:`Calibration` from its JSON dictionary (see :func:`load_calibration`)."""
     r = Fields(doc, path)
     version = r.schema(CALIBRATION_SCHEMAS)
+    check_numbers(doc, path, CALIBRATION_NUMBER_RULES)
     rate = r.number("sample_rate_hz", positive=True)
     sensors = r.mapping("sensors")
     noise = r.mapping("noise_covariance")
+    noise_rate = noise.number("sample_rate_hz", None, positive=True)
+    if noise_rate is not None and not math.isclose(noise_rate, rate, rel_tol=1e-9):
+        raise noise.error("sample_rate_hz", f"{noise_rate:g} Hz, but the file's "
+                          f"sample_rate_hz is {rate:g} Hz (the covariance holds per sample "
+                          "at one rate)")
     mm = r.mapping("misalignment_matrices", {})
     allan = r.mapping("allan", {})
     if not sensors.keys():
@@ -582,7 +614,7 @@ def calibration_from_dict(doc: Mapping[str, Any], path: str = "<calibration>") -
     sets = {kind: _sensor_set(sensors, noise, mm, allan, kind)
             for kind in KINDS if kind in sensors}
     sensors.finish()
-    noise.accept("unit", "sample_rate_hz")
+    noise.accept("unit")
     for sub in (noise, mm, allan):
         sub.finish(accept=sets)
     if version in (CALIBRATION_SCHEMA, CALIBRATION_SCHEMA_DRIFT):
@@ -757,6 +789,18 @@ def _check_covariance(r: Fields, cov: np.ndarray, key: str) -> None:
         raise r.error(key, "nearly singular (condition number above 1e12)")
 
 
+def _input_error_cov(e: Fields) -> np.ndarray:
+    """``input_error_cov``: a symmetric positive semi-definite 3×3 (zeros when absent)."""
+    c = e.array("input_error_cov", (3, 3), np.zeros((3, 3)))
+    scale = float(np.max(np.abs(c)))
+    if not np.allclose(c, c.T, rtol=1e-9, atol=1e-12 * scale):
+        raise e.error("input_error_cov", "expected a symmetric matrix")
+    if scale and float(np.linalg.eigvalsh(c).min()) < -1e-9 * scale:
+        raise e.error("input_error_cov", "expected a positive semi-definite matrix (a "
+                      "covariance)")
+    return c
+
+
 def _unit_axis(e: Fields, key: str) -> np.ndarray:
     a = e.array(key, (3,))
     if abs(np.linalg.norm(a) - 1.0) > 1e-6:
@@ -779,6 +823,12 @@ def _scale_factor_si(e: Fields) -> tuple[float, float, str]:
     if not (math.isfinite(sf_si) and math.isfinite(sfsd_si) and sf_si > 0):
         raise e.error("scale_factor", f"{sf!r} (sd {sfsd!r}) {sfu} is out of range in SI "
                       "units")
+    if not MIN_SCALE_FACTOR_SI <= sf_si <= MAX_SCALE_FACTOR_SI:
+        raise e.error("scale_factor", f"{sf!r} {sfu} is {sf_si:.3g} SI units per raw unit, "
+                      f"outside [{MIN_SCALE_FACTOR_SI:g}, {MAX_SCALE_FACTOR_SI:g}]: a unit "
+                      "mistake?")
+    if not sfsd_si >= 0:
+        raise e.error("scale_factor_sd", f"expected a standard deviation (>= 0), got {sfsd!r}")
     return sf_si, sfsd_si, sfu
 
 
@@ -795,6 +845,12 @@ def _bias_si(e: Fields) -> tuple[float, float, str]:
         raise e.error("bias_sd", f"expected a standard deviation (≥ 0, squarable), got "
                       f"{bias_sd / bf!r}")
     return bias, bias_sd, bu
+
+
+def _raw_unit(e: Fields) -> str:
+    """``raw_unit``, required: without it the unit check against the data would pass
+    anything (``"raw"`` says "unknown" explicitly)."""
+    return e.string("raw_unit", nonempty=False).strip()
 
 
 def _turn_on_sd(e: Fields, bias_unit: str) -> float | None:
@@ -817,9 +873,9 @@ def _sensor_from(e: Fields) -> SensorCal:
     c = SensorCal(
         name=str(e.get("name")), axis=axis, axis_nominal=nom, scale_factor=sf,
         scale_factor_sd=sf_sd, bias=bias, bias_sd=bias_sd,
-        input_error_cov=e.array("input_error_cov", (3, 3), np.zeros((3, 3))),
+        input_error_cov=_input_error_cov(e),
         misalignment_sd=e.array("misalignment_mrad_sd", (2,)) * 1e-3,
-        raw_unit=str(e.get("raw_unit", "raw")), scale_factor_unit=sfu, bias_unit=bu,
+        raw_unit=_raw_unit(e), scale_factor_unit=sfu, bias_unit=bu,
         residual_rms=e.number("residual_rms", float("nan")),
         timing_jitter=e.number("timing_jitter_ms", 0.0, nonnegative=True) * MS,
         timing_jitter_sd=e.number("timing_jitter_ms_sd", 0.0, nonnegative=True) * MS,
@@ -868,6 +924,14 @@ def check_compatible(cal: Calibration, n_sensors: int, raw_unit: Any, source: st
     if int(n_sensors) != s.n:
         raise ConfigError(f"{source}: {int(n_sensors)} {kind} sensors, the {where} has {s.n}: "
                           "a calibration only applies to the sensor set it was made for")
+    _check_names(s, names, source, where, kind, warn=False)
+    _check_units(s, raw_unit, source, where, kind, names)
+    _check_names(s, names, source, where, kind, warn=True)     # warned once all else passed
+
+
+def _check_units(s: SensorSet, raw_unit: Any, source: str, where: str, kind: str,
+                 names: Any) -> None:
+    """The data's raw units against the calibration's (generic names pass)."""
     if raw_unit is None:
         return
     units = [raw_unit] * s.n if isinstance(raw_unit, str) else list(raw_unit)
@@ -879,6 +943,31 @@ def check_compatible(cal: Calibration, n_sensors: int, raw_unit: Any, source: st
         who = names[i] if names is not None and i < len(names) else c.name
         raise ConfigError(f"{source}: {kind} sensor {i + 1} ({who}) is in {got!r}, the {where} "
                           f"expects raw outputs in {want!r}")
+
+
+def _check_names(s: SensorSet, names: Any, source: str, where: str, kind: str, *,
+                 warn: bool) -> None:
+    """Sensors are matched by position: the same names in another order are refused (the
+    columns were permuted), other names warned about in one line."""
+    import logging
+
+    if names is None:
+        return
+    got = [str(x) for x in names]
+    want = [c.name for c in s.sensors]
+    if got == want or len(got) != len(want):
+        return
+    if sorted(got) == sorted(want) and not warn:
+        j = next(i for i, (a, b) in enumerate(zip(got, want, strict=True)) if a != b)
+        raise ConfigError(f"{source}: {kind} sensor {j + 1} is {got[j]!r} where the {where} "
+                          f"has {want[j]!r}: the same sensors in another order (a calibration "
+                          "applies by position; reorder the columns)")
+    if not warn or sorted(got) == sorted(want):
+        return
+    pairs = ", ".join(f"{a}={b}" for a, b in zip(got, want, strict=True) if a != b)
+    logging.getLogger("rimu.calibration").warning(
+        f"{source}: its {kind} sensor names differ from the {where}'s; matched by position: "
+        f"{pairs[:200]}")
 
 
 def check_plausible(cal: Calibration, source: str) -> None:
@@ -919,5 +1008,5 @@ def check_plausible(cal: Calibration, source: str) -> None:
             "in deg/s and the latitude right?")
 
 
-__all__ = sorted([*__all__, "GENERIC_RAW_UNITS", "IMPLAUSIBLE_ALPHA", "check_compatible",
-                  "check_plausible"])
+__all__ = sorted([*__all__, "GENERIC_RAW_UNITS", "IMPLAUSIBLE_ALPHA", "MAX_SCALE_FACTOR_SI",
+                  "MIN_SCALE_FACTOR_SI", "check_compatible", "check_plausible"])

@@ -14,18 +14,34 @@ one-line :class:`~fdi.errors.FileFormatError` naming the file, the line where it
 (TOML files), the step and the field, and what was expected. :meth:`Fields.finish` refuses
 every key the loader did not read (a typo such as ``axis_nomnal`` would otherwise switch a
 check off silently), suggesting the closest known key.
+
+Every JSON and TOML file goes through :func:`read_json_object` or :func:`read_toml_object`,
+which bound what a file may hold before anything else looks at it: at most
+:data:`MAX_FILE_BYTES` bytes, nesting at most :data:`MAX_DEPTH` deep, number literals of at
+most :data:`MAX_NUMBER_CHARS` characters (a 100 000-deep nesting or a 5000-digit number is
+one line naming the file, not a traceback).
+
+:func:`check_numbers` applies a schema's declarative table of :class:`NumberRule` (which
+paths must be ``>= 0``, positive, a probability, ...) to every number of a document, after
+the conventions every rimu file follows (:data:`CONVENTION_RULES`: ``*_sd`` >= 0, ``*_hz``
+> 0, ``*p_value`` in [0, 1], ...); every number not covered by a rule must be finite. The
+loader of each schema calls it once, so every command that reads the file refuses the same
+values with the same line.
 """
 
 from __future__ import annotations
 
 import difflib
+import fnmatch
+import functools
 import json
 import logging
 import math
 import re
 import tomllib
 import warnings
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Iterable, Iterator, Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -33,8 +49,17 @@ import numpy as np
 
 from fdi.errors import FileFormatError
 
-__all__ = ["REQUIRED", "Fields", "check_schema", "read_json_object", "read_text",
-           "read_toml_object", "to_jsonable", "toml_key_line"]
+__all__ = ["CONVENTION_RULES", "MAX_DEPTH", "MAX_FILE_BYTES", "MAX_NUMBER_CHARS", "REQUIRED",
+           "Fields", "NumberRule", "check_numbers", "check_schema", "number_rule",
+           "read_json_object", "read_text", "read_toml_object", "to_jsonable",
+           "toml_key_line"]
+
+MAX_FILE_BYTES = 256 << 20
+"""Largest JSON or TOML file read (256 MiB; rimu's own are kilobytes to a few megabytes)."""
+MAX_DEPTH = 64
+"""Deepest nesting of objects and arrays in a JSON or TOML file (rimu writes at most ~10)."""
+MAX_NUMBER_CHARS = 100
+"""Longest number literal in a JSON file (a float needs at most ~25 characters)."""
 
 
 class _Required:
@@ -118,19 +143,65 @@ def read_json_object(path: str | Path, schema: str | Sequence[str] | None = None
     """
     p = str(path)
     try:
+        _check_size(path)
         text = Path(path).read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as exc:
         why = getattr(exc, "strerror", None) or str(exc)
         raise FileFormatError(p, f"cannot read ({why}){hint}") from None
     try:
-        doc = json.loads(text)
+        doc = json.loads(text, parse_int=_json_int(p), parse_float=_json_float(p))
     except json.JSONDecodeError as exc:
         raise FileFormatError(p, f"not valid JSON ({exc.msg})", line=exc.lineno) from None
+    except RecursionError:
+        raise FileFormatError(p, f"nested deeper than {MAX_DEPTH} levels") from None
+    _check_depth(doc, p)
     if not isinstance(doc, dict):
         raise FileFormatError(p, "expected a JSON object")
     if schema is not None:
         check_schema(doc, p, schema)
     return doc
+
+
+def _check_size(path: str | Path) -> None:
+    """Refuse a file above :data:`MAX_FILE_BYTES` before reading it (OSError: unreadable)."""
+    size = Path(path).stat().st_size
+    if size > MAX_FILE_BYTES:
+        raise FileFormatError(str(path), f"{size} bytes, more than the {MAX_FILE_BYTES >> 20} "
+                              "MiB a rimu JSON or TOML file may hold")
+
+
+def _json_int(path: str):
+    def parse(text: str) -> int:
+        if len(text) > MAX_NUMBER_CHARS:
+            raise FileFormatError(path, f"a number of {len(text)} digits (at most "
+                                  f"{MAX_NUMBER_CHARS} characters per number)")
+        return int(text)
+    return parse
+
+
+def _json_float(path: str):
+    def parse(text: str) -> float:
+        if len(text) > MAX_NUMBER_CHARS:
+            raise FileFormatError(path, f"a number of {len(text)} characters (at most "
+                                  f"{MAX_NUMBER_CHARS} per number)")
+        return float(text)
+    return parse
+
+
+def _check_depth(doc: Any, path: str) -> None:
+    """Refuse nesting deeper than :data:`MAX_DEPTH` (iteratively: no recursion)."""
+    stack = [(doc, 1)]
+    while stack:
+        v, d = stack.pop()
+        if isinstance(v, dict):
+            items = v.values()
+        elif isinstance(v, list):
+            items = v
+        else:
+            continue
+        if d > MAX_DEPTH:
+            raise FileFormatError(path, f"nested deeper than {MAX_DEPTH} levels")
+        stack.extend((x, d + 1) for x in items if isinstance(x, dict | list))
 
 
 def read_text(path: str | Path) -> str:
@@ -153,11 +224,19 @@ def read_text(path: str | Path) -> str:
 
 def _read_toml(path: str | Path) -> tuple[dict[str, Any], str]:
     p = str(path)
+    try:
+        _check_size(path)
+    except OSError as exc:
+        raise FileFormatError(p, f"cannot read ({exc.strerror})") from None
     text = read_text(path)
     try:
-        return tomllib.loads(text), text
+        doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise FileFormatError(p, f"not valid TOML ({exc})") from None
+    except RecursionError:
+        raise FileFormatError(p, f"nested deeper than {MAX_DEPTH} levels") from None
+    _check_depth(doc, p)
+    return doc, text
 
 
 def read_toml_object(path: str | Path, schema: str | Sequence[str] | None = None
@@ -548,3 +627,205 @@ def _show(v: Any) -> str:
         v = v.item()
     s = repr(v)
     return s if len(s) <= 60 else s[:57] + "..."
+
+
+# -- numbers: finiteness and range of every numeric field, by declarative rules -------------
+@dataclass(frozen=True)
+class NumberRule:
+    """The range of the numbers at the paths a pattern matches.
+
+    Parameters
+    ----------
+    pattern : str
+        An :mod:`fnmatch` pattern over the field's path without indices, its keys joined
+        by dots (``sensors.gyro.bias_sd`` for ``sensors.gyro[2].bias_sd``; ``*`` matches
+        any run, dots included: ``*_sd`` is every standard deviation).
+    lo, hi : float, optional
+        Inclusive bounds (None: unbounded on that side).
+    lo_open : bool
+        Exclude ``lo`` itself (``> 0``).
+    finite : bool
+        False lets ``inf`` and ``nan`` pass (a field where they mean something).
+    diagonal : bool
+        Apply only where the last two indices are equal (a covariance's variances); the
+        other entries fall through to the next rule.
+    what : str
+        How the message names the expected value (``"a standard deviation"``).
+    """
+
+    pattern: str
+    lo: float | None = None
+    hi: float | None = None
+    lo_open: bool = False
+    finite: bool = True
+    diagonal: bool = False
+    what: str = ""
+
+    def expected(self) -> str:
+        """What the rule accepts, for a message."""
+        if self.lo is not None and self.hi is not None:
+            rng = f"in {'(' if self.lo_open else '['}{self.lo:g}, {self.hi:g}]"
+        elif self.lo is not None:
+            rng = f"{'>' if self.lo_open else '>='} {self.lo:g}"
+        elif self.hi is not None:
+            rng = f"<= {self.hi:g}"
+        else:
+            rng = ""
+        text = " ".join(x for x in ("finite" if self.finite else "", "number", rng) if x)
+        return f"{self.what} ({text})" if self.what else f"a {text}"
+
+    def accepts(self, x: float) -> bool:
+        """Whether the value ``x`` passes."""
+        if math.isnan(x):
+            return not self.finite
+        if math.isinf(x) and self.finite:
+            return False
+        if self.lo is not None and (x < self.lo or (self.lo_open and x == self.lo)):
+            return False
+        return self.hi is None or x <= self.hi
+
+
+_SD = "a standard deviation"
+_P = "a probability"
+CONVENTION_RULES: tuple[NumberRule, ...] = (
+    NumberRule("*log10_p*", hi=0.0, what="a log10 probability"),
+    NumberRule("*_sd", 0.0, what=_SD),
+    NumberRule("*.sd_*", 0.0, what=_SD),
+    NumberRule("*_sd_*", 0.0, what=_SD),
+    NumberRule("*.sd", 0.0, what=_SD),
+    NumberRule("*_rms", 0.0, what="an RMS"),
+    NumberRule("*_rms_*", 0.0, what="an RMS"),
+    NumberRule("*_hz", 0.0, lo_open=True, what="a rate"),
+    NumberRule("*p_value", 0.0, 1.0, what=_P),
+    NumberRule("*_p", 0.0, 1.0, what=_P),
+    NumberRule("*.alpha", 0.0, 1.0, what=_P),
+    NumberRule("*.level", 0.0, 1.0, what=_P),
+    NumberRule("*.confidence", 0.0, 1.0, what=_P),
+    NumberRule("*probability*", 0.0, 1.0, what=_P),
+    NumberRule("*chi2*", 0.0, what="a chi-square statistic"),
+    NumberRule("*.tau_s", 0.0, lo_open=True, what="an averaging time"),
+    NumberRule("*.adev", 0.0, what="an Allan deviation"),
+    NumberRule("*jitter*", 0.0, what="a timing jitter"),
+    NumberRule("*cov", 0.0, diagonal=True, what="a variance"),
+    NumberRule("*covariance.*", 0.0, diagonal=True, what="a variance"),
+    NumberRule("*.variance*", 0.0, what="a variance"),
+    NumberRule("*.samples*", 0.0, what="a count"),
+    NumberRule("*count*", 0.0, what="a count"),
+    NumberRule("*.windows", 0.0, what="a count"),
+    NumberRule("*.independent", 0.0, what="a count"),
+    NumberRule("*.dof", 0.0, what="a count"),
+    NumberRule("*.df", 0.0, what="a count"),
+    NumberRule("*.rank", 0.0, what="a count"),
+    NumberRule("*_used", 0.0, what="a count"),
+    NumberRule("*_max", 0.0, what="a largest magnitude"),
+    NumberRule("*_abs_max", 0.0, what="a largest magnitude"),
+    NumberRule("*duration*", 0.0, what="a duration"),
+    NumberRule("*span_s", 0.0, what="a duration"),
+    NumberRule("*block_s", 0.0, lo_open=True, what="a duration"),
+    NumberRule("*condition*", 0.0, what="a condition number"),
+    NumberRule("*ratio*", 0.0, what="a ratio"),
+    NumberRule("*autocorrelation*", -1.0, 1.0, what="a correlation"),
+    NumberRule("*excess_kurtosis", -2.0, what="an excess kurtosis"),
+)
+"""Ranges that follow from a field's name in every rimu file (standard deviations, rates,
+probabilities, counts, ...); a schema's own table comes first and may override them."""
+
+
+def _leaves(doc: Any) -> Iterator[tuple[tuple[str | int, ...], Any]]:
+    """(path, value) of every number in a parsed JSON/TOML document (iteratively)."""
+    stack: list[tuple[tuple[str | int, ...], Any]] = [((), doc)]
+    while stack:
+        path, v = stack.pop()
+        if isinstance(v, Mapping):
+            stack.extend(((*path, str(k)), x) for k, x in reversed(list(v.items())))
+        elif isinstance(v, list | tuple):
+            stack.extend(((*path, j), x) for j, x in reversed(list(enumerate(v))))
+        elif _is_number(v):
+            yield path, v
+
+
+def _path_name(path: tuple[str | int, ...]) -> str:
+    """``sensors.gyro[2].bias_sd`` (indices 1-based, as every rimu message counts)."""
+    out = ""
+    for k in path:
+        out += f"[{k + 1}]" if isinstance(k, int) else (f".{k}" if out else k)
+    return out
+
+
+def _match(keys: str, pattern: str) -> bool:
+    """``fnmatch`` of a dotted path; ``*.key`` also matches ``key`` at the top level."""
+    return fnmatch.fnmatchcase(keys, pattern) or (
+        pattern.startswith("*.") and fnmatch.fnmatchcase(keys, pattern[2:]))
+
+
+def check_numbers(doc: Any, path: str | Path, rules: Sequence[NumberRule] = (), *,
+                  skip: Sequence[str] = ()) -> None:
+    """Check every number of ``doc`` against ``rules``, then :data:`CONVENTION_RULES`.
+
+    The first rule whose pattern matches a field's path decides; a number that no rule
+    matches must be finite. Integers too large for a float are refused.
+
+    Parameters
+    ----------
+    doc : mapping or list
+        The parsed file.
+    path : str or Path
+        The file, for the message.
+    rules : sequence of NumberRule
+        The schema's table.
+    skip : sequence of str
+        Patterns of paths left to the schema's own reader (free-form values it checks).
+
+    Raises
+    ------
+    FileFormatError
+        Naming the file, the field (``sensors.gyro[2].bias_sd``), what was expected and
+        what the file holds.
+    """
+    table = tuple(rules)
+    seen: dict[tuple[str, bool], Any] = {}
+    for where, v in _leaves(doc):
+        keys = ".".join(k for k in where if isinstance(k, str))
+        if any(_match(keys, pat) for pat in skip):
+            continue
+        try:
+            x = float(v)
+        except OverflowError:
+            raise FileFormatError(str(path), f"expected a number in floating-point range, got "
+                                  f"an integer of {len(str(v))} digits",
+                                  field=_path_name(where)) from None
+        idx = [k for k in where if isinstance(k, int)]
+        diag = len(idx) >= 2 and idx[-1] == idx[-2]
+        rule = seen.get((keys, diag), _DEFAULT)
+        if rule is _DEFAULT:
+            rule = seen[keys, diag] = _rule(keys, table, diag)
+        if rule is None:
+            if math.isfinite(x):
+                continue
+            rule = NumberRule("*")
+        if not rule.accepts(x):
+            raise FileFormatError(str(path), f"expected {rule.expected()}, got {_show(v)}",
+                                  field=_path_name(where))
+
+
+def number_rule(keys: str, rules: Sequence[NumberRule] = (),
+                indices: Sequence[int] = ()) -> NumberRule | None:
+    """The rule :func:`check_numbers` applies to a field (None: only finite).
+
+    Parameters
+    ----------
+    keys : str
+        The field's keys joined by dots, without indices (``sensors.gyro.bias_sd``).
+    rules : sequence of NumberRule
+        The schema's table (:data:`CONVENTION_RULES` follow it).
+    indices : sequence of int
+        The field's indices (0-based; only a ``diagonal`` rule looks at them).
+    """
+    idx = list(indices)
+    return _rule(keys, tuple(rules), len(idx) >= 2 and idx[-1] == idx[-2])
+
+
+@functools.lru_cache(maxsize=4096)
+def _rule(keys: str, rules: tuple[NumberRule, ...], diagonal: bool) -> NumberRule | None:
+    return next((r for r in (*rules, *CONVENTION_RULES) if _match(keys, r.pattern)
+                 and (not r.diagonal or diagonal)), None)

@@ -14,11 +14,12 @@ from pathlib import Path
 from typing import Any
 
 from fdi.errors import ConfigError
-from fdi.fileio import Fields, read_json_object
+from fdi.fileio import Fields, NumberRule, check_numbers, read_json_object
 
 __all__ = [
     "DETECTORS",
     "NOISE_MODELS",
+    "THRESHOLDS_NUMBER_RULES",
     "THRESHOLDS_SCHEMA",
     "THRESHOLDS_SCHEMAS",
     "MonitorSettings",
@@ -169,6 +170,21 @@ MAX_SCALE = 1 << 20
 """Longest window (samples) a thresholds file may ask for (2^20: about 3 h at 100 Hz)."""
 
 
+THRESHOLDS_NUMBER_RULES: tuple[NumberRule, ...] = (
+    NumberRule("threshold", 0.0, lo_open=True, what="a threshold on the statistic"),
+    NumberRule("cusum_threshold", 0.0, lo_open=True, what="a CUSUM threshold"),
+    NumberRule("cusum_drift", 0.0, lo_open=True, what="a CUSUM drift"),
+    NumberRule("false_alarms_per_hour", 0.0, lo_open=True, what="a false-alarm rate"),
+    NumberRule("variance_factor", 0.0, lo_open=True, what="a variance factor"),
+    NumberRule("alpha", 0.0, 1.0, what="a probability"),
+    NumberRule("missed_detection", 0.0, 1.0, what="a probability"),
+    NumberRule("scales", 1.0, what="a window length"),
+    NumberRule("n", 1.0, what="a sensor count"),
+)
+"""Ranges of the thresholds file's numbers (see :func:`fdi.fileio.check_numbers`); every
+number must be finite."""
+
+
 def thresholds_from_dict(doc: Any, path: str = "<thresholds>") -> Thresholds:
     """Build :class:`Thresholds` from its JSON dictionary (see :func:`load_thresholds`)."""
     r = Fields(doc, path)
@@ -199,6 +215,7 @@ def thresholds_from_dict(doc: Any, path: str = "<thresholds>") -> Thresholds:
         fields["calibration_fingerprint"] = fp
         fields["noise_model"] = r.choice("noise_model", NOISE_MODELS)
     r.finish()
+    check_numbers(doc, path, THRESHOLDS_NUMBER_RULES)     # what the typed reads leave
     if fields["detector"] != "windows" and not fields["cusum_threshold"] > 0:
         raise r.error("cusum_threshold", f"a {fields['detector']!r} detector needs a positive "
                       "CUSUM threshold")

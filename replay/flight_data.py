@@ -157,6 +157,13 @@ class Flight:
         return self.raw.shape[1]
 
     @property
+    def time_base(self) -> Any:
+        """Gaps, duplicate time stamps and empty rows (:class:`replay.time_base.TimeBase`)."""
+        from replay.time_base import time_base
+
+        return time_base(self.t, self.raw, self.sample_rate_hz)
+
+    @property
     def duration_s(self) -> float:
         """Time span covered (s): N / sample rate."""
         return self.t.shape[0] / self.sample_rate_hz if self.sample_rate_hz > 0 else 0.0

@@ -56,6 +56,7 @@ from __future__ import annotations
 
 import io
 import json
+import logging
 import math
 import re
 from collections.abc import Mapping, Sequence
@@ -65,13 +66,15 @@ from typing import Any
 import numpy as np
 
 from fdi.errors import ConfigError, FileFormatError
-from fdi.fileio import Fields, read_json_object, to_jsonable
+from fdi.fileio import Fields, NumberRule, check_numbers, read_json_object, to_jsonable
 from replay.faults import Fault, fault_from_dict
 from replay.flight_data import AUX_KINDS, AUX_UNITS, FLIGHT_TRUTH_SCHEMA, AuxChannels, Flight
 from replay.log_events import LogEvent, event_from_dict, event_to_dict
+from replay.time_base import check_rate, time_base
 
 __all__ = [
     "AUX_FILE",
+    "FLIGHT_NUMBER_RULES",
     "FLIGHT_SCHEMA",
     "FLIGHT_TRUTH_SCHEMA",
     "load_flight_dir",
@@ -81,6 +84,11 @@ __all__ = [
 ]
 
 FLIGHT_SCHEMA = "rimu.flight/1"
+FLIGHT_NUMBER_RULES: tuple[NumberRule, ...] = (
+    NumberRule("samples", 0.0, what="a count of rows"),
+)
+"""Ranges of the flight manifest's numbers beyond :data:`fdi.fileio.CONVENTION_RULES`
+(``sample_rate_hz`` > 0); every other number (event times, ``meta``) must be finite."""
 AUX_FILE = "aux.csv"
 """File of the channels kept beside the monitored sensors."""
 
@@ -218,14 +226,35 @@ def read_truth_sidecar(path: str | Path, *, samples: int | None = None, mmap: bo
 _EMPTY_CELL = re.compile(rb"(?<=,)(?=,|\n)|^(?=,)", re.MULTILINE)
 
 
+_CHUNK = 64 << 20
+
+
+def _read_text_bytes(path: Path) -> bytes:
+    """The bytes of a CSV file, read in chunks; a NUL byte (binary data, a sparse or
+    zero-filled file) stops the read at once with one line, before the rest is read."""
+    p = str(path)
+    parts, at = [], 0
+    try:
+        with open(path, "rb") as fh:
+            while chunk := fh.read(_CHUNK):
+                nul = chunk.find(b"\0")
+                if nul >= 0:
+                    line = sum(c.count(b"\n") for c in parts) + chunk.count(b"\n", 0, nul) + 1
+                    raise FileFormatError(p, f"binary data (a NUL byte at offset {at + nul}), "
+                                          "not CSV text: a damaged or zero-filled file",
+                                          line=line)
+                parts.append(chunk)
+                at += len(chunk)
+    except OSError as exc:
+        raise FileFormatError(p, f"cannot read ({exc.strerror})") from None
+    return b"".join(parts)
+
+
 def _load_samples(path: Path, ncol: int, columns: Sequence[str]) -> tuple[np.ndarray,
                                                                          np.ndarray]:
     """Numbers and missing-mask of a samples.csv: ((N, ncol) float, (N, ncol) bool)."""
     p = str(path)
-    try:
-        data = path.read_bytes()
-    except OSError as exc:
-        raise FileFormatError(p, f"cannot read ({exc.strerror})") from None
+    data = _read_text_bytes(path)
     data = data.replace(b"\r\n", b"\n")
     nl = data.find(b"\n")
     header = (data if nl < 0 else data[:nl]).decode("utf-8", "replace").strip()
@@ -319,8 +348,11 @@ def _check_times(sp: str, t: np.ndarray) -> None:
         j = int(np.flatnonzero(~np.isfinite(t))[0])
         raise FileFormatError(sp, "non-finite time", line=j + 2, field="t")
     if t.size > 1 and np.any(np.diff(t) < 0):
-        j = int(np.flatnonzero(np.diff(t) < 0)[0]) + 1
-        raise FileFormatError(sp, "time goes backwards", line=j + 2, field="t")
+        back = np.flatnonzero(np.diff(t) < 0)
+        j = int(back[0]) + 1
+        raise FileFormatError(sp, f"time goes backwards ({back.size} time stamp"
+                              f"{'s' * (back.size != 1)} earlier than the one before, the first "
+                              "here); sort the rows or re-ingest the log", line=j + 2, field="t")
 
 
 def _aux_channel(ch: Any, mp: str, where: str) -> tuple[str, str, str]:
@@ -384,6 +416,7 @@ def load_flight_dir(directory: str | Path) -> Flight:
     mpath = d / "manifest.json"
     man = read_json_object(mpath, FLIGHT_SCHEMA)
     mp = str(mpath)
+    check_numbers(man, mp, FLIGHT_NUMBER_RULES)
     f = Fields(man, mp)
     f.accept("schema")
     fs = _positive_rate(man, mp)
@@ -410,6 +443,10 @@ def load_flight_dir(directory: str | Path) -> Flight:
     valid = ~missing[:, 1:]
     raw[~valid] = np.nan
     _check_times(str(spath), t)
+    check_rate(fs, t, mp)
+    said = time_base(t, raw, fs).text()
+    if said:            # one line, every command that reads a flight folder
+        logging.getLogger("rimu.flight").warning(f"{d}: {said}")
     aux = _aux_channels(d, man, mp, t)
     faults: tuple[Fault, ...] = ()
     truth: dict[str, Any] = {}

@@ -49,8 +49,8 @@ from fdi.units import DPS
 from replay.flight_data import Flight
 from replay.plots import RunTrace
 
-__all__ = ["ALARM_TYPES", "REPORT_SCHEMA", "RunningReport", "build_report", "event_units",
-           "format_report", "format_summary"]
+__all__ = ["ALARM_TYPES", "REPORT_SCHEMA", "RunningReport", "build_report", "decoding_hint",
+           "event_units", "format_report", "format_summary"]
 
 REPORT_SCHEMA = "rimu.report/1"
 ALARM_TYPES = ("detected", "isolated", "health")
@@ -385,11 +385,54 @@ def _fmt(x: Any, unit: str = "", prec: str = ".4g") -> str:
     return f"{x}{unit}"
 
 
+def _time_base_text(tb: Mapping[str, Any]) -> str:
+    """What the monitor ran across: gaps, duplicate time stamps, empty rows (or none)."""
+    parts = []
+    if tb.get("gaps"):
+        parts.append(f"monitored across {tb['gaps']} gap(s) longer than "
+                     f"{tb.get('gap_periods', 2.5):g} sample periods ({tb['gap_total_s']:.4g} s "
+                     f"without samples, longest {tb['gap_longest_s']:.4g} s, first at t = "
+                     f"{tb['gap_first_t_s']:.6g} s)")
+    if tb.get("duplicate_time_stamps"):
+        parts.append(f"{tb['duplicate_time_stamps']} duplicate time stamp(s)")
+    if tb.get("empty_rows"):
+        parts.append(f"{tb['empty_rows']} row(s) without any finite value")
+    return "; ".join(parts) if parts else "regular (no gap, no duplicate, no empty row)"
+
+
+def decoding_hint(report: Mapping[str, Any]) -> str | None:
+    """A warning when the run looks like a decoding error rather than a flight: more than
+    half the sensors isolated by the parity (not for non-finite or stale values), or more
+    than half the samples out of the envelope with saturation among the reasons (one wrong
+    DBC factor, map unit or raw unit scales every sensor alike); None otherwise."""
+    s = report.get("summary", {})
+    n = len(report.get("sensor_names", ()))
+    health = {e.get("sensor") for e in report.get("events", ()) if e.get("type") == "health"}
+    iso = [k for k in s.get("isolated_sensors") or () if k not in health]   # parity's own
+    out = float(s.get("envelope_out_fraction") or 0.0)
+    ranged = any("saturation" in p.get("reasons", ()) for p in s.get("envelope_periods") or ())
+    why = []
+    if n and len(iso) > n / 2:
+        why.append(f"{len(iso)} of {n} sensors isolated")
+    if out > 0.5 and ranged:
+        why.append(f"{100 * out:.0f} % of the samples out of the envelope, saturation among "
+                   "the reasons")
+    if not why:
+        return None
+    return (f"{' and '.join(why)}: a scale error common to every sensor (a DBC factor, the "
+            "channel map's unit, the raw unit, a calibration of another set) is more likely "
+            "than faults in all of them; check the decoded rates against the calibration")
+
+
 def format_report(report: Mapping[str, Any], *, max_events: int = 50) -> str:
     """Readable text of a report: events (the first ``max_events``) and the summary."""
+    tb = report.get("time_base")
+    span = (f"{tb['span_s']:.6g} s of time stamps" if tb else f"{report['duration_s']:.6g} s")
     lines = [f"{report.get('source', '')}: {report['samples']} samples, "
-             f"{report['duration_s']:.6g} s at {report['sample_rate_hz']:g} Hz, "
+             f"{span} at {report['sample_rate_hz']:g} Hz, "
              f"{len(report['sensor_names'])} {report.get('kind', 'gyro')} sensors"]
+    if tb:
+        lines.append("time stamps: " + _time_base_text(tb))
     ev = report["events"]
     lines.append(f"events: {len(ev)}")
     names = list(report.get("sensor_names", []))
@@ -441,8 +484,8 @@ def _envelope_lines(s: Mapping[str, Any]) -> list[str]:
         reasons = ", ".join(f"{k} {v}" for k, v in why.items())
         out.append(f"out of the envelope: {100 * s.get('envelope_out_fraction', 0.0):.1f} % of "
                    f"the samples in {len(periods)} period(s){f' ({reasons})' if reasons else ''}"
-                   f"; alarms {s.get('alarms_in_envelope', 0)} inside, "
-                   f"{s.get('alarms_out_of_envelope', 0)} outside (no exclusion there)")
+                   f"; alarms {s.get('alarms_in_envelope', 0)} inside the envelope, "
+                   f"{s.get('alarms_out_of_envelope', 0)} outside it (no exclusion there)")
     if "unverified_fraction" in s:
         ax = s.get("unverified_axis_fraction") or [0.0, 0.0, 0.0]
         out.append(f"unverified rates: {100 * s['unverified_fraction']:.1f} % of the samples "

@@ -31,6 +31,7 @@ __all__ = [
     "positive_float",
     "positive_int",
     "probability",
+    "refuse_ignored_options",
     "refuse_together",
 ]
 
@@ -192,3 +193,22 @@ def refuse_together(command: str, given: dict[str, object], option: str,
     if clash:
         raise ConfigError(f"{command}: {option} cannot be combined with {', '.join(clash)} "
                           f"(give one or the other)")
+
+
+IGNORED_BESIDE: tuple[tuple[str, str], ...] = (
+    ("false_alarms_per_hour", "thresholds"),
+)
+"""(option, other): ``--option`` means nothing when ``--other`` is given (the budget of
+computed thresholds beside a thresholds file); both together are refused, in every command
+that has them."""
+
+
+def refuse_ignored_options(args: argparse.Namespace, command: str) -> None:
+    """Refuse an option that another one given beside it would make meaningless
+    (:data:`IGNORED_BESIDE`), rather than ignore it silently (``ConfigError``)."""
+    ns = vars(args)
+    for opt, other in IGNORED_BESIDE:
+        if opt in ns and other in ns:
+            refuse_together(command, {f"--{opt.replace('_', '-')}": ns[opt],
+                                      f"--{other.replace('_', '-')}": ns[other]},
+                            f"--{opt.replace('_', '-')}", (f"--{other.replace('_', '-')}",))

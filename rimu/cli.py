@@ -191,6 +191,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     from fdi.progress import session
 
     try:
+        from rimu.argtypes import refuse_ignored_options
+        from rimu.outputs import refuse_outputs_over_inputs
+
+        refuse_outputs_over_inputs(args)        # no command writes over or into its input
+        refuse_ignored_options(args, f"rimu {args.command}")   # nothing ignored silently
         with session(command or "rimu", enabled=not getattr(args, "no_progress", False)):
             return int(run(args) or 0)
     except RimuError as exc:

@@ -2,7 +2,10 @@
 
 Every command checks its output paths right after parsing (:func:`output_file`,
 :func:`output_dir`) and its input paths (:func:`input_path`), so that a typo costs no
-computation and gives one line naming the option. Files are then written through
+computation and gives one line naming the option. Before any command runs,
+:func:`refuse_outputs_over_inputs` (called by :func:`rimu.cli.main`) refuses an output
+option (:data:`OUTPUT_OPTIONS`) whose path is, or lies inside, any path the command was
+given as input: no command writes over or into what it reads. Files are then written through
 :func:`atomic_file` (a temporary file beside the target, renamed over it with
 ``os.replace`` once complete) and directories through :func:`atomic_dir` (a temporary
 directory beside the target, whose files are renamed into it once all are written): a
@@ -12,7 +15,6 @@ failure part-way leaves neither a half-written file nor a temporary one behind.
 from __future__ import annotations
 
 import contextlib
-import json
 import os
 import shutil
 import tempfile
@@ -21,8 +23,9 @@ from pathlib import Path
 
 from fdi.errors import ConfigError
 
-__all__ = ["FLIGHT_LOG_SUFFIXES", "atomic_dir", "atomic_file", "atomic_write_text",
-           "distinct_inputs", "flight_folder_hint", "input_path", "output_dir", "output_file"]
+__all__ = ["FLIGHT_LOG_SUFFIXES", "OUTPUT_OPTIONS", "atomic_dir", "atomic_file",
+           "atomic_write_text", "distinct_inputs", "flight_folder_hint", "input_path",
+           "output_dir", "output_file", "refuse_outputs_over_inputs"]
 
 FLIGHT_LOG_SUFFIXES = (".bin", ".ulg", ".mat", ".rda", ".rdata", ".csv")
 """Log files ``rimu ingest`` turns into flight folders (a hint when one is given instead)."""
@@ -37,8 +40,20 @@ def _same(a: Path, b: Path) -> bool:
         return False
 
 
+def _inside(p: Path, q: Path) -> bool:
+    """Whether ``p`` is the directory ``q`` or lies somewhere inside it (links resolved)."""
+    try:
+        pr, qr = p.resolve(), q.resolve()
+    except (OSError, RuntimeError):
+        return False
+    if not qr.is_dir():
+        return False
+    return qr == pr or qr in pr.parents or any(
+        a.exists() and os.path.samefile(a, qr) for a in (pr, *pr.parents))
+
+
 def _not_an_input(p: Path, option: str, inputs) -> None:
-    """Refuse an output that is one of the command's inputs."""
+    """Refuse an output that is one of the command's inputs or lies inside one."""
     for q in inputs or ():
         if q is None or str(q) == "":
             continue
@@ -46,6 +61,58 @@ def _not_an_input(p: Path, option: str, inputs) -> None:
         if _same(p, q):
             raise ConfigError(f"{option} {p}: is an input of this command ({q}); writing it "
                               "would replace what is being read: give another path")
+        if _inside(p, q):
+            raise ConfigError(f"{option} {p}: lies inside the input folder {q}; writing "
+                              "there would change what is being read: give a path outside it")
+
+
+OUTPUT_OPTIONS = ("out", "report", "plot", "rrd")
+"""Argument names (``args.<name>``) through which a command writes; every other argument
+that names an existing file or folder is an input."""
+
+
+_OUTPUT_SUFFIXES = ("_plot", "_report", "_rrd", "_out")
+"""Argument names ending so are outputs too (``--baseline-plot``)."""
+
+
+def _paths(value) -> list[Path]:
+    if isinstance(value, str | os.PathLike):
+        return [Path(value)] if str(value) else []
+    if isinstance(value, list | tuple):
+        return [p for v in value for p in _paths(v)]
+    return []
+
+
+def refuse_outputs_over_inputs(args, outputs: tuple[str, ...] = OUTPUT_OPTIONS) -> None:
+    """Refuse any output of a parsed command line that is, or lies inside, an input.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed arguments. Inputs are the values (strings, paths, lists of them) of every
+        argument not in ``outputs`` that name an existing file or directory.
+    outputs : tuple of str
+        The argument names that are written.
+
+    Raises
+    ------
+    ConfigError
+        One line naming the output option, its path and the input it would change.
+    """
+    ns = vars(args)
+    ins = [q for k, v in ns.items() if k not in outputs and not k.startswith("_")
+           and not k.endswith(_OUTPUT_SUFFIXES)
+           for q in _paths(v) if _exists(q)]
+    for k in [k for k in ns if k in outputs or k.endswith(_OUTPUT_SUFFIXES)]:
+        for p in _paths(ns.get(k)):
+            _not_an_input(p, "--" + k.replace("_", "-"), ins)
+
+
+def _exists(q: Path) -> bool:
+    try:
+        return q.exists()
+    except OSError:
+        return False
 
 
 def _nearest_existing(p: Path) -> Path:
@@ -109,10 +176,12 @@ def output_dir(path: str | os.PathLike, option: str, *, inputs=(),
         if not os.access(p, os.W_OK | os.X_OK):
             raise ConfigError(f"{option} {p}: directory is not writable")
         if schema is not None and (p / "manifest.json").is_file():
+            from fdi.errors import FileFormatError
+            from fdi.fileio import read_json_object
+
             try:
-                got = str(json.loads((p / "manifest.json").read_text(encoding="utf-8"))
-                          .get("schema", ""))
-            except (OSError, ValueError, AttributeError):
+                got = str(read_json_object(p / "manifest.json").get("schema", ""))
+            except FileFormatError:
                 got = "?"
             if not got.startswith(schema.split("/")[0] + "/"):
                 raise ConfigError(f"{option} {p}: holds a {got} folder, not a "

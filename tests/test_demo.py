@@ -30,6 +30,10 @@ def test_demo_end_to_end(tmp_path, capsys):
     assert f["read"] == f["used"] + sum(f["rejected"].values())
     times = [e["t"] for e in report["events"]]
     assert times == sorted(times)
+    # every live line names its sensor or says it has none (issue 30: "sensor None")
+    assert "sensor None" not in text
+    assert all(re.search(r"sensor +(\d+ \(\S+\)|-)", ln)
+               for ln in text.splitlines() if re.match(r"\s+t=\s*[\d.]+ s\s+sensor", ln))
     assert (out / "replay.rrd").stat().st_size > 0
     # the picture, drawn without a display (matplotlib Agg), and the parity in the recording
     import matplotlib.image

@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import functools
 import itertools
+import logging
 import math
 from dataclasses import dataclass, field, replace
 
@@ -292,8 +293,14 @@ def decompose(A: np.ndarray, A_cov: np.ndarray | None = None
             "nonorthogonality": (v[6:9], sd[6:9])}
 
 
+IMPLAUSIBLE_RAW = 1e12
+"""A raw gyro value beyond this magnitude is no measurement (no sensor counts to 10¹² in
+any unit; squared, 1e308 overflows): it is left out of the fit like a missing one."""
+
+
 def imu_rates(flight: Flight) -> dict[str, np.ndarray]:
-    """The gyro samples of each IMU group, shape (N, 3) each, in x, y, z order."""
+    """The gyro samples of each IMU group, shape (N, 3) each, in x, y, z order; values
+    beyond :data:`IMPLAUSIBLE_RAW` become NaN (counted in one warning)."""
     if flight.kind != "gyro":
         raise ConfigError(f"{flight.source}: in-flight calibration needs gyros, the flight "
                           f"monitors {flight.kind}")
@@ -306,7 +313,15 @@ def imu_rates(flight: Flight) -> dict[str, np.ndarray]:
         if len(idx) != 3:
             raise ConfigError(f"{flight.source}: IMU {g} has {len(idx)} gyro axes, "
                               f"expected 3")
-        out[g] = flight.raw[:, idx]
+        r = np.asarray(flight.raw[:, idx], float)
+        huge = np.isfinite(r) & (np.abs(r) > IMPLAUSIBLE_RAW)
+        if huge.any():
+            rows = int(np.count_nonzero(huge.any(axis=1)))
+            logging.getLogger("rimu.inflight").warning(
+                f"{flight.source}: IMU {g}: {rows} row{'s' * (rows != 1)} with values beyond "
+                f"{IMPLAUSIBLE_RAW:g} (no measurement) left out of the fit")
+            r = np.where(huge, np.nan, r)
+        out[g] = r
     return out
 
 

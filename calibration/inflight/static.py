@@ -403,22 +403,24 @@ def static_text(doc: StaticAlignment | Mapping[str, Any]) -> str:
             f"{a / DEG:+.2f} ± {s / DEG:.2f}" for a, s in zip(r.rotation, r.rotation_sd,
                                                               strict=True))
             + "] deg (rotation vector)")
-        lines.append("      bias relative to the reference [" + ", ".join(
+        lines.append(f"      bias relative to the reference, in {g}'s axes [" + ", ".join(
             f"{a / DPS:+.4f}" for a in r.relative_bias) + "] deg/s")
         sig = [f"{a} {d / DPS:+.4f} ± {s / DPS:.4f} deg/s (z {z:+.1f}, p {p:.2g})"
                for a, d, s, z, p in zip("xyz", r.relative_drift, r.relative_drift_sd,
                                         r.relative_drift_z, r.relative_drift_p, strict=True)]
-        lines.append("      drift relative to the reference over the record: " + "; ".join(sig))
+        lines.append(f"      drift relative to the reference over the record, in {g}'s axes: "
+                     + "; ".join(sig))
     a = doc.drift_attribution
     if a is not None:
-        lines.append("  drift shared by every IMU relative to the reference (= minus the "
-                     "reference's own): [" + ", ".join(
+        lines.append(f"  drift shared by every IMU relative to the reference (= minus the "
+                     f"reference's own), in {doc.reference}'s axes: [" + ", ".join(
                          f"{c / DPS:+.4f} ± {s / DPS:.4f}"
                          for c, s in zip(a.common, a.common_sd, strict=True))
                      + f"] deg/s, p {a.common_p:.2g}; the IMUs differ from it with chi2 "
                        f"p {a.consistent_p:.2g}")
         for g, v in a.own.items():
-            lines.append(f"    {g} relative to the reference: [" + ", ".join(
+            lines.append(f"    {g} relative to the reference, in {doc.reference}'s axes "
+                         "(the same drift as above, rotated): [" + ", ".join(
                 f"{d / DPS:+.4f} (z {z:+.1f})" for d, z in zip(v.drift, v.z, strict=True))
                 + "] deg/s")
         lines.append(f"  {a.statement}")

@@ -245,6 +245,9 @@ def run(args: argparse.Namespace) -> int:
     cal = calibration_from_fit(fit, flight,
                                drift_model=bool(getattr(args, "drift_model", False)),
                                turn_on_sd=turn_on, flights=values)
+    from replay.time_base import with_time_base
+
+    cal = with_time_base(cal, flight)       # gaps, duplicates, empty rows: in the file too
     if len(fits) > 1:
         for n in joint.notes:
             print(f"note: {n}")

@@ -36,6 +36,9 @@ def run(args: argparse.Namespace) -> int:
     flight = load_flight_dir(args.static)
     current().stage("calibrating at rest (biases, alignment, drift, tails)")
     cal = calibrate_static(flight, reference=getattr(args, "reference", None))
+    from replay.time_base import with_time_base
+
+    cal = with_time_base(cal, flight)       # gaps, duplicates, empty rows: in the file too
     with atomic_file(out) as tmp:
         cal.save(tmp)
     print(static_text(cal.extras.static))

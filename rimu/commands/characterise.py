@@ -36,7 +36,8 @@ def run(args: argparse.Namespace) -> int:
     current().stage("reading the flight folder")
     flight = load_flight_dir(args.flight)
     current().stage("characterising (noise density, Allan deviation, tails, lines, drift)")
-    doc = to_jsonable(characterise_flight(flight, alpha=args.alpha))
+    doc = to_jsonable({**characterise_flight(flight, alpha=args.alpha),
+                       "time_base": flight.time_base.to_dict()})
     js = json.dumps(doc, indent=1, allow_nan=False) + "\n"
     summary = text(doc)
     print(js if args.json else summary, end="" if args.json else "\n")

@@ -115,7 +115,8 @@ def _demo(args: argparse.Namespace, out: Path, final: Path) -> None:
     names = [c.name for c in cal.gyro.sensors]
     for e in report["events"]:
         k = e["sensor"]
-        who = f"{k} ({names[k - 1]})" if isinstance(k, int) and 1 <= k <= len(names) else k
+        who = (f"{k} ({names[k - 1]})" if isinstance(k, int) and 1 <= k <= len(names) else
+               "- (not isolated)" if k is None else k)
         print(f"  t={e['t']:8.2f} s  sensor {who}  {e['type']:9s} {e['reason']}")
     print(format_summary(report))
     rep_path = out / "report.json"

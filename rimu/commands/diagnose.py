@@ -120,9 +120,12 @@ def text(d) -> str:
 
 def _is_flight(path: str) -> bool:
     """True when ``path`` holds a ``rimu.flight/1`` manifest (else it is read as a session)."""
+    from fdi.errors import FileFormatError
+    from fdi.fileio import read_json_object
+
     try:
-        doc = json.loads((Path(path) / "manifest.json").read_text(encoding="utf-8"))
-    except (OSError, ValueError):
+        doc = read_json_object(Path(path) / "manifest.json")
+    except FileFormatError:
         return False
     return isinstance(doc, dict) and str(doc.get("schema", "")).startswith("rimu.flight/")
 

@@ -109,7 +109,8 @@ def run_flight(path: str, cal_path: str, *, alpha: float = 0.01, as_json: bool =
     flight = load_flight_dir(path)
     cal = load_calibration(cal_path)
     current().stage("diagnosing (parity residual, effects)")
-    doc = diagnose_flight(flight, cal, alpha=alpha)
+    doc = {**diagnose_flight(flight, cal, alpha=alpha),
+           "time_base": flight.time_base.to_dict()}
     text = format_text(doc)
     js = json.dumps(doc, indent=1, allow_nan=False) + "\n"
     print(js if as_json else text, end="\n" if not as_json else "")

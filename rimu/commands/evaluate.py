@@ -19,6 +19,9 @@ from rimu.argtypes import (
 )
 
 MAX_WORKERS = 256
+SAMPLE_BUDGET = 100_000_000
+"""Most simulated samples (runs × duration × rate, summed) evaluated without ``--yes``:
+about 280 flight-hours at 100 Hz, some tens of minutes on one core."""
 """Most LocalCluster workers."""
 
 HELP = ("evaluate the monitor on simulated flights (every fault kind, a sweep of sizes) or a "
@@ -56,6 +59,9 @@ def configure(p: argparse.ArgumentParser) -> None:
     p.add_argument("--workers", type=positive_int(MAX_WORKERS), default=2,
                    help="LocalCluster workers (default 2)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--yes", action="store_true",
+                   help=f"run a campaign beyond the budget of {SAMPLE_BUDGET:.0e} simulated "
+                        "samples (refused up front without it)")
     p.add_argument("--baseline", metavar="NAMES",
                    help="also run the autopilots' own rules on the same samples of every "
                         "run (px4, px4-others, ardupilot, or all; the set must be IMUs of "
@@ -149,7 +155,8 @@ def markdown(ev: dict, how: dict) -> str:
                  f"{ev['detectable_sizes']['runs']} sweep runs of the detectable step, "
                  "--sweep-runs)" if "detectable_sizes" in ev else ""),
              f"- false alarms: {fa['count']} in {fa['exposure_h']:.2f} h = "
-             f"{fa['per_hour']:.3g}/h (95 % {lo:.3g} to {hi:.3g})", ""]
+             + (f"{fa['per_hour']:.3g}/h (95 % {lo:.3g} to {hi:.3g})" if fa["exposure_h"] > 0
+                else _rate_text(fa)), ""]
     if ev["faults"]:
         lines += ["| fault | size | runs | P(detect) [95 %] | P(isolate) | median delay s |",
                   "|---|---|---|---|---|---|"]
@@ -176,6 +183,28 @@ def markdown(ev: dict, how: dict) -> str:
               + (", detectable_sizes.png" if "detectable_sizes" in ev else "")
               + (", baselines.png" if "baselines" in ev else ""), ""]
     return "\n".join(lines)
+
+
+def _check_budget(items: list, rate_hz: float, args: argparse.Namespace) -> None:
+    """Say what will run; refuse a campaign beyond :data:`SAMPLE_BUDGET` unless ``--yes``."""
+    from fdi.errors import ConfigError
+
+    n_flights = sum(x.fault != "sweep" for x in items)
+    samples = sum(x.duration_s for x in items) * float(rate_hz)
+    hours = sum(x.duration_s for x in items) / 3600.0
+    plan = (f"{n_flights} flight(s) of {args.duration:g} s"
+            + (f" + {len(items) - n_flights} short sweep run(s) (--sweep-runs)"
+               if len(items) > n_flights else "")
+            + f": {hours:.3g} simulated hours, {samples:.3g} samples at {rate_hz:g} Hz")
+    if samples > SAMPLE_BUDGET and not args.yes:
+        raise ConfigError(f"evaluate: {plan}, beyond the budget of {SAMPLE_BUDGET:.0e} samples: "
+                          "give fewer --runs or a shorter --duration, or --yes to run it")
+    print(f"evaluate: {plan}", flush=True)
+
+
+def _rate_text(fa: dict) -> str:
+    return (f"{fa['per_hour']:.3g}/h" if fa["exposure_h"] > 0 else
+            "no rate (no flight time: --runs 0)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -216,6 +245,7 @@ def run(args: argparse.Namespace) -> int:
                        sweep_runs=n_sweep, kind=args.kind, duration_s=args.duration,
                        onset_s=args.duration / 2, max_rate_dps=args.max_rate)
         task = simulation_task(cal, thr, args.kind, baselines)
+        _check_budget(items, cal.sample_rate_hz, args)
     t0 = time.perf_counter()
     results = execute(task, items, scheduler=args.scheduler, progress=not args.no_progress,
                       workers=args.workers)
@@ -242,7 +272,7 @@ def run(args: argparse.Namespace) -> int:
     what = (f" ({n_flights} flights + {len(items) - n_flights} sweep runs of the detectable "
             "step, --sweep-runs)" if len(items) > n_flights else "")
     print(f"{len(results)} runs{what} in {wall:.1f} s ({args.scheduler}); false alarms "
-          f"{fa['count']} in {fa['exposure_h']:.2f} h = {fa['per_hour']:.3g}/h")
+          f"{fa['count']} in {fa['exposure_h']:.2f} h = {_rate_text(fa)}")
     for f in ev["faults"]:
         print(f"  {f['fault']:8s} {f['size']:8.3g} {f['unit']:8s} Pd {f['pd']:.2f} "
               f"isolated {f['p_isolation']:.2f} runs {f['runs']}")

@@ -80,6 +80,10 @@ def run(args: argparse.Namespace) -> int:
             raise ConfigError("no sample decoded; no report written")
         return 0
     print(format_report(report, max_events=0))
+    from replay.report import decoding_hint
+
+    if hint := decoding_hint(report):
+        logging.getLogger("rimu").warning(hint)
     if "auxiliary" in report:
         print(format_aux(report["auxiliary"]))
     write_report(report, args.report, chain)

@@ -127,7 +127,13 @@ def run(args: argparse.Namespace) -> int:
         print(chain.turn_on.text(chain.sensor_names))
     current().stage(f"monitoring {flight.t.shape[0]} samples")
     _, report = run_flight(chain, flight)
+    report["time_base"] = flight.time_base.to_dict()     # the gaps it monitored across
     print(format_report(report, max_events=args.max_events))
+    from replay.report import decoding_hint
+
+    hint = decoding_hint(report)
+    if hint:
+        logging.getLogger("rimu").warning(hint)
     if baselines:
         current().stage("baselines")
         _baselines(args, baselines, flight, cal, report)

@@ -68,6 +68,7 @@ def run(args: argparse.Namespace) -> int:
     print("H =\n" + str(_clean(cfg.H, 5)))
     print("V =\n" + str(_clean(V, 5)))
     if "V_calibrated" in out:
+        print("H_c (calibrated axes) =\n" + str(_clean(np.array(out["H_calibrated"]), 5)))
         print("V_c =\n" + str(_clean(np.array(out["V_calibrated"]), 5)))
     bad = [p["pair"] for p in out["isolable_pairs"] if not p["isolable"]]
     print("isolation: " + ("every pair isolable" if not bad else

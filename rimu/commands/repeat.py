@@ -42,6 +42,15 @@ def _fmt(v: float) -> str:
     return f"{v:.3g}"
 
 
+def run_sd_text(run_sd: float, lo: float, hi: float) -> str:
+    """The run-to-run sd and its interval; an empty Q-profile interval (the scatter is
+    below even the low quantile the reported sigma predict: both ends 0) is said, not
+    printed as [0, 0], which would claim a run-to-run sd of exactly 0."""
+    if hi <= 0.0:
+        return "0 (scatter below the sigma: no interval)"
+    return f"{_fmt(run_sd)} [{_fmt(lo)}, {_fmt(hi)}]"
+
+
 def repeat_text(res) -> str:
     """The readable report of a :class:`calibration.repeat.RepeatResult`."""
     rep = res.repeatability
@@ -60,7 +69,7 @@ def repeat_text(res) -> str:
         mean = "-" if p.parameter == "scale_factor" else _fmt(p.mean)
         lines.append(f"  {p.kind + ' ' + p.sensor_name:<10s}{p.parameter:<16s}{mean:>12s}"
                      f"{_fmt(p.mean_sd):>10s} {p.unit:<12s}{p.chi2:8.2f}{p.p_value:10.2g}  "
-                     f"{_fmt(p.run_sd) + ' [' + _fmt(lo) + ', ' + _fmt(hi) + ']':<26s}"
+                     f"{run_sd_text(p.run_sd, lo, hi):<26s}"
                      f"{p.verdict}")
     fl = rep.flagged()
     if fl:

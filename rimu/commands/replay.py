@@ -201,6 +201,10 @@ def run(args: argparse.Namespace) -> int:
         report = report_log(chain, stream, header, pacer=pacer,
                             extra={"injected": str(args.inject)} if args.inject else None)
         print(format_report(report, max_events=args.max_events))
+        from replay.report import decoding_hint
+
+        if hint := decoding_hint(report):
+            logging.getLogger("rimu").warning(hint)
         if "auxiliary" in report:
             print(format_aux(report["auxiliary"]))
         if chain.recorder is not None:

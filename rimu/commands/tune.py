@@ -84,6 +84,12 @@ def run(args: argparse.Namespace) -> int:
     out = output_file(args.out, "--out", inputs=(args.cal,))
     scales = _scales(args.scales) if args.scales else 7
     cal = load_calibration(args.cal)
+    if args.drift_horizon_s is not None and cal.kind(args.kind).drift is None:
+        from fdi.errors import ConfigError
+
+        raise ConfigError(f"--drift-horizon-s: {args.cal} has no {args.kind} drift model "
+                          "(parity_drift), so there is no drift term to project; calibrate "
+                          "with --drift-model or leave the option out")
     tu = tune(cal, false_alarms_per_hour=args.false_alarms_per_hour, kind=args.kind,
               scales=scales, simulate_hours=args.simulate_hours, seed=args.seed,
               progress=not args.no_progress, drift_horizon_s=args.drift_horizon_s,

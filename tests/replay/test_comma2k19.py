@@ -1,5 +1,6 @@
 """The real comma2k19 RAV4 CAN log: every frame accounted for, YAW_RATE decoded as cantools does."""
 
+import os
 import re
 from pathlib import Path
 
@@ -13,7 +14,8 @@ from replay.can_read import read_frames
 from replay.channel_map import load_channel_map
 from replay.frames import load_dbc
 
-DATA = Path(__file__).parents[2] / ".." / "shared" / "data" / "comma2k19_can"
+DATA = Path(os.environ.get("RIMU_SHARED_DATA", Path(__file__).parents[2] / ".." / "shared"
+                          / "data")) / "comma2k19_can"
 LOG = DATA / "rav4_2018-08-02--08-34-47_seg40.candump.log"
 DBC = DATA / "toyota_2017_kinematics_excerpt.dbc"
 

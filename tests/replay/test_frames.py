@@ -1,5 +1,8 @@
 """Shipped DBC layout and the vectorised block decoder against cantools' own decode."""
 
+import os
+from pathlib import Path
+
 import cantools
 import numpy as np
 import pytest
@@ -16,8 +19,9 @@ from replay.frames import (
     message_layout,
 )
 
-COMMA_DBC = (DEFAULT_DBC.parents[2] / ".." / "shared" / "data" / "comma2k19_can"
-             / "toyota_2017_kinematics_excerpt.dbc")
+COMMA_DBC = (Path(os.environ.get("RIMU_SHARED_DATA",
+                                 DEFAULT_DBC.parents[2] / ".." / "shared" / "data"))
+             / "comma2k19_can" / "toyota_2017_kinematics_excerpt.dbc")
 
 
 def test_shipped_dbc_messages_and_signals():

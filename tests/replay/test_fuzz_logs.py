@@ -187,7 +187,8 @@ def test_pristine_logs_are_clean(logs, work):
 
 
 # ---------------------------------------------------------------- the real comma2k19 log
-DATA = Path(__file__).parents[2] / ".." / "shared" / "data" / "comma2k19_can"
+DATA = Path(os.environ.get("RIMU_SHARED_DATA", Path(__file__).parents[2] / ".." / "shared"
+                          / "data")) / "comma2k19_can"
 COMMA = DATA / "rav4_2018-08-02--08-34-47_seg40.candump.log"
 COMMA_DBC = DATA / "toyota_2017_kinematics_excerpt.dbc"
 
