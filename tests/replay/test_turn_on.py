@@ -131,3 +131,21 @@ def test_chain_monitors_with_the_rest_estimate_and_reports_it():
                                                           else "rest") \
             if "extra" in rep else True
     assert quiet == {"off": False, "rest": True}
+
+
+def test_auto_without_measured_spread_or_given_bound_keeps_the_calibrated_biases(monkeypatch):
+    """No rest stretch, no ``bias_turn_on_sd``, no ``--bias-bound-dps``: ``auto`` does not
+    guess a bound (it would raise the thresholds by the fault sizes they must see); the
+    reason says how to cover the spread. Asked for (``mode="bound"``) the default applies."""
+    import replay.turn_on as turn_on
+
+    # a calibration of another flight: not the same power-up
+    monkeypatch.setattr(turn_on, "same_power_up", lambda cal, flight: False)
+    fl = _flight(0.0, 20.0, turn_on_dps=TURN_ON)
+    ton = turn_on_for_flight(fl, CAL, mode="auto")
+    assert ton.method == "calibrated", ton
+    assert "no measured run-to-run bias spread" in ton.reason and "--bias-bound-dps" in ton.reason
+    bound = turn_on_for_flight(fl, CAL, mode="bound")
+    assert bound.method == "bound" and np.allclose(bound.bound, DEFAULT_BIAS_BOUND_DPS * DPS)
+    given = turn_on_for_flight(fl, CAL, mode="auto", bias_bound_dps=0.25)
+    assert given.method == "bound" and np.allclose(given.bound, 0.25 * DPS)
