@@ -37,7 +37,13 @@ from numba import njit
 
 from fdi.errors import ConfigError
 from fdi.units import DPS
-from replay.baselines.common import BaselineEvent, BaselineResult, Triads, answer_events
+from replay.baselines.common import (
+    BaselineEvent,
+    BaselineResult,
+    StreamingRule,
+    Triads,
+    answer_events,
+)
 
 __all__ = ["ACCEL_THIRD_IMU_FACTOR", "ACCEL_Z_FACTOR", "ARMING_ACCTHRESH_MPS2",
            "CONSISTENT_FOR_S", "GYRO_CONSISTENCY_DPS", "LEFT_OUT", "ArduPilotAnswer",
@@ -167,7 +173,7 @@ class ArduPilotAnswer:
     events: tuple[BaselineEvent, ...]
 
 
-class ArduPilotConsistency:
+class ArduPilotConsistency(StreamingRule):
     """ArduPilot's IMU consistency check over a stream of IMU triads (module docstring).
 
     Parameters
@@ -179,6 +185,8 @@ class ArduPilotConsistency:
     """
 
     name = "ardupilot"
+
+    _answer = ArduPilotAnswer
 
     def __init__(self, imus: Any, kind: str = "gyro",
                  settings: ArduPilotSettings | None = None) -> None:
@@ -209,20 +217,6 @@ class ArduPilotConsistency:
         ev = answer_events(t, flag, blame, why, val, self._prev, self.imus, REASONS, 1.0,
                            "x threshold")
         return flag, blame, ratio, ev
-
-    def step(self, t: float, values: np.ndarray, valid: np.ndarray) -> ArduPilotAnswer:
-        """One sample: ``values`` (k, 3) SI, ``valid`` (k,)."""
-        flag, blame, ratio, ev = self._advance(
-            np.array([float(t)]), np.asarray(values, float).reshape(1, -1, 3),
-            np.asarray(valid, bool).reshape(1, -1))
-        return ArduPilotAnswer(float(t), bool(flag[0]), int(blame[0]), ratio[0], tuple(ev))
-
-    def run(self, t: np.ndarray, values: np.ndarray, valid: np.ndarray) -> BaselineResult:
-        """A block: ``t`` (N,), ``values`` (N, k, 3) SI, ``valid`` (N, k)."""
-        t = np.asarray(t, float)
-        flag, blame, ratio, ev = self._advance(t, np.asarray(values, float),
-                                               np.asarray(valid, bool))
-        return self.result(t, flag, blame, ratio, ev)
 
     def result(self, t: np.ndarray, flag: np.ndarray, blame: np.ndarray, ratio: np.ndarray,
                events: Any) -> BaselineResult:

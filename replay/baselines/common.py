@@ -28,7 +28,7 @@ from replay.flight_data import Flight
 from replay.time_offsets import imu_groups
 
 __all__ = ["BASELINE_SCHEMA", "MOUNTING_TOLERANCE_DEG", "SI_UNITS", "BaselineEvent",
-           "BaselineResult", "Triads", "answer_events", "triads_from_flight"]
+           "BaselineResult", "StreamingRule", "Triads", "answer_events", "triads_from_flight"]
 
 BASELINE_SCHEMA = "rimu.baseline/1"
 """Format of one baseline's answer (:meth:`BaselineResult.to_dict`)."""
@@ -327,3 +327,33 @@ def answer_events(t: np.ndarray, flagged: np.ndarray, blamed: np.ndarray,
                                      float(value[r]), threshold, unit))
         prev[0], prev[1] = f, (b if f else -1)
     return out
+
+
+class StreamingRule:
+    """The one streaming shape of a baseline rule: ``step`` (one sample) and ``run`` (a
+    block) both go through the rule's ``_advance(t, x, ok) -> (flag, blame, value, events)``
+    on arrays of shape (N,), (N, k, 3), (N, k), so they share the arithmetic; ``_answer`` is
+    the rule's per-sample answer class, built as ``(t, flagged, blamed, value, events)``."""
+
+    _answer: Any
+
+    def _advance(self, t: np.ndarray, x: np.ndarray, ok: np.ndarray) -> tuple[Any, ...]:
+        raise NotImplementedError
+
+    def result(self, t: np.ndarray, flag: np.ndarray, blame: np.ndarray, value: np.ndarray,
+               events: Any) -> BaselineResult:
+        raise NotImplementedError
+
+    def step(self, t: float, values: np.ndarray, valid: np.ndarray) -> Any:
+        """One sample: ``values`` (k, 3) SI, ``valid`` (k,)."""
+        flag, blame, value, ev = self._advance(
+            np.array([float(t)]), np.asarray(values, float).reshape(1, -1, 3),
+            np.asarray(valid, bool).reshape(1, -1))
+        return self._answer(float(t), bool(flag[0]), int(blame[0]), value[0], tuple(ev))
+
+    def run(self, t: np.ndarray, values: np.ndarray, valid: np.ndarray) -> BaselineResult:
+        """A block: ``t`` (N,), ``values`` (N, k, 3) SI, ``valid`` (N, k)."""
+        t = np.asarray(t, float)
+        flag, blame, value, ev = self._advance(t, np.asarray(values, float),
+                                               np.asarray(valid, bool))
+        return self.result(t, flag, blame, value, ev)

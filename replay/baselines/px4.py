@@ -47,7 +47,13 @@ from numba import njit
 
 from fdi.errors import ConfigError
 from fdi.units import DPS
-from replay.baselines.common import BaselineEvent, BaselineResult, Triads, answer_events
+from replay.baselines.common import (
+    BaselineEvent,
+    BaselineResult,
+    StreamingRule,
+    Triads,
+    answer_events,
+)
 
 __all__ = [
     "EKF2_SEL_IMU_ACC_MPS2",
@@ -295,7 +301,7 @@ class PX4Answer:
     events: tuple[BaselineEvent, ...]
 
 
-class PX4Selector:
+class PX4Selector(StreamingRule):
     """PX4's IMU rule over a stream of IMU triads (module docstring).
 
     Parameters
@@ -314,6 +320,8 @@ class PX4Selector:
         The baseline's name in results (``"px4"``; ``"px4-others"`` for the variant that
         compares each IMU with the mean of the others).
     """
+
+    _answer = PX4Answer
 
     def __init__(self, imus: Any, kind: str = "gyro", settings: PX4Settings | None = None,
                  *, sample_period_s: float | None = None, name: str = "px4") -> None:
@@ -361,20 +369,6 @@ class PX4Selector:
         ev = answer_events(t, flag, blame, why, val * self._to_unit, self._prev, self.imus,
                            REASONS, self.settings.fault_threshold * self._to_unit, self.unit)
         return flag, blame, acc, ev
-
-    def step(self, t: float, values: np.ndarray, valid: np.ndarray) -> PX4Answer:
-        """One sample: ``values`` (k, 3) SI, ``valid`` (k,)."""
-        flag, blame, acc, ev = self._advance(
-            np.array([float(t)]), np.asarray(values, float).reshape(1, -1, 3),
-            np.asarray(valid, bool).reshape(1, -1))
-        return PX4Answer(float(t), bool(flag[0]), int(blame[0]), acc[0], tuple(ev))
-
-    def run(self, t: np.ndarray, values: np.ndarray, valid: np.ndarray) -> BaselineResult:
-        """A block: ``t`` (N,), ``values`` (N, k, 3) SI, ``valid`` (N, k)."""
-        t = np.asarray(t, float)
-        flag, blame, acc, ev = self._advance(t, np.asarray(values, float),
-                                             np.asarray(valid, bool))
-        return self.result(t, flag, blame, acc, ev)
 
     def result(self, t: np.ndarray, flag: np.ndarray, blame: np.ndarray, acc: np.ndarray,
                events: Any) -> BaselineResult:
