@@ -149,7 +149,8 @@ def read_json_object(path: str | Path, schema: str | Sequence[str] | None = None
         why = getattr(exc, "strerror", None) or str(exc)
         raise FileFormatError(p, f"cannot read ({why}){hint}") from None
     try:
-        doc = json.loads(text, parse_int=_json_int(p), parse_float=_json_float(p))
+        doc = json.loads(text, parse_int=_json_number(p, int),
+                         parse_float=_json_number(p, float))
     except json.JSONDecodeError as exc:
         raise FileFormatError(p, f"not valid JSON ({exc.msg})", line=exc.lineno) from None
     except RecursionError:
@@ -170,21 +171,15 @@ def _check_size(path: str | Path) -> None:
                               "MiB a rimu JSON or TOML file may hold")
 
 
-def _json_int(path: str):
-    def parse(text: str) -> int:
+def _json_number(path: str, convert: Any):
+    """A ``json.loads`` number hook that refuses a literal above :data:`MAX_NUMBER_CHARS`
+    before ``convert`` (int or float) reads it."""
+    def parse(text: str) -> Any:
         if len(text) > MAX_NUMBER_CHARS:
-            raise FileFormatError(path, f"a number of {len(text)} digits (at most "
-                                  f"{MAX_NUMBER_CHARS} characters per number)")
-        return int(text)
-    return parse
-
-
-def _json_float(path: str):
-    def parse(text: str) -> float:
-        if len(text) > MAX_NUMBER_CHARS:
-            raise FileFormatError(path, f"a number of {len(text)} characters (at most "
-                                  f"{MAX_NUMBER_CHARS} per number)")
-        return float(text)
+            size = (f"{len(text)} digits (at most {MAX_NUMBER_CHARS} characters"
+                    if convert is int else f"{len(text)} characters (at most {MAX_NUMBER_CHARS}")
+            raise FileFormatError(path, f"a number of {size} per number)")
+        return convert(text)
     return parse
 
 
