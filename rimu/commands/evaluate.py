@@ -127,10 +127,7 @@ def _baseline_markdown(ev: dict) -> list[str]:
         return []
     lines = ["Autopilot rules on the same samples (--baseline; docs/baselines.md):", ""]
     for nm, rule in b["rules"].items():
-        fa = rule["false_alarms"]
-        lo, hi = fa["ci95_per_hour"]
-        lines += [f"- {nm}: false alarms {fa['count']} in {fa['exposure_h']:.2f} h = "
-                  f"{fa['per_hour']:.3g}/h (95 % {lo:.3g} to {hi:.3g})", ""]
+        lines += [f"- {nm}: false alarms {_false_alarm_text(rule['false_alarms'])}", ""]
         if rule["faults"]:
             lines += ["| fault | size | runs | P(detect) | P(right blame) | rimu P(isolate, "
                       "per IMU) | median delay s |", "|---|---|---|---|---|---|---|"]
@@ -146,7 +143,6 @@ def _baseline_markdown(ev: dict) -> list[str]:
 def markdown(ev: dict, how: dict) -> str:
     """A short Markdown summary of ``evaluation.json``."""
     fa = ev["false_alarms"]
-    lo, hi = fa["ci95_per_hour"]
     lines = ["# rimu evaluation", "",
              f"- thresholds: {how.get('source')} ({ev['thresholds']['false_alarms_per_hour']:g} "
              f"false alarms/h target), scales {ev['thresholds']['scales']}",
@@ -154,9 +150,7 @@ def markdown(ev: dict, how: dict) -> str:
                  f" ({ev['runs'] - ev['detectable_sizes']['runs']} flights + "
                  f"{ev['detectable_sizes']['runs']} sweep runs of the detectable step, "
                  "--sweep-runs)" if "detectable_sizes" in ev else ""),
-             f"- false alarms: {fa['count']} in {fa['exposure_h']:.2f} h = "
-             + (f"{fa['per_hour']:.3g}/h (95 % {lo:.3g} to {hi:.3g})" if fa["exposure_h"] > 0
-                else _rate_text(fa)), ""]
+             f"- false alarms: {_false_alarm_text(fa)}", ""]
     if ev["faults"]:
         lines += ["| fault | size | runs | P(detect) [95 %] | P(isolate) | median delay s |",
                   "|---|---|---|---|---|---|"]
@@ -200,6 +194,15 @@ def _check_budget(items: list, rate_hz: float, args: argparse.Namespace) -> None
         raise ConfigError(f"evaluate: {plan}, beyond the budget of {SAMPLE_BUDGET:.0e} samples: "
                           "give fewer --runs or a shorter --duration, or --yes to run it")
     print(f"evaluate: {plan}", flush=True)
+
+
+def _false_alarm_text(fa: dict) -> str:
+    """``N in X h = r/h (95 % lo to hi)`` of rimu's or a rule's false alarms, or no rate
+    where there was no flight time."""
+    lo, hi = fa["ci95_per_hour"]
+    rate = (f"{fa['per_hour']:.3g}/h (95 % {lo:.3g} to {hi:.3g})" if fa["exposure_h"] > 0
+            else _rate_text(fa))
+    return f"{fa['count']} in {fa['exposure_h']:.2f} h = {rate}"
 
 
 def _rate_text(fa: dict) -> str:
