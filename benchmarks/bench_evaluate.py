@@ -18,9 +18,9 @@ import time
 
 from _common import RESULTS, header, spread, write_results
 
+from replay.threshold_choice import select
 from studies.synthetic import synthetic_calibration
 from thresholds.evaluate import design, execute, simulation_task, summarise
-from thresholds.select import select
 
 
 def _timed(fn, repeats: int) -> tuple[list[float], object]:

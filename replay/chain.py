@@ -18,11 +18,12 @@
 6. the report's running summaries (:class:`replay.report.RunningReport`) and the rerun
    recording (:class:`replay.rerun_log.Recorder`), both in constant memory.
 
-The thresholds come from :func:`thresholds.select.select` (a file made for another
+The thresholds come from :func:`replay.threshold_choice.select` (a file made for another
 calibration or sample rate is refused there). :func:`chain_for_flight` and
 :func:`chain_for_map` build a chain for a flight folder and for a CAN source (log or bus);
 :func:`run_flight` and :func:`run_log` run one over the whole source and return the report;
-:func:`replay.live.run_live` runs one on a bus.
+:func:`replay.live.run_live` and :func:`replay.live.report_bus` run one on a bus (the live
+module builds on this one, never the other way).
 """
 
 from __future__ import annotations
@@ -57,9 +58,9 @@ from replay.log_events import declared_intervals
 from replay.report import RunningReport
 from replay.time_offsets import StreamAligner, imu_groups, moved_aux_channels
 
-__all__ = ["ChainBlock", "ChainOptions", "MonitorChain", "aux_record", "chain_for_flight",
-           "chain_for_map", "format_aux", "moved_aux", "report_bus", "report_log", "run_flight",
-           "run_log"]
+__all__ = ["ChainBlock", "ChainOptions", "MonitorChain", "aux_extra", "aux_record",
+           "chain_for_flight", "chain_for_map", "format_aux", "moved_aux", "offsets_extra",
+           "report_log", "run_flight", "run_log"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -113,7 +114,7 @@ class MonitorChain:
         ``update(t, rates, accel) -> (B,) int`` envelope codes per block (:class:`ChainBlock`
         fields); None: the monitor gets no envelope codes.
     thresholds_how : dict, optional
-        Where the thresholds came from (:meth:`thresholds.select.ThresholdChoice.to_dict`),
+        Where the thresholds came from (:meth:`replay.threshold_choice.ThresholdChoice.to_dict`),
         for the report.
     turn_on : replay.turn_on.TurnOn, optional
         What was done about the turn-on bias (:func:`replay.turn_on.turn_on_for_flight`),
@@ -357,7 +358,7 @@ def _monitor(cal: Calibration, kind: str, *, thresholds_file: Any, calibration_f
     ``cal`` (a file made for another calibration is refused); with a ``turn_on``
     (:class:`replay.turn_on.TurnOn`) the monitor runs on the biases it estimated at rest,
     or on thresholds raised for its nominal bias bound (:mod:`fdi.bias_bound`)."""
-    from thresholds.select import select
+    from replay.threshold_choice import select
 
     if thresholds is not None:                          # given in the library (a Thresholds)
         thr, how = thresholds, {"source": "given", "false_alarms_per_hour":
@@ -609,7 +610,7 @@ def _warn(text: str) -> None:
     logging.getLogger("rimu").warning(text)
 
 
-def _aux_extra(chain: MonitorChain, decoder: Any, source: str) -> dict[str, Any]:
+def aux_extra(chain: MonitorChain, decoder: Any, source: str) -> dict[str, Any]:
     """The report's ``auxiliary`` block (and a warning on channels that never spoke)."""
     if chain.cmap is None or not chain.cmap.auxiliary:
         return {}
@@ -621,7 +622,8 @@ def _aux_extra(chain: MonitorChain, decoder: Any, source: str) -> dict[str, Any]
     return {"auxiliary": rec}
 
 
-def _offsets_extra(chain: MonitorChain) -> dict[str, Any]:
+def offsets_extra(chain: MonitorChain) -> dict[str, Any]:
+    """The report's ``time_offsets_aux_moved`` entry (none when nothing was moved)."""
     moved = moved_aux(chain)
     return {"time_offsets_aux_moved": moved} if moved else {}
 
@@ -662,24 +664,5 @@ def report_log(chain: MonitorChain, stream: Any, header: Flight, *, stepwise: bo
         raise ConfigError(f"{src}: no sample could be decoded ({frames['read']} frames read, "
                           f"rejected {frames['rejected']})")
     return chain.build_report(header, frames=frames, extra={
-        "timing_s": timing, **_offsets_extra(chain), **_aux_extra(chain, stream.decoder, src),
+        "timing_s": timing, **offsets_extra(chain), **aux_extra(chain, stream.decoder, src),
         **(extra or {})})
-
-
-def report_bus(chain: MonitorChain, bus: Any, decoder: Any, *, source: str,
-               on_event: Callable[[Event], None] | None = None, window: int | None = None,
-               **stop: Any) -> tuple[dict[str, Any] | None, dict[str, Any]]:
-    """Monitor a live bus (:func:`replay.live.run_live`, ``stop``: its stop conditions) and
-    build the report; returns ``(None, frames)`` when no sample was decoded."""
-    from replay.live import run_live
-
-    _, frames = run_live(bus, decoder, chain, on_event=on_event, window=window, **stop)
-    if chain.report is None or chain.report.samples == 0:
-        return None, frames
-    n = chain.n
-    header = Flight(t=np.zeros(0), raw=np.zeros((0, n)), valid=np.zeros((0, n), bool),
-                    sample_rate_hz=chain.cal.sample_rate_hz, sensor_names=chain.sensor_names,
-                    source=source, kind=chain.kind)
-    return chain.build_report(header, frames=frames, extra={
-        "live": True, "window": window, **_offsets_extra(chain),
-        **_aux_extra(chain, decoder.block, source)}), frames

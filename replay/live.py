@@ -33,13 +33,15 @@ from fdi.answer import Answer, BlockResult, Event
 from fdi.blocks import block_from_answers
 from replay.accounting import FrameAccounting
 from replay.assemble import BlockDecoder, Samples
+from replay.chain import MonitorChain, aux_extra, offsets_extra
 from replay.channel_map import ChannelMap
 from replay.effect_inputs import row_inputs
+from replay.flight_data import Flight
 from replay.logio import aux_channels
 from replay.raw_frames import RawFrames, norm_channel
 
 __all__ = ["STATUS_EVERY_S", "Pacer", "StreamDecoder", "block_from_answers", "format_event",
-           "print_event", "run_live"]
+           "print_event", "report_bus", "run_live"]
 
 STATUS_EVERY_S = 5.0
 """``rimu monitor`` says what the bus gave (frames, last sample time, or "waiting") this
@@ -207,8 +209,6 @@ def run_live(bus: can.BusABC, decoder: StreamDecoder, monitor: Any, *,
     frames : dict
         Frame accounting (:meth:`~replay.accounting.FrameAccounting.to_dict`).
     """
-    from replay.chain import MonitorChain
-    from replay.flight_data import Flight
 
     chain = monitor if isinstance(monitor, MonitorChain) else MonitorChain(
         monitor, monitor.cal, cmap=decoder.cmap, time_offsets=False)
@@ -281,3 +281,20 @@ def run_live(bus: can.BusABC, decoder: StreamDecoder, monitor: Any, *,
     keep(chain.finish(stepwise=True, on_event=on_event))
     return (block_from_answers(list(answers), n, int(chain.monitor.K)),
             decoder.acct.to_dict())
+
+
+def report_bus(chain: MonitorChain, bus: Any, decoder: Any, *, source: str,
+               on_event: Callable[[Event], None] | None = None, window: int | None = None,
+               **stop: Any) -> tuple[dict[str, Any] | None, dict[str, Any]]:
+    """Monitor a live bus (:func:`run_live`, ``stop``: its stop conditions) and
+    build the report; returns ``(None, frames)`` when no sample was decoded."""
+    _, frames = run_live(bus, decoder, chain, on_event=on_event, window=window, **stop)
+    if chain.report is None or chain.report.samples == 0:
+        return None, frames
+    n = chain.n
+    header = Flight(t=np.zeros(0), raw=np.zeros((0, n)), valid=np.zeros((0, n), bool),
+                    sample_rate_hz=chain.cal.sample_rate_hz, sensor_names=chain.sensor_names,
+                    source=source, kind=chain.kind)
+    return chain.build_report(header, frames=frames, extra={
+        "live": True, "window": window, **offsets_extra(chain),
+        **aux_extra(chain, decoder.block, source)}), frames

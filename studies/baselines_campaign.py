@@ -288,7 +288,7 @@ def run_case(case: Case, faults: Iterable[tuple[str, str, float, float | None]] 
     ``sensors``: 1-based sensors to fault (default: every axis of every IMU).
     """
     from replay.scenario import inject
-    from thresholds.select import select
+    from replay.threshold_choice import select
 
     thr = select(case.cal, false_alarms_per_hour=FALSE_ALARMS_PER_HOUR).thresholds
     f = case.flight

@@ -606,7 +606,7 @@ def field_results(data: str | Path, *, targets: Sequence[float] = TARGETS_PER_HO
     """
     from tqdm.auto import tqdm
 
-    from thresholds.select import select
+    from replay.threshold_choice import select
 
     data = Path(data)
     out: dict[str, Any] = {"schema": FIELD_SCHEMA, "targets_per_hour": list(targets),

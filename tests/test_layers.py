@@ -6,9 +6,8 @@ and ``from … import`` in every module is checked, including those inside funct
 every pair of packages. ``studies`` (the evidence and the tests' simulated truth, which
 the wheel does not install) may import the product; no product package imports it.
 
-What does not hold yet is listed, not hidden: :data:`KNOWN_BACK_EDGES` (imports against
-the order) and :data:`KNOWN_MODULE_CYCLES` (modules that import each other). Each entry
-must still exist (a stale entry fails), and nothing else may be added.
+No exception is pinned: no import points against the order and no two product modules
+import each other (:func:`test_no_module_cycles`).
 """
 
 import ast
@@ -21,20 +20,6 @@ ORDER = ("fdi", "replay", "calibration", "thresholds", "rimu")
 """The layers, lowest first: each package may import the packages before it."""
 PRODUCT = ORDER
 PACKAGES = (*ORDER, "studies")
-KNOWN_BACK_EDGES = {
-    ("replay/chain.py", "thresholds.select"),
-}
-"""Imports against :data:`ORDER` that are still there (file, module imported). The
-monitoring chain picks its thresholds with ``thresholds.select`` (a thresholds file or
-computed for a rate) while ``thresholds.campaign`` and ``thresholds.evaluate`` fly
-``replay``'s simulated flights: ``replay`` ↔ ``thresholds``. Breaking it means handing the
-chain a chosen ``Thresholds`` (or moving ``select`` below ``replay``)."""
-KNOWN_MODULE_CYCLES = {
-    frozenset({"replay.chain", "replay.live"}),
-}
-"""Groups of modules that import each other (strongly connected, imports inside functions
-counted): ``replay.live`` builds the chain of :mod:`replay.chain` for a bus and the chain
-imports the live decoder for ``rimu monitor``."""
 
 
 def _modules() -> dict[str, Path]:
@@ -95,38 +80,25 @@ def _allowed(src: str, dst: str) -> bool:
     return ORDER.index(dst) < ORDER.index(src)
 
 
-def _known(site: str) -> bool:
-    path, mod = site.split(":")[0], site.split(" ", 1)[1]
-    return (path, mod) in KNOWN_BACK_EDGES
-
-
 @pytest.mark.parametrize("package", PRODUCT)
 def test_imports_point_one_way(package):
     """Every pair: ``package`` imports no package after it in :data:`ORDER`, nor
-    ``studies``, apart from :data:`KNOWN_BACK_EDGES`."""
+    ``studies``."""
     bad = []
     for (src, dst), sites in sorted(EDGES.items()):
         if src == package and not _allowed(src, dst):
-            bad += [s for s in sites if not _known(s)]
+            bad += sites
     assert not bad, "imports against fdi ← replay ← calibration ← thresholds ← rimu:\n" + \
         "\n".join(bad)
 
 
 def test_every_pair_of_packages_is_checked():
-    """The rule covers every ordered pair of the five packages and studies, and the pairs
-    that import each other at all are exactly those the known back edges explain."""
+    """The rule covers every ordered pair of the five packages and studies, and no two
+    packages import each other."""
     pairs = {(a, b) for a in PACKAGES for b in PACKAGES if a != b}
     assert len(pairs) == 30
     both_ways = {frozenset(p) for p in EDGES if p[::-1] in EDGES}
-    explained = {frozenset((Path(f).parts[0], m.split(".")[0])) for f, m in KNOWN_BACK_EDGES}
-    assert both_ways <= explained, both_ways - explained
-
-
-def test_known_back_edges_still_exist():
-    """A known back edge that was removed must leave :data:`KNOWN_BACK_EDGES` too."""
-    sites = {(s.split(":")[0], s.split(" ", 1)[1]) for v in EDGES.values() for s in v}
-    stale = KNOWN_BACK_EDGES - sites
-    assert not stale, f"no longer imported, remove from KNOWN_BACK_EDGES: {sorted(stale)}"
+    assert not both_ways, sorted(sorted(p) for p in both_ways)
 
 
 def _module_cycles() -> set[frozenset[str]]:
@@ -166,14 +138,11 @@ def _module_cycles() -> set[frozenset[str]]:
     return out
 
 
-def test_module_cycles_are_the_known_ones():
-    """No modules import each other (imports inside functions counted) except the groups
-    of :data:`KNOWN_MODULE_CYCLES`, each of which must still be a cycle."""
+def test_no_module_cycles():
+    """No product modules import each other, directly or round a loop (imports inside
+    functions counted)."""
     found = _module_cycles()
-    assert found == KNOWN_MODULE_CYCLES, (
-        f"new cycles: {[sorted(c) for c in found - KNOWN_MODULE_CYCLES]}; "
-        f"gone (remove from KNOWN_MODULE_CYCLES): "
-        f"{[sorted(c) for c in KNOWN_MODULE_CYCLES - found]}")
+    assert not found, f"module cycles: {[sorted(c) for c in found]}"
 
 
 def test_wheel_packages_are_the_product():

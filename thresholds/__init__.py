@@ -11,13 +11,13 @@ from fdi.lazy import attach
 
 _EXPORTS = {
     "DetectableSize": "thresholds.tune",
-    "ThresholdChoice": "thresholds.select",
+    "ThresholdChoice": "replay.threshold_choice",
     "Tuning": "thresholds.tune",
     "allan_from_residuals": "thresholds.compute",
     "compute_thresholds": "thresholds.compute",
     "detectable_sizes": "thresholds.tune",
-    "load_any_thresholds": "thresholds.select",
-    "select": "thresholds.select",
+    "load_any_thresholds": "replay.threshold_choice",
+    "select": "replay.threshold_choice",
     "tune": "thresholds.tune",
 }
 """Public name → module defining it (imported on first use, PEP 562)."""

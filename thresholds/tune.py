@@ -92,7 +92,7 @@ from fdi.parity import parity_matrix
 from fdi.settings import MAX_SCALE, MonitorSettings, Thresholds
 from fdi.tails import TailChoice, tail_variance_factors
 from fdi.units import DPS
-from thresholds.select import TUNING_SCHEMA
+from replay.threshold_choice import TUNING_SCHEMA
 
 __all__ = ["CORRECTION_MAX_RATE_DPS", "MAX_DEAD_TIME_SHARE", "MAX_SHARE_OF_TOP",
            "MIN_SIMULATED_RATE", "ZERO_COUNT_UPPER", "DetectableSize", "Tuning", "check_scales",

@@ -214,6 +214,7 @@ def run(args: argparse.Namespace) -> int:
     from fdi.calfile import load_calibration
     from fdi.fileio import to_jsonable
     from replay.baselines import parse_baselines
+    from replay.threshold_choice import select
     from rimu.outputs import atomic_dir, input_path, output_dir
     from thresholds.evaluate import (
         corpus_task,
@@ -223,7 +224,6 @@ def run(args: argparse.Namespace) -> int:
         summarise,
     )
     from thresholds.plots import plot_all
-    from thresholds.select import select
     from thresholds.tune import detectable_sizes
 
     kinds = _kinds(args.faults)

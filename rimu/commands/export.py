@@ -44,8 +44,8 @@ def run(args: argparse.Namespace) -> int:
     from fdi.errors import ConfigError
     from fdi.export import generate_c
     from fdi.export.c import API_VERSION
+    from replay.threshold_choice import select
     from rimu.outputs import atomic_dir, input_path, output_dir
-    from thresholds.select import select
 
     depth: int | str | None = args.depth
     if args.depth == "all":

@@ -41,8 +41,8 @@ def configure(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     import can
 
-    from replay.chain import chain_for_map, format_aux, report_bus
-    from replay.live import StreamDecoder, print_event
+    from replay.chain import chain_for_map, format_aux
+    from replay.live import StreamDecoder, print_event, report_bus
     from replay.logio import resolve_map
     from replay.report import format_report
 

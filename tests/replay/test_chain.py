@@ -30,10 +30,10 @@ from replay.chain import ChainOptions, chain_for_flight, chain_for_map, report_l
 from replay.flight_data import concat_flights
 from replay.imu_set import ImuSetSpec, simulate_imu_set
 from replay.logio import LogStream, read_log, resolve_map
+from replay.threshold_choice import check_made_for
 from replay.time_offsets import StreamAligner, apply_time_offsets, imu_groups
 from rimu.cli import main
 from thresholds.compute import compute_thresholds
-from thresholds.select import check_made_for
 
 TAU_S = -0.010          # imu2 sees the motion 10 ms late (in-flight model y2(t) = y1(t + τ))
 

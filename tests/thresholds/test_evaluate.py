@@ -7,6 +7,7 @@ import json
 import numpy as np
 import pytest
 
+from replay.threshold_choice import select
 from studies.synthetic import synthetic_calibration
 from thresholds.evaluate import (
     design,
@@ -17,7 +18,6 @@ from thresholds.evaluate import (
     summarise,
     wilson_interval,
 )
-from thresholds.select import select
 from thresholds.tune import detectable_sizes
 
 CAL = synthetic_calibration("cone6")

@@ -11,9 +11,9 @@ import pytest
 from fdi.units import DPS
 from replay.baselines import run_baselines
 from replay.flight_sim import simulate_flight
+from replay.threshold_choice import select
 from thresholds.campaign import RunSpec, run_one
 from thresholds.evaluate import summarise
-from thresholds.select import select
 
 
 @pytest.fixture(scope="module")

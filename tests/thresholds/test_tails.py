@@ -146,8 +146,8 @@ def test_file_round_trip_fingerprint_and_bad_field(tmp_path):
 
 def test_tune_prints_the_choice_and_writes_fingerprint_and_noise_model(tmp_path, capsys):
     from fdi.settings import load_thresholds
+    from replay.threshold_choice import load_any_thresholds
     from rimu.cli import main
-    from thresholds.select import load_any_thresholds
 
     rng = np.random.default_rng(8)
     heavy = _cal_with_tails(_t_noise(rng, 20_000))

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from fdi.errors import ConfigError
+from replay.threshold_choice import select
 from studies.synthetic import synthetic_calibration
-from thresholds.select import select
 from thresholds.tune import (
     CORRECTION_MAX_RATE_DPS,
     check_scales,

@@ -15,6 +15,11 @@ so is a file made for another calibration or sample rate (:func:`check_made_for`
 ``rimu.thresholds/2`` file records the fingerprint of the calibration it was made for
 (``calibration_fingerprint``, :meth:`fdi.calfile.Calibration.fingerprint`); an older file
 records none and is accepted with a one-line warning.
+
+It lives in :mod:`replay`, below :mod:`thresholds`, because the monitoring chain
+(:mod:`replay.chain`) chooses its thresholds here; thresholds computed for a budget are
+:func:`fdi.detector.default_thresholds`, the arithmetic :func:`thresholds.compute_thresholds`
+runs when it is given no residuals (the provenance names that function, as before).
 """
 
 from __future__ import annotations
@@ -26,6 +31,7 @@ from pathlib import Path
 from typing import Any
 
 from fdi.calfile import Calibration
+from fdi.detector import default_thresholds
 from fdi.errors import ConfigError, FileFormatError
 from fdi.fileio import read_json_object
 from fdi.settings import THRESHOLDS_SCHEMA, Thresholds, thresholds_from_dict
@@ -192,9 +198,7 @@ def select(cal: Calibration, *, kind: str = "gyro", thresholds_file: str | Path 
               else float(false_alarms_per_hour))
     if not budget > 0:
         raise ConfigError(f"--false-alarms-per-hour must be positive, got {budget:g}")
-    from thresholds.compute import compute_thresholds
-
-    thr = compute_thresholds(cal, false_alarms_per_hour=budget, kind=kind)
+    thr = default_thresholds(cal, false_alarms_per_hour=budget, kind=kind)
     return ThresholdChoice(thr, "calibration",
                            {"method": "thresholds.compute_thresholds (per-sample Bonferroni)",
                             "false_alarms_per_hour": budget})

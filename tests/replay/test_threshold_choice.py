@@ -1,4 +1,4 @@
-"""thresholds.select: one policy for the monitor's thresholds, with provenance."""
+"""replay.threshold_choice: one policy for the monitor's thresholds, with provenance."""
 
 from __future__ import annotations
 
@@ -7,9 +7,9 @@ import json
 import pytest
 
 from fdi.errors import ConfigError, FileFormatError
+from replay.threshold_choice import TUNING_SCHEMA, select
 from studies.synthetic import synthetic_calibration
 from thresholds import compute_thresholds
-from thresholds.select import TUNING_SCHEMA, select
 
 CAL = synthetic_calibration("cone6", seed=2)
 
