@@ -1,41 +1,44 @@
-"""Choose the reader of a log: by ``--format`` or, with ``auto``, by content and suffix."""
+"""Choose the reader of a log: by ``--format`` or, with ``auto``, by content and suffix.
+
+The formats and their readers are the entries of :mod:`replay.ingest.registry` (built-in
+and third parties'); this module only dispatches to them.
+"""
 
 from __future__ import annotations
 
 from pathlib import Path
 
 from fdi.errors import ConfigError
+from replay.ingest.registry import FORMATS, get_format, log_formats
 from replay.ingest.stream import LogRead
 
 __all__ = ["FORMATS", "detect_format", "merge_reads", "read_any"]
 
-FORMATS = ("auto", "ardupilot", "px4", "mat", "csv", "rda")
-"""Values of ``rimu ingest --format``."""
-
 
 def detect_format(path: str | Path) -> str:
-    """The format of a log from its first bytes, else its suffix.
+    """The format of a log from its first bytes (each format's sniffer, in registry
+    order), else its suffix.
 
     Raises
     ------
     ConfigError
         When neither says.
     """
-    from replay.ingest.ardupilot import looks_like_dataflash
-    from replay.ingest.px4 import looks_like_ulog
-
     p = Path(path)
-    if looks_like_dataflash(p):
-        return "ardupilot"
-    if looks_like_ulog(p):
-        return "px4"
+    formats = log_formats()
+    for f in formats:
+        if f.sniff(p):
+            return f.name
     suffix = p.suffix.lower()
-    by_suffix = {".bin": "ardupilot", ".ulg": "px4", ".mat": "mat", ".csv": "csv",
-                 ".rda": "rda", ".rdata": "rda"}
-    if suffix in by_suffix:
-        return by_suffix[suffix]
+    for f in formats:
+        if suffix in f.suffixes:
+            return f.name
     raise ConfigError(f"{p}: cannot tell the log format (suffix {suffix!r}); give --format "
-                      f"one of {', '.join(FORMATS[1:])}")
+                      f"one of {', '.join(f.name for f in formats)}")
+
+
+def _and(names: list[str]) -> str:
+    return names[0] if len(names) == 1 else f"{', '.join(names[:-1])} and {names[-1]}"
 
 
 def read_any(path: str | Path, fmt: str = "auto", *, map_path: str | Path | None = None,
@@ -46,17 +49,19 @@ def read_any(path: str | Path, fmt: str = "auto", *, map_path: str | Path | None
     ----------
     path : str or Path
     fmt : str
-        One of :data:`FORMATS`.
+        ``auto`` or the name of a registered format
+        (:func:`replay.ingest.registry.format_names`).
     map_path : str or Path, optional
-        ``rimu.ingest-map/1`` TOML (needed for CSV and R data; optional for .mat).
+        ``rimu.ingest-map/1`` TOML (needed for CSV and R data; optional for .mat), for the
+        formats that take one.
     salvage : bool
         Keep the samples before a damage instead of failing.
     px4_topic : str
         For ULog files: ``auto``, ``sensor_gyro`` or ``vehicle_imu``
         (:func:`replay.ingest.px4.read_px4`).
     """
-    if fmt not in FORMATS:
-        raise ConfigError(f"unknown format {fmt!r}; expected one of {', '.join(FORMATS)}")
+    if fmt != "auto":
+        get_format(fmt)                                 # an unknown name is refused first
     if fmt == "auto":
         fmt = detect_format(path)
     if not Path(path).exists():
@@ -64,17 +69,13 @@ def read_any(path: str | Path, fmt: str = "auto", *, map_path: str | Path | None
         raise FileFormatError(str(path), "cannot read (no such file)")
     from replay.ingest.plausible import mark_implausible
 
+    entry = get_format(fmt)
+    if map_path is not None and "map_path" not in entry.options:
+        takes = [f.name for f in log_formats() if "map_path" in f.options]
+        raise ConfigError(f"--map is for {_and(takes)} logs, not {fmt}")
     # no format here has a checksum over its samples: implausible values are marked
-    if fmt in ("ardupilot", "px4"):
-        if map_path is not None:
-            raise ConfigError(f"--map is for mat, csv and rda logs, not {fmt}")
-        if fmt == "ardupilot":
-            from replay.ingest.ardupilot import read_ardupilot
-            return mark_implausible(read_ardupilot(path, salvage=salvage))
-        from replay.ingest.px4 import read_px4
-        return mark_implausible(read_px4(path, salvage=salvage, topic=px4_topic))
-    from replay.ingest.tabular import read_tabular
-    return mark_implausible(read_tabular(path, fmt, map_path=map_path, salvage=salvage))
+    return mark_implausible(entry.read(path, salvage=salvage, map_path=map_path,
+                                       px4_topic=px4_topic))
 
 
 def merge_reads(reads: list[LogRead]) -> LogRead:

@@ -6,12 +6,13 @@ import argparse
 import json
 from pathlib import Path
 
+# light: the registry names the readers, it does not import them
+from replay.ingest.registry import FORMATS as FORMATS  # the built-in ones, re-exported
+from replay.ingest.registry import format_help, format_names
+
 HELP = ("read a flight log or bench recording (ArduPilot .BIN, PX4 .ulg, .mat, CSV, R .rda) "
         "into a flight folder")
 
-FORMATS = ("auto", "ardupilot", "px4", "mat", "csv", "rda")
-"""``--format`` (:data:`replay.ingest.readers.FORMATS`; kept here so that ``--help`` does
-not import the readers; a test checks they agree)."""
 REPORT_FILE = "ingest_report.json"
 """The accounting file written beside the flight (``rimu.ingest-report/1``)."""
 
@@ -20,8 +21,7 @@ def configure(p: argparse.ArgumentParser) -> None:
     p.add_argument("logs", nargs="+", metavar="LOG",
                    help="the log; several files recorded together (one IMU each, e.g. "
                         "imu1.mat imu2.mat) are joined as imu1, imu2, ...")
-    p.add_argument("--format", default="auto", choices=FORMATS,
-                   help="log format (default auto: from the content, else the suffix)")
+    add_format_option(p)
     p.add_argument("--map", metavar="MAP.toml", dest="map_path",
                    help="rimu.ingest-map/1 TOML: columns, units, time base and IMU of each "
                         "column (CSV and R data; optional for .mat)")
@@ -37,6 +37,12 @@ def configure(p: argparse.ArgumentParser) -> None:
     p.add_argument("--salvage", action="store_true",
                    help="on a truncated or corrupt log, write the samples before the damage "
                         "(default: refuse, exit 2)")
+
+
+def add_format_option(p: argparse.ArgumentParser) -> None:
+    """``--format``: its choices and help from the log-format registry
+    (:mod:`replay.ingest.registry`, third parties' entry points included)."""
+    p.add_argument("--format", default="auto", choices=format_names(), help=format_help())
 
 
 def run(args: argparse.Namespace) -> int:

@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 import json
 
-from rimu.commands.ingest import FORMATS
+from rimu.commands.ingest import add_format_option
 
 HELP = ("list a log's IMU streams, rates, durations, gaps, declared events and damage "
         "(writes nothing)")
@@ -15,8 +15,7 @@ HELP = ("list a log's IMU streams, rates, durations, gaps, declared events and d
 def configure(p: argparse.ArgumentParser) -> None:
     p.add_argument("logs", nargs="+", metavar="LOG",
                    help="the log(s): ArduPilot .BIN, PX4 .ulg, .mat, CSV, R .rda")
-    p.add_argument("--format", default="auto", choices=FORMATS,
-                   help="log format (default auto: from the content, else the suffix)")
+    add_format_option(p)
     p.add_argument("--map", metavar="MAP.toml", dest="map_path",
                    help="rimu.ingest-map/1 TOML (CSV and R data; optional for .mat)")
     p.add_argument("--px4-topic", default="auto",
