@@ -4,7 +4,7 @@ A simulated two-IMU flight at 50 Hz (``replay.imu_set``, 5 ms offset, a g-sensit
 a vibration line) is written as a CSV log in rimu's column naming (``time_ms``,
 ``imu1_gyr_x_rps``, ``imu1_acc_x_mps2``, ...); the benchmark times, over repeats:
 ``rimu ingest`` of that log into a flight folder, loading the folder, the in-flight fit with
-its calibration file (``calibrate --in-flight``) and ``diagnose``; the total is compared
+its calibration file (``calibrate in-flight``) and ``diagnose``; the total is compared
 with the 30 s target. The fit's cost is also given as a ratio to a bare
 ``numpy.linalg.lstsq`` of the same size (3N × 13, one IMU pair), measured in the same run,
 so that numbers from different machines compare. Writes ``benchmarks/results/inflight.json``.

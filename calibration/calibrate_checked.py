@@ -27,8 +27,8 @@ selection reads as coloured: a genuine bias instability is then noise, not an ef
 the widening applies; structure that a Gauss-Markov wander of the fitted size cannot
 explain as well still makes the session "effects suspected".
 
-With ``effects`` given (``rimu calibrate --effects``) those effects are fitted jointly with
-the calibration (:mod:`calibration.diagnose.refit`) and the adequacy is checked on the
+With ``effects`` given (``rimu calibrate turntable --effects``) those effects are fitted
+jointly with the calibration (:mod:`calibration.diagnose.refit`) and the adequacy is checked on the
 extended model.
 
 The verdict is decided by :func:`calibration.diagnose.adequacy.decide`, the function

@@ -1,7 +1,7 @@
 """Estimate against truth: estimate, truth, error and error/σ side by side.
 
-Used by ``rimu calibrate SESSION --compare TRUTH`` and by the acceptance tests. Values are
-shown in the calibration's own file units (scale factors in ``scale_factor_unit``, biases
+Used by ``rimu calibrate turntable SESSION --compare TRUTH`` and by the acceptance tests.
+Values are shown in the calibration's own file units (scale factors in ``scale_factor_unit``, biases
 in ``bias_unit``, misalignment angles in mrad about the nominal axis, Earth rate in °/h).
 """
 

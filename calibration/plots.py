@@ -1,4 +1,5 @@
-"""PNG plots of a calibration (``rimu calibrate ... --plot DIR``), matplotlib Agg backend.
+"""PNG plots of a calibration (``rimu calibrate turntable ... --plot DIR``), matplotlib Agg
+backend.
 
 - ``residual_steps_<kind>.png``: mean and RMS of the residuals of every step, per sensor;
 - ``earth_rate_fit.png``: the (wavelet-denoised) compensated gyro outputs of the outer-axis

@@ -1,7 +1,7 @@
 """What a calibration keeps of its residual for the thresholds: tails and slow drift.
 
 One function for every calibration that measures its own residual (the static bench
-calibration, ``rimu calibrate --static``, the in-flight calibration): the residual's tail
+calibration, ``rimu calibrate static``, the in-flight calibration): the residual's tail
 per window scale relative to the monitor's threshold inflation (:mod:`calibration.tails`,
 ``docs/noise-tails.md``) and the slow drift of its whitened parity (:mod:`calibration.drift`,
 ``docs/drift.md``), both measured on the calibration's own samples.

@@ -10,7 +10,8 @@ values (every ``*_sd`` is 0), plus::
     "effect_details": {...}                    # constants the effects used (tau, table rate)
 
 The ``noise_covariance`` is the true per-sample white-noise covariance of the compensated
-outputs (SI²). Compare a calibration with ``rimu calibrate ... --compare DIR/truth.json``.
+outputs (SI²). Compare a calibration with
+``rimu calibrate turntable ... --compare DIR/truth.json``.
 """
 
 from __future__ import annotations

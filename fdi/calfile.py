@@ -81,7 +81,7 @@ its thresholds with ``τ_i²·(h_iᵀω̇)²`` while the body accelerates (:mod:
 Optional per sensor (a ``/3`` file without it loads with None, "not measured"):
 ``bias_turn_on_sd``, in ``bias_unit``: the run-to-run standard deviation of the sensor's
 turn-on bias, measured over several flights calibrated together (``rimu calibrate
---in-flight F1 F2 ...``, :mod:`calibration.inflight.multi`). ``bias`` is what holds on the
+in-flight F1 F2 ...``, :mod:`calibration.inflight.multi`). ``bias`` is what holds on the
 flights it was fitted on; on the next power-up the bias may lie anywhere within about
 this spread.
 

@@ -1,9 +1,10 @@
 """Run-time compensation of a calibration's effect terms (``effects``, ``rimu.calibration/2`` on).
 
 A calibration may carry effect terms beyond the linear sensor model (``rimu calibrate
---effects``, ``rimu diagnose``): each adds ``estimate · g(inputs; params)`` to one sensor's
-SI output, with ``g`` the session regressor of the effect's spec (:mod:`fdi.effect_specs`;
-the SI output gained per unit of the estimate, the estimate in the term's ``unit``). The
+turntable --effects``, ``rimu diagnose``): each adds ``estimate · g(inputs; params)`` to
+one sensor's SI output, with ``g`` the session regressor of the effect's spec
+(:mod:`fdi.effect_specs`; the SI output gained per unit of the estimate, the estimate in
+the term's ``unit``). The
 monitor takes a run-time correction ``c`` (rad/s or m/s²) subtracted from the compensated outputs,
 ``y = SF·u − b − c`` (:meth:`fdi.monitor.Monitor.run`); this module computes ``c`` from the
 terms whose inputs the stream carries, and says which terms it cannot apply and why.

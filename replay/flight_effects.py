@@ -207,7 +207,8 @@ def plan_effects(cal: Calibration, kind: str, *, duration_s: float, sample_rate_
     """
     if not cal.effects:
         raise ConfigError("--effects-from-cal: the calibration has no effect terms "
-                          "(fit them with rimu calibrate --effects NAME,... or rimu diagnose)")
+                          "(fit them with rimu calibrate turntable --effects NAME,... or rimu "
+                          "diagnose)")
     n = cal.kind(kind).n
     everything = {"specific_force": range(n), "temperature": range(n)}
     comp = Compensator(cal, kind, available=everything)

@@ -165,9 +165,23 @@ def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
     return parser
 
 
+def _old_spelling(argv: Sequence[str]) -> str | None:
+    """The refusal of a command spelled as before a command was split into subcommands
+    (``rimu calibrate in-flight F``: :func:`rimu.commands.calibrate.old_spelling`)."""
+    words = [i for i, a in enumerate(argv) if not str(a).startswith("-")]
+    if not words or argv[words[0]] != "calibrate":
+        return None
+    from rimu.commands.calibrate import old_spelling
+
+    return old_spelling(argv[words[0] + 1:])
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the CLI; returns the exit code."""
     argv = list(sys.argv[1:] if argv is None else argv)
+    if (hint := _old_spelling(argv)) is not None:   # one line and exit 2, like a usage error
+        print(f"rimu: error: {hint}", file=sys.stderr)
+        return 2
     try:
         parser = build_parser(argv)
     except ModuleNotFoundError as exc:  # a command module needs an extra at import

@@ -61,7 +61,8 @@ def available(module: str) -> bool:
         return False
 
 
-_PLOTTING = {"calibrate": ("plot", "report"), "characterise": ("report",),
+_PLOTTING = {"calibrate turntable": ("plot",), "calibrate in-flight": ("report",),
+             "characterise": ("report",),
              "diagnose": ("report",), "monitor-file": ("baseline_plot",)}
 """Commands whose options, when given, make them draw figures at the end of their work."""
 

@@ -135,7 +135,7 @@ def read_xsens(folder: Path) -> Flight:
 
 
 def calibrate(flight: Flight) -> Any:
-    """rimu's in-flight calibration with its defaults (what ``rimu calibrate --in-flight``
+    """rimu's in-flight calibration with its defaults (what ``rimu calibrate in-flight``
     runs)."""
     from calibration.inflight import calibration_from_fit, fit_inflight
 

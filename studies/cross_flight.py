@@ -1,7 +1,7 @@
 """Cross-flight evidence (issue 27): calibrated and tuned on one flight, monitored on another.
 
 For every ordered pair of flights of one vehicle, the first is calibrated in flight
-(``rimu calibrate --in-flight`` defaults) and tuned at 1 false alarm per hour (``rimu tune``),
+(``rimu calibrate in-flight`` defaults) and tuned at 1 false alarm per hour (``rimu tune``),
 and the second is monitored through ``rimu monitor-file``'s chain
 (:func:`replay.chain.chain_for_flight`) twice: *before*, with the calibration's biases as
 they are (``--turn-on off``, the chain before issue 27), and *after*, with the chain's

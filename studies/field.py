@@ -1,13 +1,13 @@
 """Evidence on measured data: held-out false alarms, runs from the start, injected faults.
 
 What a vehicle would see, computed from real recordings with the library calls the command
-line makes (``rimu ingest`` → ``rimu calibrate --in-flight`` → ``rimu tune`` →
+line makes (``rimu ingest`` → ``rimu calibrate in-flight`` → ``rimu tune`` →
 ``rimu monitor-file``), so that one call recomputes every number of
 ``docs/field-results.md`` (``studies/make_field_results.py``) and the slow test
 ``tests/thresholds/test_field_results.py``:
 
 - :func:`holdout_flight`, :func:`holdout_static_set` (the static set through
-  ``rimu calibrate --static``; :func:`holdout_static` is the bench calibration of
+  ``rimu calibrate static``; :func:`holdout_static` is the bench calibration of
   :mod:`studies.realnoise` that ``docs/drift.md`` compares): split a recording in time,
   calibrate and tune on one part at several targets, count alarm episodes on the other
   part outside the out-of-envelope periods, both ways round; per target the expected
@@ -126,7 +126,7 @@ def split_flight(flight: Flight, fraction: float = 0.5) -> tuple[Flight, Flight]
 
 
 def inflight_calibration(flight: Flight) -> Calibration:
-    """``rimu calibrate --in-flight`` with its defaults."""
+    """``rimu calibrate in-flight`` with its defaults."""
     from calibration.inflight import calibration_from_fit, fit_inflight
 
     return calibration_from_fit(fit_inflight(flight), flight)
@@ -370,7 +370,7 @@ def load_static_set(folder: str | Path) -> Flight:
 
 def holdout_static_set(flight: Flight, targets: Sequence[float] = TARGETS_PER_HOUR, *,
                        progress: Callable[[], None] | None = None) -> dict[str, Any]:
-    """The static set through the product's chain: ``rimu calibrate --static`` of one half
+    """The static set through the product's chain: ``rimu calibrate static`` of one half
     (:func:`calibration.inflight.static.calibrate_static`: alignment from gravity and the
     shared motion, the residual's tail and parity drift models, the range its samples
     covered), thresholds tuned on it, ``rimu monitor-file`` (:func:`run_monitor`: the
@@ -394,7 +394,7 @@ def holdout_static_set(flight: Flight, targets: Sequence[float] = TARGETS_PER_HO
     return {"rows": rows, "whole_record_1_per_hour": whole, "sample_rate_hz": fs,
             "refused": refused,
             "samples": int(flight.t.size), "duration_s": float(flight.t[-1] - flight.t[0]),
-            "calibration": "rimu calibrate --static (calibration.inflight.static)",
+            "calibration": "rimu calibrate static (calibration.inflight.static)",
             "envelope_source": "the monitoring chain (replay.chain), online"}
 
 

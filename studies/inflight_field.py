@@ -1,4 +1,4 @@
-"""Every multi-IMU flight of ../shared/data through ``rimu calibrate --in-flight`` (defaults).
+"""Every multi-IMU flight of ../shared/data through ``rimu calibrate in-flight`` (defaults).
 
 ``python studies/inflight_field.py [--json OUT]``: ingests each recording (ArduPilot logs as
 they are, the Xsens DOT paths with ``docs/examples/xsens_dot.toml``), calibrates it with the

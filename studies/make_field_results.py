@@ -6,7 +6,7 @@ Run from the repository root (the data folder is read, never copied)::
     PYTHONPATH=. python studies/make_field_results.py [--data ../shared/data] [--baseline]
 
 Everything is computed by :func:`studies.field.field_results` (the library calls behind
-``rimu ingest``, ``rimu calibrate --in-flight``, ``rimu tune`` and ``rimu monitor-file``);
+``rimu ingest``, ``rimu calibrate in-flight``, ``rimu tune`` and ``rimu monitor-file``);
 this script only writes tables and plots. ``--baseline`` stores the run as the "before"
 figures as well; without it the baseline already in ``studies/field-results.json`` is kept
 and the run becomes the "now" column.
@@ -241,7 +241,7 @@ def _markdown(doc: dict, images: list[str]) -> str:
          "Recordings: two ArduCopter flights with two IMUs on one board (41: heavy "
          "vibration, crash; 83: clean, cut at the end), read as `rimu ingest --salvage` reads "
          "them; four MPU9250 IMUs at rest for 16 min. The flights are calibrated in flight "
-         "(`rimu calibrate --in-flight`), the bench set by `rimu calibrate --static` (its "
+         "(`rimu calibrate in-flight`), the bench set by `rimu calibrate static` (its "
          "residual's tail and drift models and the range its samples covered); the monitor "
          "runs through `rimu monitor-file`'s chain; thresholds come from `rimu tune`'s "
          "library call, whose simulated correction flights stay inside each calibration's "

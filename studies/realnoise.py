@@ -108,7 +108,7 @@ def static_calibration(y: np.ndarray, fs: float, names: tuple[str, ...],
 
     The measurement harness of ``docs/drift.md`` and ``docs/noise-tails.md`` (bare arrays,
     every choice a switch, so their before/after tables stay reproducible). A set at rest
-    is calibrated for use by ``rimu calibrate --static``
+    is calibrated for use by ``rimu calibrate static``
     (:func:`calibration.inflight.static.calibrate_static`: alignment from gravity and the
     shared motion, shocks left out, the range covered); both fit the residual's tail and
     drift models with the same code.

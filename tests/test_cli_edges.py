@@ -35,7 +35,7 @@ def world(tmp_path_factory) -> dict[str, Path]:
     d = tmp_path_factory.mktemp("edges")
     assert main(["simulate", "flight", "--imus", "2", "--duration", "30", "--seed", "3",
                  "--out", str(d / "fl")]) == 0
-    assert main(["calibrate", "--in-flight", str(d / "fl"), "--out", str(d / "cal.json")]) == 0
+    assert main(["calibrate", "in-flight", str(d / "fl"), "--out", str(d / "cal.json")]) == 0
     assert main(["simulate", "flight", "--imus", "2", "--duration", "30", "--seed", "4",
                  "--max-rate", "0.001", "--out", str(d / "rest")]) == 0
     assert main(["simulate", "flight", "--cal", str(d / "cal.json"), "--duration", "2",
@@ -272,7 +272,7 @@ def test_deep_nesting_and_huge_numbers_refused_everywhere(world, capsys):
     deep_sec.write_text('{"a": ' + _deep_json() + "}")
     fer = o / "fer.csv"
     fer.write_text("gyr_x,gyr_y,gyr_z,acc_x,acc_y,acc_z\n" + "0,0,0,0,0,9.8\n" * 10)
-    refused(capsys, world, ["calibrate", "--ferraris", fer, "--sections", deep_sec,
+    refused(capsys, world, ["calibrate", "ferraris", fer, "--sections", deep_sec,
                             "--sample-rate-hz", "100", "--out", o / "f.json"],
             "nested deeper")
 
@@ -306,9 +306,9 @@ def test_a_manifest_rate_the_time_stamps_contradict_is_refused(world, capsys, tm
 def test_no_output_is_or_lies_inside_an_input(world, capsys):
     fl, cal = world["fl"], world["cal"]
     cases = [
-        ["calibrate", "--static", fl, "--out", fl / "samples.csv"],
-        ["calibrate", "--in-flight", fl, "--out", fl / "cal.json"],
-        ["calibrate", "--in-flight", fl, "--out", world["out"] / "x.json", "--report", fl],
+        ["calibrate", "static", fl, "--out", fl / "samples.csv"],
+        ["calibrate", "in-flight", fl, "--out", fl / "cal.json"],
+        ["calibrate", "in-flight", fl, "--out", world["out"] / "x.json", "--report", fl],
         ["characterise", fl, "--report", fl],
         ["characterise", fl, "--report", fl / "rep"],
         ["monitor-file", fl, "--cal", cal, "--report", fl / "r.json"],
@@ -376,7 +376,7 @@ def test_gaps_duplicates_and_empty_rows_are_said_by_every_flight_reader(world, g
         "monitor-file": ["monitor-file", gappy, "--cal", world["cal"], "--report",
                          o / "mf.json"],
         "characterise": ["characterise", gappy, "--json"],
-        "calibrate --static": ["calibrate", "--static", gappy, "--out", o / "st.json"],
+        "calibrate static": ["calibrate", "static", gappy, "--out", o / "st.json"],
     }
     for cmd, argv in runs.items():
         rc, out, err = run(capsys, world, argv)
@@ -510,7 +510,7 @@ def test_static_drifts_say_their_frames_and_agree(world, capsys):
     """The two drift vectors of one IMU are the same drift in two frames: equal norms."""
     from fdi.calfile import load_calibration
 
-    rc, out, _ = run(capsys, world, ["calibrate", "--static", world["rest"], "--out",
+    rc, out, _ = run(capsys, world, ["calibrate", "static", world["rest"], "--out",
                                      world["out"] / "st2.json"])
     assert rc == 0
     assert "in imu2's axes" in out and "in imu1's axes" in out

@@ -51,8 +51,10 @@ def _files(d: Path) -> dict[str, Path]:
 
 CASES = {
     "parity": (["parity", "{d}/bad.toml"], "bad.toml"),
-    "calibrate_missing": (["calibrate", "{d}/nowhere", "--out", "{d}/o.json"], "nowhere"),
-    "calibrate_manifest": (["calibrate", "{d}/sess", "--out", "{d}/o.json"], "manifest.json"),
+    "calibrate_missing": (["calibrate", "turntable",
+                           "{d}/nowhere", "--out", "{d}/o.json"], "nowhere"),
+    "calibrate_manifest": (["calibrate", "turntable",
+                            "{d}/sess", "--out", "{d}/o.json"], "manifest.json"),
     "simulate_calibration_config": (["simulate", "calibration", "--config", "{d}/bad.toml",
                                      "--out", "{d}/s1"], "bad.toml"),
     "simulate_calibration_sequence": (["simulate", "calibration", "--config", "cone6",

@@ -128,10 +128,10 @@ def inputs(tmp_path_factory) -> dict[str, str]:
         for i in range(s.gyro.shape[0])))
     assert main(["simulate", "calibration", "--config", "tetrad", "--sequence",
                  "tetrad-paper", "--turns", "0.05", "--out", str(d / "sess")]) == 0
-    assert main(["calibrate", str(d / "sess"), "--out", str(d / "sess_cal.json")]) == 0
+    assert main(["calibrate", "turntable", str(d / "sess"), "--out", str(d / "sess_cal.json")]) == 0
     assert main(["simulate", "flight", "--imus", "2", "--duration", "12",
                  "--out", str(d / "imus")]) == 0
-    assert main(["calibrate", "--in-flight", str(d / "imus"), "--out",
+    assert main(["calibrate", "in-flight", str(d / "imus"), "--out",
                  str(d / "imus_cal.json")]) == 0
     return {"d": str(d), "cal": str(d / "cal.json"), "log": str(d / "f.log"),
             "flight": str(d / "flight"), "csv": str(d / "x.csv"), "fer": str(d / "fer.csv"),
@@ -152,8 +152,8 @@ def _base(cmd: str, io: dict[str, str]) -> list[str]:
         "simulate calibration": ["simulate", "calibration", "--config", "tetrad",
                                  "--sequence", "tetrad-paper", "--turns", "0.05", "--out",
                                  f"{d}/sess_{uuid.uuid4().hex}"],
-        "calibrate": ["calibrate", "--ferraris", io["fer"], "--sample-rate-hz", "100",
-                      "--out", f"{d}/cal_{uuid.uuid4().hex}.json"],
+        "calibrate ferraris": ["calibrate", "ferraris", io["fer"], "--sample-rate-hz", "100",
+                               "--out", f"{d}/cal_{uuid.uuid4().hex}.json"],
         "diagnose": ["diagnose", io["sess"], "--cal", io["sess_cal"]],
         "ingest": ["ingest", io["csv"], "--out", f"{d}/ing_{uuid.uuid4().hex}"],
         "repeat": ["repeat", io["sess"], io["sess"]],        # refused: the same session twice
@@ -162,7 +162,8 @@ def _base(cmd: str, io: dict[str, str]) -> list[str]:
 
 RUN_OPTIONS = [(c, o) for p, o in OPTIONS for c in [" ".join(p)]
                if c in ("replay", "monitor-file", "monitor", "simulate flight",
-                        "simulate calibration", "calibrate", "diagnose", "ingest", "repeat")]
+                        "simulate calibration", "calibrate ferraris", "diagnose", "ingest",
+                        "repeat")]
 # valid but slow: a long simulated flight or session is work, not a fault; keep them short
 _SLOW_VALID = {("simulate flight", "--duration"): 2.0, ("monitor", "--duration"): 1.0,
                ("monitor", "--idle-timeout"): 1.0, ("simulate flight", "--rate"): 1000.0,
@@ -279,12 +280,12 @@ def damage(path: Path, how: tuple) -> None:
 #  for the damaged input and {out} for a fresh output, whether the output must exist on 0)
 DAMAGE_CASES = [
     ("ingest csv", "csv", "", ["ingest", "{in}", "--out", "{out}"], True),
-    ("calibrate ferraris", "fer", "", ["calibrate", "--ferraris", "{in}", "--sample-rate-hz",
+    ("calibrate ferraris", "fer", "", ["calibrate", "ferraris", "{in}", "--sample-rate-hz",
                                        "100", "--out", "{out}"], True),
-    ("calibrate session samples", "sess", "samples.csv", ["calibrate", "{in}", "--out",
-                                                          "{out}"], True),
-    ("calibrate session manifest", "sess", "manifest.json", ["calibrate", "{in}", "--out",
-                                                             "{out}"], True),
+    ("calibrate session samples", "sess", "samples.csv", ["calibrate", "turntable", "{in}",
+                                                          "--out", "{out}"], True),
+    ("calibrate session manifest", "sess", "manifest.json", ["calibrate", "turntable",
+                                                             "{in}", "--out", "{out}"], True),
     ("monitor-file samples", "flight", "samples.csv", ["monitor-file", "{in}", "--cal", "{cal}",
                                                        "--report", "{out}"], True),
     ("monitor-file manifest", "flight", "manifest.json", ["monitor-file", "{in}", "--cal",
@@ -298,7 +299,7 @@ DAMAGE_CASES = [
                                                  "--out", "{out}"], True),
     ("diagnose flight", "imus", "samples.csv", ["diagnose", "{in}", "--cal", "{imus_cal}",
                                                 "--report", "{out}"], True),
-    ("in-flight calibration", "imus", "samples.csv", ["calibrate", "--in-flight", "{in}",
+    ("in-flight calibration", "imus", "samples.csv", ["calibrate", "in-flight", "{in}",
                                                       "--out", "{out}"], True),
     ("tune calibration", "cal", "", ["tune", "--cal", "{in}", "--false-alarms-per-hour", "1",
                                      "--simulate-hours", "0", "--out", "{out}"], True),

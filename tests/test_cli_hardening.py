@@ -77,19 +77,20 @@ def _usage_error(capsys, argv: list[str], needle: str) -> None:
 
 # ----------------------------------------------------------------- output paths ---------
 def test_calibrate_out_is_a_directory(files, capsys):
-    refused(capsys, files["d"], ["calibrate", files["sess"], "--out", files["d"] / "adir"],
+    refused(capsys, files["d"], ["calibrate", "turntable",
+                                 files["sess"], "--out", files["d"] / "adir"],
             "is a directory")
 
 
 def test_calibrate_compare_missing_refused_before_writing(files, capsys):
     d = files["d"]
-    refused(capsys, d, ["calibrate", files["sess"], "--out", d / "cal_new.json",
+    refused(capsys, d, ["calibrate", "turntable", files["sess"], "--out", d / "cal_new.json",
                         "--compare", d / "nope.json"], "no such file")
 
 
 def test_calibrate_compare_bad_truth_refused_before_writing(files, capsys):
     d = files["d"]
-    refused(capsys, d, ["calibrate", files["sess"], "--out", d / "cal_new.json",
+    refused(capsys, d, ["calibrate", "turntable", files["sess"], "--out", d / "cal_new.json",
                         "--compare", files["cal6"]], "cal6.json")
 
 
@@ -285,13 +286,14 @@ def test_table_rates_in_rad_s_refused(files, tmp_path, capsys):
     """The session's table-rate columns in rad/s: the Earth rate the rate test recovers is
     57x too small, far beyond chi2.isf(1e-9, 1); refused, no calibration file written."""
     _rad_session(files["sess"], tmp_path / "sess")
-    refused(capsys, tmp_path, ["calibrate", tmp_path / "sess", "--out", tmp_path / "c.json"],
+    refused(capsys, tmp_path, ["calibrate", "turntable",
+                               tmp_path / "sess", "--out", tmp_path / "c.json"],
             "horizontal Earth rate")
 
 
 def test_plausible_session_passes(files, tmp_path, capsys):
     out = tmp_path / "c.json"
-    assert main(["calibrate", str(files["sess"]), "--out", str(out)]) == 0
+    assert main(["calibrate", "turntable", str(files["sess"]), "--out", str(out)]) == 0
     check_plausible(load_calibration(out), "x")
     cal = load_calibration(out)
     er = cal.extra["earth_rate_fit"]

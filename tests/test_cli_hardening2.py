@@ -79,7 +79,7 @@ def refused(capsys, d: Path, argv: list, needle: str) -> str:
 
 
 def _cal_args(f):
-    return ["--ferraris", f["fer"], "--sample-rate-hz", "100"]
+    return ["ferraris", f["fer"], "--sample-rate-hz", "100"]
 
 
 # ------------------------------------------------------------ (a) tracebacks and hangs ----
@@ -122,7 +122,7 @@ def test_bad_option_values_refused_while_parsing(files, capsys, argv, needle):
 
 
 def test_binary_ferraris_file_is_one_line(files, capsys):
-    refused(capsys, files["d"], ["calibrate", "--ferraris", files["bin"], "--sample-rate-hz",
+    refused(capsys, files["d"], ["calibrate", "ferraris", files["bin"], "--sample-rate-hz",
                                  "100", "--out", files["d"] / "c.json"], "not UTF-8")
 
 
@@ -133,7 +133,7 @@ def test_ferraris_file_with_1e308_is_one_line(files, tmp_path, capsys):
     cells[2] = "1e308"
     lines[40] = ",".join(cells)
     (tmp_path / "f.csv").write_text("\n".join(lines) + "\n")
-    refused(capsys, tmp_path, ["calibrate", "--ferraris", tmp_path / "f.csv",
+    refused(capsys, tmp_path, ["calibrate", "ferraris", tmp_path / "f.csv",
                                "--sample-rate-hz", "100", "--out", tmp_path / "c.json"],
             "beyond any sensor")
 
@@ -154,7 +154,7 @@ def test_diagnose_flight_with_huge_samples(files, tmp_path, capsys):
     with (big / "samples.csv").open("w", newline="") as f:
         csv.writer(f).writerows(rows)
     cal = tmp_path / "c.json"
-    assert main(["calibrate", "--in-flight", str(files["imus"]), "--out", str(cal)]) == 0
+    assert main(["calibrate", "in-flight", str(files["imus"]), "--out", str(cal)]) == 0
     capsys.readouterr()
     assert main(["diagnose", str(big), "--cal", str(cal)]) == 0
     out, err = capsys.readouterr()
@@ -167,14 +167,21 @@ def test_diagnose_flight_with_huge_samples(files, tmp_path, capsys):
 
 # --------------------------------------------------- (b) conflicting options ------------
 @pytest.mark.parametrize("argv,needle", [
-    (["calibrate", "--in-flight", "{imus}", "--ferraris", "{fer}"], "--ferraris"),
-    (["calibrate", "{sess}", "--in-flight", "{imus}"], "SESSION"),
-    (["calibrate", "{sess}", "--reference", "imu1"], "--in-flight and --static only"),
-    (["calibrate", "--static", "{imus}", "--in-flight", "{imus}"], "--static"),
-    (["calibrate", "--in-flight", "{imus}", "--effects", "warmup"], "--effects"),
-    (["calibrate", "--ferraris", "{fer}", "--sample-rate-hz", "100", "--no-denoise"],
-     "--no-denoise"),
-    (["calibrate", "{sess}", "--sample-rate-hz", "100"], "--ferraris only"),
+    # each procedure takes only its own options (rimu calibrate PROCEDURE, issue 29)
+    (["calibrate", "in-flight", "{imus}", "--ferraris", "{fer}"],
+     "unrecognized arguments: --ferraris"),
+    (["calibrate", "turntable", "{sess}", "--in-flight", "{imus}"],
+     "unrecognized arguments: --in-flight"),
+    (["calibrate", "turntable", "{sess}", "--reference", "imu1"],
+     "unrecognized arguments: --reference"),
+    (["calibrate", "static", "{imus}", "--in-flight", "{imus}"],
+     "unrecognized arguments: --in-flight"),
+    (["calibrate", "in-flight", "{imus}", "--effects", "warmup"],
+     "unrecognized arguments: --effects"),
+    (["calibrate", "ferraris", "{fer}", "--sample-rate-hz", "100", "--no-denoise"],
+     "unrecognized arguments: --no-denoise"),
+    (["calibrate", "turntable", "{sess}", "--sample-rate-hz", "100"],
+     "unrecognized arguments: --sample-rate-hz"),
     (["simulate", "flight", "--imus", "2", "--duration", "2", "--cal", "{cal6}"], "--cal"),
     (["simulate", "flight", "--imus", "2", "--duration", "2", "--fault", "step:1:5sigma:1"],
      "--fault"),
@@ -206,7 +213,7 @@ def test_output_replacing_input(files, tmp_path, capsys):
     fer.write_bytes(files["fer"].read_bytes())
     cal = tmp_path / "cal.json"
     cal.write_bytes(files["cal6"].read_bytes())
-    for argv in (["calibrate", "--ferraris", fer, "--sample-rate-hz", "100", "--out", fer],
+    for argv in (["calibrate", "ferraris", fer, "--sample-rate-hz", "100", "--out", fer],
                  ["tune", "--cal", cal, "--false-alarms-per-hour", "1", "--out", cal],
                  ["diagnose", files["sess"], "--cal", cal, "--out", cal],
                  ["simulate", "flight", "--cal", cal, "--duration", "1", "--out", cal]):
@@ -348,7 +355,7 @@ def test_inflight_counts_nonfinite_rows(files, tmp_path, capsys):
     with (fl / "samples.csv").open("w", newline="") as f:
         csv.writer(f).writerows(rows)
     capsys.readouterr()
-    assert main(["calibrate", "--in-flight", str(fl), "--out", str(tmp_path / "c.json")]) == 0
+    assert main(["calibrate", "in-flight", str(fl), "--out", str(tmp_path / "c.json")]) == 0
     out = capsys.readouterr().out
     doc = json.loads((tmp_path / "c.json").read_text())["extra"]["inflight"]
     assert doc["samples_nonfinite"] == 50
@@ -396,8 +403,9 @@ def test_damaged_text_log_warns_on_stderr(tmp_path, capsys):
 def test_hints_for_the_natural_wrong_command(files, capsys):
     refused(capsys, files["d"], ["monitor-file", files["bin_log"], "--cal", files["cal6"]],
             "rimu ingest")
-    refused(capsys, files["d"], ["calibrate", files["imus"], "--out", files["d"] / "c.json"],
-            "--in-flight")
+    refused(capsys, files["d"], ["calibrate", "turntable",
+                                 files["imus"], "--out", files["d"] / "c.json"],
+            "rimu calibrate in-flight")
 
 
 def test_calibration_schema_error_names_the_written_version(files, capsys):
@@ -544,9 +552,10 @@ def test_choice_lists_kept_beside_the_parsers_agree_with_the_library():
     from calibration.diagnose.library import candidates
     from calibration.inflight.fit import MODELS
     from replay.ingest.readers import FORMATS
-    from rimu.commands import calibrate, calibrate_effects, calibrate_inflight, ingest
+    from rimu.commands import calibrate_effects, calibrate_inflight, calibrate_turntable, ingest
 
-    assert calibrate.BIAS_METHODS == BIAS_METHODS and calibrate.NOISE_MODELS == NOISE_MODELS
+    assert calibrate_turntable.BIAS_METHODS == BIAS_METHODS
+    assert calibrate_turntable.NOISE_MODELS == NOISE_MODELS
     assert calibrate_inflight.MODELS == MODELS and ingest.FORMATS == FORMATS
     assert calibrate_effects.EFFECT_NAMES == tuple(c.name for c in candidates())
 
@@ -685,7 +694,7 @@ def test_evaluate_and_diagnose_leave_nothing_when_a_late_write_fails(files, tmp_
                                "--out", tmp_path / "ev"], "No space left")
     cal = tmp_path / "in" / "cal.json"
     cal.parent.mkdir()
-    assert main(["calibrate", str(files["sess"]), "--out", str(cal)]) == 0
+    assert main(["calibrate", "turntable", str(files["sess"]), "--out", str(cal)]) == 0
     monkeypatch.setattr(import_module("calibration.diagnose.report"), "write_report", broken)
     refused(capsys, tmp_path, ["diagnose", files["sess"], "--cal", cal, "--out",
                                tmp_path / "refit.json", "--report", tmp_path / "rep"],

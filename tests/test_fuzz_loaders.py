@@ -84,7 +84,7 @@ def pristine(tmp_path_factory) -> Path:
     d = tmp_path_factory.mktemp("pristine")
     _cli("simulate", "calibration", "--config", "tetrad", "--preset", "tetrad-paper",
          "--table-rate-dps", "90", "--out", str(d / "sess"), "--seed", "2")
-    _cli("calibrate", str(d / "sess"), "--out", str(d / "cal.json"))
+    _cli("calibrate", "turntable", str(d / "sess"), "--out", str(d / "cal.json"))
     _cli("simulate", "flight", "--cal", str(d / "cal.json"), "--duration", "2",
          "--out", str(d / "flight"), "--seed", "1", "--fault", "step:2:15sigma:1")
     cal = load_calibration(d / "cal.json")

@@ -84,8 +84,8 @@ def test_ingest_names_the_logs_extra(tmp_path, suffix, dist):
     ("evaluate", "--cal", "cal.json", "--runs", "2", "--out", "ev"),
     ("diagnose", "session", "--cal", "cal.json", "--report", "rep"),
     ("characterise", "flight", "--report", "rep"),
-    ("calibrate", "session", "--out", "cal2.json", "--plot", "rep"),
-    ("calibrate", "--in-flight", "flight", "--out", "cal2.json", "--report", "rep"),
+    ("calibrate", "turntable", "session", "--out", "cal2.json", "--plot", "rep"),
+    ("calibrate", "in-flight", "flight", "--out", "cal2.json", "--report", "rep"),
     ("monitor-file", "flight", "--cal", "cal.json", "--baseline", "px4",
      "--baseline-plot", "b.png"),
 ], ids=lambda a: " ".join(a[:2]))

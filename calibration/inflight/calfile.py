@@ -124,7 +124,7 @@ def calibration_from_fit(fit: InflightFit, flight: Flight, *, tails: bool = True
     :func:`fdi.reconstruction.inflation_terms`); without it the jitter is 0 and the tails
     are those of the bare statistic (the behaviour before the jitter term). With
     ``drift_model`` the slow drift of the residual's whitened parity is kept too
-    (:mod:`calibration.drift`; ``rimu calibrate --in-flight --drift-model``): ``tune`` then
+    (:mod:`calibration.drift`; ``rimu calibrate in-flight --drift-model``): ``tune`` then
     covers the drift expected over its horizon, at a price in detectable size
     (``docs/drift.md``). ``turn_on_sd`` (per IMU group, per axis, rad/s) gives each
     sensor's ``bias_turn_on_sd`` and ``flights`` each flight's own values

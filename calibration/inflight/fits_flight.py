@@ -3,7 +3,7 @@
 A calibration carried to a new flight brings what should last across power-ups (mounting,
 scale, a firmware lag) and what may not (turn-on bias, jitter, the vibration the noise
 model saw). :func:`parameter_checks` fits the new flight in flight as ``rimu calibrate
---in-flight`` does (:func:`calibration.inflight.fit_inflight`, its defaults) and compares,
+in-flight`` does (:func:`calibration.inflight.fit_inflight`, its defaults) and compares,
 per IMU against the reference and per axis, each parameter of the calibration with the
 same parameter of the flight:
 
@@ -82,7 +82,7 @@ class ParameterCheck:
 
 
 def flight_calibration(flight: Any) -> Calibration:
-    """The flight's own in-flight calibration (``rimu calibrate --in-flight`` defaults)."""
+    """The flight's own in-flight calibration (``rimu calibrate in-flight`` defaults)."""
     from calibration.inflight.calfile import calibration_from_fit
     from calibration.inflight.fit import fit_inflight
 

@@ -1,6 +1,6 @@
 """Several flights of one IMU set calibrated together: what lasts across power-ups, what not.
 
-``rimu calibrate --in-flight F1 F2 ...``. Each flight is fitted on its own
+``rimu calibrate in-flight F1 F2 ...``. Each flight is fitted on its own
 (:func:`calibration.inflight.fit.fit_inflight`); then, per IMU:
 
 - **shared** (mounting, misalignment, scale, non-orthogonality: the parts of E, which

@@ -1,4 +1,4 @@
-"""Calibration of several IMUs at rest against one of them (``rimu calibrate --static``).
+"""Calibration of several IMUs at rest against one of them (``rimu calibrate static``).
 
 A static recording excites no rotation, so the in-flight fit (:mod:`.fit`) cannot run. What
 a set at rest does show:
@@ -282,7 +282,8 @@ def calibrate_static(flight: Flight, *, reference: str | None = None, alpha: flo
     spread = float(np.median(np.linalg.norm(xs[:, groups[ref]], axis=1)))
     if spread > _MOVING_RPS:
         raise CalibrationError(f"{flight.source}: the set is moving (median rate deviation "
-                               f"{spread:.3g} rad/s > {_MOVING_RPS:g}); use --in-flight")
+                               f"{spread:.3g} rad/s > {_MOVING_RPS:g}); use rimu calibrate "
+                               "in-flight")
     acc = {g: (_accel(flight, g)[ok] if _accel(flight, g) is not None else None)
            for g in groups}
     rots, notes, full = _rotations(x, acc, groups, ref)

@@ -160,13 +160,13 @@ class CalibrationExtras:
 TURNTABLE_LAYOUT = ("source", "method", "rate_test", "step_residual_chi2_dof", "warnings",
                     "noise_model", "gyro_bias", "parity_calibrated_sd", "residual_steps",
                     "regressors", "earth_rate_fit", "parity_accel_calibrated_sd")
-"""The ``extra`` keys of a turntable calibration (``rimu calibrate SESSION``), in order."""
+"""The ``extra`` keys of a turntable calibration (``rimu calibrate turntable``), in order."""
 FERRARIS_LAYOUT = ("source", "method", "ferraris", "warnings")
 """The ``extra`` keys of a Ferraris calibration, in order."""
 STATIC_LAYOUT = ("method", "source", "static")
-"""The ``extra`` keys of a calibration at rest (``rimu calibrate --static``), in order."""
+"""The ``extra`` keys of a calibration at rest (``rimu calibrate static``), in order."""
 INFLIGHT_LAYOUT = ("method", "source", "inflight")
-"""The ``extra`` keys of an in-flight calibration (``rimu calibrate --in-flight``), in order."""
+"""The ``extra`` keys of an in-flight calibration (``rimu calibrate in-flight``), in order."""
 
 
 def _set(v: Any) -> bool:

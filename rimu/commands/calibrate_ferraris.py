@@ -1,8 +1,5 @@
-"""``rimu calibrate --ferraris CSV ... --out CAL``: known-angle rotation (Ferraris) sessions.
-
-Kept beside :mod:`rimu.commands.calibrate`, which only adds the options
-(:func:`add_arguments`) and hands over (:func:`ferraris_command`).
-"""
+"""``rimu calibrate ferraris CSV --sample-rate-hz HZ --out CAL``: known-angle rotation
+(Ferraris) sessions, one of the procedures of :mod:`rimu.commands.calibrate`."""
 
 from __future__ import annotations
 
@@ -12,43 +9,46 @@ from fdi.errors import ConfigError
 from fdi.units import G0
 from rimu.argtypes import bounded_float, nonnegative_float
 
-__all__ = ["add_arguments", "ferraris_command", "summary_lines"]
+__all__ = ["HELP", "configure", "run", "summary_lines"]
+
+HELP = ("Ferraris session (static positions + known-angle rotations, imucal's procedure): "
+        "scale factors, biases, axes and the gyro g-sensitivity")
 
 
 MIN_ROTATION_DEG = 10.0
 """Smallest rotation angle (deg) the gyro scale factors can be fitted from."""
 
 
-def add_arguments(p: argparse.ArgumentParser) -> None:
-    """The ``--ferraris`` options of ``rimu calibrate``."""
-    g = p.add_argument_group("Ferraris sessions (static positions + known-angle rotations)")
-    g.add_argument("--ferraris", metavar="CSV",
-                   help="calibrate a Ferraris session instead of a turntable session: CSV "
-                        "with gyr_x..z, acc_x..z and a 'part' column (x_p ... z_rot), or with "
-                        "--sections")
-    g.add_argument("--sections", metavar="JSON",
+def configure(p: argparse.ArgumentParser) -> None:
+    """The options of ``rimu calibrate ferraris``."""
+    p.add_argument("ferraris", metavar="CSV",
+                   help="the session: CSV with gyr_x..z, acc_x..z and a 'part' column "
+                        "(x_p ... z_rot), or with --sections")
+    p.add_argument("--out", required=True, metavar="FILE",
+                   help="calibration file to write (rimu.calibration/3 JSON)")
+    p.add_argument("--sections", metavar="JSON",
                    help="section list {\"x_p\": {\"start\": i, \"end\": j}, ...} (0-based rows, "
                         "end exclusive) for a CSV without a 'part' column")
-    g.add_argument("--sample-rate-hz", metavar="HZ",
+    p.add_argument("--sample-rate-hz", metavar="HZ",
                    type=bounded_float(1.0, 1e6, name="sample rate in Hz"),
-                   help="sample rate of the Ferraris CSV (required with --ferraris)")
-    g.add_argument("--rotation-deg", default=-360.0,
+                   help="sample rate of the CSV (required: the CSV does not hold it)")
+    p.add_argument("--rotation-deg", default=-360.0,
                    type=bounded_float(-3600.0, 3600.0, min_abs=MIN_ROTATION_DEG,
                                       name="rotation in deg"),
                    help="nominal rotation angle about each axis (default -360: clockwise "
                         "seen from above, imucal's convention)")
-    g.add_argument("--gravity", type=bounded_float(0.1, 100.0, name="gravity in m/s^2"),
+    p.add_argument("--gravity", type=bounded_float(0.1, 100.0, name="gravity in m/s^2"),
                    default=G0,
                    help=f"local gravity in m/s^2 (default {G0})")
-    g.add_argument("--position-sd-deg", type=nonnegative_float(90.0), default=1.0,
+    p.add_argument("--position-sd-deg", type=nonnegative_float(90.0), default=1.0,
                    help="sd of each tilt component of a position or rotation axis (default 1)")
-    g.add_argument("--angle-sd-deg", type=nonnegative_float(360.0), default=1.0,
+    p.add_argument("--angle-sd-deg", type=nonnegative_float(360.0), default=1.0,
                    help="sd of each rotation angle (default 1)")
-    g.add_argument("--latitude-deg", type=bounded_float(-90.0, 90.0, name="latitude in deg"),
+    p.add_argument("--latitude-deg", type=bounded_float(-90.0, 90.0, name="latitude in deg"),
                    default=None,
                    help="latitude: removes the vertical Earth rate from the static gyro "
                         "means (default: counted as an uncertainty)")
-    g.add_argument("--raw-unit", default="count",
+    p.add_argument("--raw-unit", default="count",
                    help="unit of the raw outputs in the CSV (default count)")
 
 
@@ -89,18 +89,16 @@ def summary_lines(cal) -> list[str]:
     return out
 
 
-def ferraris_command(args: argparse.Namespace) -> int:
-    """Run ``rimu calibrate --ferraris``: load, calibrate, write, print."""
+def run(args: argparse.Namespace) -> int:
+    """Run ``rimu calibrate ferraris``: load, calibrate, write, print."""
     from calibration.ferraris import FerrarisOptions, ferraris_calibrate
     from calibration.ferraris_io import load_ferraris
     from rimu.outputs import atomic_file, input_path, output_file
 
     if args.sample_rate_hz is None:
-        raise ConfigError("--ferraris needs --sample-rate-hz (the CSV does not hold it)")
-    if args.session is not None or args.compare or args.plot:
-        raise ConfigError("--ferraris takes no session directory, --compare or --plot "
-                          "(those are for turntable sessions)")
-    input_path(args.ferraris, "--ferraris")
+        raise ConfigError("rimu calibrate ferraris needs --sample-rate-hz (the CSV does not "
+                          "hold it)")
+    input_path(args.ferraris, "CSV")
     if args.sections:
         input_path(args.sections, "--sections")
     out = output_file(args.out, "--out", inputs=(args.ferraris, args.sections))

@@ -1,6 +1,7 @@
-"""``rimu calibrate --in-flight DIR --out CAL``: calibrate an IMU set against itself in flight.
+"""``rimu calibrate in-flight DIR [DIR ...] --out CAL``: calibrate an IMU set against itself
+in flight.
 
-Reached through ``rimu calibrate`` (its ``--in-flight`` option); fits every IMU of the flight
+One of the procedures of :mod:`rimu.commands.calibrate`; fits every IMU of the flight
 folder to the reference IMU (:mod:`calibration.inflight.fit`), writes the
 ``rimu.calibration/3`` file (:mod:`calibration.inflight.calfile`) and prints a summary.
 """
@@ -13,17 +14,20 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:
     from fdi.calfile import Calibration
 
-__all__ = ["MODELS", "configure_options", "covered_range_text", "parse_window", "run",
+__all__ = ["HELP", "MODELS", "configure", "covered_range_text", "parse_window", "run",
            "summary_text"]
+
+HELP = ("an IMU set against itself in flight (one or several flight folders): alignment, "
+        "scale, bias and time offsets from the recorded motion")
 
 MODELS = ("auto", "full", "rotation")
 """``--model`` (:data:`calibration.inflight.fit.MODELS`; kept here so that ``--help`` does
 not import the fit; a test checks they agree)."""
 
 
-def configure_options(p: argparse.ArgumentParser) -> None:
-    """The options ``rimu calibrate`` adds for ``--in-flight``."""
-    p.add_argument("--in-flight", metavar="DIR", nargs="+",
+def configure(p: argparse.ArgumentParser) -> None:
+    """The options of ``rimu calibrate in-flight``."""
+    p.add_argument("in_flight", metavar="DIR", nargs="+",
                    help="calibrate the IMUs of a flight folder (rimu.flight/1) against one of "
                         "them: alignment, bias and time offset from the recorded motion; what "
                         "the motion does not excite is held at the prior (--prior-*) and the "
@@ -31,41 +35,44 @@ def configure_options(p: argparse.ArgumentParser) -> None:
                         "mounting, misalignment and scale fitted jointly, bias and time "
                         "offset per flight, their run-to-run spread written "
                         "(bias_turn_on_sd)")
+    p.add_argument("--out", required=True, metavar="FILE",
+                   help="calibration file to write (rimu.calibration/3 JSON)")
     p.add_argument("--window", metavar="T0:T1",
-                   help="with --in-flight: use only the part of the record from T0 to T1 s "
+                   help="use only the part of the record from T0 to T1 s "
                         "(either may be empty: '30:' or ':95'), or 'flight' for the span "
                         "between the log's own arm/take-off and land/disarm events")
     p.add_argument("--prior-misalignment-deg", type=float, default=2.0, metavar="DEG",
-                   help="with --in-flight: 1-sigma tolerance of each IMU's mounting about "
+                   help="1-sigma tolerance of each IMU's mounting about "
                         "its nominal (default 2)")
     p.add_argument("--prior-scale-pct", type=float, default=3.0, metavar="PCT",
-                   help="with --in-flight: 1-sigma relative scale-factor tolerance (a "
+                   help="1-sigma relative scale-factor tolerance (a "
                         "datasheet's; default 3)")
     p.add_argument("--prior-nonorthogonality-pct", type=float, default=2.0, metavar="PCT",
-                   help="with --in-flight: 1-sigma cross-axis tolerance (default 2)")
+                   help="1-sigma cross-axis tolerance (default 2)")
     p.add_argument("--reference", metavar="IMU",
-                   help="with --in-flight: reference IMU group (default: the first)")
+                   help="reference IMU group (default: the first)")
     p.add_argument("--model", choices=MODELS, default="auto",
-                   help="with --in-flight: 'full' (rotation, scale, non-orthogonality, each "
+                   help="'full' (rotation, scale, non-orthogonality, each "
                         "estimated or held at the prior), 'rotation' (scale and "
                         "non-orthogonality equal to the reference's), or 'auto' (= full; "
                         "default)")
     p.add_argument("--no-time-offset", action="store_true",
-                   help="with --in-flight: do not fit the time offsets")
+                   help="do not fit the time offsets")
     p.add_argument("--drift-model", action="store_true",
-                   help="with --in-flight: also measure the slow drift of the residual's "
+                   help="also measure the slow drift of the residual's "
                         "parity; rimu tune then covers the drift over its horizon (fewer "
                         "alarms on a drifting set, larger detectable sizes: docs/drift.md)")
     p.add_argument("--report", metavar="DIR",
-                   help="with --in-flight: write report.md and PNG plots (residual before "
+                   help="write report.md and PNG plots (residual before "
                         "and after, the offset of each piece, the periods left out) into DIR")
 
 
 def covered_range_text(cal: Calibration) -> str | None:
     """The range the gyro calibration's samples covered, one line (None: no range stated).
 
-    Shared by ``--in-flight`` and ``--static``: beyond it the monitor marks its answers out
-    of the envelope, and ``rimu tune``'s correction flights stay inside it.
+    Shared by ``rimu calibrate in-flight`` and ``rimu calibrate static``: beyond it the
+    monitor marks its answers out of the envelope, and ``rimu tune``'s correction flights
+    stay inside it.
     """
     from fdi.units import DPS, G0
 
@@ -197,7 +204,7 @@ def _prior(args: argparse.Namespace):
 
 
 def run(args: argparse.Namespace) -> int:
-    """Run ``rimu calibrate --in-flight``."""
+    """Run ``rimu calibrate in-flight``."""
     from calibration.inflight.calfile import calibration_from_fit, flight_values
     from calibration.inflight.fit import fit_inflight
     from calibration.inflight.segments import flight_window
@@ -206,7 +213,7 @@ def run(args: argparse.Namespace) -> int:
 
     dirs = args.in_flight if isinstance(args.in_flight, list | tuple) else [args.in_flight]
     for d in dirs:
-        input_path(d, "--in-flight", kind="dir")
+        input_path(d, "DIR", kind="dir")
     out = output_file(args.out, "--out", inputs=tuple(dirs))
     rep = None
     if getattr(args, "report", None):

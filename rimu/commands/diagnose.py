@@ -20,7 +20,7 @@ def configure(p: argparse.ArgumentParser) -> None:
                    help="session directory (rimu.session/1) or flight folder (rimu.flight/1, "
                         "e.g. from rimu ingest)")
     p.add_argument("--cal", required=True, metavar="FILE",
-                   help="calibration of this session (rimu calibrate --out FILE)")
+                   help="calibration of this session (rimu calibrate turntable SESSION --out FILE)")
     p.add_argument("--alpha", type=probability(), default=0.01, metavar="A",
                    help="family-wise false-claim level of the tests (default 0.01)")
     p.add_argument("--json", action="store_true", help="print the result as JSON")

@@ -62,7 +62,7 @@ def turntable(out: Path) -> None:
         s = out / f"session_{name}"
         _cli("simulate", "calibration", "--out", str(s), *sim)
         (out / f"truth_{name}.json").write_text((s / "truth.json").read_text())
-        _cli("calibrate", str(s), "--out", str(out / f"{name}.json"), *cal)
+        _cli("calibrate", "turntable", str(s), "--out", str(out / f"{name}.json"), *cal)
         _fingerprint(out / f"{name}.json")
         if name == "cone_effect":
             _cli("diagnose", str(s), "--cal", str(out / f"{name}.json"),
@@ -79,10 +79,10 @@ def presets(out: Path) -> None:
 
 def ferraris(out: Path) -> None:
     csv = SHARED / "imucal" / "annotated_session.csv"
-    _cli("calibrate", "--ferraris", str(csv), "--sample-rate-hz", "204.8", "--gravity", "9.81",
+    _cli("calibrate", "ferraris", str(csv), "--sample-rate-hz", "204.8", "--gravity", "9.81",
          "--out", str(out / "ferraris.json"))
     _fingerprint(out / "ferraris.json")
-    _cli("calibrate", "--ferraris", str(csv), "--sample-rate-hz", "204.8",
+    _cli("calibrate", "ferraris", str(csv), "--sample-rate-hz", "204.8",
          "--latitude-deg", "49.6", "--out", str(out / "ferraris_lat.json"))
     _fingerprint(out / "ferraris_lat.json")
 
@@ -93,7 +93,7 @@ def inflight(out: Path) -> None:
                       ("83", "pxf_copter_31-3-2015_83.BIN")):
         f = out / f"flight_{name}"
         _cli("ingest", str(d / log), "--salvage", "--out", str(f))
-        _cli("calibrate", "--in-flight", str(f), "--out", str(out / f"inflight_{name}.json"))
+        _cli("calibrate", "in-flight", str(f), "--out", str(out / f"inflight_{name}.json"))
         _fingerprint(out / f"inflight_{name}.json")
 
 
@@ -101,7 +101,7 @@ def static(out: Path) -> None:
     p = SHARED / "multi_imu_4x_mpu9250"
     f = out / "mpu4"
     _cli("ingest", *(str(p / f"imu{k}_raw.mat") for k in range(1, 5)), "--out", str(f))
-    _cli("calibrate", "--static", str(f), "--out", str(out / "static_mpu4.json"))
+    _cli("calibrate", "static", str(f), "--out", str(out / "static_mpu4.json"))
     _fingerprint(out / "static_mpu4.json")
 
 

@@ -24,7 +24,7 @@ def tetrad_dir(tmp_path_factory):
 
 def test_writes_file_summary_and_comparison(tetrad_dir, tmp_path, capsys):
     out = tmp_path / "cal.json"
-    code, text, err = _run(capsys, "calibrate", tetrad_dir, "--out", out, "--compare",
+    code, text, err = _run(capsys, "calibrate", "turntable", tetrad_dir, "--out", out, "--compare",
                            tetrad_dir / "truth.json")
     assert code == 0, err
     doc = json.loads(out.read_text())
@@ -59,7 +59,7 @@ def comparison_table(text):
 
 def test_bias_method_turns_and_no_denoise(tetrad_dir, tmp_path, capsys):
     out = tmp_path / "cal.json"
-    code, _, err = _run(capsys, "calibrate", tetrad_dir, "--out", out, "--bias-method",
+    code, _, err = _run(capsys, "calibrate", "turntable", tetrad_dir, "--out", out, "--bias-method",
                         "turns", "--no-denoise")
     assert code == 0, err
     doc = json.loads(out.read_text())
@@ -85,11 +85,12 @@ def test_noise_model_option_and_summary(tmp_path, capsys):
     docs = {}
     for mode in ("auto", "white"):
         out = tmp_path / f"{mode}.json"
-        code, text, err = _run(capsys, "calibrate", d, "--out", out, "--noise-model", mode)
+        code, text, err = _run(capsys, "calibrate", "turntable",
+                                       d, "--out", out, "--noise-model", mode)
         assert code == 0, err
         assert f"noise model: {mode}:" in text
         docs[mode] = json.loads(out.read_text())
-    txt = _run(capsys, "calibrate", d, "--out", tmp_path / "x.json")[1]
+    txt = _run(capsys, "calibrate", "turntable", d, "--out", tmp_path / "x.json")[1]
     assert "gyro: Gauss-Markov bias" in txt and "sigma at correlation" in txt, txt
     assert docs["auto"]["extra"]["noise_model"]["gyro"]["applied"] is True
     sd_a = np.array([e["bias_sd"] for e in docs["auto"]["sensors"]["gyro"]])
@@ -123,7 +124,7 @@ def test_missing_column(tetrad_dir, tmp_path, capsys):
     j = head.index("gyro.g3")
     (d / "samples.csv").write_text("\n".join(",".join(c for k, c in enumerate(r.split(","))
                                                       if k != j) for r in lines) + "\n")
-    msg = _one_line_error(capsys, "calibrate", d, "--out", tmp_path / "c.json")
+    msg = _one_line_error(capsys, "calibrate", "turntable", d, "--out", tmp_path / "c.json")
     assert str(d) in msg and "gyro.g3" in msg
 
 
@@ -135,7 +136,7 @@ def test_nan_sample(tetrad_dir, tmp_path, capsys):
     cells[-1] = "nan"
     lines[row] = ",".join(cells)
     (d / "samples.csv").write_text("\n".join(lines) + "\n")
-    msg = _one_line_error(capsys, "calibrate", d, "--out", tmp_path / "c.json")
+    msg = _one_line_error(capsys, "calibrate", "turntable", d, "--out", tmp_path / "c.json")
     assert "samples.csv" in msg and "step 11" in msg
 
 
@@ -144,7 +145,7 @@ def test_unknown_unit(tetrad_dir, tmp_path, capsys):
     m = json.loads((d / "manifest.json").read_text())
     m["raw_units"]["gyro"] = "furlongs"
     (d / "manifest.json").write_text(json.dumps(m))
-    msg = _one_line_error(capsys, "calibrate", d, "--out", tmp_path / "c.json")
+    msg = _one_line_error(capsys, "calibrate", "turntable", d, "--out", tmp_path / "c.json")
     assert "manifest.json" in msg and "furlongs" in msg
 
 
@@ -161,7 +162,7 @@ def _rewrite(tetrad_dir, d, keep_fn, steps=None):
 
 def test_not_enough_excitation(tetrad_dir, tmp_path, capsys):
     d = _rewrite(tetrad_dir, tmp_path / "s", lambda s: s.step <= 6, lambda s: s.steps[:6])
-    msg = _one_line_error(capsys, "calibrate", d, "--out", tmp_path / "c.json")
+    msg = _one_line_error(capsys, "calibrate", "turntable", d, "--out", tmp_path / "c.json")
     assert str(d) in msg and "1/2, 3/4, 5/6" in msg and "rank of R is 2" in msg
 
 
@@ -171,13 +172,14 @@ def test_step_with_too_few_samples(tetrad_dir, tmp_path, capsys):
         k[np.flatnonzero(s.step == 12)[4:]] = False
         return k
     d = _rewrite(tetrad_dir, tmp_path / "s", keep)
-    msg = _one_line_error(capsys, "calibrate", d, "--out", tmp_path / "c.json")
+    msg = _one_line_error(capsys, "calibrate", "turntable", d, "--out", tmp_path / "c.json")
     # the loader or the estimator (whichever sees it first) names the step and the minimum
     assert str(d) in msg and "step 12" in msg and "4 sample" in msg and "at least 10" in msg
 
 
 def test_plots(tetrad_dir, tmp_path, capsys):
-    code, text, err = _run(capsys, "calibrate", tetrad_dir, "--out", tmp_path / "c.json",
+    code, text, err = _run(capsys, "calibrate", "turntable",
+                                   tetrad_dir, "--out", tmp_path / "c.json",
                            "--plot", tmp_path / "plots")
     assert code == 0, err
     for name in ("residual_steps_gyro.png", "allan_gyro.png", "earth_rate_fit.png"):

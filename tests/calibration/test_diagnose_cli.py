@@ -1,4 +1,4 @@
-"""``rimu diagnose`` and ``rimu calibrate --effects``: JSON layout, report, temperature
+"""``rimu diagnose`` and ``rimu calibrate turntable --effects``: JSON layout, report, temperature
 columns, and one-line errors (exit 2) on bad input."""
 
 import json
@@ -20,7 +20,7 @@ def drift_dir(tmp_path_factory):
     from calibration.presets import preset
 
     save_simulation(seq_truth[0], preset("tetrad-paper").truth, d / "s")
-    assert main(["calibrate", str(d / "s"), "--out", str(d / "cal.json")]) == 0
+    assert main(["calibrate", "turntable", str(d / "s"), "--out", str(d / "cal.json")]) == 0
     return d
 
 
@@ -70,11 +70,13 @@ def test_text_report_and_refit_file(drift_dir, tmp_path, capsys):
 
 
 def test_calibrate_prints_the_verdict_and_fits_asked_effects(drift_dir, tmp_path, capsys):
-    code, out, err = _run(capsys, "calibrate", drift_dir / "s", "--out", tmp_path / "c.json")
+    code, out, err = _run(capsys, "calibrate", "turntable",
+                                  drift_dir / "s", "--out", tmp_path / "c.json")
     assert code == 0, err
     assert "model adequacy (alpha 0.01): effects suspected: gyro 2: bias_drift" in out
     assert "Gauss-Markov noise widening is withheld" in err  # warnings go to stderr
-    code, out, err = _run(capsys, "calibrate", drift_dir / "s", "--out", tmp_path / "c.json",
+    code, out, err = _run(capsys, "calibrate", "turntable",
+                                  drift_dir / "s", "--out", tmp_path / "c.json",
                           "--effects", "bias_drift")
     assert code == 0, err
     doc = json.loads((tmp_path / "c.json").read_text())
@@ -125,7 +127,8 @@ def test_bad_inputs_one_line(drift_dir, tmp_path, capsys):
     # a calibration of another configuration
     cone, _ = session("cone-paper", 1)
     save_session(cone, tmp_path / "cone")
-    assert main(["calibrate", str(tmp_path / "cone"), "--out", str(tmp_path / "cone.json")]) == 0
+    assert main(["calibrate", "turntable",
+                 str(tmp_path / "cone"), "--out", str(tmp_path / "cone.json")]) == 0
     capsys.readouterr()
     _one_line_exit_2(capsys, "diagnose", drift_dir / "s", "--cal", tmp_path / "cone.json",
                      must=("cone.json", "sensors.gyro", "another configuration"))
@@ -135,9 +138,11 @@ def test_bad_inputs_one_line(drift_dir, tmp_path, capsys):
     _one_line_exit_2(capsys, "diagnose", tmp_path / "other", "--cal", drift_dir / "cal.json",
                      must=("cal.json", "residual_rms", "another session"))
     # an asked-for effect whose input the session lacks
-    _one_line_exit_2(capsys, "calibrate", drift_dir / "s", "--out", tmp_path / "x.json",
+    _one_line_exit_2(capsys, "calibrate", "turntable",
+                             drift_dir / "s", "--out", tmp_path / "x.json",
                      "--effects", "temperature", must=("temperature", str(drift_dir / "s")))
-    _one_line_exit_2(capsys, "calibrate", drift_dir / "s", "--out", tmp_path / "x.json",
+    _one_line_exit_2(capsys, "calibrate", "turntable",
+                             drift_dir / "s", "--out", tmp_path / "x.json",
                      "--effects", "humidity", must=("unknown effect 'humidity'",))
     _one_line_exit_2(capsys, "diagnose", drift_dir / "s", "--cal", drift_dir / "cal.json",
                      "--alpha", "1.5", must=("alpha",))
@@ -153,7 +158,7 @@ def test_nan_temperature_one_line(tmp_path, capsys):
     cells[-1] = "nan"
     lines[100] = ",".join(cells)
     csv.write_text("\n".join(lines))
-    _one_line_exit_2(capsys, "calibrate", tmp_path / "t", "--out", tmp_path / "c.json",
+    _one_line_exit_2(capsys, "calibrate", "turntable", tmp_path / "t", "--out", tmp_path / "c.json",
                      must=("samples.csv:101", "temp_degC", "got nan"))
 
 
@@ -164,5 +169,5 @@ def test_misspelt_temperature_column_refused(tmp_path, capsys):
     csv = tmp_path / "t" / "samples.csv"
     text = csv.read_text()
     csv.write_text(text.replace("temp_degC", "temp_degF", 1))
-    _one_line_exit_2(capsys, "calibrate", tmp_path / "t", "--out", tmp_path / "c.json",
+    _one_line_exit_2(capsys, "calibrate", "turntable", tmp_path / "t", "--out", tmp_path / "c.json",
                      must=("samples.csv", "temp_degF"))

@@ -12,7 +12,7 @@
   "unexplained".
 
 The levels on full presets sessions are a campaign (test_closure_levels.py). Also
-``rimu calibrate --sensor-class`` (the class whose physical bounds label effect terms).
+``rimu calibrate turntable --sensor-class`` (the class whose physical bounds label effect terms).
 """
 
 import dataclasses
@@ -134,10 +134,10 @@ def test_quadratic_drift_is_not_named_a_step():
     assert {u["sensor"] for u in out.unexplained} == {3}
 
 
-# ---- rimu calibrate --sensor-class ------------------------------------------------------
+# ---- rimu calibrate turntable --sensor-class -------------------------------------
 
 def test_calibrate_sensor_class_sets_the_bounds(capsys, tmp_path):
-    """``format_adequacy(cal, sensor_class=...)`` (what ``rimu calibrate --sensor-class``
+    """``format_adequacy(cal, sensor_class=...)`` (what ``rimu calibrate turntable --sensor-class``
     prints): 100 °/h per g of g-sensitivity is beyond the FOG bound the tetrad's noise
     implies, within the MEMS one when the class is given; the option is refused for the
     other kinds of session, in one line, exit 2."""
@@ -155,7 +155,7 @@ def test_calibrate_sensor_class_sets_the_bounds(capsys, tmp_path):
     assert "absorbing something else" in note(sensor_class="fog")
     assert "absorbing" not in note(sensor_class="mems")
     (tmp_path / "fl").mkdir()       # the output may not lie inside the input (issue 30)
-    code, out, err = run(capsys, "calibrate", "--in-flight", tmp_path / "fl", "--out",
+    code, out, err = run(capsys, "calibrate", "in-flight", tmp_path / "fl", "--out",
                          tmp_path / "c.json", "--sensor-class", "mems")
     assert code == 2 and not out and len(err.strip().splitlines()) == 1, err
     assert "--sensor-class" in err

@@ -218,7 +218,7 @@ def test_missing_section_and_bad_samples():
 @needs_data
 def test_cli_ferraris(tmp_path, capsys):
     out = tmp_path / "cal.json"
-    rc = main(["calibrate", "--ferraris", str(ANNOTATED), "--sample-rate-hz", "204.8",
+    rc = main(["calibrate", "ferraris", str(ANNOTATED), "--sample-rate-hz", "204.8",
                "--gravity", "9.81", "--out", str(out)])
     assert rc == 0
     cal = load_calibration(out)
@@ -230,15 +230,15 @@ def test_cli_ferraris(tmp_path, capsys):
 def test_cli_ferraris_errors(tmp_path, capsys):
     bad = tmp_path / "bad.csv"
     bad.write_text("a,b\n1,2\n")
-    rc = main(["calibrate", "--ferraris", str(bad), "--sample-rate-hz", "100",
+    rc = main(["calibrate", "ferraris", str(bad), "--sample-rate-hz", "100",
                "--out", str(tmp_path / "c.json")])
     err = capsys.readouterr().err.strip()
     assert rc == 2 and len(err.splitlines()) == 1 and "bad.csv" in err
-    rc = main(["calibrate", "--ferraris", str(bad), "--out", str(tmp_path / "c.json")])
+    rc = main(["calibrate", "ferraris", str(bad), "--out", str(tmp_path / "c.json")])
     assert rc == 2 and "--sample-rate-hz" in capsys.readouterr().err
-    rc = main(["calibrate", "--ferraris", str(bad), "--sample-rate-hz", "100", "--compare",
+    rc = main(["calibrate", "ferraris", str(bad), "--sample-rate-hz", "100", "--compare",
                "t.json", "--out", str(tmp_path / "c.json")])
     assert rc == 2 and "--compare" in capsys.readouterr().err
-    rc = main(["calibrate", "--out", str(tmp_path / "c.json")])
+    rc = main(["calibrate", "turntable", "--out", str(tmp_path / "c.json")])
     err = capsys.readouterr().err
-    assert rc == 2 and "session directory" in err and len(err.strip().splitlines()) == 1
+    assert rc == 2 and "required: SESSION" in err and len(err.strip().splitlines()) == 1

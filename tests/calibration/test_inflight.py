@@ -165,7 +165,7 @@ def test_cli_simulate_calibrate_diagnose(tmp_path: Path) -> None:
     r = _rimu("simulate", "flight", "--imus", "2", "--duration", "60", "--seed", "2",
               "--time-offset-ms", "0,5", "--out", str(d))
     assert r.returncode == 0, r.stderr
-    r = _rimu("calibrate", "--in-flight", str(d), "--out", str(tmp_path / "cal.json"),
+    r = _rimu("calibrate", "in-flight", str(d), "--out", str(tmp_path / "cal.json"),
               "--report", str(tmp_path / "crep"))
     assert r.returncode == 0, r.stderr
     assert "time offset +5.0" in r.stdout
@@ -196,7 +196,7 @@ def test_cli_simulate_calibrate_diagnose(tmp_path: Path) -> None:
     assert not tm["left"] and abs(tm["left_ms"]) < 3 * tm["left_sd_ms"]
     assert "later than the reference" in doc["time_offset_sign"]
     # a calibration without the offset leaves it all: diagnose finds it as time_skew
-    r = _rimu("calibrate", "--in-flight", str(d), "--no-time-offset", "--out",
+    r = _rimu("calibrate", "in-flight", str(d), "--no-time-offset", "--out",
               str(tmp_path / "cal0.json"))
     assert r.returncode == 0, r.stderr
     r = _rimu("diagnose", str(d), "--cal", str(tmp_path / "cal0.json"), "--json")
@@ -212,7 +212,7 @@ def test_cli_calibrates_a_static_flight_saying_what_it_holds(tmp_path: Path) -> 
     at the prior (issue 27), and whose file carries the prior's sd."""
     d = tmp_path / "f"
     save_flight_dir(_flight(max_rate_dps=0.01), d)
-    r = _rimu("calibrate", "--in-flight", str(d), "--out", str(tmp_path / "cal.json"))
+    r = _rimu("calibrate", "in-flight", str(d), "--out", str(tmp_path / "cal.json"))
     assert r.returncode == 0, r.stderr
     assert "imu2: estimated: none; held at the prior: rotation x" in r.stdout
     doc = json.loads((tmp_path / "cal.json").read_text())
@@ -226,10 +226,10 @@ def test_cli_errors_are_one_line(tmp_path: Path) -> None:
 
     cal = synthetic_calibration("cone6", seed=2)
     save_flight_dir(simulate_flight(cal, 2.0, seed=1), tmp_path / "plain")
-    cases = [(("calibrate", "--in-flight", str(tmp_path / "plain"), "--out",
+    cases = [(("calibrate", "in-flight", str(tmp_path / "plain"), "--out",
                str(tmp_path / "c.json")), "at least two IMU groups"),
-             (("calibrate", "--out", str(tmp_path / "c.json")), "--in-flight"),
-             (("calibrate", "--in-flight", str(tmp_path / "nope"), "--out",
+             (("calibrate", "--out", str(tmp_path / "c.json")), "in-flight"),
+             (("calibrate", "in-flight", str(tmp_path / "nope"), "--out",
                str(tmp_path / "c.json")), "no such directory")]
     for args, word in cases:
         r = _rimu(*args)
@@ -257,13 +257,13 @@ def test_noise_split_three_cornered_hat_recovers_each_imus_noise() -> None:
 
 
 def test_cli_timing_jitter_simulated_and_estimated(tmp_path: Path) -> None:
-    """``--timing-jitter-ms`` on a simulated flight; ``calibrate --in-flight`` prints the
+    """``--timing-jitter-ms`` on a simulated flight; ``calibrate in-flight`` prints the
     estimate with its sd and writes it on imu2's sensors only."""
     d = tmp_path / "f"
     r = _rimu("simulate", "flight", "--imus", "2", "--duration", "60", "--seed", "2",
               "--timing-jitter-ms", "0,2", "--out", str(d))
     assert r.returncode == 0, r.stderr
-    r = _rimu("calibrate", "--in-flight", str(d), "--out", str(tmp_path / "cal.json"))
+    r = _rimu("calibrate", "in-flight", str(d), "--out", str(tmp_path / "cal.json"))
     assert r.returncode == 0, r.stderr
     line = next(x for x in r.stdout.splitlines() if "timing jitter imu2:" in x)
     est, sd = (float(v) for v in line.split(":")[1].split("ms")[0].split("±"))

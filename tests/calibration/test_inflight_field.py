@@ -1,5 +1,5 @@
 """Every multi-IMU flight of ../shared/data gets a calibration from ``rimu calibrate
---in-flight`` with its defaults (issue 27); the Xsens DOT units ingest through the documented
+in-flight`` with its defaults (issue 27); the Xsens DOT units ingest through the documented
 map ``docs/examples/xsens_dot.toml``. Skipped with the reason when the data are absent.
 
 The fast and slow tests take a cut (one Xsens path, flight 83); all sixteen recordings run
@@ -34,7 +34,7 @@ def _xsens(kind: str, k: int, out: Path) -> Path:
 
 
 def _calibrated(folder: Path, out: Path) -> dict:
-    assert main(["calibrate", "--in-flight", str(folder), "--out", str(out)]) == 0
+    assert main(["calibrate", "in-flight", str(folder), "--out", str(out)]) == 0
     return json.loads(out.read_text())
 
 

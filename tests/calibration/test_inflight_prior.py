@@ -153,7 +153,7 @@ def test_cli_window_and_several_flights_write_the_turn_on_spread(tmp_path: Path)
         save_flight_dir(replace(f, raw=raw), d)
         dirs.append(str(d))
     out = tmp_path / "joint.json"
-    r = _rimu("calibrate", "--in-flight", *dirs, "--out", str(out), "--window", "1:11")
+    r = _rimu("calibrate", "in-flight", *dirs, "--out", str(out), "--window", "1:11")
     assert r.returncode == 0, r.stderr
     assert "bias_turn_on_sd" in r.stdout
     cal = load_calibration(out)
@@ -163,7 +163,7 @@ def test_cli_window_and_several_flights_write_the_turn_on_spread(tmp_path: Path)
     flights = doc["extra"]["inflight"]["flights"]
     assert [v["source"] for v in flights] == dirs
     assert doc["extra"]["inflight"]["window_s"] == [1.0, 11.0]
-    r = _rimu("calibrate", "--in-flight", dirs[0], "--out", str(tmp_path / "x.json"),
+    r = _rimu("calibrate", "in-flight", dirs[0], "--out", str(tmp_path / "x.json"),
               "--window", "20:30")
     assert r.returncode == 2 and "holds no sample" in r.stderr
 

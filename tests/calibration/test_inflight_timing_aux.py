@@ -91,7 +91,7 @@ def test_moved_inputs_line_up_within_interpolation_error(flight_and_cal, offset)
 
 
 def test_monitor_file_says_which_channels_moved(tmp_path, capsys):
-    """``rimu simulate flight --imus 2 --time-offset-ms 0,5`` → ``calibrate --in-flight`` →
+    """``rimu simulate flight --imus 2 --time-offset-ms 0,5`` → ``calibrate in-flight`` →
     ``monitor-file``: the IMU and its four auxiliary channels are moved, and the report
     records them."""
     from rimu.cli import main
@@ -99,7 +99,7 @@ def test_monitor_file_says_which_channels_moved(tmp_path, capsys):
     d = tmp_path / "f"
     for argv in (["simulate", "flight", "--imus", "2", "--duration", "30", "--seed", "2",
                   "--time-offset-ms", "0,5", "--temperature-coeff", "0.01", "--out", d],
-                 ["calibrate", "--in-flight", d, "--out", tmp_path / "cal.json"],
+                 ["calibrate", "in-flight", d, "--out", tmp_path / "cal.json"],
                  ["monitor-file", d, "--cal", tmp_path / "cal.json", "--report",
                   tmp_path / "rep.json"]):
         assert main([str(a) for a in argv]) == 0

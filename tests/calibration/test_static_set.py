@@ -1,5 +1,5 @@
 """Static calibration of several IMUs at rest (calibration.inflight.static, rimu calibrate
---static) on synthetic sets with known rotations, biases and drifts; the 4xMPU9250 chain
+static) on synthetic sets with known rotations, biases and drifts; the 4xMPU9250 chain
 on the shared recording when it is there."""
 
 from __future__ import annotations
@@ -117,7 +117,7 @@ def test_moving_set_is_refused() -> None:
 def test_cli_static_calibration_then_diagnose_names_the_drift(tmp_path: Path, capsys) -> None:
     d = tmp_path / "f"
     save_flight_dir(_set(drift={1: np.array([0.2 * DPS, 0.0, 0.0])}), d)
-    assert main(["calibrate", "--static", str(d), "--out", str(tmp_path / "c.json")]) == 0
+    assert main(["calibrate", "static", str(d), "--out", str(tmp_path / "c.json")]) == 0
     out = capsys.readouterr().out
     assert "static calibration against imu1" in out
     # the range the samples covered, as the file states it (rimu tune corrects inside it)
@@ -145,12 +145,12 @@ def _mpu() -> Path | None:
 @pytest.mark.slow
 @pytest.mark.skipif(_mpu() is None, reason="4xMPU9250 recording not in ../shared/data")
 def test_mpu9250_chain_names_the_drift_and_whose_it_is(tmp_path: Path, capsys) -> None:
-    """ingest → calibrate --static → characterise → diagnose on the 16-min static set."""
+    """ingest → calibrate static → characterise → diagnose on the 16-min static set."""
     p = _mpu()
     d = tmp_path / "m4"
     assert main(["ingest", *(str(p / f"imu{k}_raw.mat") for k in range(1, 5)),
                  "--out", str(d)]) == 0
-    assert main(["calibrate", "--static", str(d), "--out", str(tmp_path / "c.json")]) == 0
+    assert main(["calibrate", "static", str(d), "--out", str(tmp_path / "c.json")]) == 0
     out = capsys.readouterr().out
     assert "imu1's own" in out                         # the reference's drift, named
     assert main(["characterise", str(d), "--json"]) == 0

@@ -229,7 +229,7 @@ def test_compensation_removes_the_parity_bias_and_the_alarms(effect_cal, seed):
     assert comp.missing == {("g_sensitivity", 1): 0, ("g_sensitivity", 3): 0}
 
 
-# -- end to end with fitted terms (rimu calibrate --effects on a simulated session) --------
+# -- end to end with fitted terms (rimu calibrate turntable --effects on a simulated session) --
 @pytest.fixture(scope="module")
 def fitted_tetrad():
     from calibration.calibrate_checked import calibrate_checked

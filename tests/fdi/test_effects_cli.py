@@ -131,7 +131,8 @@ def test_calibrate_effects_then_monitor_file(tmp_path, capsys):
     _run(capsys, "simulate", "calibration", "--preset", "tetrad-paper", "--effect",
          "scale_nonlinearity=3e-4,temperature=2", "--effect-sensors", "2", "--out", s,
          "--seed", "3")
-    _run(capsys, "calibrate", s, "--effects", "scale_nonlinearity,temperature", "--out",
+    _run(capsys, "calibrate", "turntable",
+                 s, "--effects", "scale_nonlinearity,temperature", "--out",
          tmp_path / "cal.json")
     cal = load_calibration(tmp_path / "cal.json")
     nl = next(t for t in cal.effects if t.name == "scale_nonlinearity" and t.sensor == 1)

@@ -5,7 +5,7 @@ The modules are compared with :class:`fdi.monitor.Monitor` as in ``test_export_c
 (``assert_same``: events, healthy sets and capabilities exactly, arrays within 1e-12
 relative): four triads (12 sensors, tables of 112 of the 4096 sets), a 16-sensor array
 (tables of 17 of 65536), and (``--slow``) the 4×MPU9250 set of ``../shared/data`` calibrated
-with ``rimu calibrate --static``, as recorded and with faults injected.
+with ``rimu calibrate static``, as recorded and with faults injected.
 """
 
 from __future__ import annotations
@@ -289,7 +289,7 @@ def _text_bytes(obj: Path) -> int:
 @pytest.mark.slow
 @pytest.mark.skipif(_mpu() is None, reason="4xMPU9250 recording not in ../shared/data")
 def test_mpu9250_set_exports_fits_and_answers_as_the_monitor(tmp_path, capsys):
-    """ingest → calibrate --static → export: the float32 module's code and tables within
+    """ingest → calibrate static → export: the float32 module's code and tables within
     256 KiB (`size` text, host object: the Cortex-M4 object is smaller) and cone6's within
     64 KiB; on the recording as it is (imu1.y is isolated by the parity) and with a step
     on imu2.y, then imu1 silent (two more exclusions: a sensor, an IMU), it gives the
@@ -303,7 +303,7 @@ def test_mpu9250_set_exports_fits_and_answers_as_the_monitor(tmp_path, capsys):
     d = tmp_path / "m4"
     assert main(["ingest", *(str(p / f"imu{k}_raw.mat") for k in range(1, 5)),
                  "--out", str(d)]) == 0
-    assert main(["calibrate", "--static", str(d), "--out", str(tmp_path / "c.json")]) == 0
+    assert main(["calibrate", "static", str(d), "--out", str(tmp_path / "c.json")]) == 0
     capsys.readouterr()
     cal = load_calibration(tmp_path / "c.json")
     flight = load_flight_dir(d)

@@ -42,7 +42,8 @@ def chain(tmp_path_factory):
     for argv in (["simulate", "calibration", "--preset", "tetrad-paper", "--effect",
                   "g_sensitivity=30,temperature=2", "--effect-sensors", "2", "--out",
                   d / "S", "--seed", "3"],
-                 ["calibrate", d / "S", "--effects", "g_sensitivity,temperature", "--out",
+                 ["calibrate", "turntable",
+                  d / "S", "--effects", "g_sensitivity,temperature", "--out",
                   d / "cal.json"]):
         assert main([str(a) for a in argv]) == 0, argv
     return d
