@@ -441,6 +441,95 @@ def generate_c(cal: Calibration, thresholds: Thresholds | None = None, *, kind: 
         What the C cannot carry (module docstring); ConfigError for thresholds made for
         another kind or number of sensors (as the monitor).
     """
+    settings, thresholds, n = _checked(cal, thresholds, kind, settings, precision)
+    s = cal.kind(kind)
+    nw = len(thresholds.scales)
+    ring = max(int(w) for w in thresholds.scales) + 1
+    df_max = max(n - 3, 0)
+    real = 4 if precision == "float32" else 8
+    rec_bytes = 8 + real * (S.F_SLOTS + nw * S.SCALE_COLS + 4 + nw) + 4 * S.I_SLOTS
+    groups = tuple(c.name.rpartition(".")[0] for c in s.sensors)  # the IMU: before the dot
+    if depth == "auto":
+        return _auto_depth(cal, thresholds, groups, rec_bytes, real, kind=kind,
+                           settings=settings, precision=precision, harness=harness,
+                           thresholds_note=thresholds_note, effects=effects)
+    if depth is not None and (isinstance(depth, bool) or not isinstance(depth, int)
+                              or depth < 0):
+        raise ExportError(f"depth must be a whole number of exclusions or None, got {depth!r}")
+    masks = reachable_sets(n, groups, depth)
+    guess = _estimate(masks, n, rec_bytes, real)
+    if guess > MAX_TABLE_BYTES:
+        raise ExportError(f"{n} {kind} sensors: the tables of {len(masks)} healthy sets "
+                          f"would take {guess / 2**20:.1f} MiB (at most "
+                          f"{MAX_TABLE_BYTES >> 20} MiB are exported; a smaller depth "
+                          f"carries fewer sets)")
+    num = _Numbers(precision)
+    crc = _Crc(precision)
+    cache, sigma, limits = _set_tables(cal, kind, thresholds, settings)
+    packed = _packed_sets(masks, n, cache, sigma, limits, settings, thresholds)
+    kinds = _sensor_row_kinds(packed, n)
+    full_index = masks.index((1 << n) - 1)
+    records, pool_text, pool_vals = _set_records(packed, kinds, cache, thresholds, num, crc)
+    shared_text = _shared_rows(packed[full_index], kinds, n, num, crc)
+    effect_text, n_terms, applied, skipped = _effect_tables(cal, kind, num, effects, crc)
+    time_const = (settings.stale_timeout_s, settings.readmit_dwell_s,
+                  settings.stale_timeout_s * thresholds.sample_rate_hz, settings.max_time_step_s)
+    for v in time_const:
+        crc.f64(v)
+    for w in thresholds.scales:
+        crc.i64(int(w))
+    for v in thresholds.variance_factor:
+        crc.real(v)
+    cusum = thresholds.detector != "windows"
+    pool_len = max(len(pool_vals), 1)
+    tables = _tables_text(effect_text, time_const, thresholds, num, kinds, shared_text,
+                          full_index, pool_len, records, pool_text)
+    fp = cal.fingerprint() or "none"
+    identity = _identity(fp, kind, precision, effects, thresholds, settings, masks)
+    values = {
+        "VERSION": _version(), "CAL_NAME": _c_comment(str(getattr(cal, "name", "") or
+                                                          "(unnamed)")),
+        "FINGERPRINT": fp, "KIND": kind, "N": str(n), "NW": str(nw),
+        "HAS_CUSUM": "1" if cusum else "0", "DF_MAX": str(df_max),
+        "PARITY_LEN": str(max(df_max, 1)), "RING": str(ring), "N_SETS": str(len(masks)),
+        "FLOAT32": "1" if precision == "float32" else "0",
+        "THRESHOLDS_NOTE": _c_comment(thresholds_note or _describe(thresholds)),
+        "ONES": ", ".join(["1"] * n), "TABLES": tables, "SLOTS": S.c_enums(),
+        "COUNTERS": str(S.HEALTH0 + n), "API_VERSION": str(API_VERSION),
+        "SAMPLE_RATE": _f64(float(thresholds.sample_rate_hz)),
+        "IDENTITY": identity, "TABLE_CRC": f"{crc.value:#010x}",
+        "MAGIC": f"{(int(identity[:8], 16) | 1):#010x}",
+        "F_SLOTS": str(S.F_SLOTS), "I_SLOTS": str(S.I_SLOTS),
+        "SENSOR_COLS": str(S.SENSOR_COLS), "SCALE_COLS": str(S.SCALE_COLS),
+        "DEPTH": _depth_text(depth),
+    }
+    table_bytes = len(masks) * rec_bytes + real * pool_len + real * S.SENSOR_COLS * n
+    state_bytes = _state_bytes(n, df_max, nw, ring, real)
+    ops = _ops_per_step(n, df_max, nw, cusum, n_terms)
+    files = {"rimu_monitor.h": _fill(_template("rimu_monitor.h.in"), values),
+             "rimu_monitor.c": _fill(_template("rimu_monitor.c.in"), values)}
+    readme_values = dict(values, STATE_BYTES=str(state_bytes), TABLE_BYTES=str(table_bytes),
+                         OPS=str(ops), PRECISION=precision,
+                         APPLIED=_bullets(applied, "none"),
+                         NOT_APPLIED=_bullets(skipped, "none"),
+                         TIME_OFFSETS=_offsets_note(cal),
+                         SETTINGS=_settings_table(settings, thresholds),
+                         SENSORS=", ".join(f"{k + 1} {c.name}"
+                                           for k, c in enumerate(s.sensors)))
+    files["README.md"] = _fill(_template("README.md.in"), readme_values)
+    if harness:
+        files["rimu_harness.c"] = _fill(_template("rimu_harness.c.in"), values)
+        files["rimu_block.c"] = _fill(_template("rimu_block.c.in"), values)
+    return CModule(files, fp, n, len(masks), precision, table_bytes, state_bytes, ops,
+                   applied, skipped, identity=identity, table_crc=crc.value,
+                   masks=tuple(masks), depth=depth)
+
+
+def _checked(cal: Calibration, thresholds: Thresholds | None, kind: str,
+             settings: MonitorSettings | None, precision: str
+             ) -> tuple[MonitorSettings, Thresholds, int]:
+    """The settings and thresholds :func:`generate_c` uses and the number of sensors, after
+    refusing what the C cannot carry."""
     from fdi.errors import ConfigError
 
     if precision not in PRECISIONS:
@@ -455,52 +544,44 @@ def generate_c(cal: Calibration, thresholds: Thresholds | None = None, *, kind: 
     if n > MAX_SENSORS:
         raise ExportError(f"{n} {kind} sensors: the exported monitor keeps its healthy set "
                           f"as the bits of an unsigned long (at most {MAX_SENSORS} sensors)")
-    nw = len(thresholds.scales)
     ring = max(int(w) for w in thresholds.scales) + 1
     if ring - 1 > MAX_RING:
         raise ExportError(f"thresholds: a window of {ring - 1} samples; the exported monitor "
                           f"keeps a static ring of at most {MAX_RING} cumulative sums")
-    df_max = max(n - 3, 0)
-    real = 4 if precision == "float32" else 8
-    names = tuple(c.name for c in s.sensors)
-    rec_bytes = 8 + real * (S.F_SLOTS + nw * S.SCALE_COLS + 4 + nw) + 4 * S.I_SLOTS
+    return settings, thresholds, n
 
-    def estimate(masks: list[int]) -> int:
-        """An upper bound of the tables' bytes, before any model is built."""
-        pool = sum(_pool_len(bin(m).count("1"), n) for m in masks)
-        return len(masks) * rec_bytes + real * pool
 
-    groups = tuple(nm.rpartition(".")[0] for nm in names)  # the IMU: before the last dot
-    if depth == "auto":
-        if n <= ALL_SETS_UP_TO:
-            depth = None
-        else:
-            kw = dict(kind=kind, settings=settings, precision=precision, harness=harness,
-                      thresholds_note=thresholds_note, effects=effects)
-            for d in range(DEFAULT_DEPTH, 1, -1):
-                if estimate(reachable_sets(n, groups, d)) > MAX_TABLE_BYTES:
-                    continue
-                mod = generate_c(cal, thresholds, depth=d, **kw)
-                if mod.table_bytes <= AUTO_TABLE_BUDGET:
-                    return mod
-            return generate_c(cal, thresholds, depth=1, **kw)
-    if depth is not None and (isinstance(depth, bool) or not isinstance(depth, int)
-                              or depth < 0):
-        raise ExportError(f"depth must be a whole number of exclusions or None, got {depth!r}")
-    masks = reachable_sets(n, groups, depth)
-    guess = estimate(masks)
-    if guess > MAX_TABLE_BYTES:
-        raise ExportError(f"{n} {kind} sensors: the tables of {len(masks)} healthy sets "
-                          f"would take {guess / 2**20:.1f} MiB (at most "
-                          f"{MAX_TABLE_BYTES >> 20} MiB are exported; a smaller depth "
-                          f"carries fewer sets)")
-    num = _Numbers(precision)
-    crc = _Crc(precision)
-    cache, sigma, limits = _set_tables(cal, kind, thresholds, settings)
-    packed = _packed_sets(masks, n, cache, sigma, limits, settings, thresholds)
-    kinds = _sensor_row_kinds(packed, n)
-    full_index = masks.index((1 << n) - 1)
-    records, pool_text, pool_vals = [], [], []
+def _estimate(masks: list[int], n: int, rec_bytes: int, real: int) -> int:
+    """An upper bound of the tables' bytes, before any model is built."""
+    pool = sum(_pool_len(bin(m).count("1"), n) for m in masks)
+    return len(masks) * rec_bytes + real * pool
+
+
+def _auto_depth(cal: Calibration, thresholds: Thresholds, groups: tuple[str, ...],
+                rec_bytes: int, real: int, **kw: Any) -> CModule:
+    """``depth="auto"`` of :func:`generate_c`: every set up to :data:`ALL_SETS_UP_TO`
+    sensors, else the largest depth up to :data:`DEFAULT_DEPTH` whose tables stay within
+    :data:`AUTO_TABLE_BUDGET` (1 at least)."""
+    n = len(groups)
+    if n <= ALL_SETS_UP_TO:
+        return generate_c(cal, thresholds, depth=None, **kw)
+    for d in range(DEFAULT_DEPTH, 1, -1):
+        if _estimate(reachable_sets(n, groups, d), n, rec_bytes, real) > MAX_TABLE_BYTES:
+            continue
+        mod = generate_c(cal, thresholds, depth=d, **kw)
+        if mod.table_bytes <= AUTO_TABLE_BUDGET:
+            return mod
+    return generate_c(cal, thresholds, depth=1, **kw)
+
+
+def _set_records(packed: list[dict[str, Any]], kinds: list[int], cache: Any,
+                 thresholds: Thresholds, num: _Numbers, crc: _Crc
+                 ) -> tuple[list[str], list[str], list[float]]:
+    """The ``RIMU_SETS`` records, the ``RIMU_POOL`` lines and the pool's values of the
+    packed sets (CRC updated in table order: each record, then the pool)."""
+    records: list[str] = []
+    pool_text: list[str] = []
+    pool_vals: list[float] = []
     for p in packed:
         mask, model, ks, df = p["mask"], p["model"], p["ks"], p["df"]
         where = f"set {mask:#x}"
@@ -523,7 +604,7 @@ def generate_c(cal: Calibration, thresholds: Thresholds | None = None, *, kind: 
             f"    }}")
         crc.i32(mask)
         crc.i32(len(pool_vals))
-        for v in (*fconst, ):
+        for v in fconst:
             crc.real(v)
         for v in iconst:
             crc.i32(v)
@@ -537,103 +618,76 @@ def generate_c(cal: Calibration, thresholds: Thresholds | None = None, *, kind: 
             pool_vals.extend(vals)
     for v in pool_vals:
         crc.real(v)
+    return records, pool_text, pool_vals
+
+
+def _shared_rows(full: dict[str, Any], kinds: list[int], n: int, num: _Numbers,
+                 crc: _Crc) -> str:
+    """``SENSOR_SHARED``: the sensor rows every set shares, from the full set (CRC: the
+    rows, then ``SENSOR_KIND``)."""
     shared = np.zeros((S.SENSOR_COLS, n))
-    full_sens = np.asarray(packed[full_index]["ks"].sensors, float)
+    full_sens = np.asarray(full["ks"].sensors, float)
     for r, k in enumerate(kinds):
         if k == 0:
             shared[r] = full_sens[r]
-    full_where = f"set {(1 << n) - 1:#x} sensors"
-    shared_text = _matrix(shared, num, full_where)
+    text = _matrix(shared, num, f"set {(1 << n) - 1:#x} sensors")
     for v in shared.ravel():
         crc.real(v)
     for k in kinds:
         crc.u8(k)
-    effect_text, n_terms, applied, skipped = _effect_tables(cal, kind, num, effects, crc)
-    time_const = (settings.stale_timeout_s, settings.readmit_dwell_s,
-                  settings.stale_timeout_s * thresholds.sample_rate_hz, settings.max_time_step_s)
-    for v in time_const:
-        crc.f64(v)
-    for w in thresholds.scales:
-        crc.i64(int(w))
-    for v in thresholds.variance_factor:
-        crc.real(v)
-    cusum = thresholds.detector != "windows"
-    pool_len = max(len(pool_vals), 1)
+    return text
+
+
+def _tables_text(effect_text: str, time_const: tuple[float, ...], thresholds: Thresholds,
+                 num: _Numbers, kinds: list[int], shared_text: str, full_index: int,
+                 pool_len: int, records: list[str], pool_text: list[str]) -> str:
+    """The const tables of ``rimu_monitor.c`` (``@TABLES@``)."""
     rec_text = ",\n".join(records)
     pool_body = ",\n".join(pool_text) or "    0"
-    tables = (f"{effect_text}"
-              f"#define AXIS_SHARE {AXIS_SHARE!r}\n"
-              f"#define ENV_SATURATION {SATURATION}UL  /* fdi.envelope.SATURATION */\n"
-              f"static const rimu_time TIME_CONST[4] = "
-              f"{{{', '.join(_f64(v) for v in time_const)}}};\n"
-              f"static const long long SCALE_W[RIMU_NW] = "
-              f"{{{', '.join(str(int(w)) for w in thresholds.scales)}}};\n"
-              f"#define SCALE_W_MAX {max(int(w) for w in thresholds.scales)}LL\n"
-              f"static const rimu_real VARIANCE_FACTOR[RIMU_NW] = "
-              f"{_row(thresholds.variance_factor, num, 'variance_factor')};\n"
-              f"/* per row of a set's sensors table: 0 shared (SENSOR_SHARED), 1 per set, "
-              f"2 per set on its sensors only, 3 IN_SET (from the mask) */\n"
-              f"static const unsigned char SENSOR_KIND[SENSOR_COLS] = "
-              f"{{{', '.join(map(str, kinds))}}};\n"
-              f"static const rimu_real SENSOR_SHARED[SENSOR_COLS][RIMU_N] = "
-              f"{shared_text};\n"
-              f"#define RIMU_FULL_SET {full_index}\n"
-              f"#define RIMU_POOL_LEN {pool_len}\n"
-              f"/* the healthy sets carried, by mask (ascending: a binary search finds one) */\n"
-              f"static const rimu_set_rec RIMU_SETS[RIMU_N_SETS] = {{\n"
-              f"{rec_text}\n}};\n"
-              f"/* their matrices: per set the rows of sensors that differ between sets, V, "
-              f"G, A (lower triangle), the unit whitened columns and U, on the set's "
-              f"sensors */\n"
-              f"static const rimu_real RIMU_POOL[RIMU_POOL_LEN] = {{\n"
-              f"{pool_body}\n}};\n")
-    fp = cal.fingerprint() or "none"
-    identity = _identity(fp, kind, precision, effects, thresholds, settings, masks)
-    values = {
-        "VERSION": _version(), "CAL_NAME": _c_comment(str(getattr(cal, "name", "") or
-                                                          "(unnamed)")),
-        "FINGERPRINT": fp, "KIND": kind, "N": str(n), "NW": str(nw),
-        "HAS_CUSUM": "1" if cusum else "0", "DF_MAX": str(df_max),
-        "PARITY_LEN": str(max(df_max, 1)), "RING": str(ring), "N_SETS": str(len(masks)),
-        "FLOAT32": "1" if precision == "float32" else "0",
-        "THRESHOLDS_NOTE": _c_comment(thresholds_note or _describe(thresholds)),
-        "ONES": ", ".join(["1"] * n), "TABLES": tables, "SLOTS": S.c_enums(),
-        "COUNTERS": str(S.HEALTH0 + n), "API_VERSION": str(API_VERSION),
-        "SAMPLE_RATE": _f64(float(thresholds.sample_rate_hz)),
-        "IDENTITY": identity, "TABLE_CRC": f"{crc.value:#010x}",
-        "MAGIC": f"{(int(identity[:8], 16) | 1):#010x}",
-        "F_SLOTS": str(S.F_SLOTS), "I_SLOTS": str(S.I_SLOTS),
-        "SENSOR_COLS": str(S.SENSOR_COLS), "SCALE_COLS": str(S.SCALE_COLS),
-        "DEPTH": "every set" if depth is None else
-                 f"up to {depth} exclusion{'s' if depth != 1 else ''}, of a sensor or a whole IMU "
-                 f"each, and every set "
-                 f"of whole IMUs",
-    }
-    table_bytes = len(masks) * rec_bytes + real * pool_len + real * S.SENSOR_COLS * n
+    return (f"{effect_text}"
+            f"#define AXIS_SHARE {AXIS_SHARE!r}\n"
+            f"#define ENV_SATURATION {SATURATION}UL  /* fdi.envelope.SATURATION */\n"
+            f"static const rimu_time TIME_CONST[4] = "
+            f"{{{', '.join(_f64(v) for v in time_const)}}};\n"
+            f"static const long long SCALE_W[RIMU_NW] = "
+            f"{{{', '.join(str(int(w)) for w in thresholds.scales)}}};\n"
+            f"#define SCALE_W_MAX {max(int(w) for w in thresholds.scales)}LL\n"
+            f"static const rimu_real VARIANCE_FACTOR[RIMU_NW] = "
+            f"{_row(thresholds.variance_factor, num, 'variance_factor')};\n"
+            f"/* per row of a set's sensors table: 0 shared (SENSOR_SHARED), 1 per set, "
+            f"2 per set on its sensors only, 3 IN_SET (from the mask) */\n"
+            f"static const unsigned char SENSOR_KIND[SENSOR_COLS] = "
+            f"{{{', '.join(map(str, kinds))}}};\n"
+            f"static const rimu_real SENSOR_SHARED[SENSOR_COLS][RIMU_N] = "
+            f"{shared_text};\n"
+            f"#define RIMU_FULL_SET {full_index}\n"
+            f"#define RIMU_POOL_LEN {pool_len}\n"
+            f"/* the healthy sets carried, by mask (ascending: a binary search finds one) */\n"
+            f"static const rimu_set_rec RIMU_SETS[RIMU_N_SETS] = {{\n"
+            f"{rec_text}\n}};\n"
+            f"/* their matrices: per set the rows of sensors that differ between sets, V, "
+            f"G, A (lower triangle), the unit whitened columns and U, on the set's "
+            f"sensors */\n"
+            f"static const rimu_real RIMU_POOL[RIMU_POOL_LEN] = {{\n"
+            f"{pool_body}\n}};\n")
+
+
+def _depth_text(depth: int | None) -> str:
+    """``@DEPTH@``: which healthy sets are carried, in words."""
+    if depth is None:
+        return "every set"
+    return (f"up to {depth} exclusion{'s' if depth != 1 else ''}, of a sensor or a whole IMU "
+            f"each, and every set of whole IMUs")
+
+
+def _state_bytes(n: int, df_max: int, nw: int, ring: int, real: int) -> int:
+    """Bytes of one ``rimu_monitor`` state (see :class:`CModule`)."""
     set_bytes = real * (S.F_SLOTS + S.SENSOR_COLS * n + nw * S.SCALE_COLS
                         + (3 * df_max + 3) * n + max(df_max, 1) * n + 4 + nw) + 4 * S.I_SLOTS
-    state_bytes = (8 * 5 * n + 8 * 2
-                   + real * (4 * n + (ring + 1) * (df_max + 1) + 3 * n + 9 + n + 1 + 1 + 2 * n)
-                   + 8 * (S.HEALTH0 + n) + 8 * 4 + 3 + 8 + 4 + 4 + 4 + n + 2 * set_bytes
-                   + 4 * 4)
-    ops = _ops_per_step(n, df_max, nw, cusum, n_terms)
-    files = {"rimu_monitor.h": _fill(_template("rimu_monitor.h.in"), values),
-             "rimu_monitor.c": _fill(_template("rimu_monitor.c.in"), values)}
-    readme_values = dict(values, STATE_BYTES=str(state_bytes), TABLE_BYTES=str(table_bytes),
-                         OPS=str(ops), PRECISION=precision,
-                         APPLIED=_bullets(applied, "none"),
-                         NOT_APPLIED=_bullets(skipped, "none"),
-                         TIME_OFFSETS=_offsets_note(cal),
-                         SETTINGS=_settings_table(settings, thresholds),
-                         SENSORS=", ".join(f"{k + 1} {c.name}"
-                                           for k, c in enumerate(s.sensors)))
-    files["README.md"] = _fill(_template("README.md.in"), readme_values)
-    if harness:
-        files["rimu_harness.c"] = _fill(_template("rimu_harness.c.in"), values)
-        files["rimu_block.c"] = _fill(_template("rimu_block.c.in"), values)
-    return CModule(files, fp, n, len(masks), precision, table_bytes, state_bytes, ops,
-                   applied, skipped, identity=identity, table_crc=crc.value,
-                   masks=tuple(masks), depth=depth)
+    return (8 * 5 * n + 8 * 2
+            + real * (4 * n + (ring + 1) * (df_max + 1) + 3 * n + 9 + n + 1 + 1 + 2 * n)
+            + 8 * (S.HEALTH0 + n) + 8 * 4 + 3 + 8 + 4 + 4 + 4 + n + 2 * set_bytes
+            + 4 * 4)
 
 
 def _pool_len(m: int, n: int) -> int:
