@@ -246,12 +246,28 @@ def plot_run(trace: RunTrace, path: str | Path, *, report: Mapping[str, Any] | N
 
     rep = dict(report or {})
     b = _break_gaps(trace.bins())
-    t0, t1 = b["t0"], b["t1"]
-    tm = 0.5 * (t0 + t1)
-    names = list(rep.get("sensor_names") or [])
     fig, (ax1, ax2, ax3) = plt.subplots(3, 1, figsize=(11, 8.5), sharex=True,
                                         gridspec_kw={"height_ratios": [3, 3, 2]})
-    # 1. rates, unverified spans shaded, envelope excursions hatched
+    unv = _rates_panel(ax1, ax2, trace, b, rep)
+    _ratio_panel(ax2, b, scale_names, unv, plt.get_cmap("viridis"))
+    _events_panel(ax3, b["t1"], rep)
+    ttl = title or f"monitoring run: {rep.get('source', '')}"
+    if trace.per_bin > 1:
+        ttl += f"  (bins of {trace.per_bin} samples: band min-max, line mean)"
+    fig.suptitle(ttl, fontsize=10)
+    fig.tight_layout()
+    p = Path(path)
+    fig.savefig(p, dpi=100)
+    plt.close(fig)
+    return p
+
+
+def _rates_panel(ax1: Any, ax2: Any, trace: RunTrace, b: dict[str, np.ndarray],
+                 rep: Mapping[str, Any]) -> list[tuple[float, float]]:
+    """Panel 1 of :func:`plot_run`: the rates, unverified spans shaded, envelope excursions
+    hatched (on panel 2 too); returns the unverified spans."""
+    t0, t1 = b["t0"], b["t1"]
+    tm = 0.5 * (t0 + t1)
     for j, a in enumerate("xyz"):
         c = _AXIS_COLOURS[j]
         if trace.per_bin > 1:
@@ -272,11 +288,16 @@ def plot_run(trace: RunTrace, path: str | Path, *, report: Mapping[str, Any] | N
     ax1.set_ylabel("ω̂ (°/s)")
     ax1.legend(loc="upper right", fontsize=8, ncol=5)
     ax1.grid(alpha=0.3)
-    # 2. statistic / threshold per window
+    return unv
+
+
+def _ratio_panel(ax2: Any, b: dict[str, np.ndarray], scale_names: Sequence[str] | None,
+                 unv: list[tuple[float, float]], cmap: Any) -> None:
+    """Panel 2 of :func:`plot_run`: statistic / threshold per detector column."""
+    tm = 0.5 * (b["t0"] + b["t1"])
     K = b["ratio"].shape[1]
     labels = list(scale_names) if scale_names is not None and len(scale_names) == K \
         else [f"scale {j + 1}" for j in range(K)]
-    cmap = plt.get_cmap("viridis")
     for j in range(K):
         r = b["ratio"][:, j]
         ax2.plot(tm, np.where(r > 0, r, np.nan), lw=0.8, color=cmap(j / max(K - 1, 1)),
@@ -291,12 +312,13 @@ def plot_run(trace: RunTrace, path: str | Path, *, report: Mapping[str, Any] | N
     ax2.grid(alpha=0.3, which="both")
     for a, z in unv:
         ax2.axvspan(a, z, color="gold", alpha=0.25, lw=0)
-    # 3. events and injected faults per sensor
-    events = list(rep.get("events") or [])
-    n = len(names) or max([int(e["sensor"]) for e in events
-                           if isinstance(e.get("sensor"), int)] + [1])
+
+
+def _fault_marks(ax3: Any, t1: np.ndarray, faults: Sequence[Mapping[str, Any]]) -> set[str]:
+    """The injected faults of panel 3, a bar from onset to the end; returns the legend
+    entries drawn (``{"fault"}`` or none)."""
     seen: set[str] = set()
-    for f in rep.get("faults") or []:
+    for f in faults:
         s, on = f.get("sensor"), f.get("onset")
         if isinstance(s, int) and on is not None:
             end = float(t1[-1]) if t1.size else float(on)
@@ -305,6 +327,16 @@ def plot_run(trace: RunTrace, path: str | Path, *, report: Mapping[str, Any] | N
                      label="injected fault" if "fault" not in seen else None)
             ax3.annotate(str(f.get("spec", "")), (float(on), s + 0.25), fontsize=7)
             seen.add("fault")
+    return seen
+
+
+def _events_panel(ax3: Any, t1: np.ndarray, rep: Mapping[str, Any]) -> None:
+    """Panel 3 of :func:`plot_run`: events and injected faults per sensor."""
+    names = list(rep.get("sensor_names") or [])
+    events = list(rep.get("events") or [])
+    n = len(names) or max([int(e["sensor"]) for e in events
+                           if isinstance(e.get("sensor"), int)] + [1])
+    seen = _fault_marks(ax3, t1, rep.get("faults") or [])
     for e in events:
         ty = e.get("type", "")
         mk, col = _EVENT_STYLE.get(ty, ("o", "k"))
@@ -323,13 +355,4 @@ def plot_run(trace: RunTrace, path: str | Path, *, report: Mapping[str, Any] | N
     ax3.grid(alpha=0.3)
     if seen:
         ax3.legend(loc="upper left", fontsize=7, ncol=7)
-    ttl = title or f"monitoring run: {rep.get('source', '')}"
-    if trace.per_bin > 1:
-        ttl += f"  (bins of {trace.per_bin} samples: band min-max, line mean)"
-    fig.suptitle(ttl, fontsize=10)
-    fig.tight_layout()
-    p = Path(path)
-    fig.savefig(p, dpi=100)
-    plt.close(fig)
-    return p
 
