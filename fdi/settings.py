@@ -360,6 +360,14 @@ class MonitorSettings:
     isolation_ratio: float = 10.0
 
     def __post_init__(self) -> None:
+        # one check per group of settings, in the order they are documented; the first
+        # setting out of its range is named
+        self._check_decision()
+        self._check_timing()
+        self._check_noise()
+        self._check_health()
+
+    def _check_decision(self) -> None:
         if not 0.0 < self.wrong_exclusion < 0.5:
             raise ConfigError("wrong_exclusion must lie in (0, 0.5)")
         if not (self.isolation_ratio >= 1.0 and math.isfinite(self.isolation_ratio)):
@@ -372,12 +380,16 @@ class MonitorSettings:
             raise ConfigError("clear_samples must be >= 1")
         if not 0.0 < self.clear_miss < 1.0:
             raise ConfigError("clear_miss must lie in (0, 1)")
+
+    def _check_timing(self) -> None:
         if not (self.stale_timeout_s > 0 and math.isfinite(self.stale_timeout_s)):
             raise ConfigError("stale_timeout_s must be positive and finite")
         if not (self.max_time_step_s > 0 and math.isfinite(self.max_time_step_s)):
             raise ConfigError("max_time_step_s must be positive and finite")
         if int(self.time_rebase_samples) < 2:
             raise ConfigError("time_rebase_samples must be >= 2")
+
+    def _check_noise(self) -> None:
         for name in ("noise_window_s", "noise_clip", "noise_scale_max", "vibration_level",
                      "vibration_dwell_s"):
             v = getattr(self, name)
@@ -390,6 +402,8 @@ class MonitorSettings:
         if not (self.vibration_ratio == 0 or (self.vibration_ratio > 1
                                               and math.isfinite(self.vibration_ratio))):
             raise ConfigError("vibration_ratio must be 0 (off) or finite and > 1")
+
+    def _check_health(self) -> None:
         if int(self.stuck_count) < 2:
             raise ConfigError("stuck_count must be >= 2")
         if self.readmit_dwell_s < 0:
