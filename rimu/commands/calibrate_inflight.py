@@ -92,16 +92,31 @@ def covered_range_text(cal: Calibration) -> str | None:
 
 def summary_text(cal: Calibration) -> str:
     """Readable summary of an in-flight calibration (its ``extra.inflight`` block)."""
-    import numpy as np
-
-    from calibration.inflight.offset_check import check_lines
     from fdi.extras import ImuTiming
-    from fdi.units import DPH, DPS, MS
+    from fdi.units import DPH, MS
 
     ex = cal.extras
     timing, doc = ex.inflight, ex.inflight_alignment
     if timing is None or doc is None:
         return f"calibration of {cal.configuration}: no in-flight record"
+    lines = _record_lines(timing, doc)
+    for g, r in doc.imus.items():
+        lines += _imu_lines(g, r, timing.imus.get(g, ImuTiming(time_offset_s=None)),
+                            timing.reference)
+    for v in doc.flights:
+        lines.append(f"  flight {v.source}:")
+        for g, d in v.imus.items():
+            lines.append(f"    {g}: bias [" + ", ".join(f"{x / DPH:+.1f}" for x in d["bias_dph"])
+                         + "] deg/h, time offset "
+                         + f"{d['time_offset_ms'][0] / MS:+.3f} ms")
+    if timing.time_offset_sign:
+        lines.append(f"  sign: {timing.time_offset_sign}")
+    return "\n".join(lines)
+
+
+def _record_lines(timing, doc) -> list[str]:
+    """The head of :func:`summary_text`: samples used and left out, window, prior,
+    findings."""
     lines = [f"in-flight calibration against {timing.reference} "
              f"({doc.samples_used} of {doc.samples} samples used)"]
     for s in doc.left_out:
@@ -120,47 +135,49 @@ def summary_text(cal: Calibration) -> str:
                      f"±{pr.get('time_offset_ms_sd', 0):.3g} ms (1 sigma)")
     for x in doc.findings:
         lines.append(f"  finding: {x}")
-    for g, r in doc.imus.items():
-        t = timing.imus.get(g, ImuTiming(time_offset_s=None))
-        th, ths = 1e3 * np.asarray(r.rotation), 1e3 * np.asarray(r.rotation_sd)
-        if r.mounting and not np.allclose(r.mounting, np.eye(3)):
-            from calibration.inflight.prior import mounting_text
+    return lines
 
-            lines.append(f"  {g}: mounted {mounting_text(np.asarray(r.mounting))} against "
-                         f"{timing.reference}; the parts below are beyond that mounting")
-        if r.parameters:
-            est = [p.name for p in r.parameters if p.status == "estimated"]
-            held = [p.name for p in r.parameters if p.status != "estimated"]
-            lines.append(f"  {g}: estimated: {', '.join(est) or 'none'}; held at the prior: "
-                         f"{', '.join(held) or 'none'}")
-        lines.append(f"  {g} ({r.model}): rotation [" + ", ".join(
-            f"{a:+.3f} ± {b:.3f}" for a, b in zip(th, ths, strict=True)) + "] mrad")
-        if r.model == "full":
-            sc, scs = 1e6 * np.asarray(r.scale), 1e6 * np.asarray(r.scale_sd)
-            lines.append("      scale difference [" + ", ".join(
-                f"{a:+.0f} ± {b:.0f}" for a, b in zip(sc, scs, strict=True)) + "] ppm")
-        lines.append("      bias [" + ", ".join(
-            f"{a / DPH:+.1f} ± {b / DPH:.1f}" for a, b in zip(r.bias, r.bias_sd, strict=True))
-            + "] deg/h")
-        offset = ("not fitted" if t.time_offset_s is None else
-                  f"{t.time_offset_s / MS:+.3f} ± {t.time_offset_sd_s / MS:.3f} ms")
-        lines.append(f"      time offset {offset}; residual rms [" + ", ".join(
-            f"{x / DPS:.3g}" for x in r.residual_rms) + f"] deg/s; HAC lags {r.hac_lags}")
-        lines.extend(f"      {x}" for x in check_lines(t.check))
-        if t.timing_jitter_s is not None:
-            lines.append(f"      timing jitter {g}: {t.timing_jitter_s / MS:.2f} ± "
-                         f"{t.timing_jitter_sd_s / MS:.2f} ms (thresholds widen with it while "
-                         "the body accelerates)")
-        lines.extend(f"      note: {n}" for n in r.notes if not n.startswith("held at the prior"))
-    for v in doc.flights:
-        lines.append(f"  flight {v.source}:")
-        for g, d in v.imus.items():
-            lines.append(f"    {g}: bias [" + ", ".join(f"{x / DPH:+.1f}" for x in d["bias_dph"])
-                         + "] deg/h, time offset "
-                         + f"{d['time_offset_ms'][0] / MS:+.3f} ms")
-    if timing.time_offset_sign:
-        lines.append(f"  sign: {timing.time_offset_sign}")
-    return "\n".join(lines)
+
+def _imu_lines(g: str, r, t, reference: str) -> list[str]:
+    """The lines of :func:`summary_text` on one IMU ``g`` (its alignment ``r`` and timing
+    ``t``)."""
+    import numpy as np
+
+    from calibration.inflight.offset_check import check_lines
+    from fdi.units import DPH, DPS, MS
+
+    lines = []
+    th, ths = 1e3 * np.asarray(r.rotation), 1e3 * np.asarray(r.rotation_sd)
+    if r.mounting and not np.allclose(r.mounting, np.eye(3)):
+        from calibration.inflight.prior import mounting_text
+
+        lines.append(f"  {g}: mounted {mounting_text(np.asarray(r.mounting))} against "
+                     f"{reference}; the parts below are beyond that mounting")
+    if r.parameters:
+        est = [p.name for p in r.parameters if p.status == "estimated"]
+        held = [p.name for p in r.parameters if p.status != "estimated"]
+        lines.append(f"  {g}: estimated: {', '.join(est) or 'none'}; held at the prior: "
+                     f"{', '.join(held) or 'none'}")
+    lines.append(f"  {g} ({r.model}): rotation [" + ", ".join(
+        f"{a:+.3f} ± {b:.3f}" for a, b in zip(th, ths, strict=True)) + "] mrad")
+    if r.model == "full":
+        sc, scs = 1e6 * np.asarray(r.scale), 1e6 * np.asarray(r.scale_sd)
+        lines.append("      scale difference [" + ", ".join(
+            f"{a:+.0f} ± {b:.0f}" for a, b in zip(sc, scs, strict=True)) + "] ppm")
+    lines.append("      bias [" + ", ".join(
+        f"{a / DPH:+.1f} ± {b / DPH:.1f}" for a, b in zip(r.bias, r.bias_sd, strict=True))
+        + "] deg/h")
+    offset = ("not fitted" if t.time_offset_s is None else
+              f"{t.time_offset_s / MS:+.3f} ± {t.time_offset_sd_s / MS:.3f} ms")
+    lines.append(f"      time offset {offset}; residual rms [" + ", ".join(
+        f"{x / DPS:.3g}" for x in r.residual_rms) + f"] deg/s; HAC lags {r.hac_lags}")
+    lines.extend(f"      {x}" for x in check_lines(t.check))
+    if t.timing_jitter_s is not None:
+        lines.append(f"      timing jitter {g}: {t.timing_jitter_s / MS:.2f} ± "
+                     f"{t.timing_jitter_sd_s / MS:.2f} ms (thresholds widen with it while "
+                     "the body accelerates)")
+    lines.extend(f"      note: {n}" for n in r.notes if not n.startswith("held at the prior"))
+    return lines
 
 
 def parse_window(text: str | None) -> tuple[float, float] | str | None:
@@ -205,7 +222,7 @@ def _prior(args: argparse.Namespace):
 
 def run(args: argparse.Namespace) -> int:
     """Run ``rimu calibrate in-flight``."""
-    from calibration.inflight.calfile import calibration_from_fit, flight_values
+    from calibration.inflight.calfile import calibration_from_fit
     from calibration.inflight.fit import fit_inflight
     from calibration.inflight.segments import flight_window
     from replay.flight_io import load_flight_dir
@@ -238,16 +255,8 @@ def run(args: argparse.Namespace) -> int:
                                  model=getattr(args, "model", "auto"),
                                  time_offset=not getattr(args, "no_time_offset", False),
                                  prior=prior, window=win))
-    turn_on, values = None, ()
-    if len(fits) > 1:
-        from calibration.inflight.multi import combine_fits
-
-        joint = combine_fits(fits)
-        fit, flight = joint.fit, flights[joint.base]
-        turn_on = joint.turn_on_sd
-        values = tuple(flight_values(f, fl) for f, fl in zip(fits, flights, strict=True))
-    else:
-        fit, flight = fits[0], flights[0]
+    fit, flight, joint, values = _joined(fits, flights)
+    turn_on = joint.turn_on_sd if joint is not None else None
     current().stage("noise, tails and drift of the residual")
     cal = calibration_from_fit(fit, flight,
                                drift_model=bool(getattr(args, "drift_model", False)),
@@ -255,7 +264,7 @@ def run(args: argparse.Namespace) -> int:
     from replay.time_base import with_time_base
 
     cal = with_time_base(cal, flight)       # gaps, duplicates, empty rows: in the file too
-    if len(fits) > 1:
+    if joint is not None:
         for n in joint.notes:
             print(f"note: {n}")
         from fdi.units import DPH
@@ -266,29 +275,56 @@ def run(args: argparse.Namespace) -> int:
     with atomic_file(out) as tmp:
         cal.save(tmp)
     print(summary_text(cal))
-    tails = cal.gyro.tails
+    tails = _tails_line(cal)
     if tails is not None:
-        bad = [str(r.scale) for r in tails.scales if not r.gaussian]
-        r1 = tails.scales[0]
-        print(f"residual tails ({tails.samples} samples): "
-              + (f"not Gaussian at window(s) {', '.join(bad)}" if bad else "Gaussian white")
-              + f"; w={r1.scale}: excess kurtosis {r1.excess_kurtosis:.3g}"
-              + (f", GPD xi {r1.gpd.shape:.2f} +- {r1.gpd.shape_sd:.2f}" if r1.gpd else "")
-              + " (rimu tune and the monitor overbound the non-Gaussian scales)")
+        print(tails)
     rng = covered_range_text(cal)
     if rng is not None:
         print(rng)
     print(f"wrote {out}")
     if rep is not None:
-        from calibration.inflight.report import write_flight_plots
-        from rimu.outputs import atomic_dir
-
-        current().stage("plots")
-
-        with atomic_dir(rep) as tmp:        # the page and its plots: all or none
-            pngs = write_flight_plots(flight, cal, tmp)
-            (tmp / "report.md").write_text(
-                "```\n" + summary_text(cal) + "\n```\n\n"
-                + "".join(f"![{p.stem}]({p.name})\n" for p in pngs), encoding="utf-8")
-        print(f"wrote {rep / 'report.md'} and {', '.join(p.name for p in pngs)}")
+        _write_report(rep, flight, cal)
     return 0
+
+
+def _joined(fits: list, flights: list) -> tuple:
+    """(fit, flight, joint or None, per-flight values) of one flight or several of one set
+    (:func:`calibration.inflight.multi.combine_fits`)."""
+    if len(fits) == 1:
+        return fits[0], flights[0], None, ()
+    from calibration.inflight.calfile import flight_values
+    from calibration.inflight.multi import combine_fits
+
+    joint = combine_fits(fits)
+    values = tuple(flight_values(f, fl) for f, fl in zip(fits, flights, strict=True))
+    return joint.fit, flights[joint.base], joint, values
+
+
+def _tails_line(cal: Calibration) -> str | None:
+    """One line on the residual's tails (None: no tail model)."""
+    tails = cal.gyro.tails
+    if tails is None:
+        return None
+    bad = [str(r.scale) for r in tails.scales if not r.gaussian]
+    r1 = tails.scales[0]
+    return (f"residual tails ({tails.samples} samples): "
+            + (f"not Gaussian at window(s) {', '.join(bad)}" if bad else "Gaussian white")
+            + f"; w={r1.scale}: excess kurtosis {r1.excess_kurtosis:.3g}"
+            + (f", GPD xi {r1.gpd.shape:.2f} +- {r1.gpd.shape_sd:.2f}" if r1.gpd else "")
+            + " (rimu tune and the monitor overbound the non-Gaussian scales)")
+
+
+def _write_report(rep, flight, cal: Calibration) -> None:
+    """``--report DIR``: report.md and the plots, all or none."""
+    from calibration.inflight.report import write_flight_plots
+    from fdi.progress import current
+    from rimu.outputs import atomic_dir
+
+    current().stage("plots")
+
+    with atomic_dir(rep) as tmp:        # the page and its plots: all or none
+        pngs = write_flight_plots(flight, cal, tmp)
+        (tmp / "report.md").write_text(
+            "```\n" + summary_text(cal) + "\n```\n\n"
+            + "".join(f"![{p.stem}]({p.name})\n" for p in pngs), encoding="utf-8")
+    print(f"wrote {rep / 'report.md'} and {', '.join(p.name for p in pngs)}")
