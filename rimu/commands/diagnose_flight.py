@@ -28,40 +28,13 @@ def format_text(doc: dict) -> str:
                      + (f" ({s['detail']})" if s.get("detail") else ""))
     if doc.get("calibration_kind") == "in-flight" and not doc.get("warnings"):
         lines.append("  (the same samples the in-flight calibration used)")
-    for tm in doc.get("timing", []):
-        head = (f"  time offset {tm['imu']}: calibration {tm['calibration_ms']:+.3f} ± "
-                f"{tm['calibration_sd_ms']:.3f} ms applied; " if tm["calibration_ms"] is not None
-                else f"  time offset {tm['imu']}: none calibrated; ")
-        if tm["left"]:
-            lines.append(head + f"left {tm['left_ms']:+.3f} ± {tm['left_sd_ms']:.3f} ms "
-                         f"(p={tm['p_value']:.2g}), total {tm['total_ms']:+.3f} ms, "
-                         f"{tm['apart_in_combined_sd']:.1f} combined sd from the calibration")
-        else:
-            lines.append(head + f"nothing left ({tm['left_ms']:+.3f} ± {tm['left_sd_ms']:.3f}"
-                         f" ms, p={tm['p_value']:.2g})")
+    lines += [_timing_line(tm) for tm in doc.get("timing", [])]
     if doc.get("time_offset_sign"):
         lines.append(f"  sign: {doc['time_offset_sign']}")
     if not doc["effects"]:
         lines.append("  no effect found")
     for e in doc["effects"]:
-        est, sd = e["estimate"], e["estimate_sd"]
-        if isinstance(est, list):
-            val = "[" + ", ".join(f"{a:+.3g} ± {b:.2g}" for a, b in zip(est, sd, strict=True)) \
-                + "]"
-        else:
-            val = f"{est:+.4g} ± {sd:.2g}"
-        if e.get("matrix"):
-            m = e["matrix"]
-            lines.append(f"  {e['name']:<18s} {e['imu']}: [{m['unit']}] (p={e['p_value']:.2g})")
-            lines.append("      " + " " * 16 + "".join(f"{c:>22s}" for c in m["cols"]))
-            for rn, vr, sr in zip(m["rows"], m["values"], m["sd"], strict=True):
-                lines.append(f"      {rn:<16s}" + "".join(
-                    f"{f'{v:+.3g} ± {q:.2g}':>22s}" for v, q in zip(vr, sr, strict=True)))
-        else:
-            lines.append(f"  {e['name']:<18s} {e['imu']}: {val} {e['unit']} "
-                         f"(p={e['p_value']:.2g})")
-        if e.get("detail"):
-            lines.append(f"      {e['detail']}")
+        lines += _effect_lines(e)
     b, a = doc["error_before"], doc["error_after"]
     for c, x, y in zip(b["channels"], b["rms"], a["rms"], strict=True):
         lines.append(f"  residual {c}: rms {x:.4g} -> {y:.4g} {b['unit']}")
@@ -69,15 +42,57 @@ def format_text(doc: dict) -> str:
         lines.append(f"  not testable: {n['name']} ({n['imu']}): {n['reason']}")
     a = doc.get("drift_attribution")
     if a and any(e["name"] in (DRIFT_EFFECT, "slow_bias_change") for e in doc["effects"]):
-        lines.append(f"  drift: {a['statement']}")
-        lines.append("    shared by every IMU relative to the reference: [" + ", ".join(
-            f"{c:+.4f} ± {q:.4f}" for c, q in zip(a["common"], a["common_sd"], strict=True))
-            + f"] deg/s (p={a['common_p']:.2g}); relative to the reference: " + "; ".join(
-                f"{g} [" + ", ".join(f"{d:+.4f}" for d in v["drift"]) + "]"
-                for g, v in a["own"].items()) + " deg/s")
+        lines += _drift_lines(a)
     lines.append("  unexplained: " + ("yes" if doc["unexplained"] else "no"))
     lines.extend(f"    {d}" for d in doc["unexplained_detail"])
     return "\n".join(lines)
+
+
+def _timing_line(tm: dict) -> str:
+    """One IMU's time offset: what the calibration applied and what is left."""
+    head = (f"  time offset {tm['imu']}: calibration {tm['calibration_ms']:+.3f} ± "
+            f"{tm['calibration_sd_ms']:.3f} ms applied; " if tm["calibration_ms"] is not None
+            else f"  time offset {tm['imu']}: none calibrated; ")
+    if tm["left"]:
+        return (head + f"left {tm['left_ms']:+.3f} ± {tm['left_sd_ms']:.3f} ms "
+                f"(p={tm['p_value']:.2g}), total {tm['total_ms']:+.3f} ms, "
+                f"{tm['apart_in_combined_sd']:.1f} combined sd from the calibration")
+    return (head + f"nothing left ({tm['left_ms']:+.3f} ± {tm['left_sd_ms']:.3f}"
+            f" ms, p={tm['p_value']:.2g})")
+
+
+def _effect_lines(e: dict) -> list[str]:
+    """The lines of one effect found (a value, or a matrix of them)."""
+    lines = []
+    est, sd = e["estimate"], e["estimate_sd"]
+    if isinstance(est, list):
+        val = "[" + ", ".join(f"{a:+.3g} ± {b:.2g}" for a, b in zip(est, sd, strict=True)) \
+            + "]"
+    else:
+        val = f"{est:+.4g} ± {sd:.2g}"
+    if e.get("matrix"):
+        m = e["matrix"]
+        lines.append(f"  {e['name']:<18s} {e['imu']}: [{m['unit']}] (p={e['p_value']:.2g})")
+        lines.append("      " + " " * 16 + "".join(f"{c:>22s}" for c in m["cols"]))
+        for rn, vr, sr in zip(m["rows"], m["values"], m["sd"], strict=True):
+            lines.append(f"      {rn:<16s}" + "".join(
+                f"{f'{v:+.3g} ± {q:.2g}':>22s}" for v, q in zip(vr, sr, strict=True)))
+    else:
+        lines.append(f"  {e['name']:<18s} {e['imu']}: {val} {e['unit']} "
+                     f"(p={e['p_value']:.2g})")
+    if e.get("detail"):
+        lines.append(f"      {e['detail']}")
+    return lines
+
+
+def _drift_lines(a: dict) -> list[str]:
+    """Whose drift it is (``drift_attribution``)."""
+    return [f"  drift: {a['statement']}",
+            "    shared by every IMU relative to the reference: [" + ", ".join(
+                f"{c:+.4f} ± {q:.4f}" for c, q in zip(a["common"], a["common_sd"], strict=True))
+            + f"] deg/s (p={a['common_p']:.2g}); relative to the reference: " + "; ".join(
+                f"{g} [" + ", ".join(f"{d:+.4f}" for d in v["drift"]) + "]"
+                for g, v in a["own"].items()) + " deg/s"]
 
 
 def _monitor_picture(flight: Any, cal: Any, png: Path, *, title: str) -> Path:
