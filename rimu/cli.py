@@ -179,29 +179,10 @@ def _old_spelling(argv: Sequence[str]) -> str | None:
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the CLI; returns the exit code."""
     argv = list(sys.argv[1:] if argv is None else argv)
-    if (hint := _old_spelling(argv)) is not None:   # one line and exit 2, like a usage error
-        print(f"rimu: error: {hint}", file=sys.stderr)
-        return 2
-    try:
-        parser = build_parser(argv)
-    except ModuleNotFoundError as exc:  # a command module needs an extra at import
-        if (text := missing_text(exc)) is None or "--debug" in argv:
-            raise
-        print(f"rimu: error: {text}", file=sys.stderr)
-        return 2
-    try:
-        args = parser.parse_args(argv)
-    except SystemExit as exc:       # --help, --version, or a usage error (one line, exit 2)
-        return int(exc.code or 0) if not isinstance(exc.code, str) else 2
-    _log_to_stderr()
-    run = getattr(args, "_run", None)
-    if run is None:
-        parser.print_help()
-        return 2
-    command = " ".join(w for w in (args.command, getattr(args, "what", None)) if w)
-    if (text := refusal(command, args)) is not None:  # an extra it needs at the end
-        print(f"rimu: error: {text}", file=sys.stderr)
-        return 2
+    parsed = _parse(argv)
+    if isinstance(parsed, int):             # --help, --version, or refused in one line
+        return parsed
+    args, command = parsed
     from fdi.progress import session
 
     try:
@@ -211,24 +192,55 @@ def main(argv: Sequence[str] | None = None) -> int:
         refuse_outputs_over_inputs(args)        # no command writes over or into its input
         refuse_ignored_options(args, f"rimu {args.command}")   # nothing ignored silently
         with session(command or "rimu", enabled=not getattr(args, "no_progress", False)):
-            return int(run(args) or 0)
-    except RimuError as exc:
-        if args.debug:
-            raise
-        print(f"rimu: error: {exc}", file=sys.stderr)
-        return 2
-    except ModuleNotFoundError as exc:  # an optional package (rimu/optional.py) is missing
-        if (text := missing_text(exc, command)) is None or args.debug:
-            raise
-        print(f"rimu: error: {text}", file=sys.stderr)
-        return 2
+            return int(args._run(args) or 0)
     except KeyboardInterrupt:
         print("rimu: interrupted", file=sys.stderr)
         return 130
     except BrokenPipeError:
         return 1
-    except OSError as exc:          # disk full, permission lost mid-run: one line too
-        if args.debug:
+    except (RimuError, ModuleNotFoundError, OSError) as exc:
+        return _failed(exc, args, command)
+
+
+def _error(text: str) -> int:
+    print(f"rimu: error: {text}", file=sys.stderr)
+    return 2
+
+
+def _parse(argv: list[str]) -> tuple[argparse.Namespace, str] | int:
+    """The parsed command line and the command's name (``"simulate flight"``), or the exit
+    code when it stops there: ``--help``, ``--version``, a usage error, an old spelling, an
+    extra the command needs that is not installed (each one line on stderr, exit 2)."""
+    if (hint := _old_spelling(argv)) is not None:   # one line and exit 2, like a usage error
+        return _error(hint)
+    try:
+        parser = build_parser(argv)
+    except ModuleNotFoundError as exc:  # a command module needs an extra at import
+        if (text := missing_text(exc)) is None or "--debug" in argv:
             raise
-        print(f"rimu: error: {exc}", file=sys.stderr)
+        return _error(text)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:       # --help, --version, or a usage error (one line, exit 2)
+        return int(exc.code or 0) if not isinstance(exc.code, str) else 2
+    _log_to_stderr()
+    if getattr(args, "_run", None) is None:
+        parser.print_help()
         return 2
+    command = " ".join(w for w in (args.command, getattr(args, "what", None)) if w)
+    if (text := refusal(command, args)) is not None:  # an extra it needs at the end
+        return _error(text)
+    return args, command
+
+
+def _failed(exc: Exception, args: argparse.Namespace, command: str) -> int:
+    """A command's error as one line and exit 2 (re-raised with ``--debug``, and when a
+    missing module is not an optional package: a broken install)."""
+    if isinstance(exc, ModuleNotFoundError) and not isinstance(exc, RimuError):
+        text = missing_text(exc, command)   # an optional package (rimu/optional.py) missing
+        if text is None or args.debug:
+            raise exc
+        return _error(text)
+    if args.debug:
+        raise exc
+    return _error(str(exc))
