@@ -323,6 +323,7 @@ def fit_tail_model(residual: np.ndarray, H: np.ndarray, noise_cov: np.ndarray,
         return None
     out: list[ScaleTail] = []
     verdict: bool | None = None
+    cq = None
     if rho is not None:
         r = np.where(valid & np.isfinite(np.asarray(rho, float)), np.asarray(rho, float), 0.0)
         cq = np.concatenate([[0.0], np.cumsum(r)])
@@ -330,49 +331,12 @@ def fit_tail_model(residual: np.ndarray, H: np.ndarray, noise_cov: np.ndarray,
         S, end, ind = window_statistics(z, valid, w)
         if S.size < 2:
             break
-        c = np.vstack([np.zeros((1, df)), np.cumsum(z, axis=0)])
-        sums_ind = (c[end[ind] + 1] - c[end[ind] + 1 - w]) / math.sqrt(w)
-        if rho is not None:
-            infl = 1.0 + w * float(beta) + float(kappa) * (cq[end + 1] - cq[end + 1 - w])
-            S = S / infl
-            sums_ind = sums_ind / np.sqrt(infl[ind])[:, None]
+        S, sums_ind = _independent_sums(z, S, end, ind, w, cq, kappa, beta)
         n_eff = int(ind.sum())
         kurt, kp, ep, ok = _normality(S, sums_ind, df, level / len(scales))
-        notes = []
-        if ok is None:
-            ok = True if verdict is None else verdict
-            notes.append(f"{n_eff} independent windows: normality not testable, verdict of "
-                         "the longest tested shorter scale")
-        elif ok and n_eff < MIN_POWER_WINDOWS and any(not r.gaussian for r in out):
-            ok = False
-            notes.append(f"passes on {n_eff} independent windows (< {MIN_POWER_WINDOWS}) but "
-                         "a shorter scale fails: not taken as Gaussian")
-        else:
-            verdict = ok
-        ps, qs, qu, p_min = _empirical(S, n_eff, confidence)
-        src = ["empirical"] * len(ps)
-        rest = [float(p) for p in _grid() if p < min(p_min, ps[-1])]
-        gpd, gq, gu, why = None, [], [], ""
-        if rest and not ok:
-            with np.errstate(all="ignore"), warnings.catch_warnings():
-                warnings.simplefilter("ignore", RuntimeWarning)   # degenerate likelihoods
-                gpd, gq, gu, why = _gpd(S, end, w, n_eff, confidence, rest)
-        if why:
-            notes.append(why)
+        ok, verdict, notes = _decide(ok, verdict, n_eff, out)
         vr = float(np.mean(S)) / df
-        if gpd is not None:
-            ps, qs, qu, src = ps + rest, qs + gq, qu + gu, src + ["gpd"] * len(rest)
-        elif rest and not ok and any(r.gpd is not None or "carried" in r.source for r in out):
-            prev = [r for r in out if r.gpd is not None or "carried" in r.source][-1]
-            ratio = max(1.0, vr / prev.variance_ratio)
-            pp = dict(zip(prev.probability, prev.quantile_upper, strict=True))
-            add = [(p, pp[p] * ratio) for p in rest if p in pp]
-            ps += [a for a, _ in add]
-            qs += [float("nan")] * len(add)
-            qu += [b for _, b in add]
-            src += ["carried"] * len(add)
-            notes.append(f"tail below p={p_min:.2g} carried from scale {prev.scale} (x{ratio:.3g})")
-        qu = list(np.minimum(np.maximum.accumulate(np.maximum(qu, 1e-300)), _CAP))
+        ps, qs, qu, src, gpd = _quantiles(S, end, w, n_eff, confidence, ok, vr, out, notes)
         out.append(ScaleTail(scale=w, windows=int(S.size), independent=n_eff,
                              variance_ratio=max(vr, 1e-300), excess_kurtosis=kurt,
                              kurtosis_p=kp, exceedance_p=ep, gaussian=bool(ok),
@@ -383,3 +347,72 @@ def fit_tail_model(residual: np.ndarray, H: np.ndarray, noise_cov: np.ndarray,
         return None
     return TailModel(df=df, samples=int(valid.sum()), sample_rate_hz=float(sample_rate_hz),
                      confidence=confidence, level=level, scales=tuple(out), source=source)
+
+
+def _quantiles(S: np.ndarray, end: np.ndarray, w: int, n_eff: int, confidence: float,
+               ok: bool, vr: float, out: list[ScaleTail], notes: list[str]
+               ) -> tuple[list, list, list, list, GpdFit | None]:
+    """The quantiles of one scale: empirical, then below the empirical tail a GPD fit
+    where the scale is not Gaussian, or the tail carried from a shorter scale; the upper
+    quantiles made non-decreasing and capped. Returns (p, q, q_upper, source, gpd)."""
+    ps, qs, qu, p_min = _empirical(S, n_eff, confidence)
+    src = ["empirical"] * len(ps)
+    rest = [float(p) for p in _grid() if p < min(p_min, ps[-1])]
+    gpd, gq, gu, why = None, [], [], ""
+    if rest and not ok:
+        with np.errstate(all="ignore"), warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)   # degenerate likelihoods
+            gpd, gq, gu, why = _gpd(S, end, w, n_eff, confidence, rest)
+    if why:
+        notes.append(why)
+    if gpd is not None:
+        ps, qs, qu, src = ps + rest, qs + gq, qu + gu, src + ["gpd"] * len(rest)
+    elif rest and not ok and any(r.gpd is not None or "carried" in r.source for r in out):
+        ps, qs, qu, src = _carry(out, rest, vr, p_min, ps, qs, qu, src, notes)
+    qu = list(np.minimum(np.maximum.accumulate(np.maximum(qu, 1e-300)), _CAP))
+    return ps, qs, qu, src, gpd
+
+
+def _independent_sums(z: np.ndarray, S: np.ndarray, end: np.ndarray, ind: np.ndarray,
+                      w: int, cq: np.ndarray | None, kappa: float, beta: float
+                      ) -> tuple[np.ndarray, np.ndarray]:
+    """The window statistics ``S`` and the whitened sums of the independent windows
+    (``ind``), both relative to the monitor's inflation when ``cq`` (the cumulative ρ) is
+    given."""
+    df = z.shape[1]
+    c = np.vstack([np.zeros((1, df)), np.cumsum(z, axis=0)])
+    sums_ind = (c[end[ind] + 1] - c[end[ind] + 1 - w]) / math.sqrt(w)
+    if cq is not None:
+        infl = 1.0 + w * float(beta) + float(kappa) * (cq[end + 1] - cq[end + 1 - w])
+        S = S / infl
+        sums_ind = sums_ind / np.sqrt(infl[ind])[:, None]
+    return S, sums_ind
+
+
+def _decide(ok: bool | None, verdict: bool | None, n_eff: int, out: list[ScaleTail]
+            ) -> tuple[bool, bool | None, list[str]]:
+    """Whether a scale is taken as Gaussian: its normality test; the verdict of the longest
+    tested shorter scale where it cannot be tested; not Gaussian when it passes on too few
+    windows after a shorter scale failed. Returns (gaussian, verdict carried on, notes)."""
+    if ok is None:
+        return (True if verdict is None else verdict), verdict, [
+            f"{n_eff} independent windows: normality not testable, verdict of the longest "
+            "tested shorter scale"]
+    if ok and n_eff < MIN_POWER_WINDOWS and any(not r.gaussian for r in out):
+        return False, verdict, [
+            f"passes on {n_eff} independent windows (< {MIN_POWER_WINDOWS}) but a shorter "
+            "scale fails: not taken as Gaussian"]
+    return ok, ok, []
+
+
+def _carry(out: list[ScaleTail], rest: list[float], vr: float, p_min: float, ps: list,
+           qs: list, qu: list, src: list, notes: list[str]) -> tuple[list, list, list, list]:
+    """The tail below the empirical one carried from the last shorter scale that had one,
+    scaled by the variance ratio (a note added)."""
+    prev = [r for r in out if r.gpd is not None or "carried" in r.source][-1]
+    ratio = max(1.0, vr / prev.variance_ratio)
+    pp = dict(zip(prev.probability, prev.quantile_upper, strict=True))
+    add = [(p, pp[p] * ratio) for p in rest if p in pp]
+    notes.append(f"tail below p={p_min:.2g} carried from scale {prev.scale} (x{ratio:.3g})")
+    return (ps + [a for a, _ in add], qs + [float("nan")] * len(add),
+            qu + [b for _, b in add], src + ["carried"] * len(add))
