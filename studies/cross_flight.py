@@ -20,8 +20,17 @@ Counted per pair, as the issue's must-hold states them:
 The parameter checks of :mod:`calibration.inflight.fits_flight` (every parameter of the
 calibration against the monitored flight's own fit) are kept beside.
 
-Run: ``python -c "from studies.cross_flight import main; main()"`` from the repository root
-(recordings in ``../shared/data`` or ``$RIMU_SHARED_DATA``).
+The fourteen four-IMU Xsens DOT flights (:func:`xsens_cases`): the units may have been
+power-cycled between paths and no path starts at rest, so a calibration of one path says
+nothing of the next path's turn-on biases. Each path is monitored with the calibration of
+the other paths of its group (horizontal or vertical) calibrated together
+(``rimu calibrate --in-flight F1 F2 ...``: the shared parts joint, the run-to-run spread of
+the turn-on bias measured, which the chain's nominal bias bound then covers), tuned at
+1/h. The 10 °/s step goes on every gyro axis of every IMU at each onset.
+
+Run: ``python -m studies.cross_flight [--groups erle,xsens] [--out studies/cross_flight.json]``
+from the repository root (recordings in ``../shared/data`` or ``$RIMU_SHARED_DATA``); about
+1 min for erle and 20 min for the Xsens set (``rimu tune`` per calibration).
 """
 
 from __future__ import annotations
@@ -45,6 +54,8 @@ DETECT_WITHIN_S = 1.0
 ONSETS = 2
 EXCLUDING = ("isolated", "health")
 ERLE = ("erle_pxf_dual_imu", ("pxf_copter_22-12-2014_41.BIN", "pxf_copter_31-3-2015_83.BIN"))
+XSENS = "ansfl_4x_xsens_dot"
+XSENS_MAP = Path(__file__).resolve().parents[1] / "docs" / "examples" / "xsens_dot.toml"
 
 
 def shared_data() -> Path:
@@ -171,38 +182,28 @@ def _count(res: Any) -> dict[str, Any]:
             "unverified_fraction": float(unv.mean()) if unv.size else math.nan}
 
 
-def cross_pairs(flights: dict[str, Any], *, steps: bool = True) -> dict[str, Any]:
-    """Every ordered pair of ``flights`` ({name: Flight} of one vehicle): the module
-    docstring's counts, before and after, and the pooled rate with its interval."""
-    from calibration.inflight import calibration_from_fit, fit_inflight
+def _pair(name_cal: str, name_mon: str, flight: Any, cal: Any, thr: Any, own: Any,
+          steps: bool) -> dict[str, Any]:
     from calibration.inflight.fits_flight import parameter_checks
-    from thresholds.tune import tune
 
-    cals = {k: calibration_from_fit(fit_inflight(f), f) for k, f in flights.items()}
-    thrs = {k: tune(c, false_alarms_per_hour=TARGET_PER_HOUR).thresholds
-            for k, c in cals.items()}
-    own = {}
-    for k, f in flights.items():
-        from calibration.inflight.fits_flight import flight_calibration
+    row: dict[str, Any] = {"calibrated_on": name_cal, "monitored": name_mon}
+    for label, mode in (("before", "off"), ("after", "auto")):
+        res, ch = _run(flight, cal, thr, mode)
+        row[label] = _count(res)
+        if label == "after":
+            row["turn_on"] = ch.turn_on.to_dict()
+            row["events"] = [{"t_s": float(e.t), "type": e.type, "reason": e.reason,
+                              "sensor": e.sensor} for e in res.events
+                             if e.type in ("detected", "isolated", "health", "disagree")]
+            if steps:
+                ons = _onsets(res, ONSETS)
+                row["steps"] = _step_runs(flight, cal, thr, res, ons)
+    row["misfit"] = ([c.to_dict() for c in parameter_checks(cal, own) if not c.fits]
+                     if own is not None else [])
+    return row
 
-        own[k] = flight_calibration(f)
-    rows = []
-    for a in flights:
-        for b in flights:
-            if a == b:
-                continue
-            row: dict[str, Any] = {"calibrated_on": a, "monitored": b}
-            for label, mode in (("before", "off"), ("after", "auto")):
-                res, ch = _run(flights[b], cals[a], thrs[a], mode)
-                row[label] = _count(res)
-                if label == "after":
-                    row["turn_on"] = ch.turn_on.to_dict()
-                    if steps:
-                        ons = _onsets(res, ONSETS)
-                        row["steps"] = _step_runs(flights[b], cals[a], thrs[a], res, ons)
-            row["misfit"] = [c.to_dict() for c in parameter_checks(cals[a], own[b])
-                             if not c.fits]
-            rows.append(row)
+
+def _pooled(rows: list[dict[str, Any]]) -> dict[str, Any]:
     out: dict[str, Any] = {"target_per_hour": TARGET_PER_HOUR, "pairs": rows}
     for label in ("before", "after"):
         n = sum(r[label]["alarms_in_envelope"] for r in rows)
@@ -212,6 +213,85 @@ def cross_pairs(flights: dict[str, Any], *, steps: bool = True) -> dict[str, Any
                       "ci95_per_hour": [lo, hi],
                       "resolved": bool(TARGET_PER_HOUR * h >= -math.log(0.05) / 3)}
     return out
+
+
+def cross_pairs(flights: dict[str, Any], *, steps: bool = True) -> dict[str, Any]:
+    """Every ordered pair of ``flights`` ({name: Flight} of one vehicle): the module
+    docstring's counts, before and after, and the pooled rate with its interval."""
+    from calibration.inflight import calibration_from_fit, fit_inflight
+    from calibration.inflight.fits_flight import flight_calibration
+    from thresholds.tune import tune
+
+    cals = {k: calibration_from_fit(fit_inflight(f), f) for k, f in flights.items()}
+    thrs = {k: tune(c, false_alarms_per_hour=TARGET_PER_HOUR).thresholds
+            for k, c in cals.items()}
+    own = {k: flight_calibration(f) for k, f in flights.items()}
+    rows = [_pair(a, b, flights[b], cals[a], thrs[a], own[b], steps)
+            for a in flights for b in flights if a != b]
+    return _pooled(rows)
+
+
+def calibrate_together(flights: Sequence[Any], fits: Sequence[Any] | None = None) -> Any:
+    """``rimu calibrate --in-flight F1 F2 ...`` on flights in memory (its library calls:
+    each flight fitted, :func:`calibration.inflight.multi.combine_fits`, the file)."""
+    from calibration.inflight import calibration_from_fit, fit_inflight
+    from calibration.inflight.calfile import flight_values
+    from calibration.inflight.multi import combine_fits
+    from replay.time_base import with_time_base
+
+    fits = list(fits) if fits is not None else [fit_inflight(f) for f in flights]
+    if len(fits) == 1:
+        return with_time_base(calibration_from_fit(fits[0], flights[0]), flights[0])
+    joint = combine_fits(fits)
+    base = flights[joint.base]
+    values = tuple(flight_values(f, fl) for f, fl in zip(fits, flights, strict=True))
+    cal = calibration_from_fit(joint.fit, base, turn_on_sd=joint.turn_on_sd, flights=values)
+    return with_time_base(cal, base)
+
+
+def xsens_flights() -> dict[str, dict[str, Any]]:
+    """The Xsens DOT paths as ``rimu ingest IMU_1.csv ... --map docs/examples/xsens_dot.toml``
+    reads them: {"H": {"H1": Flight, ...}, "V": {...}}."""
+    from replay.ingest import align_streams, read_any
+    from replay.ingest.readers import merge_reads
+
+    root = shared_data() / XSENS
+    out: dict[str, dict[str, Any]] = {}
+    for grp in ("Horizontal", "Vertical"):
+        paths = sorted((root / grp).glob("path_*"), key=lambda p: int(p.name.split("_")[1]))
+        out[grp[0]] = {}
+        for p in paths:
+            reads = [read_any(p / f"IMU_{k}.csv", "csv", map_path=XSENS_MAP)
+                     for k in range(1, 5)]
+            out[grp[0]][f"{grp[0]}{p.name.split('_')[1]}"] = align_streams(merge_reads(reads))[0]
+    return out
+
+
+def xsens_cases(groups: dict[str, dict[str, Any]] | None = None, *, steps: bool = True,
+                only: Sequence[str] | None = None, log: Any = print) -> dict[str, Any]:
+    """Each Xsens path monitored with the other paths of its group calibrated together
+    and tuned at 1/h (module docstring); ``only`` limits the monitored paths."""
+    from calibration.inflight import fit_inflight
+    from calibration.inflight.fits_flight import flight_calibration
+    from thresholds.tune import tune
+
+    groups = xsens_flights() if groups is None else groups
+    rows = []
+    for flights in groups.values():
+        fits = {k: fit_inflight(f) for k, f in flights.items()}
+        for mon in flights:
+            if only is not None and mon not in only:
+                continue
+            src = [k for k in flights if k != mon]
+            cal = calibrate_together([flights[k] for k in src], [fits[k] for k in src])
+            thr = tune(cal, false_alarms_per_hour=TARGET_PER_HOUR).thresholds
+            own = flight_calibration(flights[mon])
+            rows.append(_pair("+".join(src), mon, flights[mon], cal, thr, own, steps))
+            if log is not None:
+                a = rows[-1]["after"]
+                log(f"{mon}: {a['alarms_in_envelope']} alarms, excluded {a['excluded']}, "
+                    f"unverified {100 * a['unverified_fraction']:.1f} %")
+    return _pooled(rows)
 
 
 def erle_flights() -> dict[str, Any]:
@@ -247,12 +327,24 @@ def table(doc: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def main() -> None:
-    """Compute the erle pairs and print the table (and write ``studies/cross_flight.json``)."""
-    doc = cross_pairs(erle_flights())
-    Path(__file__).with_name("cross_flight.json").write_text(
-        json.dumps(doc, indent=1, default=float) + "\n", encoding="utf-8")
-    print(table(doc))
+def main(argv: Sequence[str] | None = None) -> None:
+    """Compute the pairs, print the tables and write the JSON."""
+    import argparse
+
+    ap = argparse.ArgumentParser(prog="python -m studies.cross_flight")
+    ap.add_argument("--groups", default="erle,xsens")
+    ap.add_argument("--out", default=str(Path(__file__).with_name("cross_flight.json")))
+    ap.add_argument("--no-steps", action="store_true")
+    a = ap.parse_args(argv)
+    groups = a.groups.split(",")
+    doc: dict[str, Any] = {}
+    if "erle" in groups:
+        doc["erle"] = cross_pairs(erle_flights(), steps=not a.no_steps)
+        print(table(doc["erle"]))
+    if "xsens" in groups:
+        doc["xsens"] = xsens_cases(steps=not a.no_steps)
+        print(table(doc["xsens"]))
+    Path(a.out).write_text(json.dumps(doc, indent=1, default=float) + "\n", encoding="utf-8")
 
 
 if __name__ == "__main__":
