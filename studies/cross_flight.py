@@ -24,7 +24,7 @@ The fourteen four-IMU Xsens DOT flights (:func:`xsens_cases`): the units may hav
 power-cycled between paths and no path starts at rest, so a calibration of one path says
 nothing of the next path's turn-on biases. Each path is monitored with the calibration of
 the other paths of its group (horizontal or vertical) calibrated together
-(``rimu calibrate --in-flight F1 F2 ...``: the shared parts joint, the run-to-run spread of
+(``rimu calibrate in-flight F1 F2 ...``: the shared parts joint, the run-to-run spread of
 the turn-on bias measured, which the chain's nominal bias bound then covers), tuned at
 1/h. The 10 °/s step goes on every gyro axis of every IMU at each onset.
 
@@ -237,7 +237,7 @@ def cross_pairs(flights: dict[str, Any], *, steps: bool = True) -> dict[str, Any
 
 
 def calibrate_together(flights: Sequence[Any], fits: Sequence[Any] | None = None) -> Any:
-    """``rimu calibrate --in-flight F1 F2 ...`` on flights in memory (its library calls:
+    """``rimu calibrate in-flight F1 F2 ...`` on flights in memory (its library calls:
     each flight fitted, :func:`calibration.inflight.multi.combine_fits`, the file)."""
     from calibration.inflight import calibration_from_fit, fit_inflight
     from calibration.inflight.calfile import flight_values
