@@ -106,12 +106,226 @@ def _quiet() -> Any:
             os.close(copy)
 
 
+_FMT_ID = 0x80
+_FMT_LEN = 89
+_CHAR_SIZE = {"a": 64, "b": 1, "B": 1, "g": 2, "h": 2, "H": 2, "i": 4, "I": 4, "f": 4,
+              "n": 4, "N": 16, "Z": 64, "c": 2, "C": 2, "e": 4, "E": 4, "L": 4, "d": 8,
+              "M": 1, "q": 8, "Q": 8}
+"""Bytes of each DataFlash format character (pymavlink's ``FORMAT_TO_STRUCT``)."""
+_FILL = ((64, "Z"), (16, "N"), (8, "Q"), (4, "I"), (2, "H"), (1, "B"))
+
+
+def _cstr(b: bytes) -> bytes:
+    return b.split(b"\0", 1)[0]
+
+
+def _fmt_fields(data: bytes, k: int) -> tuple[int, int, bytes, bytes, bytes]:
+    """(type, length, name, format, columns) of the FMT record at ``k``."""
+    return (data[k + 3], data[k + 4], _cstr(data[k + 5:k + 9]), _cstr(data[k + 9:k + 25]),
+            _cstr(data[k + 25:k + 89]))
+
+
+def _fmt_problems(fields: tuple[int, int, bytes, bytes, bytes]) -> list[str]:
+    """What is wrong with one FMT definition (empty: consistent)."""
+    _, length, name, fmt, cols = fields
+    out = []
+    if not (name and name.isalnum() and name.upper() == name and name.isascii()):
+        out.append("name")
+    chars = fmt.decode("latin-1")
+    if any(c not in _CHAR_SIZE for c in chars):
+        out.append("format")
+    elif length != 3 + sum(_CHAR_SIZE[c] for c in chars):
+        out.append("length")
+    names = cols.decode("latin-1").split(",") if cols else []
+    if cols and (len(names) != len(chars) or not all(
+            c.replace("_", "").isalnum() and c.isascii() for c in names)):
+        out.append("columns")
+    return out
+
+
+def _frames_at(data: bytes, mtype: int, length: int) -> tuple[int, int]:
+    """(messages of id ``mtype`` followed by a header ``length`` bytes on, messages of
+    that id): how well a length frames a type."""
+    pat = _HEAD + bytes([mtype])
+    n = hit = 0
+    k = data.find(pat)
+    while k >= 0 and n < 2000:
+        n += 1
+        e = k + length
+        hit += e >= len(data) or data[e:e + 2] == _HEAD
+        k = data.find(pat, k + 1)
+    return hit, n
+
+
+def _fmt_records(data: bytes) -> list[int]:
+    """Start of every FMT record: the FMT id after the sync bytes, or a record where the
+    89-byte run of FMT records expects one with at most one of its header bytes damaged."""
+    recs = []
+    k = data.find(_HEAD + bytes([_FMT_ID]))
+    while k >= 0:
+        recs.append(k)
+        k = data.find(_HEAD + bytes([_FMT_ID]), k + 1)
+    known = set(recs)
+    for k in list(recs):
+        for q in (k - _FMT_LEN, k + _FMT_LEN):
+            if q < 0 or q in known or q + _FMT_LEN > len(data):
+                continue
+            one_sync = data[q + 2] == _FMT_ID and (data[q] == _HEAD[0]) != (
+                data[q + 1] == _HEAD[1])
+            one_id = data[q:q + 2] == _HEAD and data[q + 2] != _FMT_ID and not _fmt_problems(
+                _fmt_fields(data, q))
+            if one_sync or one_id:
+                recs.append(q)
+                known.add(q)
+    return sorted(recs)
+
+
+def _placeholder(nbytes: int) -> str:
+    """A format of ``nbytes`` bytes (at most 16 characters) to frame a type not read."""
+    out = ""
+    for size, c in _FILL:
+        while nbytes >= size and len(out) < 16:
+            out += c
+            nbytes -= size
+    return out
+
+
+def fmt_repairs(data: bytes) -> tuple[dict[int, bytes], list[str]]:
+    """Validate every FMT definition of a DataFlash log and repair the damaged ones.
+
+    A definition is consistent when its name is upper-case letters and digits, its
+    format characters are known, its length is 3 + their sizes, and its columns are
+    one identifier per format character. One damaged definition is repaired from what
+    is intact: damaged sync bytes; a length that does not frame its messages (the length
+    the format gives, when that one frames them); a type id whose messages never appear
+    (the id without a definition whose messages that length frames); the columns or the
+    format from a sibling definition with the same layout (``IMU`` and ``IMU2``). When
+    that is not enough, the type is framed with the length that frames its messages and
+    not read (a warning names it); nothing is misframed.
+
+    Returns
+    -------
+    patches : dict
+        Byte offset → the repaired 89-byte FMT record.
+    warnings : list of str
+        One line per damaged definition: what was wrong and what was done.
+    """
+    recs = _fmt_records(data)
+    fields = {k: _fmt_fields(data, k) for k in recs}
+    good = {k: f for k, f in fields.items() if not _fmt_problems(f)
+            and data[k:k + 3] == _HEAD + bytes([_FMT_ID])}
+    defined = {f[0] for f in good.values()}
+    patches: dict[int, bytes] = {}
+    warnings: list[str] = []
+    for k in recs:
+        if k in good:
+            continue
+        fixed, what = _repair_one(data, k, fields[k], good, defined)
+        patches[k] = fixed
+        defined.add(fixed[3])
+        warnings.append(f"damaged FMT definition at byte {k} ({what})")
+    return patches, warnings
+
+
+def _record(mtype: int, length: int, name: bytes, fmt: bytes, cols: bytes) -> bytes:
+    return (_HEAD + bytes([_FMT_ID, mtype, length]) + name.ljust(4, b"\0")[:4]
+            + fmt.ljust(16, b"\0")[:16] + cols.ljust(64, b"\0")[:64])
+
+
+def _repair_one(data: bytes, k: int, f: tuple[int, int, bytes, bytes, bytes],
+                good: dict[int, tuple[int, int, bytes, bytes, bytes]], defined: set[int]
+                ) -> tuple[bytes, str]:
+    """The repaired record of the damaged FMT at ``k`` and what was done (see
+    :func:`fmt_repairs`)."""
+    mtype, length, name, fmt, cols = f
+    probs = _fmt_problems(f)
+    what = ", ".join(probs) if probs else "sync bytes"
+    chars = fmt.decode("latin-1")
+    # the layout the format gives, when it is readable
+    calc = 3 + sum(_CHAR_SIZE[c] for c in chars) if "format" not in probs else None
+    # a sibling: a consistent definition with the same length and format or columns
+    sib = next((g for g in good.values() if g[1] == (calc or length) and g[0] != mtype
+                and (g[3] == fmt or g[4] == cols)), None)
+    if "length" in probs and calc is not None:
+        hit_calc, n = _frames_at(data, mtype, calc)
+        hit_decl, _ = _frames_at(data, mtype, length)
+        if hit_calc >= hit_decl:
+            return _record(mtype, calc, name, fmt, cols), f"{what}: length {length} -> {calc}"
+    if probs == ["columns"] and sib is not None:
+        return _record(mtype, length, name, fmt, sib[4]), f"{what}: columns of {sib[2].decode()}"
+    if probs == ["format"] and sib is not None and sib[1] == length:
+        return _record(mtype, length, name, sib[3], cols), f"{what}: format of {sib[2].decode()}"
+    if not probs or probs == ["name"]:
+        # a fresh type id whose messages do not appear: the id byte is damaged
+        hit, n = _frames_at(data, mtype, length)
+        if mtype in defined or n == 0:
+            cands = [(h, t) for t in range(256) if t not in defined and t != _FMT_ID
+                     for h, m in [_frames_at(data, t, length)] if m and h == m]
+            if len(cands) == 1:
+                mtype = cands[0][1]
+                what += f": type id -> {mtype}"
+        if not probs:
+            return _record(mtype, length, name, fmt, cols), what
+    # not readable: frame the type with the length that frames its messages, do not read it
+    n_bytes = length if length >= 3 else (calc or 3)
+    label = name.decode("latin-1") if "name" not in probs else f"type {mtype}"
+    return (_record(mtype, n_bytes, f"X{mtype:03d}".encode(),
+                    _placeholder(n_bytes - 3).encode(), b""),
+            f"{what}: {label} messages framed ({n_bytes} bytes) but not read")
+
+
+def _patched_reader(path: str, patches: dict[int, bytes]) -> Any:
+    """pymavlink's reader over a copy-on-write mapping of the file with ``patches``
+    applied before it indexes (the file itself is not changed)."""
+    import mmap
+
+    from pymavlink import DFReader
+
+    class Patched(DFReader.DFReader_binary):
+        def __init__(self) -> None:              # DFReader_binary.__init__, patched map
+            DFReader.DFReader.__init__(self)
+            self.filehandle = open(path, "rb")  # noqa: SIM115 (closed by pymavlink)
+            self.filehandle.seek(0, 2)
+            self.data_len = self.filehandle.tell()
+            self.filehandle.seek(0)
+            self.data_map = mmap.mmap(self.filehandle.fileno(), self.data_len,
+                                      access=mmap.ACCESS_COPY)
+            for off, rec in patches.items():
+                self.data_map[off:off + len(rec)] = rec
+            self.HEAD1, self.HEAD2 = _HEAD
+            self.unpackers = {}
+            self.formats = {_FMT_ID: DFReader.DFFormat(_FMT_ID, "FMT", _FMT_LEN, "BBnNZ",
+                                                       "Type,Length,Name,Format,Columns")}
+            self._zero_time_base = False
+            self.prev_type = None
+            self.init_arrays()
+            self.init_clock()
+            self.prev_type = None
+            self._rewind(keep_messages=True)
+
+    return Patched()
+
+
+def _fmt_check(path: str) -> tuple[dict[int, bytes], list[str]]:
+    """:func:`fmt_repairs` of the file at ``path`` (nothing when it cannot be mapped)."""
+    import mmap
+
+    try:
+        with open(path, "rb") as fh, mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ) as m:
+            return fmt_repairs(m)                # type: ignore[arg-type]
+    except (OSError, ValueError):
+        return {}, []
+
+
 def _open(path: str) -> Any:
     from pymavlink import DFReader
 
+    patches, warnings = _fmt_check(path)
     try:
         with _quiet():
-            return DFReader.DFReader_binary(path)
+            r = _patched_reader(path, patches) if patches else DFReader.DFReader_binary(path)
+        r.fmt_warnings = warnings
+        return r
     except OSError as exc:
         raise FileFormatError(path, f"cannot read ({exc.strerror})") from None
     except Exception as exc:        # pymavlink raises many kinds on a non-DataFlash file
@@ -482,6 +696,9 @@ def read_ardupilot(path: str | Path, *, salvage: bool = False) -> LogRead:
     """
     p = str(path)
     r = _open(p)
+    if r.fmt_warnings and not salvage:
+        raise FileFormatError(p, f"{r.fmt_warnings[0]}; --salvage repairs it or skips the "
+                                 "type it defines, with a warning")
     damage = _first_damage(r)
     counts = {t: int(r.counts[r.name_to_id[t]]) for t in (*IMU_TYPES, *EVENT_TYPES)
               if t in r.name_to_id}
@@ -490,10 +707,7 @@ def read_ardupilot(path: str | Path, *, salvage: bool = False) -> LogRead:
     if damage is not None:
         # pymavlink's index stops at the first unknown message id: count from rimu's own
         # walk of the framing (_scan), which resynchronises after the damage
-        try:
-            data = Path(p).read_bytes()[:int(r.data_len)]
-        except OSError as exc:
-            raise FileFormatError(p, f"cannot read ({exc.strerror})") from None
+        data = bytes(r.data_map[:int(r.data_len)])      # with repaired FMT records
         stretches, trusted = _stretches(r, data)
         found = np.bincount(np.fromiter(trusted.values(), np.int64, len(trusted)),
                             minlength=256)
@@ -506,9 +720,11 @@ def read_ardupilot(path: str | Path, *, salvage: bool = False) -> LogRead:
                             "bytes": int(r.data_len)}
     meta["events"] = {e: counts[e] for e in EVENT_TYPES if e in counts}
     empty = [t for t in IMU_TYPES if t in r.name_to_id and t not in types]
-    if empty:
-        meta["warnings"] = [f"the log's format declares {t} but holds no {t} sample (that "
-                            f"IMU logged nothing)" for t in empty]
+    meta["warnings"] = list(r.fmt_warnings) + [
+        f"the log's format declares {t} but holds no {t} sample (that IMU logged nothing)"
+        for t in empty]
+    if not meta["warnings"]:
+        del meta["warnings"]
     raw_events: list[list[Any]] = []
     if damage is None:
         cols = _collect(r, types, fields, r.data_len, raw_events)
