@@ -32,7 +32,7 @@ def fmt_records(data: bytes) -> list[int]:
     upper-case name)."""
     out, k = [], data.find(FMT_HEAD)
     while k >= 0:
-        name = data[k + 5:k + 9].rstrip(b"\0")
+        name = data[k + 5 : k + 9].rstrip(b"\0")
         if name and name.isalnum() and name.upper() == name:
             out.append(k)
         k = data.find(FMT_HEAD, k + 1)
@@ -74,12 +74,21 @@ def run(log: Path, flips: int, seed: int) -> dict:
                 silent += 1
     lost_a = np.array(lost)
     total = sum(truth.values())
-    return {"log": log.name, "flips": flips, "seed": seed, "fmt_records": len(recs),
-            "imu_samples": total, "imu_streams": n_streams,
-            "flips_losing_nothing": int((lost_a == 0).sum()),
-            "lost_median": float(np.median(lost_a)), "lost_p95": float(np.percentile(lost_a, 95)),
-            "lost_max": int(lost_a.max()), "lost_fraction_max": float(lost_a.max() / total),
-            "refused": int(refused), "changed_without_a_word": int(silent)}
+    return {
+        "log": log.name,
+        "flips": flips,
+        "seed": seed,
+        "fmt_records": len(recs),
+        "imu_samples": total,
+        "imu_streams": n_streams,
+        "flips_losing_nothing": int((lost_a == 0).sum()),
+        "lost_median": float(np.median(lost_a)),
+        "lost_p95": float(np.percentile(lost_a, 95)),
+        "lost_max": int(lost_a.max()),
+        "lost_fraction_max": float(lost_a.max() / total),
+        "refused": int(refused),
+        "changed_without_a_word": int(silent),
+    }
 
 
 def main() -> None:

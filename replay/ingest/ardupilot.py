@@ -195,13 +195,22 @@ def fmt_repairs(data: bytes) -> tuple[dict[int, bytes], list[str]]:
 
     A definition is consistent when its name is upper-case letters and digits, its
     format characters are known, its length is 3 + their sizes, and its columns are
-    one identifier per format character. One damaged definition is repaired from what
-    is intact: damaged sync bytes; a length that does not frame its messages (the length
-    the format gives, when that one frames them); a type id whose messages never appear
-    (the id without a definition whose messages that length frames); the columns or the
-    format from a sibling definition with the same layout (``IMU`` and ``IMU2``). When
-    that is not enough, the type is framed with the length that frames its messages and
-    not read (a warning names it); nothing is misframed.
+    one identifier per format character. One damaged field is repaired from what is
+    intact (DataFlash has no checksum; ArduPilot writes one definition per type, so there
+    is rarely a second copy of the same one):
+
+    - damaged sync bytes (the record sits in the run of FMT records);
+    - a length that does not frame its messages: the length its format gives;
+    - a type id whose messages never appear: the id, without a definition, whose
+      messages that length frames;
+    - a damaged name: the name rimu reads (``IMU``, ``IMU2``, ``IMU3``, ``ERR``, ``EV``,
+      ``MSG``) one byte away from it and not defined elsewhere;
+    - the format or the columns (an IMU type whose columns lack the gyro fields
+      included): those of a sibling definition with the same layout (``IMU`` and
+      ``IMU2``).
+
+    When that is not enough, the type is framed with the length that frames its
+    messages and not read; its name is in the warning. Nothing is misframed.
 
     Returns
     -------
@@ -214,17 +223,40 @@ def fmt_repairs(data: bytes) -> tuple[dict[int, bytes], list[str]]:
     fields = {k: _fmt_fields(data, k) for k in recs}
     good = {k: f for k, f in fields.items() if not _fmt_problems(f)
             and data[k:k + 3] == _HEAD + bytes([_FMT_ID])}
-    defined = {f[0] for f in good.values()}
+    seen = _id_counts(data)
     patches: dict[int, bytes] = {}
     warnings: list[str] = []
-    for k in recs:
-        if k in good:
-            continue
-        fixed, what = _repair_one(data, k, fields[k], good, defined)
-        patches[k] = fixed
-        defined.add(fixed[3])
+
+    def fix(k: int, rec: Fields, what: str) -> None:
+        patches[k] = _record(*rec)
+        good[k] = rec
         warnings.append(f"damaged FMT definition at byte {k} ({what})")
+
+    for k in recs:
+        if k not in good:
+            fix(k, *_repair_one(data, fields[k], good, seen))
+    for k, t in _retargets(data, good, seen).items():
+        f = good[k]
+        fix(k, (t, *f[1:]), f"type id {f[0]} has no message: {f[2].decode()} is type {t}")
+    for k, f in list(good.items()):
+        got = _imu_columns(f, good)
+        if got is not None:
+            fix(k, *got)
     return patches, warnings
+
+
+Fields = tuple[int, int, bytes, bytes, bytes]
+_READ_NAMES = (*IMU_TYPES, *EVENT_TYPES)
+_IMU_NEEDS = ("GyrX", "GyrY", "GyrZ")
+
+
+def _id_counts(data: bytes) -> np.ndarray:
+    """How many message headers (sync bytes) carry each type id, shape (256,)."""
+    b = np.frombuffer(data, np.uint8)
+    if b.shape[0] < 3:
+        return np.zeros(256, np.int64)
+    at = np.flatnonzero((b[:-2] == _HEAD[0]) & (b[1:-1] == _HEAD[1]))
+    return np.bincount(b[at + 2], minlength=256)
 
 
 def _record(mtype: int, length: int, name: bytes, fmt: bytes, cols: bytes) -> bytes:
@@ -232,46 +264,116 @@ def _record(mtype: int, length: int, name: bytes, fmt: bytes, cols: bytes) -> by
             + fmt.ljust(16, b"\0")[:16] + cols.ljust(64, b"\0")[:64])
 
 
-def _repair_one(data: bytes, k: int, f: tuple[int, int, bytes, bytes, bytes],
-                good: dict[int, tuple[int, int, bytes, bytes, bytes]], defined: set[int]
-                ) -> tuple[bytes, str]:
-    """The repaired record of the damaged FMT at ``k`` and what was done (see
+def _defined(good: dict[int, Fields]) -> set[int]:
+    return {f[0] for f in good.values()} | {_FMT_ID}
+
+
+def _retargets(data: bytes, good: dict[int, Fields], seen: np.ndarray) -> dict[int, int]:
+    """{record: type id} for consistent definitions whose type id byte is damaged: an id
+    with three or more messages but no definition, whose messages the length of exactly
+    one definition without any message frames."""
+    defined = _defined(good)
+    orphans = [int(t) for t in np.flatnonzero(seen >= 3) if int(t) not in defined]
+    idle = {k: f for k, f in good.items() if not seen[f[0]] and f[1] >= 3}
+    out: dict[int, int] = {}
+    for t in orphans[:16]:
+        claims = []
+        for k, f in idle.items():
+            hit, n = _frames_at(data, t, f[1])
+            if n >= 3 and hit >= 0.9 * n:
+                claims.append(k)
+        if len(claims) > 1:             # e.g. IMU3 declared, never logged: same length
+            claims = [k for k in claims if _brackets(good, k, t)]
+        if len(claims) == 1 and claims[0] not in out:
+            out[claims[0]] = t
+    return out
+
+
+def _brackets(good: dict[int, Fields], k: int, t: int) -> bool:
+    """Whether the type ids of the records before and after record ``k`` (in file order)
+    bracket ``t`` (writers put their FMT records in type id order)."""
+    keys = sorted(good)
+    i = keys.index(k)
+    lo = good[keys[i - 1]][0] if i > 0 else -1
+    hi = good[keys[i + 1]][0] if i + 1 < len(keys) else 256
+    return lo < t < hi
+
+
+def _sibling(good: dict[int, Fields], f: Fields, *, length: int | None = None,
+             fmt: bytes | None = None, cols: bytes | None = None) -> Fields | None:
+    """A consistent definition of another type with the given length and format or
+    columns (``IMU`` and ``IMU2`` share theirs)."""
+    for g in good.values():
+        if g[0] != f[0] and (length is None or g[1] == length) and (
+                (fmt is not None and g[3] == fmt) or (cols is not None and g[4] == cols)):
+            return g
+    return None
+
+
+def _imu_columns(f: Fields, good: dict[int, Fields]) -> tuple[Fields, str] | None:
+    """An IMU type whose columns lack the gyro or time fields: a sibling's columns
+    (same length and format) when they differ in one name."""
+    name = f[2].decode("latin-1")
+    cols = f[4].decode("latin-1").split(",")
+    if name not in IMU_TYPES or (all(c in cols for c in _IMU_NEEDS) and (
+            "TimeUS" in cols or "TimeMS" in cols)):
+        return None
+    g = _sibling(good, f, length=f[1], fmt=f[3])
+    if g is None:
+        return None
+    other = g[4].decode("latin-1").split(",")
+    if len(other) != len(cols) or sum(a != b for a, b in zip(cols, other, strict=True)) != 1:
+        return None
+    return (*f[:4], g[4]), f"columns: {name} takes the columns of {g[2].decode()}"
+
+
+def _name_fix(name: bytes, good: dict[int, Fields]) -> bytes | None:
+    """The name rimu reads one byte away from a damaged ``name``, when not defined."""
+    taken = {g[2] for g in good.values()}
+    raw = name.ljust(4, b"\0")
+    hits = [n.encode() for n in _READ_NAMES if n.encode() not in taken and sum(
+        a != b for a, b in zip(raw, n.encode().ljust(4, b"\0"), strict=True)) == 1]
+    return hits[0] if len(hits) == 1 else None
+
+
+def _repair_one(data: bytes, f: Fields, good: dict[int, Fields], seen: np.ndarray
+                ) -> tuple[Fields, str]:
+    """The repaired fields of a damaged FMT record and what was done (see
     :func:`fmt_repairs`)."""
     mtype, length, name, fmt, cols = f
     probs = _fmt_problems(f)
     what = ", ".join(probs) if probs else "sync bytes"
+    if not probs:
+        return f, what
     chars = fmt.decode("latin-1")
-    # the layout the format gives, when it is readable
     calc = 3 + sum(_CHAR_SIZE[c] for c in chars) if "format" not in probs else None
-    # a sibling: a consistent definition with the same length and format or columns
-    sib = next((g for g in good.values() if g[1] == (calc or length) and g[0] != mtype
-                and (g[3] == fmt or g[4] == cols)), None)
-    if "length" in probs and calc is not None:
-        hit_calc, n = _frames_at(data, mtype, calc)
-        hit_decl, _ = _frames_at(data, mtype, length)
+    hit_decl, n = _frames_at(data, mtype, length)
+    frames_decl = n > 0 and hit_decl >= 0.9 * n
+    if probs == ["length"] and calc is not None:
+        hit_calc, _ = _frames_at(data, mtype, calc)
         if hit_calc >= hit_decl:
-            return _record(mtype, calc, name, fmt, cols), f"{what}: length {length} -> {calc}"
-    if probs == ["columns"] and sib is not None:
-        return _record(mtype, length, name, fmt, sib[4]), f"{what}: columns of {sib[2].decode()}"
-    if probs == ["format"] and sib is not None and sib[1] == length:
-        return _record(mtype, length, name, sib[3], cols), f"{what}: format of {sib[2].decode()}"
-    if not probs or probs == ["name"]:
-        # a fresh type id whose messages do not appear: the id byte is damaged
-        hit, n = _frames_at(data, mtype, length)
-        if mtype in defined or n == 0:
-            cands = [(h, t) for t in range(256) if t not in defined and t != _FMT_ID
-                     for h, m in [_frames_at(data, t, length)] if m and h == m]
-            if len(cands) == 1:
-                mtype = cands[0][1]
-                what += f": type id -> {mtype}"
-        if not probs:
-            return _record(mtype, length, name, fmt, cols), what
+            return (mtype, calc, name, fmt, cols), f"{what}: length {length} -> {calc}"
+        g = _sibling(good, f, length=length, cols=cols)
+        if g is not None:                # a format character of a sibling's size damaged
+            return (mtype, length, name, g[3], cols), f"{what}: format of {g[2].decode()}"
+    if probs == ["format"]:
+        g = _sibling(good, f, length=length, cols=cols)
+        if g is not None:
+            return (mtype, length, name, g[3], cols), f"{what}: format of {g[2].decode()}"
+    if probs == ["columns"]:
+        g = _sibling(good, f, length=length, fmt=fmt)
+        if g is not None:
+            return (mtype, length, name, fmt, g[4]), f"{what}: columns of {g[2].decode()}"
+    if probs == ["name"]:
+        fixed = _name_fix(name, good)
+        if fixed is not None:
+            return (mtype, length, fixed, fmt, cols), f"{what}: {fixed.decode()}"
     # not readable: frame the type with the length that frames its messages, do not read it
-    n_bytes = length if length >= 3 else (calc or 3)
+    n_bytes = length if frames_decl or calc is None else calc
+    n_bytes = max(n_bytes, 3)
     label = name.decode("latin-1") if "name" not in probs else f"type {mtype}"
-    return (_record(mtype, n_bytes, f"X{mtype:03d}".encode(),
-                    _placeholder(n_bytes - 3).encode(), b""),
-            f"{what}: {label} messages framed ({n_bytes} bytes) but not read")
+    return ((mtype, n_bytes, f"X{mtype:03d}".encode(), _placeholder(n_bytes - 3).encode(),
+             b""), f"{what}: {label} messages framed ({n_bytes} bytes) but not read")
 
 
 def _patched_reader(path: str, patches: dict[int, bytes]) -> Any:
@@ -284,7 +386,7 @@ def _patched_reader(path: str, patches: dict[int, bytes]) -> Any:
     class Patched(DFReader.DFReader_binary):
         def __init__(self) -> None:              # DFReader_binary.__init__, patched map
             DFReader.DFReader.__init__(self)
-            self.filehandle = open(path, "rb")  # noqa: SIM115 (closed by pymavlink)
+            self.filehandle = open(path, "rb")      # closed by pymavlink
             self.filehandle.seek(0, 2)
             self.data_len = self.filehandle.tell()
             self.filehandle.seek(0)
