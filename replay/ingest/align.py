@@ -169,6 +169,27 @@ def _drop_baseless(read: LogRead, streams: list[ImuStream], cleaned: list[Any],
     return [streams[i] for i in keep], [cleaned[i] for i in keep], dropped
 
 
+def _check_base(read: LogRead, name: str, tb: np.ndarray, dt_b: float) -> None:
+    """Refuse a reference stream that cannot be a time base: fewer than two time stamps,
+    or a rate no IMU has (time stamps in another unit than read)."""
+    if not np.isfinite(dt_b) or dt_b <= 0:
+        raise ConfigError(f"{read.path}: reference {name} has "
+                          f"{tb.shape[0]} time stamp(s); cannot form a time base (--salvage "
+                          "drops the IMU streams that cannot and keeps the others)")
+    if 1.0 / dt_b > MAX_SAMPLE_RATE_HZ:
+        raise ConfigError(f"{read.path}: {name} is sampled every {dt_b:.3g} s "
+                          f"({1.0 / dt_b:.3g} Hz), faster than any IMU (at most "
+                          f"{MAX_SAMPLE_RATE_HZ:g} Hz): the time stamps are in another unit "
+                          "than read (seconds taken as milliseconds?); set the time unit in "
+                          "the --map")
+    if 1.0 / dt_b < MIN_SAMPLE_RATE_HZ:
+        raise ConfigError(f"{read.path}: {name} is sampled every {dt_b:.3g} s "
+                          f"({1.0 / dt_b:.3g} Hz), slower than any IMU (at least "
+                          f"{MIN_SAMPLE_RATE_HZ:g} Hz): the time stamps are in another unit "
+                          "than read (milliseconds taken as seconds?); set the time unit in "
+                          "the --map")
+
+
 def _gaps(tb: np.ndarray, max_gap: float) -> list[dict[str, float]]:
     d = np.diff(tb)
     idx = np.flatnonzero(d > max_gap)
@@ -266,22 +287,7 @@ def align_streams(read: LogRead, *, reference: str | None = None, gap_factor: fl
     r = _pick_reference(streams, reference)
     tb = streams[r].t
     dt_b = _median_dt(tb)
-    if not np.isfinite(dt_b) or dt_b <= 0:
-        raise ConfigError(f"{read.path}: reference {streams[r].name} has "
-                          f"{tb.shape[0]} time stamp(s); cannot form a time base (--salvage "
-                          "drops the IMU streams that cannot and keeps the others)")
-    if 1.0 / dt_b > MAX_SAMPLE_RATE_HZ:
-        raise ConfigError(f"{read.path}: {streams[r].name} is sampled every {dt_b:.3g} s "
-                          f"({1.0 / dt_b:.3g} Hz), faster than any IMU (at most "
-                          f"{MAX_SAMPLE_RATE_HZ:g} Hz): the time stamps are in another unit "
-                          "than read (seconds taken as milliseconds?); set the time unit in "
-                          "the --map")
-    if 1.0 / dt_b < MIN_SAMPLE_RATE_HZ:
-        raise ConfigError(f"{read.path}: {streams[r].name} is sampled every {dt_b:.3g} s "
-                          f"({1.0 / dt_b:.3g} Hz), slower than any IMU (at least "
-                          f"{MIN_SAMPLE_RATE_HZ:g} Hz): the time stamps are in another unit "
-                          "than read (milliseconds taken as seconds?); set the time unit in "
-                          "the --map")
+    _check_base(read, streams[r].name, tb, dt_b)
     tol = tol_fraction * dt_b
     m = tb.shape[0]
     gyro_cols, valid_cols, names, imu_groups = [], [], [], []

@@ -807,26 +807,12 @@ def read_ardupilot(path: str | Path, *, salvage: bool = False) -> LogRead:
     stretches: list[dict[str, Any]] = []
     trusted: dict[int, int] = {}
     if damage is not None:
-        # pymavlink's index stops at the first unknown message id: count from rimu's own
-        # walk of the framing (_scan), which resynchronises after the damage
-        data = bytes(r.data_map[:int(r.data_len)])      # with repaired FMT records
-        stretches, trusted = _stretches(r, data)
-        found = np.bincount(np.fromiter(trusted.values(), np.int64, len(trusted)),
-                            minlength=256)
-        counts = {t: int(found[r.name_to_id[t]]) for t in counts}
+        stretches, trusted, counts = _trusted_counts(r, counts)
     types = [t for t in IMU_TYPES if counts.get(t, 0) > 0]
     if not types:
         raise FileFormatError(p, f"no IMU messages ({', '.join(IMU_TYPES)}) in the log")
     fields = {t: _imu_fields(p, r.formats[r.name_to_id[t]], t) for t in types}
-    meta: dict[str, Any] = {"messages": {t: counts[t] for t in types},
-                            "bytes": int(r.data_len)}
-    meta["events"] = {e: counts[e] for e in EVENT_TYPES if e in counts}
-    empty = [t for t in IMU_TYPES if t in r.name_to_id and t not in types]
-    meta["warnings"] = list(r.fmt_warnings) + [
-        f"the log's format declares {t} but holds no {t} sample (that IMU logged nothing)"
-        for t in empty]
-    if not meta["warnings"]:
-        del meta["warnings"]
+    meta = _meta(r, counts, types)
     raw_events: list[list[Any]] = []
     if damage is None:
         cols = _collect(r, types, fields, r.data_len, raw_events)
@@ -834,18 +820,54 @@ def read_ardupilot(path: str | Path, *, salvage: bool = False) -> LogRead:
                        events=ardupilot_events(raw_events))
     cols = _collect(r, types, fields, r.data_len + 1, raw_events, trusted)
     streams = _streams(cols, fields)
+    dmg = _damage(p, damage, stretches, streams, cols)
+    if not salvage:
+        raise dmg.error()
+    return LogRead(p, "ardupilot", tuple(streams), dmg, meta,
+                   events=ardupilot_events(raw_events))
+
+
+def _trusted_counts(r: Any, counts: dict[str, int]
+                    ) -> tuple[list[dict[str, Any]], dict[int, int], dict[str, int]]:
+    """The damaged stretches, the trusted messages ({start: type id}) and the count of
+    each type among them. pymavlink's index stops at the first unknown message id: count
+    from rimu's own walk of the framing (:func:`_scan`), which resynchronises after the
+    damage."""
+    data = bytes(r.data_map[:int(r.data_len)])          # with repaired FMT records
+    stretches, trusted = _stretches(r, data)
+    found = np.bincount(np.fromiter(trusted.values(), np.int64, len(trusted)),
+                        minlength=256)
+    return stretches, trusted, {t: int(found[r.name_to_id[t]]) for t in counts}
+
+
+def _meta(r: Any, counts: dict[str, int], types: list[str]) -> dict[str, Any]:
+    """The reader's meta: message counts, bytes, events, and the warnings (repaired FMT
+    definitions, IMU types declared without a sample)."""
+    meta: dict[str, Any] = {"messages": {t: counts[t] for t in types},
+                            "bytes": int(r.data_len)}
+    meta["events"] = {e: counts[e] for e in EVENT_TYPES if e in counts}
+    empty = [t for t in IMU_TYPES if t in r.name_to_id and t not in types]
+    warnings = list(r.fmt_warnings) + [
+        f"the log's format declares {t} but holds no {t} sample (that IMU logged nothing)"
+        for t in empty]
+    if warnings:
+        meta["warnings"] = warnings
+    return meta
+
+
+def _damage(p: str, damage: tuple[int, str], stretches: list[dict[str, Any]],
+            streams: list[ImuStream], cols: dict[tuple[str, int], dict[str, list[float]]]
+            ) -> Damage:
+    """The log's damage record: the first stretch (or pymavlink's first damage), the IMU
+    samples lost in each stretch, and the samples before and after the first."""
     offsets = {s.name: np.asarray(cols[key]["off"], np.int64) for s, key in zip(
         streams, sorted(cols, key=lambda ti: (IMU_TYPES.index(ti[0]), ti[1])), strict=True)}
     _lost_samples(stretches, streams, offsets)
     first = stretches[0] if stretches else {"start": damage[0], "what": damage[1]}
     before = sum(int(np.sum(o < first["start"])) for o in offsets.values())
-    dmg = Damage(p, first["what"], offset=int(first["start"]), samples_before=before,
-                 stretches=tuple(stretches),
-                 samples_after=sum(s.size for s in streams) - before)
-    if not salvage:
-        raise dmg.error()
-    return LogRead(p, "ardupilot", tuple(streams), dmg, meta,
-                   events=ardupilot_events(raw_events))
+    return Damage(p, first["what"], offset=int(first["start"]), samples_before=before,
+                  stretches=tuple(stretches),
+                  samples_after=sum(s.size for s in streams) - before)
 
 
 def _int(d: dict[str, Any], key: str) -> int:
