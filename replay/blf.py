@@ -423,14 +423,13 @@ class ResyncBLFReader(can.BLFReader):
             return payload, nxt, cut
         data, err, gap = _inflate(payload)
         if err is not None:
-            kind = "truncated" if cut else "resync"
-            self._record(
-                pos0,
-                f"damaged compressed container ({err}); the "
-                f"{len(data)} bytes inflated before it are kept",
-                0,
-                kind,
-            )
+            if cut:
+                why = (f"truncated: the last container ends early ({err}); the "
+                       f"{len(data)} bytes inflated before the cut are kept")
+            else:
+                why = (f"damaged compressed container ({err}); the {len(data)} bytes "
+                       "inflated before it are kept")
+            self._record(pos0, why, 0, "truncated" if cut else "resync")
         elif declared != len(data) and trusted:
             self._record(
                 pos0, f"container declares {declared} uncompressed bytes, {len(data)} inflated", 0
