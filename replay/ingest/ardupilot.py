@@ -223,7 +223,10 @@ def fmt_repairs(data: bytes) -> tuple[dict[int, bytes], list[str]]:
     fields = {k: _fmt_fields(data, k) for k in recs}
     good = {k: f for k, f in fields.items() if not _fmt_problems(f)
             and data[k:k + 3] == _HEAD + bytes([_FMT_ID])}
-    seen = _id_counts(data)
+    # the headers are counted only when a definition is damaged or has no message (a
+    # flipped type id leaves a consistent definition whose id never appears)
+    idle = any(data.find(_HEAD + bytes([f[0]])) < 0 for f in good.values())
+    seen = _id_counts(data) if idle or len(good) < len(recs) else np.zeros(256, np.int64)
     patches: dict[int, bytes] = {}
     warnings: list[str] = []
 
@@ -234,7 +237,7 @@ def fmt_repairs(data: bytes) -> tuple[dict[int, bytes], list[str]]:
 
     for k in recs:
         if k not in good:
-            fix(k, *_repair_one(data, fields[k], good, seen))
+            fix(k, *_repair_one(data, fields[k], good))
     for k, t in _retargets(data, good, seen).items():
         f = good[k]
         fix(k, (t, *f[1:]), f"type id {f[0]} has no message: {f[2].decode()} is type {t}")
@@ -251,12 +254,17 @@ _IMU_NEEDS = ("GyrX", "GyrY", "GyrZ")
 
 
 def _id_counts(data: bytes) -> np.ndarray:
-    """How many message headers (sync bytes) carry each type id, shape (256,)."""
-    b = np.frombuffer(data, np.uint8)
-    if b.shape[0] < 3:
-        return np.zeros(256, np.int64)
-    at = np.flatnonzero((b[:-2] == _HEAD[0]) & (b[1:-1] == _HEAD[1]))
-    return np.bincount(b[at + 2], minlength=256)
+    """How many message headers (sync bytes) carry each type id, shape (256,); read in
+    16 MiB pieces (a log may be larger than memory likes)."""
+    out = np.zeros(256, np.int64)
+    step = 1 << 24
+    for a in range(0, len(data), step):
+        b = np.frombuffer(data[a:a + step + 2], np.uint8)
+        if b.shape[0] < 3:
+            break
+        at = np.flatnonzero((b[:-2] == _HEAD[0]) & (b[1:-1] == _HEAD[1]))
+        out += np.bincount(b[at + 2], minlength=256)
+    return out
 
 
 def _record(mtype: int, length: int, name: bytes, fmt: bytes, cols: bytes) -> bytes:
@@ -336,8 +344,7 @@ def _name_fix(name: bytes, good: dict[int, Fields]) -> bytes | None:
     return hits[0] if len(hits) == 1 else None
 
 
-def _repair_one(data: bytes, f: Fields, good: dict[int, Fields], seen: np.ndarray
-                ) -> tuple[Fields, str]:
+def _repair_one(data: bytes, f: Fields, good: dict[int, Fields]) -> tuple[Fields, str]:
     """The repaired fields of a damaged FMT record and what was done (see
     :func:`fmt_repairs`)."""
     mtype, length, name, fmt, cols = f
