@@ -321,16 +321,26 @@ def _bound(cal: Calibration, kind: str, bias_bound_dps: float | None
 
 
 def same_power_up(cal: Calibration, flight: Any) -> bool | None:
-    """True on the calibration's own power-up (its flight; the same recording read again:
-    same sample count, first and last times within 1 ms; or a part of the same log: same
-    source name, times inside the calibrated flight's), False on another, None when the
-    calibration records no flight."""
+    """True on the calibration's own power-up, False on another, None when the calibration
+    records no flight.
+
+    Its own power-up is its flight (the same fingerprint), the same recording read again
+    (same sample count, first and last times within 1 ms) or a part of the same log: the
+    same source (the whole path the calibration was made from, not only the file name:
+    every Xsens DOT path of the shared data is ``IMU_1.csv`` … ``IMU_4.csv``, and
+    autopilots number their logs from 1 on every card) with times inside the calibrated
+    flight's. A calibration of several flights together is the power-up of none of them
+    (its bias is their mean): False.
+    """
     from replay.time_offsets import flight_identity
 
     inflight = cal.extras.inflight
     known = inflight.flight if inflight is not None else None
     if known is None or not known.fingerprint:
         return None
+    alignment = cal.extras.inflight_alignment
+    if alignment is not None and len(alignment.flights) > 1:
+        return False
     here = flight_identity(flight)
     if here["fingerprint"] == known.fingerprint:
         return True
@@ -339,6 +349,9 @@ def same_power_up(cal: Calibration, flight: Any) -> bool | None:
         return True                 # the same recording read again (another format, float32)
     if not known.source or here["source"] != known.source or not here["samples"]:
         return False
+    whole = cal.extras.source
+    if not whole or str(flight.source) != str(whole):
+        return False                # only the file name agrees: another log of that name
     t0, t1 = known.t0_s, known.t1_s
     return (t0 is not None and t1 is not None and here["t0_s"] >= t0 - 1e-6
             and here["t1_s"] <= t1 + 1e-6)

@@ -338,6 +338,12 @@ def _markdown(doc: dict, images: list[str]) -> str:
         else:
             L.append(f"- {k}: {v:.1f} s")
     L.append("")
+    cross = JSON_PATH.with_name("cross_flight.json")
+    if cross.exists():                  # issue 27's cross-flight tables, their own generator
+        from studies.cross_flight import markdown as cross_markdown
+
+        L += ["## Calibrated on one flight, monitored on another (issue 27)", "",
+              cross_markdown(json.loads(cross.read_text(encoding="utf-8"))), ""]
     return "\n".join(L)
 
 

@@ -8,7 +8,11 @@ its codes into segments and adds what only the offline fit needs:
   docs/envelope.md). A shock is labelled ``crash`` when it is followed by no motion or by
   the end of the log, ``take-off`` when it comes before the first motion;
 - ``gap``: the samples next to a gap in the time base (more than two sample periods);
-- ``invalid``: a sample some sensor did not send.
+- ``invalid``: a sample some sensor did not send;
+- ``time stamp``: samples whose time stamp does not come after every earlier one (repeated
+  or running backward, as :func:`replay.time_base.time_base` counts them), with the sample
+  before each run and :data:`STAMP_PAD_SAMPLES` sample periods either side: the samples
+  cannot be placed on the time axis the fit reads the reference on.
 
 The calibration is not causal: every envelope segment is widened by :data:`PAD_S` before
 (the envelope already holds each reason ``hold_s`` after), gaps and invalid samples by
@@ -28,10 +32,14 @@ from fdi.errors import ConfigError
 from replay.envelope import flight_envelope, flying_mask
 from replay.flight_data import Flight
 
-__all__ = ["PAD_S", "Segment", "find_segments", "flight_window", "keep_mask"]
+__all__ = ["PAD_S", "STAMP_PAD_SAMPLES", "Segment", "find_segments", "flight_window",
+           "keep_mask", "stamp_faults"]
 
 PAD_S = 0.5
 """Margin (s) added before every segment (and after gaps and invalid samples)."""
+STAMP_PAD_SAMPLES = 3
+"""Sample periods left out either side of a repeated or backward time stamp (as the 3
+samples next to a dropped block: the spline must not bridge them)."""
 
 
 @dataclass(frozen=True)
@@ -64,6 +72,53 @@ def _gap_samples(flight: Flight) -> np.ndarray:
         gap[big] = True
         gap[big + 1] = True
     return gap
+
+
+def stamp_faults(t: np.ndarray) -> tuple[np.ndarray, int, int]:
+    """The samples whose time stamp does not come after every earlier one.
+
+    Parameters
+    ----------
+    t : ndarray, shape (N,)
+        Time stamps (s), in the order of the rows.
+
+    Returns
+    -------
+    mask : ndarray of bool, shape (N,)
+        True where ``t[k] <= max(t[:k])``; the rows left are strictly increasing.
+    repeated, backward : int
+        Intervals equal to zero and intervals below zero (what
+        :func:`replay.time_base.time_base` counts as duplicates, and what a flight folder
+        refuses).
+    """
+    t = np.asarray(t, float)
+    if t.shape[0] < 2:
+        return np.zeros(t.shape[0], bool), 0, 0
+    prev_max = np.maximum.accumulate(t)[:-1]
+    mask = np.concatenate([[False], t[1:] <= prev_max])
+    dt = np.diff(t)
+    return mask, int(np.count_nonzero(dt == 0)), int(np.count_nonzero(dt < 0))
+
+
+def _stamp_segments(flight: Flight) -> list[Segment]:
+    t = np.asarray(flight.t, float)
+    mask, _, _ = stamp_faults(t)
+    if not mask.any():
+        return []
+    pad = STAMP_PAD_SAMPLES / flight.sample_rate_hz if flight.sample_rate_hz > 0 else 0.0
+    dt = np.concatenate([[np.inf], np.diff(t)])
+    out = []
+    for s0, e0 in _runs(mask):
+        s, e = int(s0), int(e0)
+        rep, back = int(np.count_nonzero(dt[s:e] == 0)), int(np.count_nonzero(dt[s:e] < 0))
+        what = " and ".join(x for x in (f"{rep} repeated" * bool(rep),
+                                        f"{back} running backward" * bool(back)) if x)
+        why = (f"{e - s} time stamp{'s' * (e - s != 1)} not after every earlier one ("
+               f"{what or 'below an earlier one'}): left out with the sample before and "
+               f"{STAMP_PAD_SAMPLES} sample periods either side")
+        span = t[max(s - 1, 0):e]
+        out.append(Segment(float(span.min()) - pad, float(span.max()) + pad, "time stamp", why))
+    return out
 
 
 def _why(flight: Flight, bit: int, t0: float, t1: float,
@@ -107,6 +162,7 @@ def find_segments(flight: Flight, settings: EnvelopeSettings | None = None) -> l
     for mask, reason, why in flags:
         segs.extend(Segment(float(t[s]) - PAD_S, float(t[e - 1]) + PAD_S, reason, why)
                     for s, e in _runs(mask))
+    segs.extend(_stamp_segments(flight))
     return _merge(sorted(segs, key=lambda g: g.t0_s))
 
 

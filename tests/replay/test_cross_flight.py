@@ -34,3 +34,19 @@ def test_erle_pairs_exclude_nothing_and_name_what_does_not_fit():
         assert {("imu2", "scale"), ("imu2", "time offset")} <= flagged, flagged
         assert any(p == "noise" for _, p in flagged)
     assert doc["after"]["hours"] > 0 and doc["after"]["ci95_per_hour"][0] >= 0
+
+
+def test_the_docs_blocks_are_the_studys_json():
+    """docs/next-flight.md and docs/field-results.md carry the block the study writes from
+    studies/cross_flight.json (regenerated, not hand-typed), with a verdict per must-hold."""
+    import json
+    from pathlib import Path
+
+    from studies.cross_flight import markdown
+
+    root = Path(__file__).resolve().parents[2]
+    doc = json.loads((root / "studies" / "cross_flight.json").read_text(encoding="utf-8"))
+    block = markdown(doc)
+    assert "erle" in doc and "no exclusion:" in block
+    for name in ("next-flight.md", "field-results.md"):
+        assert block in (root / "docs" / name).read_text(encoding="utf-8"), name

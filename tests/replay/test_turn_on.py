@@ -149,3 +149,35 @@ def test_auto_without_measured_spread_or_given_bound_keeps_the_calibrated_biases
     assert bound.method == "bound" and np.allclose(bound.bound, DEFAULT_BIAS_BOUND_DPS * DPS)
     given = turn_on_for_flight(fl, CAL, mode="auto", bias_bound_dps=0.25)
     assert given.method == "bound" and np.allclose(given.bound, 0.25 * DPS)
+
+
+def test_same_file_name_in_another_folder_is_another_power_up():
+    """Every Xsens DOT path is IMU_1.csv ... IMU_4.csv and autopilots number their logs
+    from 1 on every card: a file name and times inside the calibrated flight's do not make
+    a part of the same log; the whole source does; several flights together are none's."""
+    from calibration.inflight.calfile import calibration_from_fit
+    from calibration.inflight.fit import fit_inflight
+    from replay.imu_set import ImuSetSpec, simulate_imu_set
+    from replay.turn_on import same_power_up
+    from studies.cross_flight import calibrate_together
+
+    def sim(seed: int, source: str) -> Flight:
+        f = simulate_imu_set(ImuSetSpec(imus=2, duration_s=8.0, seed=seed,
+                                        max_rate_dps=150))
+        return replace(f, source=source)
+
+    a, b = sim(1, "/logs/card1/00000001.BIN"), sim(2, "/logs/card2/00000001.BIN")
+    fa, fb = fit_inflight(a, check=False), fit_inflight(b, check=False)
+    cal = calibration_from_fit(fa, a, tails=False)
+    n = a.t.shape[0] // 2
+    part = replace(a, t=a.t[n:], raw=a.raw[n:], valid=a.valid[n:],
+                   aux=a.aux.slice(slice(n, None)) if a.aux is not None else None,
+                   omega_true=None if a.omega_true is None else a.omega_true[n:])
+    assert same_power_up(cal, a) is True
+    assert same_power_up(cal, part) is True
+    other = replace(b, t=b.t[n:], raw=b.raw[n:], valid=b.valid[n:],
+                    aux=b.aux.slice(slice(n, None)) if b.aux is not None else None,
+                    omega_true=None if b.omega_true is None else b.omega_true[n:])
+    assert same_power_up(cal, other) is False
+    joint = calibrate_together([a, b], [fa, fb])
+    assert same_power_up(joint, a) is False
