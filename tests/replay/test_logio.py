@@ -239,7 +239,7 @@ def test_corrupt_blf_container_skipped_and_reading_resumes(tmp_path):
     assert f2.t[-1] == pytest.approx(f.t[-1], abs=1e-3), "the read went on to the end"
     k = np.rint(f2.t * CAL.sample_rate_hz).astype(int)
     np.testing.assert_allclose(f2.raw[f2.valid], f.raw[k][f2.valid], rtol=6e-8)
-    with pytest.raises(ReplayError, match="damaged (compressed )?container"):
+    with pytest.raises(ReplayError, match=r"damaged (compressed )?container"):
         read_log(p, CAL, strict=True, progress=False)
 
 
