@@ -395,13 +395,16 @@ def build_set_model(H: np.ndarray, sf: np.ndarray, bias: np.ndarray, noise_cov: 
     vf = thresholds.variance_factor
     thr = tuple(chi2_threshold(a, df) if df > 0 else float("inf") for a in thresholds.alpha)
     chi2_scale = tuple(1.0 / (w * f) for w, f in zip(scales, vf, strict=True))
-    rho_gain = tuple(kappa / f for f in vf)
+    # q ≥ 1 (Thresholds.rate_error_factor): the rate term held for a calibration error up
+    # to a quantile of its covariance, not only the average one (thresholds.per_draw)
+    q = float(thresholds.rate_error_factor)
+    rho_gain = tuple(q * kappa / f for f in vf)
     offset_gain = tuple(1.0 + w * beta / f for w, f in zip(scales, vf, strict=True))
     h = float("nan")
     if df > 0 and thresholds.detector != "windows":
         h = cusum_threshold(thresholds.alpha[0], thresholds.cusum_drift, 2 * m)
     pl = protection_level_constants(U, G[:, list(idx)], Sig[np.ix_(list(idx), list(idx))],
-                                    thr[0] if scales[0] == 1 else float("inf"), vf[0], kappa,
+                                    thr[0] if scales[0] == 1 else float("inf"), vf[0], q * kappa,
                                     missed_detection)
     sf = np.array(sf, float)
     bias = np.array(bias, float)

@@ -86,6 +86,12 @@ class Thresholds:
         (empty: unknown, a ``/1`` file).
     noise_model : str
         One of :data:`NOISE_MODELS`.
+    rate_error_factor : float
+        q ≥ 1: the inflation for the calibration error at the current rate
+        (``κ/f_w·Σ_w ρ``, :mod:`fdi.windows`) is taken q times, so the thresholds hold for
+        a calibration error up to a stated quantile of the calibration's covariance, not
+        only on average over errors (``rimu tune``: :func:`thresholds.per_draw.rate_error_factor`).
+        Written to the file only when it is not 1.
     """
 
     kind: str
@@ -103,6 +109,7 @@ class Thresholds:
     notes: str = ""
     calibration_fingerprint: str = ""
     noise_model: str = "gaussian-white"
+    rate_error_factor: float = 1.0
     schema: str = THRESHOLDS_SCHEMA
 
     def __post_init__(self) -> None:
@@ -119,6 +126,9 @@ class Thresholds:
             raise ConfigError("thresholds: alpha must lie in (0, 1)")
         if any(not (f > 0.0 and math.isfinite(f)) for f in self.variance_factor):
             raise ConfigError("thresholds: variance_factor must be positive and finite")
+        if not (self.rate_error_factor >= 1.0 and math.isfinite(self.rate_error_factor)):
+            raise ConfigError(f"thresholds: rate_error_factor must be >= 1 and finite, got "
+                              f"{self.rate_error_factor}")
         if self.noise_model not in NOISE_MODELS:
             raise ConfigError(f"thresholds: noise_model must be one of {NOISE_MODELS}, "
                               f"got {self.noise_model!r}")
@@ -137,6 +147,8 @@ class Thresholds:
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dictionary in the ``rimu.thresholds/2`` layout."""
+        extra = ({} if self.rate_error_factor == 1.0
+                 else {"rate_error_factor": self.rate_error_factor})
         return {"schema": THRESHOLDS_SCHEMA,
                 "calibration_fingerprint": self.calibration_fingerprint,
                 "noise_model": self.noise_model, "kind": self.kind, "n": self.n,
@@ -148,7 +160,7 @@ class Thresholds:
                 "cusum_threshold": (None if not math.isfinite(self.cusum_threshold)
                                     else self.cusum_threshold),
                 "missed_detection": self.missed_detection, "detector": self.detector,
-                "notes": self.notes}
+                "notes": self.notes, **extra}
 
     def save(self, path: str | Path) -> None:
         """Write as JSON."""
@@ -214,6 +226,7 @@ def thresholds_from_dict(doc: Any, path: str = "<thresholds>") -> Thresholds:
                           f"Calibration.fingerprint), got {fp!r}")
         fields["calibration_fingerprint"] = fp
         fields["noise_model"] = r.choice("noise_model", NOISE_MODELS)
+        fields["rate_error_factor"] = r.number("rate_error_factor", 1.0, lo=1.0)
     r.finish()
     check_numbers(doc, path, THRESHOLDS_NUMBER_RULES)     # what the typed reads leave
     if fields["detector"] != "windows" and not fields["cusum_threshold"] > 0:

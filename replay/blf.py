@@ -1,22 +1,37 @@
-"""A BLF reader that survives damage: resynchronises on the next valid object.
+"""A BLF reader that survives damage: one damaged object costs about one frame.
 
 python-can's :class:`can.BLFReader` stops at the first damaged object: a flipped byte in
 one compressed container loses the rest of the file. :class:`ResyncBLFReader` keeps
-python-can's parsing of the objects inside a container and adds, around it:
+python-can's parsing of CAN objects and adds, around it:
 
-- a file with neither the ``LOGG`` file signature nor any ``LOBJ`` object is "not a BLF
-  file" (:class:`~fdi.errors.FileFormatError`), not an empty log; a damaged file header is
-  recorded and reading starts at the first object;
-- a container whose header is implausible, or whose zlib stream fails (wrong data check,
-  invalid stream), is skipped, and reading goes on at the next container; when the object
-  header itself is damaged, the file is scanned for the next ``LOBJ`` signature;
-- inside the data, an object that cannot be parsed (or whose size does not move the parser
-  on, python-can issue #1584) is skipped up to the next ``LOBJ`` signature; the object cut
-  by a skipped container is dropped (its bytes are counted).
+- **the file**: a file with neither the ``LOGG`` file signature nor any ``LOBJ`` object is
+  "not a BLF file" (:class:`~fdi.errors.FileFormatError`), not an empty log; a damaged file
+  header is recorded and reading starts at the first object;
+- **containers** (``LOBJ`` type 10): a container header is trusted only when its size
+  lands on the next ``LOBJ`` (or the end of the file). A damaged header (signature, type,
+  size, compression method) is recorded and the container's body is taken up to the next
+  valid container header, so the body is still read;
+- **inflation**: a zlib stream is inflated with :func:`zlib.decompressobj` in small steps,
+  so every byte produced before a deflate error is kept; a wrong Adler-32 alone drops
+  nothing (the objects are validated one by one instead);
+- **objects**: the uncompressed stream (objects run across containers) is walked object by
+  object; each header is validated (signature, header size for its version, timestamp unit,
+  size bounds for its type, channel, DLC and identifier bits of CAN frames, and that its
+  size lands on the next ``LOBJ``). A damaged object is skipped and the walk resynchronises
+  at the next valid object header (confirmed by the one after it): one damaged object costs
+  one frame, its bytes are counted.
+
+What a flip inside *compressed* bytes costs is set by deflate, not by this reader: the
+bytes after the flip are decoded with a wrong bit alignment or wrong back-references
+until the decoder fails or falls back into step, and python-can's writer puts 128 KiB of
+objects (about 2700 frames) in one deflate stream. The frames decoded before the damage
+are kept and the stream is resynchronised where valid objects come out again;
+``docs/formats.md`` gives the measured loss.
 
 Each damage is recorded in :attr:`ResyncBLFReader.damage` as ``{"where": "byte N", "why":
-..., "kind": "resync" | "truncated", "skipped_bytes": k}``; the frames lost with it show
-in the frame counters (rolling and sample counter gaps).
+..., "kind": "resync" | "truncated", "skipped_bytes": k}`` (the first 50;
+:attr:`ResyncBLFReader.n_damage` counts all); the frames lost with it show in the frame
+counters (rolling and sample counter gaps).
 """
 
 from __future__ import annotations
@@ -29,26 +44,163 @@ from typing import Any, cast
 
 import can
 from can.io.blf import (
+    CAN_ERROR_EXT,
+    CAN_ERROR_EXT_STRUCT,
+    CAN_FD_MESSAGE,
+    CAN_FD_MESSAGE_64,
+    CAN_FD_MSG_64_STRUCT,
+    CAN_FD_MSG_STRUCT,
+    CAN_MESSAGE,
+    CAN_MESSAGE2,
+    CAN_MSG_EXT,
+    CAN_MSG_STRUCT,
     FILE_HEADER_SIZE,
     FILE_HEADER_STRUCT,
+    GLOBAL_MARKER,
+    GLOBAL_MARKER_STRUCT,
     LOG_CONTAINER,
     LOG_CONTAINER_STRUCT,
     NO_COMPRESSION,
     OBJ_HEADER_BASE_STRUCT,
     ZLIB_DEFLATE,
-    BLFParseError,
     systemtime_to_timestamp,
 )
 from can.io.generic import BinaryIOMessageReader
 
 from fdi.errors import FileFormatError
 
-__all__ = ["MAX_CONTAINER_BYTES", "ResyncBLFReader"]
+__all__ = ["MAX_CONTAINER_BYTES", "MAX_OBJECT_BYTES", "ResyncBLFReader"]
 
 MAX_CONTAINER_BYTES = 64 << 20
 """Largest plausible log container (writers use about 128 kB)."""
+MAX_OBJECT_BYTES = 1 << 20
+"""Largest plausible object inside a container (CAN objects are 48–120 bytes; text and
+other objects may be longer)."""
+MAX_DAMAGE_RECORDS = 50
+"""Damage records kept in :attr:`ResyncBLFReader.damage` (all are counted)."""
+
 _HDR = OBJ_HEADER_BASE_STRUCT.size
+_CHDR = _HDR + LOG_CONTAINER_STRUCT.size
 _SCAN = 1 << 16
+_INFLATE_STEP = 2048
+_HEADER_SIZE = {1: 32, 2: 40}
+"""Object header size (base + v1 or v2 part) by header version."""
+_MIN_BODY = {
+    CAN_MESSAGE: CAN_MSG_STRUCT.size,
+    CAN_MESSAGE2: CAN_MSG_STRUCT.size,
+    CAN_ERROR_EXT: CAN_ERROR_EXT_STRUCT.size,
+    CAN_FD_MESSAGE: CAN_FD_MSG_STRUCT.size,
+    CAN_FD_MESSAGE_64: CAN_FD_MSG_64_STRUCT.size,
+    GLOBAL_MARKER: GLOBAL_MARKER_STRUCT.size,
+}
+"""Least body size (bytes after the object header) of the object types python-can reads."""
+_MAX_BODY = {
+    CAN_MESSAGE: CAN_MSG_STRUCT.size,
+    CAN_MESSAGE2: CAN_MSG_STRUCT.size + 8,
+    CAN_ERROR_EXT: CAN_ERROR_EXT_STRUCT.size + 8,
+    CAN_FD_MESSAGE: CAN_FD_MSG_STRUCT.size + 8,
+}
+"""Largest body size of the fixed-size CAN object types (a little slack for writers)."""
+_MAX_CHANNEL = 256
+_MAX_TYPE = 0xFF
+"""Largest object type (Vector's types are below 200)."""
+_INCOMPLETE = -1
+
+
+def _object_size(data: bytes, pos: int) -> int | None:
+    """Size of a plausible object whose header starts at ``pos`` (``LOBJ`` there).
+
+    Returns the object size, :data:`_INCOMPLETE` when the header looks valid but the object
+    runs past the end of ``data``, or None when the header (or a CAN frame's fields) is
+    not a valid object's.
+    """
+    if len(data) - pos < _HDR:
+        return _INCOMPLETE
+    sig, hsize, version, size, kind = OBJ_HEADER_BASE_STRUCT.unpack_from(data, pos)
+    if (
+        sig != b"LOBJ"
+        or _HEADER_SIZE.get(version) != hsize
+        or kind == LOG_CONTAINER
+        or (kind > _MAX_TYPE)
+    ):
+        return None
+    body = size - hsize
+    if not _MIN_BODY.get(kind, 0) <= body <= _MAX_BODY.get(kind, MAX_OBJECT_BYTES):
+        return None
+    if len(data) - pos < hsize + min(body, 16):
+        return _INCOMPLETE
+    if struct.unpack_from("<L", data, pos + _HDR)[0] not in (1, 2):  # timestamp unit
+        return None
+    if kind in (CAN_MESSAGE, CAN_MESSAGE2):
+        channel, _, dlc, can_id, _ = CAN_MSG_STRUCT.unpack_from(data, pos + hsize)
+        if (
+            channel > _MAX_CHANNEL
+            or dlc > 15
+            or can_id & 0x60000000
+            or (not can_id & CAN_MSG_EXT and can_id > 0x7FF)
+        ):
+            return None
+    return size if pos + size <= len(data) else _INCOMPLETE
+
+
+def _can_like(data: bytes, pos: int) -> bool:
+    """Whether the valid object at ``pos`` has a type python-can does not read but the
+    exact layout of a CAN frame object (a flipped type byte, most likely)."""
+    _, hsize, _, size, kind = OBJ_HEADER_BASE_STRUCT.unpack_from(data, pos)
+    if kind in _MIN_BODY or size - hsize != CAN_MSG_STRUCT.size:
+        return False
+    channel, _, dlc, can_id, _ = CAN_MSG_STRUCT.unpack_from(data, pos + hsize)
+    return (
+        channel <= _MAX_CHANNEL
+        and dlc <= 8
+        and not can_id & 0x60000000
+        and (bool(can_id & CAN_MSG_EXT) or can_id <= 0x7FF)
+    )
+
+
+def _lands(data: bytes, end: int) -> bool:
+    """Whether an object ending at ``end`` is followed by the next ``LOBJ`` (after up to 7
+    padding bytes) or by the end of ``data``."""
+    if end + 8 > len(data) and b"LOBJ" not in data[end:]:
+        return not data[end:].strip(b"\x00") or len(data) - end < 4
+    return data.find(b"LOBJ", end, end + 12) >= 0
+
+
+def _inflate(payload: bytes) -> tuple[bytes, str | None, bool]:
+    """Inflate a zlib stream, keeping every byte produced before an error.
+
+    Returns
+    -------
+    data : bytes
+        The bytes inflated (all of them up to the error).
+    error : str or None
+        What went wrong (None: a clean stream).
+    gap : bool
+        True when the output stops before the end of the stream (a deflate error or a cut
+        stream); False when only the Adler-32 check failed (all bytes were produced).
+    """
+    d = zlib.decompressobj()
+    out: list[bytes] = []
+    for i in range(0, len(payload), _INFLATE_STEP):
+        chunk = payload[i : i + _INFLATE_STEP]
+        saved = d.copy()
+        try:
+            out.append(d.decompress(chunk))
+        except zlib.error:
+            d = saved
+            for j in range(len(chunk)):
+                try:
+                    out.append(d.decompress(chunk[j : j + 1]))
+                except zlib.error as exc:
+                    why = str(exc).partition(": ")[2] or str(exc)
+                    check = "incorrect data check" in why
+                    return b"".join(out), f"{why} at compressed byte {i + j}", not check
+        if d.eof:
+            break
+    if not d.eof:
+        out.append(d.flush())
+        return b"".join(out), "the compressed stream ends early", True
+    return b"".join(out), None, False
 
 
 class ResyncBLFReader(can.BLFReader):
@@ -68,14 +220,20 @@ class ResyncBLFReader(can.BLFReader):
         self.path = str(path)
         BinaryIOMessageReader.__init__(self, path, mode="rb")
         self.damage: list[dict[str, Any]] = []
+        self.n_damage = 0
         self.skipped_bytes = 0
         self._sync = False
         self._cpos = 0
         self._tail = b""
+        self._tail_at = 0
         self._pos = 0
         self.file_size = self.uncompressed_size = self.object_count = 0
         self.start_timestamp = self.stop_timestamp = 0.0
-        head = self.file.read(FILE_HEADER_STRUCT.size)
+        f = self.file
+        f.seek(0, 2)
+        self._size = f.tell()
+        f.seek(0)
+        head = f.read(FILE_HEADER_STRUCT.size)
         whole = len(head) == FILE_HEADER_STRUCT.size
         if whole:
             h = FILE_HEADER_STRUCT.unpack(head)
@@ -83,140 +241,302 @@ class ResyncBLFReader(can.BLFReader):
             self.stop_timestamp = systemtime_to_timestamp(cast("Any", h[22:30]))
         if whole and head[:4] == b"LOGG":
             self.file_size, self.uncompressed_size, self.object_count = h[10], h[11], h[12]
-            hsize = h[1]
-            if not FILE_HEADER_STRUCT.size <= hsize <= (1 << 20):
-                self._record(4, f"damaged file header (header size {hsize}); read from "
-                             f"byte {FILE_HEADER_SIZE}", 0)
-                hsize = FILE_HEADER_SIZE
-            self.file.seek(hsize)
+            self._start = self._first_container(int(h[1]))
             return
         k = self._scan(0)
         if k is None:
             if head[:4] == b"LOGG":
                 self._record(0, "truncated file header, no object", len(head))
-                self.file.seek(0, 2)
+                self._start = self._size
                 return
             self.file.close()
-            raise FileFormatError(self.path, "not a BLF file (no 'LOGG' header and no "
-                                  "'LOBJ' object)")
+            raise FileFormatError(
+                self.path, "not a BLF file (no 'LOGG' header and no 'LOBJ' object)"
+            )
         self._record(0, "damaged file header; reading from the first object", k)
-        self.file.seek(k)
+        self._start = k
 
+    def _first_container(self, hsize: int) -> int:
+        """Where the first container starts: after the declared header size when a
+        container header is there, else after the standard 144-byte header, else at the
+        first container header found (a damaged header size is recorded)."""
+        f = self.file
+        for start in (hsize, FILE_HEADER_SIZE):
+            if not FILE_HEADER_STRUCT.size <= start <= (1 << 20) or start >= self._size:
+                continue
+            f.seek(start)
+            if self._container_score(f.read(_CHDR))[0] >= 5:
+                if start != hsize:
+                    self._record(
+                        4, f"damaged file header (header size {hsize}); read from byte {start}", 0
+                    )
+                return start
+        k = self._scan(FILE_HEADER_STRUCT.size, container=True)
+        if k is None:
+            k = self._scan(FILE_HEADER_STRUCT.size)
+        start = self._size if k is None else k
+        self._record(
+            4,
+            f"damaged file header (header size {hsize}); read from the first object (byte {start})",
+            max(0, start - FILE_HEADER_SIZE),
+        )
+        return start
+
+    # ----------------------------------------------------------------- bookkeeping
     def _record(self, where: int, why: str, skipped: int, kind: str = "resync") -> None:
         self.skipped_bytes += skipped
-        if len(self.damage) < 50:
-            self.damage.append({"where": f"byte {where}", "why": why, "kind": kind,
-                                "skipped_bytes": int(skipped)})
+        self.n_damage += 1
+        if len(self.damage) < MAX_DAMAGE_RECORDS:
+            self.damage.append(
+                {"where": f"byte {where}", "why": why, "kind": kind, "skipped_bytes": int(skipped)}
+            )
 
-    def _scan(self, start: int) -> int | None:
-        """Position of the next ``LOBJ`` at or after ``start`` (None: end of file)."""
+    def _scan(self, start: int, container: bool = False) -> int | None:
+        """Position of the next ``LOBJ`` at or after ``start`` (``container``: the next
+        plausible container header); None at the end of the file."""
         f = self.file
-        f.seek(start)
         pos = start
-        carry = b""
         while True:
-            block = f.read(_SCAN)
-            if not block:
+            f.seek(pos)
+            buf = f.read(_SCAN + _CHDR)
+            if len(buf) < 4:
                 return None
-            buf = carry + block
             k = buf.find(b"LOBJ")
-            if k >= 0:
-                return pos - len(carry) + k
-            carry = buf[-3:]
-            pos += len(block)
+            while k >= 0:
+                if not container or self._container_header(buf[k : k + _CHDR]) is not None:
+                    return pos + k
+                k = buf.find(b"LOBJ", k + 1)
+            if len(buf) < _SCAN + _CHDR:
+                return None
+            pos += _SCAN
+
+    @staticmethod
+    def _container_score(head: bytes) -> tuple[int, int]:
+        """(how many of the six fields of a container header hold a valid value, the
+        declared size): signature, header size, header version, object type, size bounds,
+        compression method. One flipped byte spoils at most one field."""
+        if len(head) < _CHDR:
+            return 0, 0
+        sig, hsize, version, size, kind = OBJ_HEADER_BASE_STRUCT.unpack_from(head)
+        method, _ = LOG_CONTAINER_STRUCT.unpack_from(head, _HDR)
+        score = (
+            (sig == b"LOBJ")
+            + (hsize == _HDR)
+            + (version == 1)
+            + (kind == LOG_CONTAINER)
+            + (_CHDR <= size <= MAX_CONTAINER_BYTES)
+            + (method in (NO_COMPRESSION, ZLIB_DEFLATE))
+        )
+        return score, int(size)
+
+    @classmethod
+    def _container_header(cls, head: bytes) -> int | None:
+        """The size of a plausible container header with a valid signature (None: not
+        one); at most one other field may be damaged."""
+        score, size = cls._container_score(head)
+        return size if head[:4] == b"LOBJ" and score >= 5 else None
+
+    def _lands_on_container(self, end: int) -> int | None:
+        """Where the container after one that ends at ``end`` starts (after up to 7
+        padding bytes), when a container-like header is there (one field may be damaged)."""
+        f = self.file
+        f.seek(end)
+        after = f.read(8 + _CHDR)
+        for pad in range(8):
+            if after[:pad].strip(b"\x00"):
+                break
+            if self._container_score(after[pad : pad + _CHDR])[0] >= 5:
+                return end + pad
+        return None
+
+    def _next_container(self, pos0: int) -> tuple[int, int, bool, bool]:
+        """(body end, next container position, size trusted, cut by the end of the
+        file) of the container at ``pos0``. Its declared size is trusted when it lands on
+        the next container's header (or on the end of the file with no container
+        after it); else the body ends at the next plausible container header."""
+        f = self.file
+        f.seek(pos0)
+        score, size = self._container_score(f.read(_CHDR))
+        if score >= 4 and _CHDR <= size <= MAX_CONTAINER_BYTES:
+            end = pos0 + size
+            if end < self._size:
+                k = self._lands_on_container(end)
+                if k is not None:
+                    return end, k, True, False
+                f.seek(end)
+                if not f.read(8).strip(b"\x00") and end + 8 >= self._size:
+                    return end, self._size, True, False
+            elif self._scan(pos0 + 1, container=True) is None:
+                return self._size, self._size, True, end > self._size
+        nxt = self._scan(pos0 + 1, container=True)
+        nxt = self._size if nxt is None else nxt
+        return nxt, nxt, False, False
+
+    def _read_container(self, pos0: int) -> tuple[bytes, int, bool]:
+        """The uncompressed bytes of the container at ``pos0``, where the next one starts,
+        and whether the bytes stop short (a gap follows them)."""
+        f = self.file
+        end, nxt, trusted, cut = self._next_container(pos0)
+        f.seek(pos0)
+        raw = f.read(end - pos0)
+        if not trusted:
+            self._record(
+                pos0,
+                "damaged container header (its size does not reach the "
+                f"next container); its body is taken up to the next container "
+                f"(byte {nxt})",
+                0,
+            )
+        elif self._container_score(raw[:_CHDR])[0] < 6 and len(raw) >= _CHDR:
+            self._record(
+                pos0,
+                "damaged container header field (its size is confirmed by the next container)",
+                0,
+            )
+        if len(raw) < _CHDR:
+            self._record(pos0, "truncated container header at the end", len(raw), "truncated")
+            return b"", nxt, True
+        method, declared = LOG_CONTAINER_STRUCT.unpack_from(raw, _HDR)
+        payload = raw[_CHDR:]
+        looks_zlib = (
+            len(payload) >= 2
+            and payload[0] & 0x0F == 8
+            and ((payload[0] << 8) | payload[1]) % 31 == 0
+        )
+        if method not in (NO_COMPRESSION, ZLIB_DEFLATE):
+            guess = ZLIB_DEFLATE if looks_zlib else NO_COMPRESSION
+            self._record(
+                pos0,
+                f"damaged compression method {method}; read as "
+                f"{'zlib' if guess == ZLIB_DEFLATE else 'uncompressed'}",
+                0,
+            )
+            method = guess
+        if method == NO_COMPRESSION:
+            if cut:
+                self._record(
+                    pos0,
+                    "truncated: the last container ends early (its frames up to the cut are kept)",
+                    0,
+                    "truncated",
+                )
+            return payload, nxt, cut
+        data, err, gap = _inflate(payload)
+        if err is not None:
+            if cut:
+                why = (f"truncated: the last container ends early ({err}); the "
+                       f"{len(data)} bytes inflated before the cut are kept")
+            else:
+                why = (f"damaged compressed container ({err}); the {len(data)} bytes "
+                       "inflated before it are kept")
+            self._record(pos0, why, 0, "truncated" if cut else "resync")
+        elif declared != len(data) and trusted:
+            self._record(
+                pos0, f"container declares {declared} uncompressed bytes, {len(data)} inflated", 0
+            )
+        return data, nxt, gap
 
     def __iter__(self) -> Iterator[can.Message]:
-        f = self.file
-        while True:
-            pos0 = f.tell()
-            head = f.read(_HDR)
-            if not head:
-                break
-            if len(head) < _HDR:
-                self._record(pos0, "truncated object header at the end", len(head),
-                             "truncated")
-                break
-            sig, _, _, size, kind = OBJ_HEADER_BASE_STRUCT.unpack(head)
-            if sig != b"LOBJ" or size < _HDR or size > MAX_CONTAINER_BYTES or (
-                    kind == LOG_CONTAINER and size < _HDR + LOG_CONTAINER_STRUCT.size):
-                nxt = self._scan(pos0 + 1)
-                end = nxt if nxt is not None else f.seek(0, 2)
-                self._record(pos0, "damaged object header; resynchronised at the next "
-                             "object" if nxt is not None else "damaged object header; no "
-                             "object after it", end - pos0)
+        pos = self._start
+        while pos < self._size:
+            data, nxt, gap = self._read_container(pos)
+            self._cpos = pos
+            yield from self._feed(data)
+            if gap:
+                self._flush_tail("the bytes after it are lost")
                 self._sync = True
-                self._tail = b""
-                if nxt is None:
-                    break
-                f.seek(nxt)
-                continue
-            body = f.read(size - _HDR)
-            cut = len(body) < size - _HDR
-            f.read(size % 4)
-            if kind != LOG_CONTAINER or len(body) < LOG_CONTAINER_STRUCT.size:
-                if cut:
-                    self._record(pos0, "truncated object at the end of the file",
-                                 _HDR + len(body), "truncated")
-                    break
-                continue
-            method, _ = LOG_CONTAINER_STRUCT.unpack_from(body)
-            payload = body[LOG_CONTAINER_STRUCT.size:]
-            try:
-                if method == NO_COMPRESSION:
-                    data = payload
-                elif method == ZLIB_DEFLATE:
-                    data = zlib.decompressobj().decompress(payload)
-                else:
-                    raise ValueError(f"unknown compression method {method}")
-            except (zlib.error, ValueError) as exc:
-                self._record(pos0, f"damaged container skipped ({exc})", size)
-                self._sync = True
-                self._tail = b""
-                if cut:
-                    break
-                continue
-            self._cpos = pos0
-            yield from self._parse_container(data)
-            if cut:
-                self._record(pos0, "truncated: the last container ends early (its frames up "
-                             "to the cut are kept)", _HDR + len(body), "truncated")
-                break
+            pos = max(nxt, pos + 1)
+        self._flush_tail("at the end of the file")
+        self._check_times()
         self.stop()
 
-    def _parse_container(self, data: bytes) -> Iterator[can.Message]:
+    def _check_times(self) -> None:
+        """The file header's start and stop times against the last object: a damaged
+        start time shifts every timestamp (recorded, the frames are kept)."""
+        last = getattr(self, "_last_t", None)
+        if last is None or not self.start_timestamp or not self.stop_timestamp:
+            return
+        off = last - self.stop_timestamp
+        if abs(off) > 1.0:
+            self._record(
+                40,
+                f"file header start/stop times disagree with the objects by "
+                f"{off:+.3f} s: every timestamp may be shifted",
+                0,
+            )
+
+    # ----------------------------------------------------------------- objects
+    def _flush_tail(self, why: str) -> None:
+        """Drop the object cut by a gap or the end of the file (counted)."""
+        if self._tail.strip(b"\x00"):
+            self._record(self._cpos, f"object cut short ({why})", len(self._tail), "truncated")
+        self._tail = b""
+
+    def _resync(self, data: bytes, start: int) -> int:
+        """Position of the next valid object header at or after ``start`` (confirmed by
+        the object after it), or of a plausible header cut by the end of ``data``."""
+        k = data.find(b"LOBJ", start)
+        while k >= 0:
+            size = _object_size(data, k)
+            if size == _INCOMPLETE:
+                return k
+            if size is not None and _lands(data, k + size):
+                j = data.find(b"LOBJ", k + size, k + size + 12)
+                if j < 0 or _object_size(data, j) is not None:
+                    return k
+            k = data.find(b"LOBJ", k + 1)
+        return max(start, len(data) - 3)
+
+    def _feed(self, chunk: bytes) -> Iterator[can.Message]:
+        """Walk the objects of ``chunk`` (after the tail of the previous containers)."""
+        data = self._tail + chunk if self._tail else chunk
+        pos = 0
         if self._sync:
-            k = data.find(b"LOBJ")
-            if k < 0:
-                self._record(self._cpos, "container without an object start after a "
-                             "damaged one",
-                             len(data))
-                return
-            if k:
-                self.skipped_bytes += k
-            data = data[k:]
+            pos = self._resync(data, 0)
+            if pos:
+                self.skipped_bytes += pos
             self._sync = False
-        elif self._tail:
-            data = self._tail + data
+        run = pos
+        n = len(data)
         while True:
-            self._pos = 0
-            last = -1
+            k = data.find(b"LOBJ", pos, pos + 8)
+            if k < 0 and n - pos < 8 and not (n - pos >= 4 and data[pos:].strip(b"\x00")):
+                break  # padding or a split header
+            size = _object_size(data, k) if k >= 0 else None
+            if size == _INCOMPLETE:
+                pos = k
+                break
+            if size is not None and _lands(data, k + size):
+                if _can_like(data, k):
+                    self._record(
+                        self._cpos,
+                        f"object of type {data[k + 12]} with a CAN "
+                        "frame's layout skipped (a damaged object type)",
+                        size,
+                    )
+                pos = k + size
+                continue
+            yield from self._messages(data[run:pos])
+            nxt = self._resync(data, pos + 1)
+            why = "damaged object header" if k >= 0 else "no object header"
+            self._record(
+                self._cpos,
+                f"{why} at uncompressed offset {pos - len(self._tail)}"
+                f"; resynchronised at the next valid object",
+                nxt - pos,
+            )
+            pos = run = nxt
+            if pos >= n - 3:
+                break
+        yield from self._messages(data[run:pos])
+        self._tail = data[pos:]
+
+    def _messages(self, objects: bytes) -> Iterator[can.Message]:
+        """python-can's parsing of a run of validated objects."""
+        if objects:
             try:
-                for msg in self._parse_data(data):
-                    if self._pos == last:
-                        raise BLFParseError("object size does not advance")
-                    last = self._pos
+                for msg in self._parse_data(objects):
+                    self._last_t = msg.timestamp
                     yield msg
-                break
             except struct.error:
-                break
-            except BLFParseError as exc:
-                k = data.find(b"LOBJ", self._pos + 1)
-                end = len(data) if k < 0 else k
-                why = str(exc) or "no object signature"
-                self._record(self._cpos, f"damaged object inside the container skipped ({why})",
-                             end - self._pos)
-                if k < 0:
-                    self._pos = len(data)
-                    break
-                data = data[k:]
-        self._tail = data[self._pos:]
+                return

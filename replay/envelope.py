@@ -50,7 +50,8 @@ def flight_rates(flight: Flight, cal: Calibration | None = None
         if s.n != flight.n:
             raise ConfigError(f"{flight.source}: {flight.n} sensors, the calibration has "
                               f"{s.n}")
-        return flight.raw * s.scale_factors - s.biases, s.H
+        with np.errstate(over="ignore", invalid="ignore"):   # 1e308 raw: inf, flagged
+            return flight.raw * s.scale_factors - s.biases, s.H
     groups = flight.imu_groups()
     if flight.raw_unit != "rad/s" or not groups or any(len(g) != 3 for g in groups.values()):
         raise ConfigError(f"{flight.source}: without a calibration the envelope needs IMU "
@@ -136,12 +137,14 @@ def flying_mask(flight: Flight, rest_rate_rad_s: float = 0.1) -> np.ndarray:
     """
     groups = list(flight.imu_groups().values())
     idx = groups[0] if groups else list(range(min(3, flight.n)))
-    r = np.linalg.norm(np.nan_to_num(np.asarray(flight.raw, float)[:, idx]), axis=1)
+    # hypot: no overflow on huge values (1e308 counts as moving, NaN as still)
+    r = np.hypot.reduce(np.nan_to_num(np.asarray(flight.raw, float)[:, idx]), axis=1)
     n = r.shape[0]
     out = np.zeros(n, bool)
     if n == 0:
         return out
-    base = float(np.median(r[: max(1, n // 20)]))
+    with np.errstate(over="ignore"):                   # the median of two 1e308: inf
+        base = float(np.median(r[: max(1, n // 20)]))
     moving = r > base + rest_rate_rad_s
     if moving.any():
         a = int(np.argmax(moving))

@@ -29,13 +29,29 @@ The tuning here
   of the episode rate (items 1);
 - the remaining effects (2, 3, and the calibration-uncertainty inflation of the thresholds
   during manoeuvres) are measured: healthy flights of this calibration are simulated
-  (:mod:`replay.flight_sim`, errors drawn from the calibration covariance, manoeuvres
-  inside the calibration's validated rate range and at most 300 °/s:
-  :func:`correction_max_rate_dps`; a set calibrated at rest is corrected at rest), the
-  full-set false-alarm rate is counted, and the per-scale shares are scaled by
-  target/measured (``correction``); twice, the second time at the corrected level. Below
+  (:mod:`replay.flight_sim`, manoeuvres inside the calibration's validated rate range and
+  at most 300 °/s: :func:`correction_max_rate_dps`; a set calibrated at rest is corrected
+  at rest), the false-alarm episodes counted, and the per-scale shares scaled
+  (``correction``); twice, the second time at the corrected level. Below
   :data:`MIN_SIMULATED_RATE` per hour the correction is measured at that rate and carried
   over (stated in the assumptions).
+
+Your calibration, not the average one
+-------------------------------------
+A user has one calibration, whose error against the true sensors is one draw from its
+covariance. The monitor's inflation for the calibration uncertainty in a manoeuvre is right
+on average over draws, but a draw whose misalignment and scale error point along the parity
+directions the flight excites raises the healthy statistic beyond it: tuned on the average
+over draws (one draw per flight), one cone6 tuning at 60/h gave 44 to 268 alarms/h over 20
+draws (mean 82). So each correction pass flies :data:`DRAWS` fixed draws of the
+calibration error (:mod:`thresholds.per_draw`), each for the same time (at most the time
+:data:`MAX_DRAW_ALARMS` alarms take at the target, so its Poisson noise is small against
+the spread), and the correction makes the worse of ``mean/target`` and
+``p95/(2·target)`` equal to 1 (:meth:`thresholds.per_draw.DrawRates.excess`): the rate
+holds on average at the target and for draws of this calibration's error up to the 95th
+percentile at twice the target. The second pass steps with the sensitivity of that ratio
+to the correction measured between the passes (:func:`_next_correction`).
+docs/thresholds-per-calibration.md gives the Monte Carlo (``studies/per_calibration.py``).
 
 Drift over the horizon
 ----------------------
@@ -92,12 +108,14 @@ from fdi.parity import parity_matrix
 from fdi.settings import MAX_SCALE, MonitorSettings, Thresholds
 from fdi.tails import TailChoice, tail_variance_factors
 from fdi.units import DPS
+from thresholds.per_draw import rate_error_factor
 from thresholds.select import TUNING_SCHEMA
 
-__all__ = ["CORRECTION_MAX_RATE_DPS", "MAX_DEAD_TIME_SHARE", "MAX_SHARE_OF_TOP",
-           "MIN_SIMULATED_RATE", "ZERO_COUNT_UPPER", "DetectableSize", "Tuning", "check_scales",
-           "correction_max_rate_dps", "detectable_at", "detectable_sizes",
-           "max_false_alarms_per_hour", "max_upcrossing_rate", "tune", "upcrossing_probability"]
+__all__ = ["CORRECTION_MAX_RATE_DPS", "CORRECTION_PASSES", "DRAWS", "MAX_DEAD_TIME_SHARE",
+           "MAX_DRAW_ALARMS", "MAX_SHARE_OF_TOP", "MIN_SIMULATED_RATE", "ZERO_COUNT_UPPER",
+           "DetectableSize", "Tuning", "check_scales", "correction_max_rate_dps",
+           "detectable_at", "detectable_sizes", "max_false_alarms_per_hour",
+           "max_upcrossing_rate", "tune", "upcrossing_probability"]
 
 MAX_DEAD_TIME_SHARE = 0.1
 """Largest share of the mean time between false alarms that one alarm's shortest episode
@@ -111,6 +129,14 @@ CORRECTION_MAX_RATE_DPS = 300.0
 validated range (:func:`correction_max_rate_dps`)."""
 DETECTION_PROBABILITY = 0.99
 """Detection probability of the detectable sizes."""
+CORRECTION_PASSES = 2
+"""Correction passes of ``rimu tune`` (each flies every draw); the second's step uses the
+rate's measured sensitivity to the correction (:func:`_next_correction`)."""
+DRAWS = 20
+"""Drawn calibration errors flown per correction pass (:mod:`thresholds.per_draw`)."""
+MAX_DRAW_ALARMS = 60.0
+"""A draw is flown at most as long as this many alarms at the target take (its Poisson
+noise is then small against the spread over draws)."""
 
 
 @lru_cache(maxsize=4096)
@@ -501,53 +527,16 @@ def _drift_assumptions(cal: Calibration, kind: str, thr: Thresholds, vf_no_drift
                     "tau_h = 1.5 h + T_c/2 (random walk beyond the longest resolved tau)"}
 
 
-def tune(cal: Calibration, *, false_alarms_per_hour: float, kind: str = "gyro",
-         scales: int | tuple[int, ...] = 7, simulate_hours: float = 4.0,
-         seed: int = 0, progress: bool = False,
-         drift_horizon_s: float | None = None,
-         max_rate_dps: float | None = None) -> Tuning:
-    """Thresholds whose full-set false-alarm rate is ``false_alarms_per_hour``.
-
-    Parameters
-    ----------
-    cal : Calibration
-        Must carry residual statistics (an Allan table) for ``kind``.
-    false_alarms_per_hour : float
-        Target rate of false alarms (episodes) per hour of healthy operation (> 0).
-    kind : str
-    scales : int or tuple of int
-        K (windows 1 ... 2^K) or window lengths (samples).
-    simulate_hours : float
-        Hours of healthy flight simulated per correction pass, at most the time in which
-        about 150 false alarms are expected (0: analytic shares only).
-    seed : int
-        Seed of the correction flights.
-    progress : bool
-        A bar over the simulated flight hours (:func:`fdi.progress.current`: shown by the
-        CLI on stderr once the work has taken 3 s).
-    drift_horizon_s : float, optional
-        How long after its data the calibration must hold (s): the horizon of the drift
-        term (module docstring). Default: the span of the calibration data. Ignored when
-        the calibration has no drift model.
-    max_rate_dps : float, optional
-        Largest body rate of the correction flights (°/s). Default: inside the
-        calibration's validated range (:func:`correction_max_rate_dps`).
-
-    Raises
-    ------
-    ConfigError
-        No residual statistics, a target that is not positive and finite or so high that
-        alarms would merge (:data:`MAX_DEAD_TIME_SHARE`), an unknown scale, a set without
-        redundancy, a negative or non-finite horizon.
-    """
-    R = float(false_alarms_per_hour)
+def _check_target(cal: Calibration, R: float, kind: str, drift_horizon_s: float | None
+                  ) -> float:
+    """The calibration's sample rate once the target, the horizon and the residual
+    statistics pass (:func:`tune`'s Raises)."""
     if not (math.isfinite(R) and R > 0):
         raise ConfigError(f"--false-alarms-per-hour must be positive and finite, got {R:g}")
     if drift_horizon_s is not None and not (math.isfinite(float(drift_horizon_s))
                                             and float(drift_horizon_s) >= 0):
         raise ConfigError(f"--drift-horizon-s must be >= 0 and finite, got {drift_horizon_s}")
-    s = cal.kind(kind)
-    if s.allan is None:
+    if cal.kind(kind).allan is None:
         raise ConfigError(f"the calibration has no residual statistics for its {kind} "
                           f"sensors (no Allan table of the residuals): recalibrate with the "
                           f"Allan table on, or give thresholds by hand")
@@ -560,89 +549,209 @@ def tune(cal: Calibration, *, false_alarms_per_hour: float, kind: str = "gyro",
             f"alarm lasts at least {dead_s:.3g} s (clear_samples), and at this rate that "
             f"is more than {MAX_DEAD_TIME_SHARE:.0%} of the time between alarms; alarms "
             f"would merge and that is not a false-alarm budget")
-    sc = check_scales(cal, scales, kind=kind, sample_rate_hz=fs)
+    return fs
+
+
+def _max_rate(cal: Calibration, kind: str, max_rate_dps: float | None) -> tuple[float, str]:
+    """The correction flights' largest rate (°/s) and where it comes from."""
     if max_rate_dps is None:
-        max_rate_dps, rate_source = _correction_rate(cal, kind)
-    else:
-        rate_source = "given"
+        return _correction_rate(cal, kind)
     if not (math.isfinite(float(max_rate_dps)) and float(max_rate_dps) >= 0):
         raise ConfigError(f"--max-rate-dps must be >= 0 and finite, got {max_rate_dps}")
+    return float(max_rate_dps), "given"
+
+
+def _next_correction(history: list[tuple[float, float]], floor: float) -> float:
+    """The next correction γ from the passes so far, ``(γ, excess)`` each.
+
+    The first step assumes the rate falls as 1/γ (γ·excess); later steps use the slope
+    e of log(excess) against log(γ) between the last two passes (clipped to 0.3–2: the
+    rate of a draw whose alarms come from its calibration error falls more slowly than
+    1/γ), γ·excess^(1/e).
+    """
+    g, x = history[-1]
+    e = 1.0
+    if len(history) > 1:
+        g0, x0 = history[-2]
+        if g != g0 and x > 0 and x0 > 0:
+            e = float(np.clip(-math.log(x / x0) / math.log(g / g0), 0.3, 2.0))
+    return max(g * x ** (1.0 / e), floor)
+
+
+def _correct(cal: Calibration, base: dict[str, Any], df: int, *, kind: str,
+             simulate_hours: float, draws: int, seed: int, progress: bool,
+             max_rate_dps: float) -> tuple[float, list[dict[str, Any]], float]:
+    """The simulated correction γ of the per-scale shares, its passes, and the rate Rc
+    it was measured at (module docstring; :mod:`thresholds.per_draw`)."""
+    from fdi.progress import current
+    from thresholds.per_draw import draw_rates, draw_seeds
+
+    R, fs, sc = base["false_alarms_per_hour"], base["sample_rate_hz"], base["scales"]
+    Rc = max(R, MIN_SIMULATED_RATE)
+    n_pass = CORRECTION_PASSES if simulate_hours > 0 and draws > 0 else 0
+    per_draw = min(simulate_hours / max(draws, 1), MAX_DRAW_ALARMS / Rc)
+    seeds = draw_seeds(seed, draws)
+    # the command's progress (fdi.progress): a bar on a terminal, a line every 10 s else
+    bar = (current().bar(n_pass * draws * per_draw, "simulated flight", unit="h")
+           if progress and n_pass else None)
+    floor = _least_correction(Rc, fs, sc, df)
+    gamma, passes, history = 1.0, [], []
+    for p in range(n_pass):
+        thr_c = _share_thresholds({**base, "false_alarms_per_hour": Rc},
+                                  Rc / (3600.0 * fs) / len(sc) / gamma, df)
+        dr = draw_rates(cal, thr_c, seeds, hours=per_draw, max_rate_dps=max_rate_dps,
+                        kind=kind, seed=seed + 1000 * p, bar=bar)
+        x = dr.excess(Rc)
+        passes.append({"target_per_hour": Rc, "false_alarms": int(sum(dr.alarms)),
+                       "exposure_h": float(sum(dr.hours)), "rate_per_hour": dr.mean,
+                       "quantile_per_hour": dr.true_quantile(), "excess": x,
+                       "correction_before": gamma, "bound_only": sum(dr.alarms) == 0,
+                       "per_draw": dr.to_dict()})
+        history.append((gamma, x))
+        gamma = _next_correction(history, floor)
+    if bar is not None:
+        bar.close()
+    return gamma, passes, Rc
+
+
+def _correction_record(gamma: float, passes: list[dict[str, Any]], R: float, Rc: float,
+                       capped: bool, max_rate_dps: float, rate_source: str, draws: int
+                       ) -> dict[str, Any]:
+    """``assumptions["simulation_correction"]`` of the tuning file."""
+    from thresholds.per_draw import DRAW_QUANTILE, DRAW_QUANTILE_FACTOR
+
+    q = f"p{100 * DRAW_QUANTILE:g}"
+    covers = (f"holds for draws of this calibration's error up to {q}: the mean over "
+              f"{draws} drawn calibration errors at the target, the {q} draw at "
+              f"<= {DRAW_QUANTILE_FACTOR:g}x the target")
+    note = ("not simulated: analytic shares only (conservative)" if not passes
+            else f"measured at {Rc:g}/h and carried over to {R:g}/h" if R < Rc
+            else "measured at the target")
+    if any(p["bound_only"] for p in passes):
+        note += "; no alarm in a pass: its 95 % upper bound used (a conservative step)"
+    if capped:
+        note += "; held at the least correction every scale's share allows"
+    return {
+        "factor": gamma, "passes": passes,
+        "flights": "replay.flight_sim healthy, per drawn calibration error (axis, scale, "
+                   "bias from the calibration covariance, thresholds.per_draw), "
+                   f"manoeuvres up to {float(max_rate_dps):.4g} deg/s",
+        "criterion": covers if passes else "none (not simulated)",
+        "draws": draws if passes else 0,
+        "max_rate_dps": float(max_rate_dps),
+        "max_rate_source": rate_source,
+        "extrapolated": R < MIN_SIMULATED_RATE and bool(passes),
+        "capped": bool(capped),
+        "note": note}
+
+
+def _tail_assumptions(choices: tuple[TailChoice, ...]) -> list[dict[str, Any]]:
+    return [{"scale": c.scale, "choice": c.choice, "allan_factor": c.allan_factor,
+             "overbound_factor": c.overbound_factor, "variance_factor": c.factor,
+             "excess_kurtosis": c.excess_kurtosis, "gpd_shape": c.shape,
+             "gpd_shape_sd": c.shape_sd, "text": c.text()} for c in choices]
+
+
+def _drift_note(cal: Calibration, kind: str, drift_horizon_s: float | None) -> str:
+    d = cal.kind(kind).drift
+    if d is None:
+        return ""
+    h = d.span_s if drift_horizon_s is None else float(drift_horizon_s)
+    return (f"; parity drift over a {h:g} s horizon (offset variance up to "
+            f"{d.offset_variance(drift_horizon_s):.3g} per sample, fdi.drift)")
+
+
+def tune(cal: Calibration, *, false_alarms_per_hour: float, kind: str = "gyro",
+         scales: int | tuple[int, ...] = 7, simulate_hours: float = 8.0,
+         seed: int = 0, progress: bool = False,
+         drift_horizon_s: float | None = None,
+         max_rate_dps: float | None = None, draws: int = DRAWS) -> Tuning:
+    """Thresholds whose full-set false-alarm rate is ``false_alarms_per_hour``, for the
+    calibration the user has (over its uncertainty), not only on average.
+
+    Parameters
+    ----------
+    cal : Calibration
+        Must carry residual statistics (an Allan table) for ``kind``.
+    false_alarms_per_hour : float
+        Target rate of false alarms (episodes) per hour of healthy operation (> 0).
+    kind : str
+    scales : int or tuple of int
+        K (windows 1 ... 2^K) or window lengths (samples).
+    simulate_hours : float
+        Hours of healthy flight simulated per correction pass, shared by the ``draws``
+        drawn calibration errors, each at most the time in which
+        :data:`MAX_DRAW_ALARMS` false alarms are expected (0: analytic shares only).
+    seed : int
+        Seed of the correction flights and of the drawn calibration errors.
+    progress : bool
+        A bar over the simulated flight hours (:func:`fdi.progress.current`: shown by the
+        CLI on stderr once the work has taken 3 s).
+    drift_horizon_s : float, optional
+        How long after its data the calibration must hold (s): the horizon of the drift
+        term (module docstring). Default: the span of the calibration data. Ignored when
+        the calibration has no drift model.
+    max_rate_dps : float, optional
+        Largest body rate of the correction flights (°/s). Default: inside the
+        calibration's validated range (:func:`correction_max_rate_dps`).
+    draws : int
+        Drawn calibration errors per correction pass (:mod:`thresholds.per_draw`): the
+        correction holds the mean over them at the target and their
+        :data:`thresholds.per_draw.DRAW_QUANTILE` quantile at
+        :data:`thresholds.per_draw.DRAW_QUANTILE_FACTOR` × the target.
+
+    Raises
+    ------
+    ConfigError
+        No residual statistics, a target that is not positive and finite or so high that
+        alarms would merge (:data:`MAX_DEAD_TIME_SHARE`), an unknown scale, a set without
+        redundancy, a negative or non-finite horizon.
+    """
+    R = float(false_alarms_per_hour)
+    fs = _check_target(cal, R, kind, drift_horizon_s)
+    s = cal.kind(kind)
+    sc = check_scales(cal, scales, kind=kind, sample_rate_hz=fs)
+    max_rate_dps, rate_source = _max_rate(cal, kind, max_rate_dps)
     if s.n < 4:
         raise ConfigError(f"{s.n} {kind} sensors: no parity space, nothing to tune")
     df, u2, beta, _, _ = _parity_geometry(cal, kind)
     vf = variance_factors(s.allan, s.noise_covariance, fs, sc)
     base = {"kind": kind, "n": s.n, "sample_rate_hz": fs, "false_alarms_per_hour": R,
             "scales": sc, "variance_factor": vf, "detector": "windows"}
-    per_sample = R / (3600.0 * fs)
-    gamma = 1.0
-    passes = []
-    Rc = max(R, MIN_SIMULATED_RATE)
-    n_pass = 2 if simulate_hours > 0 else 0
-    from fdi.progress import current
-
-    # the command's progress (fdi.progress): a bar on a terminal, a line every 10 s else
-    bar = (current().bar(n_pass * min(simulate_hours, 150.0 / Rc), "simulated flight",
-                         unit="h") if progress and n_pass else None)
-    for p in range(n_pass):
-        thr_c = _share_thresholds({**base, "false_alarms_per_hour": Rc},
-                                  Rc / (3600.0 * fs) / len(sc) / gamma, df)
-        cnt, hrs = simulated_rate(cal, thr_c, hours=min(simulate_hours, 150.0 / Rc),
-                                  seed=seed + 1000 * p, kind=kind, bar=bar,
-                                  max_rate_dps=float(max_rate_dps))
-        # no alarm at all measures no rate, only a bound: the 95 % upper bound of the
-        # count (-ln 0.05 = 3.0 alarms) makes the step a conservative one
-        meas = (cnt if cnt > 0 else ZERO_COUNT_UPPER) / hrs
-        passes.append({"target_per_hour": Rc, "false_alarms": cnt, "exposure_h": hrs,
-                       "rate_per_hour": cnt / hrs, "correction_before": gamma,
-                       "bound_only": cnt == 0})
-        gamma = max(gamma * meas / Rc, _least_correction(Rc, fs, sc, df))
-    if bar is not None:
-        bar.close()
+    ref = _share_thresholds(base, R / (3600.0 * fs) / len(sc), df)
+    qf = rate_error_factor(cal, max(ref.threshold), kind, seed=seed)
+    base["rate_error_factor"] = qf.factor
+    gamma, passes, Rc = _correct(cal, base, df, kind=kind, simulate_hours=simulate_hours,
+                                 draws=int(draws), seed=seed, progress=progress,
+                                 max_rate_dps=float(max_rate_dps))
     floor = _least_correction(R, fs, sc, df)
     capped = gamma < floor
     gamma = max(gamma, floor)
-    thr = _share_thresholds(base, per_sample / len(sc) / gamma, df)
+    thr = _share_thresholds(base, R / (3600.0 * fs) / len(sc) / gamma, df)
     # the simulated correction is measured on Gaussian flights with the Allan factors; the
     # measured tails then inflate the variance per scale at the alpha it ended with
     vf_tail, choices = tail_variance_factors(s.tails, sc, thr.alpha, vf)
     # then the drift expected over the horizon (fdi.drift), on top of noise and tail
     vf_used = drift_variance_factors(s.drift, sc, vf_tail, drift_horizon_s, thr.alpha)
-    drift_note = ""
-    if s.drift is not None:
-        h = s.drift.span_s if drift_horizon_s is None else float(drift_horizon_s)
-        drift_note = (f"; parity drift over a {h:g} s horizon (offset variance up to "
-                      f"{s.drift.offset_variance(drift_horizon_s):.3g} per sample, "
-                      f"fdi.drift)")
+    per_draw = (f"; rate term x{qf.factor:.3g} for the p95 calibration error "
+                f"(thresholds.per_draw)" + (f"; the mean over {int(draws)} drawn calibration "
+                                            f"errors at the target, the p95 draw at <= 2x"
+                                            if passes else ""))
     notes = (f"tuned for {R:g} false alarms/h: exact white-noise upcrossing rate per scale, "
-             f"equal shares, simulated correction {gamma:.3f}{tail_note(choices)}"
-             f"{drift_note} (rimu tune)")
+             f"equal shares, simulated correction {gamma:.3f}{per_draw}{tail_note(choices)}"
+             f"{_drift_note(cal, kind, drift_horizon_s)} (rimu tune)")
     thr = Thresholds(kind=kind, n=s.n, sample_rate_hz=fs, false_alarms_per_hour=R,
                      scales=sc, alpha=thr.alpha, variance_factor=vf_used,
                      threshold=thr.threshold, detector="windows", notes=notes,
                      calibration_fingerprint=cal.fingerprint(),
-                     noise_model=noise_model(choices))
+                     noise_model=noise_model(choices), rate_error_factor=qf.factor)
     ass = _assumptions(cal, thr, kind, df, beta)
-    ass["residual_tails"]["per_scale"] = [
-        {"scale": c.scale, "choice": c.choice, "allan_factor": c.allan_factor,
-         "overbound_factor": c.overbound_factor, "variance_factor": c.factor,
-         "excess_kurtosis": c.excess_kurtosis, "gpd_shape": c.shape,
-         "gpd_shape_sd": c.shape_sd, "text": c.text()} for c in choices]
+    ass["residual_tails"]["per_scale"] = _tail_assumptions(choices)
     ass["drift"] = _drift_assumptions(cal, kind, thr, vf_tail, drift_horizon_s, u2)
-    ass["method"] = "rimu tune: upcrossing shares + simulated correction"
-    ass["simulation_correction"] = {
-        "factor": gamma, "passes": passes,
-        "flights": "replay.flight_sim healthy, errors drawn from the calibration covariance, "
-                   f"manoeuvres up to {float(max_rate_dps):.4g} deg/s, 60-600 s",
-        "max_rate_dps": float(max_rate_dps),
-        "max_rate_source": rate_source,
-        "extrapolated": R < MIN_SIMULATED_RATE and bool(passes),
-        "capped": bool(capped),
-        "note": ("not simulated: analytic shares only (conservative)" if not passes
-                 else f"measured at {Rc:g}/h and carried over to {R:g}/h" if R < Rc
-                 else "measured at the target")
-        + ("; no alarm in a pass: its 95 % upper bound used (a conservative step)"
-           if any(p["bound_only"] for p in passes) else "")
-        + ("; held at the least correction every scale's share allows"
-           if capped else "")}
+    ass["method"] = "rimu tune: upcrossing shares + simulated correction per drawn error"
+    ass["rate_error_factor"] = qf.to_dict()
+    ass["simulation_correction"] = _correction_record(gamma, passes, R, Rc, capped,
+                                                      float(max_rate_dps), rate_source,
+                                                      int(draws))
     ass["created"] = datetime.now(UTC).isoformat(timespec="seconds")
     return Tuning(thr, detectable_sizes(cal, thr, kind=kind), ass, choices)

@@ -134,6 +134,62 @@ def _pick_reference(streams: list[ImuStream], reference: str | None) -> int:
     return names.index(reference)
 
 
+def _time_base_ok(s: ImuStream) -> bool:
+    """Whether a stream's time stamps can form a time base (two or more, a positive
+    finite median interval)."""
+    if s.size < 2:
+        return False
+    dt = _median_dt(s.t)
+    return bool(np.isfinite(dt) and dt > 0)
+
+
+def _drop_baseless(read: LogRead, streams: list[ImuStream], cleaned: list[Any],
+                   reference: str | None, min_imus: int
+                   ) -> tuple[list[ImuStream], list[Any], list[dict[str, Any]]]:
+    """Salvage: the streams that can form a time base, their cleaning records, and a
+    record of each stream dropped because it cannot (a log cut after its first sample).
+
+    Raises
+    ------
+    ConfigError
+        Fewer than ``min_imus`` streams remain, or ``reference`` names a dropped one.
+    """
+    keep = [i for i, s in enumerate(streams) if _time_base_ok(s)]
+    dropped = [{"name": s.name, "source": s.source, "samples": int(s.size),
+                "why": "cannot form a time base (fewer than two time stamps)"}
+               for i, s in enumerate(streams) if i not in keep]
+    named = ", ".join(f"{d['name']} ({d['source']}, {d['samples']} sample(s))"
+                      for d in dropped)
+    if len(keep) < min_imus:
+        raise ConfigError(f"{read.path}: {len(keep)} IMU stream(s) can form a time base, "
+                          f"{min_imus} needed; cannot form a time base from {named}")
+    if reference is not None and reference in {d["name"] for d in dropped}:
+        raise ConfigError(f"{read.path}: reference {reference} cannot form a time base "
+                          f"(dropped with {named}); pick another with --reference")
+    return [streams[i] for i in keep], [cleaned[i] for i in keep], dropped
+
+
+def _check_base(read: LogRead, name: str, tb: np.ndarray, dt_b: float) -> None:
+    """Refuse a reference stream that cannot be a time base: fewer than two time stamps,
+    or a rate no IMU has (time stamps in another unit than read)."""
+    if not np.isfinite(dt_b) or dt_b <= 0:
+        raise ConfigError(f"{read.path}: reference {name} has "
+                          f"{tb.shape[0]} time stamp(s); cannot form a time base (--salvage "
+                          "drops the IMU streams that cannot and keeps the others)")
+    if 1.0 / dt_b > MAX_SAMPLE_RATE_HZ:
+        raise ConfigError(f"{read.path}: {name} is sampled every {dt_b:.3g} s "
+                          f"({1.0 / dt_b:.3g} Hz), faster than any IMU (at most "
+                          f"{MAX_SAMPLE_RATE_HZ:g} Hz): the time stamps are in another unit "
+                          "than read (seconds taken as milliseconds?); set the time unit in "
+                          "the --map")
+    if 1.0 / dt_b < MIN_SAMPLE_RATE_HZ:
+        raise ConfigError(f"{read.path}: {name} is sampled every {dt_b:.3g} s "
+                          f"({1.0 / dt_b:.3g} Hz), slower than any IMU (at least "
+                          f"{MIN_SAMPLE_RATE_HZ:g} Hz): the time stamps are in another unit "
+                          "than read (milliseconds taken as seconds?); set the time unit in "
+                          "the --map")
+
+
 def _gaps(tb: np.ndarray, max_gap: float) -> list[dict[str, float]]:
     d = np.diff(tb)
     idx = np.flatnonzero(d > max_gap)
@@ -175,7 +231,7 @@ def _aux_columns(s: Any, i0: np.ndarray, i1: np.ndarray, w: np.ndarray,
 
 
 def align_streams(read: LogRead, *, reference: str | None = None, gap_factor: float = 2.5,
-                  tol_fraction: float = 0.01, salvage: bool = False
+                  tol_fraction: float = 0.01, salvage: bool = False, min_imus: int = 1
                   ) -> tuple[Flight, dict[str, Any]]:
     """Put the streams of ``read`` on one time base.
 
@@ -192,7 +248,12 @@ def align_streams(read: LogRead, *, reference: str | None = None, gap_factor: fl
         A sample within ``tol_fraction`` × the base's median interval of a base time is
         taken as on it (kept, not resampled).
     salvage : bool
-        Drop (and count) samples with rates beyond any gyro's range instead of refusing.
+        Drop (and count) samples with rates beyond any gyro's range instead of refusing,
+        and drop (and name: ``report["dropped_imus"]``, one line in
+        ``report["warnings"]``) the IMU streams that cannot form a time base (fewer than
+        two time stamps: a log cut after their first sample).
+    min_imus : int
+        With ``salvage``, the fewest IMU streams that must remain.
 
     Returns
     -------
@@ -206,7 +267,8 @@ def align_streams(read: LogRead, *, reference: str | None = None, gap_factor: fl
     ------
     ConfigError
         No stream has samples, ``reference`` names no IMU, rates beyond any gyro's range
-        (without ``salvage``), or a time base faster than any IMU.
+        (without ``salvage``), a time base faster than any IMU, or (with ``salvage``)
+        fewer than ``min_imus`` streams that can form a time base (naming the others).
     """
     cleaned = [_clean(s) for s in read.streams]
     for s, (_, dropped) in zip(read.streams, cleaned, strict=True):
@@ -218,24 +280,14 @@ def align_streams(read: LogRead, *, reference: str | None = None, gap_factor: fl
     streams = [c[0] for c in cleaned]
     if not streams or all(s.size == 0 for s in streams):
         raise ConfigError(f"{read.path}: no IMU samples to ingest")
+    baseless: list[dict[str, Any]] = []
+    if salvage:
+        streams, cleaned, baseless = _drop_baseless(read, streams, cleaned, reference,
+                                                    min_imus)
     r = _pick_reference(streams, reference)
     tb = streams[r].t
     dt_b = _median_dt(tb)
-    if not np.isfinite(dt_b) or dt_b <= 0:
-        raise ConfigError(f"{read.path}: reference {streams[r].name} has "
-                          f"{tb.shape[0]} time stamp(s); cannot form a time base")
-    if 1.0 / dt_b > MAX_SAMPLE_RATE_HZ:
-        raise ConfigError(f"{read.path}: {streams[r].name} is sampled every {dt_b:.3g} s "
-                          f"({1.0 / dt_b:.3g} Hz), faster than any IMU (at most "
-                          f"{MAX_SAMPLE_RATE_HZ:g} Hz): the time stamps are in another unit "
-                          "than read (seconds taken as milliseconds?); set the time unit in "
-                          "the --map")
-    if 1.0 / dt_b < MIN_SAMPLE_RATE_HZ:
-        raise ConfigError(f"{read.path}: {streams[r].name} is sampled every {dt_b:.3g} s "
-                          f"({1.0 / dt_b:.3g} Hz), slower than any IMU (at least "
-                          f"{MIN_SAMPLE_RATE_HZ:g} Hz): the time stamps are in another unit "
-                          "than read (milliseconds taken as seconds?); set the time unit in "
-                          "the --map")
+    _check_base(read, streams[r].name, tb, dt_b)
     tol = tol_fraction * dt_b
     m = tb.shape[0]
     gyro_cols, valid_cols, names, imu_groups = [], [], [], []
@@ -290,6 +342,10 @@ def align_streams(read: LogRead, *, reference: str | None = None, gap_factor: fl
                       "tolerance_s": tol, "gap_factor": gap_factor,
                       "gaps": gaps[:50], "n_gaps": len(gaps)},
         "imus": imus, "meta": read.meta,
+        "dropped_imus": baseless,
+        "warnings": [f"dropped {len(baseless)} IMU stream(s) that cannot form a time base: "
+                     + ", ".join(f"{d['name']} ({d['source']}, {d['samples']} sample(s))"
+                                 for d in baseless)] if baseless else [],
         "events": {"count": len(read.events),
                    "by_category": {c: sum(e.category == c for e in read.events)
                                    for c in sorted({e.category for e in read.events})}}}

@@ -431,43 +431,14 @@ def read_px4(path: str | Path, *, salvage: bool = False, topic: str = "auto") ->
         raise ConfigError(f"PX4 topic {topic!r} is not one of {', '.join(PX4_TOPICS)}")
     p = str(path)
     u, fh, data = _load(p)
-    try:
-        streams, meta = _streams(u, topic)
-    except KeyError as exc:        # a damaged format definition lost a field
-        raise FileFormatError(str(path), f"an IMU topic lacks the field {exc.args[0]!r} "
-                                         "(corrupt format definition?)",
-                              field=str(exc.args[0])) from None
-    meta["topic"] = streams[0].source.split("[")[0] if streams else None
+    streams, meta = _imu_streams(p, u, topic)
     _silent_warnings(data, meta, streams)
     meta["start_timestamp_us"] = int(u.start_timestamp)
     meta["dropouts"] = len(u.dropouts)
-    dmg = None
     if u.file_corruption:
-        offset, last = _cut_time(p, data)
-        stretches = _damaged_stretches(data, max(0, offset - 16))
-        lost = _lost_in_time(streams, last)
-        for x in stretches:
-            x["lost"] = {"imu_samples": lost if x is stretches[0] else {}}
-        before = sum(int(np.sum(s.t <= last)) for s in streams)
-        dmg = Damage(p, "corrupt ULog data (pyulog skipped bytes it could not read)",
-                     offset=offset, samples_before=before, stretches=tuple(stretches),
-                     samples_after=sum(s.size for s in streams) - before)
+        dmg = _corruption(p, data, streams)
     else:
-        short = _short_read(fh)
-        if short is not None:
-            before = sum(s.size for s in streams)
-            fixed = _splice_resync(p, data, short[0], topic) if salvage else None
-            if fixed is not None:
-                last = max((float(s.t[-1]) for s in streams if s.size), default=-np.inf)
-                streams, stretches = fixed
-                lost = _lost_in_time(streams, last)
-                for x in stretches:
-                    x["lost"] = {"imu_samples": lost if x is stretches[0] else {}}
-                dmg = Damage(p, short[1], offset=short[0], samples_before=before,
-                             stretches=tuple(stretches),
-                             samples_after=sum(s.size for s in streams) - before)
-            else:
-                dmg = Damage(p, short[1], offset=short[0], samples_before=before)
+        streams, dmg = _cut(p, fh, data, streams, topic, salvage)
     if dmg is not None and not salvage:
         raise dmg.error()
     if not streams or all(s.size == 0 for s in streams):
@@ -478,6 +449,53 @@ def read_px4(path: str | Path, *, salvage: bool = False, topic: str = "auto") ->
         last = max((float(s.t[-1]) for s in streams if s.size), default=np.inf)
         events = tuple(e for e in events if e.t_s <= last)
     return LogRead(p, "px4", tuple(streams), dmg, meta, events=events)
+
+
+def _imu_streams(p: str, u: Any, topic: str) -> tuple[list[ImuStream], dict[str, Any]]:
+    """The IMU streams of a parsed log and the reader's meta (``topic`` set)."""
+    try:
+        streams, meta = _streams(u, topic)
+    except KeyError as exc:        # a damaged format definition lost a field
+        raise FileFormatError(p, f"an IMU topic lacks the field {exc.args[0]!r} "
+                                 "(corrupt format definition?)",
+                              field=str(exc.args[0])) from None
+    meta["topic"] = streams[0].source.split("[")[0] if streams else None
+    return streams, meta
+
+
+def _corruption(p: str, data: bytes, streams: list[ImuStream]) -> Damage:
+    """The damage of a log pyulog flagged as corrupt (it resynchronised over it)."""
+    offset, last = _cut_time(p, data)
+    stretches = _damaged_stretches(data, max(0, offset - 16))
+    lost = _lost_in_time(streams, last)
+    for x in stretches:
+        x["lost"] = {"imu_samples": lost if x is stretches[0] else {}}
+    before = sum(int(np.sum(s.t <= last)) for s in streams)
+    return Damage(p, "corrupt ULog data (pyulog skipped bytes it could not read)",
+                  offset=offset, samples_before=before, stretches=tuple(stretches),
+                  samples_after=sum(s.size for s in streams) - before)
+
+
+def _cut(p: str, fh: Any, data: bytes, streams: list[ImuStream], topic: str,
+         salvage: bool) -> tuple[list[ImuStream], Damage | None]:
+    """Where pyulog stopped short (a cut file or a header claiming more bytes than the
+    file has): the damage, and with ``salvage`` the streams read on after a spliced
+    resync where one is found."""
+    short = _short_read(fh)
+    if short is None:
+        return streams, None
+    before = sum(s.size for s in streams)
+    fixed = _splice_resync(p, data, short[0], topic) if salvage else None
+    if fixed is None:
+        return streams, Damage(p, short[1], offset=short[0], samples_before=before)
+    last = max((float(s.t[-1]) for s in streams if s.size), default=-np.inf)
+    streams, stretches = fixed
+    lost = _lost_in_time(streams, last)
+    for x in stretches:
+        x["lost"] = {"imu_samples": lost if x is stretches[0] else {}}
+    return streams, Damage(p, short[1], offset=short[0], samples_before=before,
+                           stretches=tuple(stretches),
+                           samples_after=sum(s.size for s in streams) - before)
 
 
 def _bits(code: int) -> str:

@@ -80,6 +80,8 @@ def run(args: argparse.Namespace) -> int:
     for rd in reads:
         for w in rd.meta.get("warnings", []):
             print(f"  warning: {rd.path}: {w}")
+    for w in report["warnings"]:
+        print(f"  warning: {read.path}: {w}")
     for imu in report["imus"]:
         dropped = sum(imu["dropped"].values())
         print(f"  {imu['name']} ({imu['source']}): {imu['samples_in']} in, {imu['kept']} kept, "

@@ -48,9 +48,10 @@ def configure(p: argparse.ArgumentParser) -> None:
     p.add_argument("--scales", metavar="LIST",
                    help="window lengths in samples, e.g. 1,2,4,...,128 (default 1 ... 128)")
     p.add_argument("--kind", default="gyro", choices=("gyro", "accel"))
-    p.add_argument("--simulate-hours", type=nonnegative_float(MAX_SIMULATE_HOURS), default=4.0,
+    p.add_argument("--simulate-hours", type=nonnegative_float(MAX_SIMULATE_HOURS), default=8.0,
                    metavar="H",
-                   help="healthy flight hours simulated per correction pass (default 4; "
+                   help="healthy flight hours simulated per correction pass, shared by 20 drawn "
+                        "calibration errors (default 8; "
                         "0: analytic only)")
     p.add_argument("--seed", type=nonnegative_int(SEED_MAX), default=0,
                    help="seed of the correction flights")
@@ -100,6 +101,14 @@ def run(args: argparse.Namespace) -> int:
           f"sensors at {th.sample_rate_hz:g} Hz (correction {corr['factor']:.3g}: "
           f"{corr['note']}; flights up to {corr['max_rate_dps']:.3g} deg/s, "
           f"{corr['max_rate_source']})")
+    qf = tu.assumptions["rate_error_factor"]
+    last = corr["passes"][-1] if corr["passes"] else None
+    print(f"per calibration: rate term x{qf['factor']:.3g} (the p95 calibration error of "
+          f"the covariance, worst-direction gain {qf['worst_direction_gain_quantile']:.3g}); "
+          f"{corr['criterion']}"
+          + (f" (last pass, at correction {last['correction_before']:.3g}: mean "
+             f"{last['rate_per_hour']:.3g}/h, p95 {last['quantile_per_hour']:.3g}/h against "
+             f"{last['target_per_hour']:g}/h)" if last else ""))
     d0 = tu.detectable[0]
     print(f"{'scale':>6} {'window_s':>9} {'alpha':>10} {'chi2 thr':>9} {'var f':>6} "
           f"{'detectable (99 %)':>18} {'sigma':>7}")

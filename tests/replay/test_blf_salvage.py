@@ -1,0 +1,156 @@
+"""One flipped byte in a BLF log (issue 30): what :class:`replay.blf.ResyncBLFReader` keeps.
+
+Small logs written by python-can's BLF writer (default 128 KiB containers), compressed and
+uncompressed; one byte XORed at seeded random positions. Every frame carries a unique
+counter, so a frame is kept when its (time, id, data) is read back. Measured at scale by
+``python -m studies.blf_flips`` (docs/formats.md).
+"""
+
+from __future__ import annotations
+
+import zlib
+from collections import Counter
+from pathlib import Path
+
+import can
+import numpy as np
+import pytest
+
+from replay.blf import ResyncBLFReader, _inflate
+from replay.can_read import read_frames
+
+N = 6000
+PER_CONTAINER = can.BLFWriter.max_container_size / 48  # 48-byte CAN objects
+BUDGET = 0.02 * PER_CONTAINER  # the issue's 2 % of a container
+
+
+def _write(path: Path, level: int) -> bytes:
+    rng = np.random.default_rng(7)
+    with can.BLFWriter(str(path), compression_level=level) as w:
+        for k in range(N):
+            w.on_message_received(
+                can.Message(
+                    timestamp=1_767_225_600.0 + k * 1e-3,
+                    arbitration_id=0x100 + k % 6,
+                    is_extended_id=False,
+                    data=int(k).to_bytes(4, "little") + rng.bytes(4),
+                )
+            )
+    return path.read_bytes()
+
+
+def _read(path: Path) -> tuple[Counter, ResyncBLFReader]:
+    r = ResyncBLFReader(path)
+    got = Counter(
+        (round(m.timestamp - r.start_timestamp, 4), m.arbitration_id, bytes(m.data)) for m in r
+    )
+    return got, r
+
+
+def _containers(raw: bytes) -> list[tuple[int, int]]:
+    out, pos = [], int.from_bytes(raw[4:8], "little")
+    while pos + 16 <= len(raw):
+        size = int.from_bytes(raw[pos + 8 : pos + 12], "little")
+        out.append((pos, size))
+        pos += size + size % 4
+    return out
+
+
+@pytest.fixture(scope="module")
+def logs(tmp_path_factory) -> dict[str, tuple[Path, bytes, Counter]]:
+    d = tmp_path_factory.mktemp("blf")
+    out = {}
+    for name, level in (("compressed", -1), ("plain", 0)):
+        p = d / f"{name}.blf"
+        raw = _write(p, level)
+        truth, r = _read(p)
+        assert sum(truth.values()) == N and not r.damage
+        out[name] = (p, raw, truth)
+    return out
+
+
+def _flip(tmp_path: Path, raw: bytes, pos: int, x: int) -> Path:
+    bad = bytearray(raw)
+    bad[pos] ^= x
+    q = tmp_path / f"flip{pos}.blf"
+    q.write_bytes(bytes(bad))
+    return q
+
+
+def _positions(raw: bytes, kind: str) -> list[int]:
+    heads = list(range(144))
+    body = []
+    for pos, size in _containers(raw):
+        heads += range(pos, pos + 32)
+        body += range(pos + 32, pos + size)
+    return heads if kind == "header" else body
+
+
+@pytest.mark.parametrize(
+    ("name", "kind"), [("plain", "header"), ("plain", "body"), ("compressed", "header")]
+)
+def test_one_flip_costs_at_most_two_percent_of_a_container(logs, tmp_path, name, kind):
+    """Headers of either file and object bytes of an uncompressed file: one flip loses at
+    most 2 % of a container (measured: at most 2 frames), and a frame that vanishes
+    without being replaced by an altered one is always recorded as damage."""
+    _, raw, truth = logs[name]
+    rng = np.random.default_rng(11)
+    pos = _positions(raw, kind)
+    worst = 0
+    for i in rng.choice(len(pos), size=30, replace=False):
+        got, r = _read(_flip(tmp_path, raw, pos[i], int(rng.integers(1, 256))))
+        lost = sum((truth - got).values())
+        altered = sum((got - truth).values())
+        worst = max(worst, lost)
+        assert lost <= BUDGET, (pos[i], lost, r.damage)
+        if lost > altered:
+            assert r.damage, (pos[i], lost)
+    assert worst <= 2
+
+
+def test_flip_in_compressed_bytes_stays_inside_its_container(logs, tmp_path):
+    """Inside compressed bytes deflate sets the loss (docs/formats.md): every frame of the
+    other containers is kept, every changed read is recorded, and a bad Adler-32 alone
+    drops nothing."""
+    _, raw, truth = logs["compressed"]
+    cont = _containers(raw)
+    # frames per container, from the pristine uncompressed stream
+    rng = np.random.default_rng(12)
+    for _ in range(12):
+        c = int(rng.integers(len(cont)))
+        start, size = cont[c]
+        pos = int(rng.integers(start + 32, start + size))
+        got, r = _read(_flip(tmp_path, raw, pos, int(rng.integers(1, 256))))
+        lost = sum((truth - got).values())
+        assert lost <= PER_CONTAINER + 1, (pos, lost)
+        if got != truth:
+            assert r.damage, pos
+    start, size = cont[0]
+    got, r = _read(_flip(tmp_path, raw, start + size - 1, 0x5A))  # Adler-32 byte
+    assert got == truth
+    assert any("incorrect data check" in d["why"] for d in r.damage)
+
+
+def test_inflate_keeps_every_byte_before_the_error():
+    """Output before a deflate error or a cut is real data and is kept."""
+    data = b"".join(int(k).to_bytes(4, "little") * 3 for k in range(20000))
+    z = zlib.compress(data)
+    got, err, gap = _inflate(z[: len(z) // 2])
+    assert gap and err == "the compressed stream ends early"
+    assert len(got) > len(data) // 3 and data.startswith(got)
+    got, err, gap = _inflate(z)
+    assert got == data and err is None and not gap
+
+
+def test_damage_reaches_the_frame_accounting(logs, tmp_path):
+    """The damage is counted in what read_frames returns (and refused with --strict)."""
+    from fdi.errors import ReplayError
+
+    _, raw, _ = logs["plain"]
+    start, _ = _containers(raw)[0]
+    q = _flip(tmp_path, raw, start + 32 + 48 * 5 + 8, 0x40)  # an object's size field
+    frames, acct = read_frames(q, progress=False)
+    assert len(frames.t) >= N - 2
+    assert acct.errors and acct.errors[0]["kind"] == "resync"
+    with pytest.raises(ReplayError, match=q.name):
+        read_frames(q, strict=True, progress=False)
