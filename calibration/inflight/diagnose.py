@@ -540,6 +540,46 @@ def _holm_rest(ps: dict[str, float], alpha: float, M: int, k: int) -> set[str]:
     return out
 
 
+def _imu_records(flight: Flight, cal: Calibration, r0s: dict[str, np.ndarray],
+                 selected: dict[str, Any], per_imu: dict[str, Any],
+                 groups: dict[str, list[int]], keep: np.ndarray, offsets: dict[str, float],
+                 alpha_each: float, vib_on: Any, vib_tests: dict[str, Any]) -> tuple:
+    """Per IMU the records :func:`diagnose_flight` returns: (effects, detail, timing, the
+    drift's first-order parts, channels, RMS before, RMS after, not testable)."""
+    t = flight.t
+    not_testable: list[dict[str, str]] = []
+    effects, detail, timing = [], [], []
+    p1: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+    chans, before, after = [], [], []
+    for g in r0s:
+        r0 = r0s[g]
+        chosen, fit, sl = selected[g]
+        names = [flight.sensor_names[i] for i in groups[g]]
+        chans += names
+        before += list(np.sqrt(np.mean(r0[keep] ** 2, axis=0)) / DPS)
+        after += list(np.sqrt(np.mean(fit.residual**2, axis=0)) / DPS)
+        sensors = [i + 1 for i in groups[g]]
+        grp = _slow_group(chosen, sl, fit, t, keep, g, sensors)
+        effects += [_effect_record(c, s, fit, g, sensors, cal)
+                    for c, s in zip(chosen, sl, strict=True)
+                    if grp is None or c.name not in grp["members"]]
+        effects += [grp] if grp is not None else []
+        timing.append(_timing_record(g, chosen, sl, fit, per_imu[g], r0, keep, cal,
+                                     offsets[g], alpha_each))
+        d1 = _drift_p1(chosen, sl, fit, per_imu[g], r0, keep)
+        if d1 is not None:
+            p1[g] = d1
+        if g in vib_on:
+            effects.append(_vibration_record(vib_tests[g], g, sensors))
+        elif g not in vib_tests:
+            not_testable.append({"name": "vibration_noise", "imu": g,
+                                 "reason": "no accelerometer logged beside the gyros"})
+        detail += _structure(fit.residual, flight.sample_rate_hz, alpha_each, names)
+        for f0 in _lines(fit.residual, flight.sample_rate_hz):
+            detail.append(f"{g}: a spectral line at {f0:.2f} Hz remains")
+    return effects, detail, timing, p1, chans, before, after, not_testable
+
+
 def diagnose_flight(flight: Flight, cal: Calibration, *, alpha: float = 0.01,
                     reference: str | None = None) -> dict[str, Any]:
     """Diagnose the parity residual of a flight (module docstring).
@@ -588,35 +628,10 @@ def diagnose_flight(flight: Flight, cal: Calibration, *, alpha: float = 0.01,
     vib_tests = {g: _vibration_noise(selected[g][1].residual, v[keep])
                  for g, v in vib.items() if v is not None}
     vib_on = _holm_rest({g: v[2] for g, v in vib_tests.items()}, alpha, M, k)
-    effects, detail, timing = [], [], []
-    p1: dict[str, tuple[np.ndarray, np.ndarray]] = {}
-    chans, before, after = [], [], []
-    for g in res:
-        r0 = r0s[g]
-        chosen, fit, sl = selected[g]
-        names = [flight.sensor_names[i] for i in groups[g]]
-        chans += names
-        before += list(np.sqrt(np.mean(r0[keep] ** 2, axis=0)) / DPS)
-        after += list(np.sqrt(np.mean(fit.residual**2, axis=0)) / DPS)
-        sensors = [i + 1 for i in groups[g]]
-        grp = _slow_group(chosen, sl, fit, t, keep, g, sensors)
-        effects += [_effect_record(c, s, fit, g, sensors, cal)
-                    for c, s in zip(chosen, sl, strict=True)
-                    if grp is None or c.name not in grp["members"]]
-        effects += [grp] if grp is not None else []
-        timing.append(_timing_record(g, chosen, sl, fit, per_imu[g], r0, keep, cal,
-                                     offsets[g], alpha_each))
-        d1 = _drift_p1(chosen, sl, fit, per_imu[g], r0, keep)
-        if d1 is not None:
-            p1[g] = d1
-        if g in vib_on:
-            effects.append(_vibration_record(vib_tests[g], g, sensors))
-        elif g not in vib_tests:
-            not_testable.append({"name": "vibration_noise", "imu": g,
-                                 "reason": "no accelerometer logged beside the gyros"})
-        detail += _structure(fit.residual, flight.sample_rate_hz, alpha_each, names)
-        for f0 in _lines(fit.residual, flight.sample_rate_hz):
-            detail.append(f"{g}: a spectral line at {f0:.2f} Hz remains")
+    rec = _imu_records(flight, cal, r0s, selected, per_imu, groups, keep, offsets,
+                       alpha_each, vib_on, vib_tests)
+    effects, detail, timing, p1, chans, before, after = rec[:7]
+    not_testable += rec[7]
     return {"schema": DIAGNOSE_SCHEMA, "source": flight.source, "reference": ref,
             "alpha": alpha, "candidates": M,
             "correction": "Holm over all candidates (the after-checks at alpha/M)",

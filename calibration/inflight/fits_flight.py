@@ -93,6 +93,97 @@ def _z(d: float, sd: float) -> float:
     return d / sd if sd > 0 else (0.0 if d == 0 else math.inf)
 
 
+_Row = tuple[str, str, str, float, float, float, str]
+
+
+def _turn_on_sd(cal: Calibration, ref: str | None, imu: str, k: int) -> float:
+    """Run-to-run sd of IMU ``imu``'s axis k bias relative to the reference (rad/s)."""
+    s_c = cal.kind("gyro")
+    names = [c.name for c in s_c.sensors]
+
+    def sd_of(g: str | None) -> float:
+        if g is None:
+            return 0.0
+        nm = f"{g}.{_AXES[k]}"
+        if nm not in names:
+            return 0.0
+        v = getattr(s_c.sensors[names.index(nm)], "bias_turn_on_sd", None)
+        return float(v) if v is not None and math.isfinite(float(v)) else 0.0
+
+    return math.hypot(sd_of(imu), sd_of(ref))
+
+
+def _alignment_rows(cal: Calibration, flight_cal: Calibration, ref: str | None) -> list[_Row]:
+    """Scale, misalignment and bias of every IMU and axis."""
+    a_c, a_f = cal.extras.inflight_alignment, flight_cal.extras.inflight_alignment
+    raw: list[_Row] = []
+    if a_c is None or a_f is None:
+        return raw
+    for g, ac in a_c.imus.items():
+        af = a_f.imus.get(g)
+        if af is None:
+            continue
+        for k, ax in enumerate(_AXES):
+            raw.append((g, "scale", ax, 100 * ac.scale[k], 100 * af.scale[k],
+                        100 * math.hypot(ac.scale_sd[k], af.scale_sd[k]), "%"))
+            raw.append((g, "misalignment", ax, math.degrees(ac.rotation[k]),
+                        math.degrees(af.rotation[k]),
+                        math.degrees(math.hypot(ac.rotation_sd[k], af.rotation_sd[k])),
+                        "deg"))
+            raw.append((g, "bias", ax, ac.bias[k] / DPS, af.bias[k] / DPS,
+                        math.sqrt(ac.bias_sd[k] ** 2 + af.bias_sd[k] ** 2
+                                  + _turn_on_sd(cal, ref, g, k) ** 2) / DPS, "deg/s"))
+    return raw
+
+
+def _timing_rows(cal: Calibration, flight_cal: Calibration) -> list[_Row]:
+    """Time offset and timing jitter of every IMU."""
+    t_c, t_f = cal.extras.inflight, flight_cal.extras.inflight
+    raw: list[_Row] = []
+    if t_c is None or t_f is None:
+        return raw
+    for g, tc in t_c.imus.items():
+        tf = t_f.imus.get(g)
+        if tf is None:
+            continue
+        if tc.time_offset_s is not None and tf.time_offset_s is not None:
+            raw.append((g, "time offset", "", tc.time_offset_s / _MS,
+                        tf.time_offset_s / _MS,
+                        math.hypot(tc.time_offset_sd_s, tf.time_offset_sd_s) / _MS, "ms"))
+        if tc.timing_jitter_s is not None and tf.timing_jitter_s is not None:
+            raw.append((g, "jitter", "", tc.timing_jitter_s / _MS, tf.timing_jitter_s / _MS,
+                        math.hypot(tc.timing_jitter_sd_s, tf.timing_jitter_sd_s) / _MS,
+                        "ms"))
+    return raw
+
+
+def _n_eff(c: Calibration) -> float:
+    a = c.extras.inflight_alignment
+    if a is None or not a.imus:
+        return math.nan
+    al = next(iter(a.imus.values()))
+    return al.samples / max(int(al.hac_lags), 1)
+
+
+def _noise_rows(cal: Calibration, flight_cal: Calibration) -> list[_Row]:
+    """The noise level of every sensor both calibrations have (log ratio)."""
+    s_c, s_f = cal.kind("gyro"), flight_cal.kind("gyro")
+    names = [c.name for c in s_c.sensors]
+    f_names = [c.name for c in s_f.sensors]
+    ne = [_n_eff(cal), _n_eff(flight_cal)]
+    raw: list[_Row] = []
+    if not all(math.isfinite(x) and x > 0 for x in ne):
+        return raw
+    sd_log = math.sqrt(1.0 / (2 * ne[0]) + 1.0 / (2 * ne[1]))
+    for i, nm in enumerate(names):
+        if nm not in f_names:
+            continue
+        vc, vf = float(s_c.noise_sd[i]), float(s_f.noise_sd[f_names.index(nm)])
+        if vc > 0 and vf > 0:
+            raw.append((nm.split(".")[0], "noise", nm, vc / DPS, vf / DPS, sd_log, "deg/s"))
+    return raw
+
+
 def parameter_checks(cal: Calibration, flight_cal: Calibration, *, alpha: float = 0.01
                      ) -> list[ParameterCheck]:
     """Every parameter of ``cal`` against ``flight_cal`` (module docstring).
@@ -100,73 +191,10 @@ def parameter_checks(cal: Calibration, flight_cal: Calibration, *, alpha: float 
     Both must be in-flight calibrations of the same IMU set (the same IMU names); the
     parameters one of them lacks are not tested.
     """
-    raw: list[tuple[str, str, str, float, float, float, str]] = []
-    a_c, a_f = cal.extras.inflight_alignment, flight_cal.extras.inflight_alignment
-    t_c, t_f = cal.extras.inflight, flight_cal.extras.inflight
-    s_c = cal.kind("gyro")
-    names = [c.name for c in s_c.sensors]
+    t_c = cal.extras.inflight
     ref = t_c.reference if t_c is not None else None
-
-    def turn_on(imu: str, k: int) -> float:
-        def sd_of(g: str | None) -> float:
-            if g is None:
-                return 0.0
-            nm = f"{g}.{_AXES[k]}"
-            if nm not in names:
-                return 0.0
-            v = getattr(s_c.sensors[names.index(nm)], "bias_turn_on_sd", None)
-            return float(v) if v is not None and math.isfinite(float(v)) else 0.0
-
-        return math.hypot(sd_of(imu), sd_of(ref))
-
-    if a_c is not None and a_f is not None:
-        for g, ac in a_c.imus.items():
-            af = a_f.imus.get(g)
-            if af is None:
-                continue
-            for k, ax in enumerate(_AXES):
-                raw.append((g, "scale", ax, 100 * ac.scale[k], 100 * af.scale[k],
-                            100 * math.hypot(ac.scale_sd[k], af.scale_sd[k]), "%"))
-                raw.append((g, "misalignment", ax, math.degrees(ac.rotation[k]),
-                            math.degrees(af.rotation[k]),
-                            math.degrees(math.hypot(ac.rotation_sd[k], af.rotation_sd[k])),
-                            "deg"))
-                raw.append((g, "bias", ax, ac.bias[k] / DPS, af.bias[k] / DPS,
-                            math.sqrt(ac.bias_sd[k] ** 2 + af.bias_sd[k] ** 2
-                                      + turn_on(g, k) ** 2) / DPS, "deg/s"))
-    if t_c is not None and t_f is not None:
-        for g, tc in t_c.imus.items():
-            tf = t_f.imus.get(g)
-            if tf is None:
-                continue
-            if tc.time_offset_s is not None and tf.time_offset_s is not None:
-                raw.append((g, "time offset", "", tc.time_offset_s / _MS,
-                            tf.time_offset_s / _MS,
-                            math.hypot(tc.time_offset_sd_s, tf.time_offset_sd_s) / _MS, "ms"))
-            if tc.timing_jitter_s is not None and tf.timing_jitter_s is not None:
-                raw.append((g, "jitter", "", tc.timing_jitter_s / _MS, tf.timing_jitter_s / _MS,
-                            math.hypot(tc.timing_jitter_sd_s, tf.timing_jitter_sd_s) / _MS,
-                            "ms"))
-    s_f = flight_cal.kind("gyro")
-    f_names = [c.name for c in s_f.sensors]
-
-    def n_eff(c: Calibration) -> float:
-        a = c.extras.inflight_alignment
-        if a is None or not a.imus:
-            return math.nan
-        al = next(iter(a.imus.values()))
-        return al.samples / max(int(al.hac_lags), 1)
-
-    ne = [n_eff(cal), n_eff(flight_cal)]
-    if all(math.isfinite(x) and x > 0 for x in ne):
-        sd_log = math.sqrt(1.0 / (2 * ne[0]) + 1.0 / (2 * ne[1]))
-        for i, nm in enumerate(names):
-            if nm not in f_names:
-                continue
-            vc, vf = float(s_c.noise_sd[i]), float(s_f.noise_sd[f_names.index(nm)])
-            if vc > 0 and vf > 0:
-                raw.append((nm.split(".")[0], "noise", nm, vc / DPS, vf / DPS, sd_log,
-                            "deg/s"))
+    raw = (_alignment_rows(cal, flight_cal, ref) + _timing_rows(cal, flight_cal)
+           + _noise_rows(cal, flight_cal))
     M = max(len(raw), 1)
     zc = float(stats.norm.isf(alpha / (2 * M)))
     out = []

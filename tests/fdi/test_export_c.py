@@ -336,6 +336,20 @@ def test_same_answers_as_the_monitor(build, tmp_path, name):
     assert_same(res, case.c(build))
 
 
+def test_same_answers_with_a_rate_error_factor(build, tmp_path):
+    """``Thresholds.rate_error_factor`` q > 1 (``rimu tune``'s per-calibration term) reaches
+    the C module: its answers equal the monitor's, and q changes what the monitor gives (so
+    the comparison covers it)."""
+    case = faults_case("cone6", "both")
+    q_th = dataclasses.replace(case.th, rate_error_factor=2.18)
+    base = case.python()
+    case = dataclasses.replace(case, th=q_th)
+    res = case.python()
+    assert not np.allclose(res.protection_level, base.protection_level, equal_nan=True), \
+        "q = 2.18 left the protection level unchanged: the case does not cover it"
+    assert_same(res, build(case.cal, q_th).run(case.t, case.raw, case.valid))
+
+
 @pytest.mark.parametrize("bad", ["inf", "1e300", "backward-reset", "frozen"])
 def test_no_blind_spot_from_a_bad_time_stamp(build, bad):
     """Issue 28's must-hold in C: a bad time stamp, a sensor silent later, a step on another
