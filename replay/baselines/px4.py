@@ -193,6 +193,11 @@ def _px4_kernel(t, x, ok, p, lp, acc, last, same, last_t, demoted, clock,
     validator's reason (3 stale, 4 timeout), clock (2,) [time of the previous update,
     started]. Outputs per row: flagged, blamed, why (REASONS index), acc (k,), the value
     reported (the blamed or largest accumulated error).
+
+    One function on purpose (CC 40): it is the per-sample state machine of PX4's selector
+    (validator demotion, low-pass, accumulation, blame), compiled by numba as one loop so
+    that the block path and ``step`` run the same arithmetic; split into helper calls it
+    would need each state array passed and returned per sample.
     """
     N, k = ok.shape
     rate, thr, keep = p[_P_RATE], p[_P_ACC], p[_P_KEEP]
