@@ -44,9 +44,10 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from scipy import stats
 
 from fdi.units import DPS
+from studies.per_calibration import garwood
+from thresholds.per_draw import alarm_episodes
 
 TARGET_PER_HOUR = 1.0
 STEP_DPS = 10.0
@@ -78,29 +79,6 @@ def _part(flight: Any, sl: slice) -> Any:
     om = flight.omega_true[sl] if flight.omega_true is not None else None
     return replace(flight, t=flight.t[sl], raw=flight.raw[sl], valid=flight.valid[sl],
                    omega_true=om, aux=aux)
-
-
-def alarm_episodes(events: Sequence[Any]) -> list[Any]:
-    """The events that start an alarm episode (module docstring), in time order."""
-    out, open_ = [], False
-    for e in events:
-        if e.type == "detected":
-            out.append(e)
-            open_ = True
-        elif e.type == "health":
-            out.append(e)
-        elif e.type in ("isolated", "disagree"):
-            if not open_:
-                out.append(e)
-            open_ = open_ and e.type == "disagree"
-    return out
-
-
-def garwood(count: int, hours: float) -> tuple[float, float]:
-    """Exact Poisson 95 % interval of a rate (per hour)."""
-    lo = 0.0 if count == 0 else stats.chi2.ppf(0.025, 2 * count) / 2
-    hi = stats.chi2.ppf(0.975, 2 * count + 2) / 2
-    return lo / hours, hi / hours
 
 
 def _run(flight: Any, cal: Any, thr: Any, turn_on: str) -> tuple[Any, Any]:

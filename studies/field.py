@@ -53,6 +53,7 @@ from fdi.calfile import Calibration
 from fdi.units import DPS
 from replay.faults import Fault
 from replay.flight_data import Flight
+from thresholds.per_draw import alarm_episodes
 
 __all__ = [
     "ALARM_EVENTS",
@@ -178,22 +179,6 @@ def run_monitor(flight: Flight, cal: Calibration, thresholds: Any,
 
     chain = chain_for_flight(flight, cal, ChainOptions(thresholds=thresholds, report=False))
     return chain.feed_whole(flight)
-
-
-def alarm_episodes(events: Sequence[Any]) -> list[Any]:
-    """The events that start an alarm episode (module docstring), in time order."""
-    out, open_ = [], False
-    for e in events:
-        if e.type == "detected":
-            out.append(e)
-            open_ = True
-        elif e.type == "health":
-            out.append(e)
-        elif e.type in ("isolated", "disagree"):
-            if not open_:
-                out.append(e)
-            open_ = open_ and e.type == "disagree"
-    return out
 
 
 def _answer_envelope(result: Any, fallback: np.ndarray) -> np.ndarray:

@@ -58,6 +58,7 @@ __all__ = [
     "X_GRID",
     "DrawRates",
     "RateErrorFactor",
+    "alarm_episodes",
     "draw_rates",
     "draw_seeds",
     "episodes",
@@ -101,19 +102,27 @@ def truth_for_draw(cal: Calibration, seed: int, kind: str = "gyro") -> Calibrati
     return replace(cal, sets={**cal.sets, kind: replace(s, sensors=sens)})
 
 
-def episodes(events: Any) -> int:
-    """Alarm episodes of a healthy run: ``detected`` and ``health`` events, and
-    ``isolated``/``disagree`` no detection opened."""
-    n, open_ = 0, False
+def alarm_episodes(events: Any) -> list[Any]:
+    """The events that start an alarm episode of a healthy run, in time order: every
+    ``detected`` and ``health`` event, and an ``isolated``/``disagree`` that no detection
+    opened."""
+    out, open_ = [], False
     for e in events:
         if e.type == "detected":
-            n, open_ = n + 1, True
+            out.append(e)
+            open_ = True
         elif e.type == "health":
-            n += 1
+            out.append(e)
         elif e.type in ("isolated", "disagree"):
-            n += 0 if open_ else 1
+            if not open_:
+                out.append(e)
             open_ = open_ and e.type == "disagree"
-    return n
+    return out
+
+
+def episodes(events: Any) -> int:
+    """How many alarm episodes a healthy run holds (:func:`alarm_episodes`)."""
+    return len(alarm_episodes(events))
 
 
 @dataclass(frozen=True)
