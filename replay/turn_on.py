@@ -347,9 +347,20 @@ def same_power_up(cal: Calibration, flight: Any) -> bool | None:
         return True
     if known.firmware and here["firmware"] and here["firmware"] != known.firmware:
         return False                # another firmware build: another power-up (replay.firmware)
-    if (here["samples"] == known.samples and known.t0_s is not None and known.t1_s is not None
-            and abs(here["t0_s"] - known.t0_s) < 1e-3 and abs(here["t1_s"] - known.t1_s) < 1e-3):
+    if _read_again(here, known):
         return True                 # the same recording read again (another format, float32)
+    return _part_of_the_log(cal, flight, here, known)
+
+
+def _read_again(here: dict[str, Any], known: Any) -> bool:
+    """The same sample count, first and last times within 1 ms of the calibrated flight's."""
+    return bool(here["samples"] == known.samples and known.t0_s is not None
+                and known.t1_s is not None and abs(here["t0_s"] - known.t0_s) < 1e-3
+                and abs(here["t1_s"] - known.t1_s) < 1e-3)
+
+
+def _part_of_the_log(cal: Calibration, flight: Any, here: dict[str, Any], known: Any) -> bool:
+    """The same whole source path as the calibration's, with times inside its flight's."""
     if not known.source or here["source"] != known.source or not here["samples"]:
         return False
     whole = cal.extras.source
