@@ -35,7 +35,7 @@ import numpy as np
 
 from fdi import state as S
 from fdi.answer import Answer, BlockResult, Event
-from fdi.blocks import CAPABILITY_CODE, CAPABILITY_NAMES, block_from_answers
+from fdi.blocks import BlockRows, block_from_answers, make_answer
 from fdi.calfile import Calibration
 from fdi.detector import default_thresholds
 from fdi.envelope import SATURATION, reason_names
@@ -54,7 +54,6 @@ _STOP_MASK = S.STOP_MASK
 _RETURN_DETECTED = S.RETURN_DETECTED
 _INF = float("inf")
 _CHUNK = 1 << 16
-_TIME_NAMES = np.array(S.TIME_STATUSES, dtype=object)
 
 
 class Monitor:
@@ -257,10 +256,7 @@ class Monitor:
         if ep.suspects or self._env:
             r[S.PROTECTION] = _INF                          # not verified: no bound
         o, s0, t0, p0 = self._columns
-        # an Answer without the frozen dataclass's per-field __setattr__ calls (a third
-        # of the step's Python time once); same fields, same object
-        a = object.__new__(Answer)
-        object.__setattr__(a, "__dict__", {
+        return make_answer({
             "t": t, "omega": r[o:o + 3],
             "omega_sd": self._omega_sd if osd is None else osd,
             "healthy": self._healthy_now,
@@ -270,18 +266,20 @@ class Monitor:
             "protection_level": float(r[S.PROTECTION]), "envelope": self._env,
             "unverified": ep.unverified, "suspects": ep.suspects,
             "time_status": S.TIME_STATUSES[self._time_code]})
-        return a
 
     def _internal_error(self, t: float, exc: Exception) -> Answer:
         """The answer to a sample whose processing failed: NaN rate, an event naming it."""
         self._state.counters[S.PHASE] = S.PHASE_HEALTH
         ev = Event(t, None, "health", f"internal error: {type(exc).__name__}: {exc}")
-        return Answer(t, np.full(3, _NAN), np.full(3, _NAN),
-                      self._healthy_array(self._mask), tuple(self._status),
-                      np.full(max(self.n - 3, 0), _NAN), np.full(self.K, _NAN),
-                      np.full(self.K, _NAN), (ev,), self._model.capability, _INF,
-                      self._env, np.ones(3, bool), self._episode.suspects,
-                      S.TIME_STATUSES[self._time_code])
+        return make_answer({
+            "t": t, "omega": np.full(3, _NAN), "omega_sd": np.full(3, _NAN),
+            "healthy": self._healthy_array(self._mask), "status": tuple(self._status),
+            "parity": np.full(max(self.n - 3, 0), _NAN), "statistics": np.full(self.K, _NAN),
+            "thresholds": np.full(self.K, _NAN), "events": (ev,),
+            "capability": self._model.capability, "protection_level": _INF,
+            "envelope": self._env, "unverified": np.ones(3, bool),
+            "suspects": self._episode.suspects,
+            "time_status": S.TIME_STATUSES[self._time_code]})
 
     def _step_stop(self, code: int, u: np.ndarray, corr: np.ndarray, ok: np.ndarray,
                    has_valid: bool, events: list[Event]) -> tuple[np.ndarray | None, bool]:
@@ -297,7 +295,7 @@ class Monitor:
 
     # ------------------------------------------------------------------ the loop
     def _advance(self, t: np.ndarray, raw: np.ndarray, corr: np.ndarray, valid: np.ndarray,
-                 has_valid: bool, out: np.ndarray, events: list[Event], rows: _Rows | None,
+                 has_valid: bool, out: np.ndarray, events: list[Event], rows: BlockRows | None,
                  chunk: int = _CHUNK, r0: int = 0, r1: int | None = None
                  ) -> np.ndarray | None:
         """Run the kernel over rows r0 … r1−1 (all by default), handling the samples it hands
@@ -319,7 +317,7 @@ class Monitor:
             if tc.shape[0] and (tc != self._time_code).any():
                 self._time_events(t, out[:, S.TIME_CODE], r, events, e)
             if rows is not None:
-                rows.fill(r, stop, self)
+                self._fill(rows, r, stop)
             r, osd = self._handle(stop, code, t, raw, corr, valid, has_valid, out, events, rows)
         return osd
 
@@ -333,7 +331,7 @@ class Monitor:
 
     def _handle(self, stop: int, code: int, t: np.ndarray, raw: np.ndarray, corr: np.ndarray,
                 valid: np.ndarray, has_valid: bool, out: np.ndarray, events: list[Event],
-                rows: _Rows | None) -> tuple[int, np.ndarray | None]:
+                rows: BlockRows | None) -> tuple[int, np.ndarray | None]:
         """Handle the sample the kernel stopped at; returns the next row and the sample's
         ω̂ sd when it is not the model's (incomplete sample)."""
         if code == S.STOP_NONE:
@@ -359,7 +357,7 @@ class Monitor:
             if code & S.STOP_VIBRATION:
                 self._on_vibration(tr, raw, corr, stop, out[stop], events)
         if rows is not None:
-            rows.fill(stop, stop + 1, self, osd)
+            self._fill(rows, stop, stop + 1, osd)
         return stop + 1, osd
 
     # ------------------------------------------------------------------ stops
@@ -538,7 +536,7 @@ class Monitor:
             return self._run_rows(t, raw, valid, parity, correction, envelope)
         N = ta.shape[0]
         out = np.empty((N, self._layout.width(parity)))
-        rows = _Rows(N, n)
+        rows = BlockRows(N, n)
         events: list[Event] = []
         if N:
             self._input.length_bad = False
@@ -557,7 +555,19 @@ class Monitor:
             finally:
                 c[S.HAS_PARITY] = 1                          # step() always fills the parity
                 c[S.PHASE] = S.PHASE_HEALTH                  # and starts a sample afresh
-        return rows.result(ta, out, self._layout, parity, events)
+        lay = self._layout
+        return rows.result(ta, out[:, S.OMEGA0:S.OMEGA0 + 3], out[:, S.STATS0:lay.thresholds0],
+                           out[:, lay.thresholds0:lay.parity0], out[:, S.PROTECTION],
+                           out[:, lay.parity0:] if parity else None, out[:, S.TIME_CODE],
+                           events)
+
+    def _fill(self, rows: BlockRows, r0: int, r1: int, omega_sd: np.ndarray | None = None
+              ) -> None:
+        """Rows r0 … r1−1 of a block answered by the current set and episode."""
+        ep = self._episode
+        rows.fill(r0, r1, self._healthy_array(self._mask), self._model.capability,
+                  self._model.omega_sd if omega_sd is None else omega_sd, self._env,
+                  ep.unverified, not (ep.suspects or self._env))
 
     def _run_rows(self, t: Any, raw: Any, valid: Any, parity: bool, correction: Any,
                   envelope: Any = None) -> BlockResult:
@@ -590,50 +600,3 @@ class Monitor:
 def _env_reason(code: int) -> str:
     """Why a sample is out of the envelope: the names of its bits, "shock+tumble"."""
     return "+".join(reason_names(code))
-
-
-class _Rows:
-    """Per-row outputs that change only at the monitor's stops: health, capability, ω̂ sd,
-    envelope, unverified axes and whether the answer is verified."""
-
-    def __init__(self, N: int, n: int) -> None:
-        self.healthy = np.empty((N, n), bool)
-        self.cap = np.empty(N, np.int8)
-        self.omega_sd = np.empty((N, 3))
-        self.envelope = np.empty(N, np.int64)
-        self.unverified = np.empty((N, 3), bool)
-        self.verified = np.empty(N, bool)
-
-    def fill(self, r0: int, r1: int, mon: Monitor, omega_sd: np.ndarray | None = None) -> None:
-        if r1 <= r0:
-            return
-        _fill_rows(self.healthy, r0, r1, mon._healthy_array(mon._mask))
-        self.cap[r0:r1] = CAPABILITY_CODE[mon.model.capability]
-        _fill_rows(self.omega_sd, r0, r1, mon.model.omega_sd if omega_sd is None else omega_sd)
-        self.envelope[r0:r1] = mon._env
-        _fill_rows(self.unverified, r0, r1, mon._episode.unverified)
-        self.verified[r0:r1] = not (mon._episode.suspects or mon._env)
-
-    def result(self, t: np.ndarray, out: np.ndarray, lay: S.OutLayout, parity: bool,
-               events: list[Event]) -> BlockResult:
-        pl = out[:, S.PROTECTION]
-        pl[~self.verified] = _INF                    # not verified: no bound (as step)
-        return BlockResult(t=t, omega=out[:, S.OMEGA0:S.OMEGA0 + 3], omega_sd=self.omega_sd,
-                           healthy=self.healthy, statistics=out[:, S.STATS0:lay.thresholds0],
-                           thresholds=out[:, lay.thresholds0:lay.parity0],
-                           protection_level=pl,
-                           capability=CAPABILITY_NAMES[self.cap], events=events,
-                           parity=out[:, lay.parity0:] if parity else None,
-                           envelope=self.envelope, unverified=self.unverified,
-                           time_status=_TIME_NAMES[out[:, S.TIME_CODE].astype(np.intp)])
-
-
-def _fill_rows(a: np.ndarray, r0: int, r1: int, row: np.ndarray) -> None:
-    """a[r0:r1] = row by doubling contiguous copies (a row-major array with a few columns:
-    ~6× faster than numpy's broadcast, which loops over the rows)."""
-    a[r0] = row
-    k = 1
-    while r0 + k < r1:
-        m = min(k, r1 - r0 - k)
-        a[r0 + k:r0 + k + m] = a[r0:r0 + m]
-        k += m
