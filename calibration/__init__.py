@@ -8,10 +8,10 @@ from fdi.lazy import attach
 
 _EXPORTS = {
     "MOUNTS": "calibration.turntable",
-    "NoiseModel": "calibration.simulate",
     "Sequence": "calibration.sequence",
     "SequenceStep": "calibration.sequence",
     "Session": "calibration.session",
+    "SessionNoise": "calibration.simulate",
     "Step": "calibration.session",
     "body_inputs": "calibration.turntable",
     "calibrate": "calibration.calibrate",
@@ -39,10 +39,10 @@ _EXPORTS = {
 """Public name → module defining it (imported on first use, PEP 562)."""
 __all__ = [
     "MOUNTS",
-    "NoiseModel",
     "Sequence",
     "SequenceStep",
     "Session",
+    "SessionNoise",
     "Step",
     "body_inputs",
     "calibrate",

@@ -6,7 +6,7 @@ result (:func:`run_stages` returns them all, :class:`CalibrationStages`):
 1. :func:`calibration.problem.gyro_problem` → :class:`~calibration.problem.GyroProblem`:
    per-segment means of the raw outputs and of the exact body-frame inputs (table rate,
    Earth rate, specific force from :meth:`calibration.session.Session.inputs`);
-2. :func:`calibration.linear_fit.gyro_rate_test` → :class:`~calibration.rate_test.RateTest`:
+2. :func:`calibration.linear_fit.gyro_rate_test` → :class:`~calibration.rate_test.RateTestFit`:
    the gyro rate test over the paired ±ω steps (:mod:`calibration.rate_test`,
    seed 000 Eqs. 16-19), with the Earth rate as modelled included in the inputs;
 3. :func:`calibration.linear_fit.fit_offsets` → :class:`~calibration.linear_fit.LinearFit`:
@@ -111,7 +111,7 @@ from calibration.linear_fit import (
 )
 from calibration.multiposition import MultiPosition, multiposition
 from calibration.problem import AccelProblem, GyroProblem, accel_problem, gyro_problem
-from calibration.rate_test import RateTest
+from calibration.rate_test import RateTestFit
 from calibration.residuals import noise_covariance, residual_step_stats
 from calibration.sensor_set import build_sensor_set, check_gains, display_units
 from calibration.session import Session
@@ -132,9 +132,9 @@ from fdi.extras import (
     Method,
     NoiseFit,
     NoiseModel,
+    RateTest,
     ResidualStep,
 )
-from fdi.extras import RateTest as RateTestRecord
 from fdi.units import EARTH_RATE
 
 __all__ = ["BIAS_METHODS", "MIN_STEP_SAMPLES", "NOISE_MODELS", "AccelStages",
@@ -152,7 +152,7 @@ class GyroStages:
     Attributes
     ----------
     problem : GyroProblem
-    rate_test : RateTest
+    rate_test : RateTestFit
     fit : LinearFit
     residuals : FitResiduals
     uncertainty : Uncertainty
@@ -161,7 +161,7 @@ class GyroStages:
     """
 
     problem: GyroProblem
-    rate_test: RateTest
+    rate_test: RateTestFit
     fit: LinearFit
     residuals: FitResiduals
     uncertainty: Uncertainty
@@ -434,7 +434,7 @@ def _extra(session: Session, g: GyroStages, er: EarthRateFit | None,
                                      "inputs from the turntable model with the Earth rate",
                              "bias": bias_method, "denoise": "db4 level 8 (approximation)"
                              if denoise else "none"}),
-        rate_test=RateTestRecord(pairs=tuple((int(nums[k]), int(nums[q]))
+        rate_test=RateTest(pairs=tuple((int(nums[k]), int(nums[q]))
                                              for k, q in g.rate_test.pairs),
                                  rates=_rows(g.rate_test.R),
                                  chi2_dof=tuple(np.asarray(res.rate_chi2_dof).tolist())),

@@ -2,7 +2,7 @@
 
 Residuals ``r = u − a·x − c (− β·z)`` per sample (raw units) over the bias steps give the
 per-sample noise covariance. Two checks test whiteness against the data: the scatter of
-the rate-step differences about the fit (:meth:`calibration.rate_test.RateTest.chi2`) and
+the rate-step differences about the fit (:meth:`calibration.rate_test.RateTestFit.chi2`) and
 the scatter of the per-step residual means, whose exact expectation under white noise is
 computed from the operators: with ``r_step = B·ū_seg``,
 ``E[Σ_k N_k r_k²] = σ²·tr(D·B·diag(1/N_seg)·Bᵀ)`` (D = diag N_k over the bias steps).
@@ -17,7 +17,7 @@ import scipy.stats
 
 from calibration.linear_fit import LinearFit
 from calibration.problem import GyroProblem
-from calibration.rate_test import RateTest
+from calibration.rate_test import RateTestFit
 from calibration.residuals import noise_covariance
 
 __all__ = ["FitResiduals", "fit_residuals", "whiteness_warnings"]
@@ -59,7 +59,7 @@ class FitResiduals:
     step_means: np.ndarray
 
 
-def fit_residuals(problem: GyroProblem, rt: RateTest, fit: LinearFit) -> FitResiduals:
+def fit_residuals(problem: GyroProblem, rt: RateTestFit, fit: LinearFit) -> FitResiduals:
     """Residuals, noise covariance and the two whiteness statistics (calibrate stage 4)."""
     m = problem.n_regressors
     bs = np.array(fit.bias_steps)

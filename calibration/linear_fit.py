@@ -20,7 +20,7 @@ import numpy as np
 
 from calibration.bias import offset_operator
 from calibration.problem import GyroProblem
-from calibration.rate_test import RateTest, rate_test
+from calibration.rate_test import RateTestFit, rate_test
 from fdi.errors import CalibrationError
 
 __all__ = ["MIN_STEP_SAMPLES", "LinearFit", "fail_steps", "fit_offsets", "gyro_rate_test"]
@@ -37,7 +37,7 @@ def fail_steps(source: str, kind: str, steps: list[tuple[int, int]]) -> Calibrat
                             f"least {MIN_STEP_SAMPLES} per step used by the calibration")
 
 
-def gyro_rate_test(problem: GyroProblem) -> RateTest:
+def gyro_rate_test(problem: GyroProblem) -> RateTestFit:
     """Least-squares gains ``a = h̃/SF`` from the paired rate steps (calibrate stage 2).
 
     Raises
@@ -161,7 +161,7 @@ def _turn_rows(problem: GyroProblem, op_model: np.ndarray,
     return out
 
 
-def fit_offsets(problem: GyroProblem, rt: RateTest, bias_method: str = "model") -> LinearFit:
+def fit_offsets(problem: GyroProblem, rt: RateTestFit, bias_method: str = "model") -> LinearFit:
     """Offsets of every gyro with the rate-test gains (calibrate stage 3).
 
     Without regressors: ``a`` from the rate test and ``c`` from the explicit model over every

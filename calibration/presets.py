@@ -33,7 +33,7 @@ import numpy as np
 
 from calibration.preset_names import PRESETS
 from calibration.sequence import Sequence, load_sequence
-from calibration.simulate import NoiseModel, configuration_of
+from calibration.simulate import SessionNoise, configuration_of
 from fdi.calfile import Calibration, SensorCal, SensorSet, tangent_basis
 from fdi.errors import ConfigError
 from fdi.geometry import Configuration, cone6, tetrad
@@ -52,7 +52,7 @@ class Preset(NamedTuple):
 
     sequence: Sequence
     truth: Calibration
-    noise: NoiseModel
+    noise: SessionNoise
 
     @property
     def config(self) -> Configuration:
@@ -171,7 +171,7 @@ def _tetrad_paper() -> Preset:
                            _TETRAD_BIAS_DPS, "deg/s", TETRAD_NOISE_DPS * DPS, "mV")
     cal = Calibration("tetrad", {"gyro": gyro}, 100.0, latitude_deg=-23.2,
                       extra={"preset": "tetrad-paper"})
-    return Preset(load_sequence("tetrad-paper"), cal, NoiseModel())
+    return Preset(load_sequence("tetrad-paper"), cal, SessionNoise())
 
 
 def _cone_paper() -> Preset:
@@ -187,7 +187,7 @@ def _cone_paper() -> Preset:
         sets[kind] = make_sensor_set(kind, cfg, Ht, sf, sfu, b, bu, sd, "LSB")
     cal = Calibration("cone6", sets, 100.0, latitude_deg=37.5,
                       extra={"preset": "cone-paper"})
-    return Preset(load_sequence("cone-paper"), cal, NoiseModel())
+    return Preset(load_sequence("cone-paper"), cal, SessionNoise())
 
 
 def preset(name: str) -> Preset:

@@ -30,7 +30,7 @@ from fdi.errors import CalibrationError
 
 __all__ = [
     "GainSplit",
-    "RateTest",
+    "RateTestFit",
     "group_misalignment_matrices",
     "rate_test",
     "split_gain",
@@ -41,8 +41,9 @@ RANK_RTOL = 1e-2
 
 
 @dataclass(frozen=True)
-class RateTest:
-    """Least-squares rate test over paired steps.
+class RateTestFit:
+    """Least-squares rate test over paired steps (the fit; the calibration file's record of
+    it is :class:`fdi.extras.RateTest`).
 
     Attributes
     ----------
@@ -86,7 +87,7 @@ class RateTest:
 
 def rate_test(step_mean_u: np.ndarray, step_counts: np.ndarray, step_mean_x: np.ndarray,
               pairs: Sequence[tuple[int, int]], *, step_numbers: Sequence[int] | None = None,
-              source: str = "<memory>") -> RateTest:
+              source: str = "<memory>") -> RateTestFit:
     """Least-squares gains ``a = h̃/SF`` from paired rate steps (seed 000 Eq. 18).
 
     Parameters
@@ -133,7 +134,7 @@ def rate_test(step_mean_u: np.ndarray, step_counts: np.ndarray, step_mean_x: np.
     Rw = R * w[:, None]
     A = np.linalg.solve(R.T @ Rw, Rw.T @ D)                           # seed 000 Eq. 18
     a = (A @ U).T
-    return RateTest(pairs=P, R=R, weights=w, op=A, a=a, G=D @ U)
+    return RateTestFit(pairs=P, R=R, weights=w, op=A, a=a, G=D @ U)
 
 
 @dataclass(frozen=True)

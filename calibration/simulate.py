@@ -10,7 +10,7 @@ plus Earth rate (15.041 °/h at the latitude), for accelerometers the specific f
 values from a :class:`fdi.calfile.Calibration`, ``e_i`` the effects switched on
 (:mod:`calibration.effects`) and ``η_i`` the noise: white with the truth's per-sample
 ``noise_covariance`` (SI², correlations allowed), plus optionally a first-order Gauss-Markov
-bias instability and a bias random walk (:class:`NoiseModel`). Inputs come from the one
+bias instability and a bias random walk (:class:`SessionNoise`). Inputs come from the one
 kinematic model, :func:`calibration.turntable.body_inputs`, step by step.
 
 Time: each step of the sequence lasts ``round(duration_s·fs)`` samples at ``t = t0 + k/fs``
@@ -49,15 +49,17 @@ from fdi.errors import ConfigError
 from fdi.geometry import Configuration, load_configuration
 from fdi.units import EARTH_RATE_DPH
 
-__all__ = ["EffectContext", "NoiseDraw", "NoiseModel", "SimSetup", "TimeBase", "accel_outputs",
+__all__ = ["EffectContext", "NoiseDraw", "SessionNoise", "SimSetup", "TimeBase", "accel_outputs",
            "configuration_of", "draw_noise", "gyro_outputs", "sampled_inputs",
            "save_simulation", "sim_setup", "simulate_session", "time_base", "true_raw_means",
            "truth_of_session"]
 
 
 @dataclass(frozen=True)
-class NoiseModel:
-    """Noise beyond the white noise held in the truth's ``noise_covariance``.
+class SessionNoise:
+    """The noise of a simulated session beyond the white noise held in the truth's
+    ``noise_covariance`` (the simulator's input; the fitted record is
+    :class:`fdi.extras.NoiseModel`).
 
     Attributes
     ----------
@@ -288,7 +290,7 @@ class NoiseDraw:
     slow: dict[str, np.ndarray]
 
 
-def _slow_noise(rng: np.random.Generator, noise: NoiseModel, kind: str, N: int, n: int,
+def _slow_noise(rng: np.random.Generator, noise: SessionNoise, kind: str, N: int, n: int,
                 fs: float) -> np.ndarray:
     extra = np.zeros((N, n))
     sd = float(noise.bias_instability.get(kind, 0.0))
@@ -303,7 +305,7 @@ def _slow_noise(rng: np.random.Generator, noise: NoiseModel, kind: str, N: int, 
     return extra
 
 
-def draw_noise(setup: SimSetup, noise: NoiseModel, N: int, seed: int | None) -> NoiseDraw:
+def draw_noise(setup: SimSetup, noise: SessionNoise, N: int, seed: int | None) -> NoiseDraw:
     """White noise of the gyros, then the accelerometers, then the slow processes."""
     rng = np.random.default_rng(seed)
     kinds = [(k, s) for k, s in (("gyro", setup.gyros), ("accel", setup.accels))
@@ -378,7 +380,7 @@ def simulate_session(config: Configuration | str | None, sequence: Sequence,
                      truth: Calibration, *, seed: int | None = 0,
                      effects: Mapping[str, float] | None = None,
                      effect_sensors: Mapping[str, Iterable[int]] | Iterable[int] | None = None,
-                     noise: NoiseModel | None = None, sample_rate_hz: float | None = None,
+                     noise: SessionNoise | None = None, sample_rate_hz: float | None = None,
                      latitude_deg: float | None = None, gravity: float | None = None,
                      accel_config: Configuration | None = None) -> Session:
     """Simulate the raw outputs of every sensor over a test sequence.
@@ -402,7 +404,7 @@ def simulate_session(config: Configuration | str | None, sequence: Sequence,
         ``temperature`` given (any value), the session carries the temperature profile.
     effect_sensors : mapping of name to 1-based sensors, or sensors for every effect
         Default: every sensor of the kinds each effect acts on.
-    noise : NoiseModel, optional
+    noise : SessionNoise, optional
         Default: white noise only.
     sample_rate_hz : float, optional
         Default ``truth.sample_rate_hz``.
@@ -425,7 +427,7 @@ def simulate_session(config: Configuration | str | None, sequence: Sequence,
     ConfigError
         Inconsistent configuration and truth, no latitude, bad effect or sensor number.
     """
-    noise = NoiseModel() if noise is None else noise
+    noise = SessionNoise() if noise is None else noise
     su = sim_setup(config, truth, effects=effects, effect_sensors=effect_sensors,
                    sample_rate_hz=sample_rate_hz, latitude_deg=latitude_deg, gravity=gravity,
                    accel_config=accel_config)

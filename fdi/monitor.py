@@ -7,10 +7,12 @@ Both run the same compiled per-sample recursion, :func:`fdi.kernel.advance` (hea
 compensation, parity, whitening, dyadic windows, CUSUM, detection state machine,
 reconstruction, protection level; see :mod:`fdi.kernel`). The kernel runs until a sample
 needs the monitor: a health verdict, a re-admission, a missing sample, a detection or an
-isolation. :class:`Monitor` then names the events, attributes a detection to a sensor
-(GLT, :mod:`fdi.isolation`), switches to the model of the new healthy set
-(:class:`fdi.reconstruction.SetCache`) and resumes the kernel. The state the kernel carries
-is laid out in :mod:`fdi.state`; the windows and the CUSUM bank are :mod:`fdi.windows` and
+isolation. :class:`Monitor` then names the events, hands a detection to its
+:class:`fdi.episode.Episode` (attribution by GLT, :mod:`fdi.isolation`; the suspects and the
+sensor to exclude), switches to the model of the new healthy set
+(:class:`fdi.reconstruction.SetCache`) and resumes the kernel. Samples are read into the
+kernel's rows by :class:`fdi.sample_input.SampleReader`. The state the kernel carries is laid
+out in :mod:`fdi.state`; the windows and the CUSUM bank are :mod:`fdi.windows` and
 :mod:`fdi.cusum`.
 
 Detection state machine: the first alarm emits ``"detected"``; after ``persistence``
@@ -27,37 +29,31 @@ protection level (no parity test was possible).
 
 from __future__ import annotations
 
-import math
 from typing import Any
 
 import numpy as np
 
 from fdi import state as S
 from fdi.answer import Answer, BlockResult, Event
-from fdi.blocks import CAPABILITY_CODE, CAPABILITY_NAMES, block_from_answers
+from fdi.blocks import BlockRows, block_from_answers, make_answer
 from fdi.calfile import Calibration
-from fdi.capability import moved_axes
-from fdi.detector import chi2_threshold, default_thresholds
+from fdi.detector import default_thresholds
 from fdi.envelope import SATURATION, reason_names
+from fdi.episode import Episode
 from fdi.errors import ConfigError
 from fdi.health import health_limits
-from fdi.isolation import IsolationDecision, decide, isolate, magnitude
 from fdi.kernel import advance, reconstruct_row
 from fdi.reconstruction import SetCache, SetModel
+from fdi.sample_input import SampleReader, env_code, envelope_runs
 from fdi.settings import MonitorSettings, Thresholds
 
 __all__ = ["Monitor"]
 
 _NAN = float("nan")
-_F64 = np.dtype(np.float64)
 _STOP_MASK = S.STOP_MASK
 _RETURN_DETECTED = S.RETURN_DETECTED
-_BOOL = np.dtype(bool)
 _INF = float("inf")
 _CHUNK = 1 << 16
-_NO_AXES = np.zeros(3, bool)
-_NO_AXES.setflags(write=False)
-_TIME_NAMES = np.array(S.TIME_STATUSES, dtype=object)
 
 
 class Monitor:
@@ -120,11 +116,11 @@ class Monitor:
         self._layout = S.OutLayout(self.K, max(self.n - 3, 0))
         self._full_mask = (1 << self.n) - 1
         self._healthy_arr: dict[int, np.ndarray] = {}
-        self._all_valid = np.ones((1, self.n), bool)
-        self._no_correction = np.zeros((1, self.n))
+        self._input = SampleReader(self.n)
+        self._episode = Episode(self.thresholds, self.settings, self.sensor_names,
+                                self._layout.thresholds0)
         self._row = np.empty((1, self._layout.width(True)))
         self._row0 = self._row[0]
-        self._shape1 = (self.n,)
         self._t1 = np.empty(1)
         self._columns = (S.OMEGA0, S.STATS0, self._layout.thresholds0, self._layout.parity0)
         self.reset()
@@ -135,7 +131,7 @@ class Monitor:
         self._state = S.DetectorState(self.n, max(self._scales) + 1)
         self._state.counters[S.HAS_PARITY] = 1
         self._status = ["ok"] * self.n
-        self._length_bad = False
+        self._input.length_bad = False
         self._env = 0
         self._time_code = S.TIME_OK                  # the verdict of the last time stamp seen
         self._set_model(self._full_mask)
@@ -159,16 +155,7 @@ class Monitor:
         self._status_detected = tuple("detected" if s == "ok" else s for s in self._status)
         self._omega_sd = self._model.omega_sd
         self._capability = self._model.capability
-        self._clear_suspects()
-
-    def _clear_suspects(self) -> None:
-        """No detection active: nothing suspected, every axis verified."""
-        self._suspects: tuple[int, ...] = ()
-        self._unverified = _NO_AXES
-        self._iso_due = 0
-        self._rows_seen = 0                 # detection age at the last stop (a new onset
-        self._fresh = False                 # makes it smaller: decide afresh)
-        self._no_fit = False                # no single-sensor fault explains this detection
+        self._episode.clear()
 
     def _healthy_array(self, mask: int) -> np.ndarray:
         a = self._healthy_arr.get(mask)
@@ -192,50 +179,6 @@ class Monitor:
     def detected(self) -> bool:
         """A detection is active (not yet isolated or cleared)."""
         return bool(self._state.counters[S.DETECTED])
-
-    # ------------------------------------------------------------------ input
-    def _parse(self, raw: Any, valid: Any, t: float, events: list[Event]
-               ) -> tuple[np.ndarray, np.ndarray]:
-        """One sample as a (1, n) float64 row and a (1, n) bool row; never raises."""
-        n = self.n
-        if (valid is None and type(raw) is np.ndarray and raw.dtype is _F64
-                and raw.shape == (n,) and raw.flags.c_contiguous):
-            self._length_bad = False                         # the common case, quickly
-            return raw.reshape(1, n), self._all_valid
-        vals = self._parse_values(raw)
-        ok = self._all_valid if valid is None else self._parse_valid(valid)
-        if vals is None or ok is None:
-            if not self._length_bad:
-                events.append(Event(t, None, "health", "length"))
-            self._length_bad = True
-            return np.full((1, n), _NAN), np.zeros((1, n), bool)
-        self._length_bad = False
-        return vals, ok
-
-    def _parse_values(self, raw: Any) -> np.ndarray | None:
-        """Raw values as a (1, n) float64 row (NaN for what is not a real number), None when
-        there are not n of them."""
-        n = self.n
-        try:
-            if type(raw) is np.ndarray and raw.shape == (n,) and raw.dtype.kind == "f":
-                return np.ascontiguousarray(raw, np.float64).reshape(1, n)
-            seq = list(raw)
-        except Exception:
-            return None
-        if len(seq) != n:
-            return None
-        return np.array([_to_float(x) for x in seq], np.float64).reshape(1, n)
-
-    def _parse_valid(self, valid: Any) -> np.ndarray | None:
-        """The valid flags as a (1, n) bool row, None when there are not n of them."""
-        n = self.n
-        try:
-            if type(valid) is np.ndarray and valid.shape == (n,):
-                return np.ascontiguousarray(valid.astype(bool, copy=False)).reshape(1, n)
-            ok = [bool(v) for v in valid]
-        except Exception:
-            return None
-        return np.array(ok, bool).reshape(1, n) if len(ok) == n else None
 
     # ------------------------------------------------------------------ step
     def step(self, t: float, raw: Any, valid: Any = None, correction: Any = None,
@@ -274,25 +217,18 @@ class Monitor:
         except Exception:
             tf = _NAN
         try:
-            u = ok = corr = events = None
-            env = _env_code(envelope)
+            events = None
+            env = env_code(envelope)
             if env != self._env:
                 events = []
                 self._env_change(tf, env, events)
-            if (type(raw) is np.ndarray and raw.dtype is _F64 and raw.shape == self._shape1
-                    and raw.flags.c_contiguous):                      # the common case,
-                corr = (self._no_correction if correction is None     # quickly
-                        else self._plain_array(correction, _F64))
-                ok = self._all_valid if valid is None else self._plain_array(valid, _BOOL)
-                u = raw[None]
-                self._length_bad = False
-            if corr is None or ok is None:
-                u, ok, corr, ev = self._parse_sample(raw, valid, correction, tf)
+            u, ok, corr, ev = self._input.read(raw, valid, correction, tf)
+            if ev is not None:
                 events = ev if events is None else events + ev
             # one sample through the kernel (the same entry point as run's)
             self._t1[0] = tf
             st = self._state
-            has_valid = ok is not self._all_valid
+            has_valid = ok is not self._input.all_valid
             if has_valid:                                    # (HAS_VALID only picks the row
                 st.counters[S.HAS_VALID] = 1                 # of ``valid``: 0 here either way)
             code = advance(self._t1, u, corr, ok, 0, 1, self._kset.packed, st.values,
@@ -307,41 +243,43 @@ class Monitor:
                                                 events)
             else:
                 detected = code >= _RETURN_DETECTED
-            r = self._row0.copy()
-            if self._suspects or self._env:
-                r[S.PROTECTION] = _INF                      # not verified: no bound
-            o, s0, t0, p0 = self._columns
-            # an Answer without the frozen dataclass's per-field __setattr__ calls (a third
-            # of the step's Python time once); same fields, same object
-            a = object.__new__(Answer)
-            object.__setattr__(a, "__dict__", {
-                "t": tf, "omega": r[o:o + 3],
-                "omega_sd": self._omega_sd if osd is None else osd,
-                "healthy": self._healthy_now,
-                "status": self._status_detected if detected else self._status_now,
-                "parity": r[p0:], "statistics": r[s0:t0], "thresholds": r[t0:p0],
-                "events": tuple(events) if events else (), "capability": self._capability,
-                "protection_level": float(r[S.PROTECTION]), "envelope": self._env,
-                "unverified": self._unverified, "suspects": self._suspects,
-                "time_status": S.TIME_STATUSES[self._time_code]})
-            return a
+            return self._answer(tf, osd, detected, events)
         except Exception as exc:
-            self._state.counters[S.PHASE] = S.PHASE_HEALTH
-            ev = Event(tf, None, "health", f"internal error: {type(exc).__name__}: {exc}")
-            return Answer(tf, np.full(3, _NAN), np.full(3, _NAN),
-                          self._healthy_array(self._mask), tuple(self._status),
-                          np.full(max(self.n - 3, 0), _NAN), np.full(self.K, _NAN),
-                          np.full(self.K, _NAN), (ev,), self._model.capability, _INF,
-                          self._env, np.ones(3, bool), self._suspects,
-                          S.TIME_STATUSES[self._time_code])
+            return self._internal_error(tf, exc)
 
-    def _parse_sample(self, raw: Any, valid: Any, correction: Any, t: float
-                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[Event]]:
-        """Any sample as (1, n) raw, valid and correction rows, and the events of reading
-        it (a wrong length); never raises."""
-        events: list[Event] = []
-        u, ok = self._parse(raw, valid, t, events)
-        return u, ok, self._correction(correction, 1), events
+    def _answer(self, t: float, osd: np.ndarray | None, detected: bool,
+                events: list[Event] | None) -> Answer:
+        """The answer to the sample in the kernel's output row (``osd``: its ω̂ sd when it
+        is not the model's)."""
+        r = self._row0.copy()
+        ep = self._episode
+        if ep.suspects or self._env:
+            r[S.PROTECTION] = _INF                          # not verified: no bound
+        o, s0, t0, p0 = self._columns
+        return make_answer({
+            "t": t, "omega": r[o:o + 3],
+            "omega_sd": self._omega_sd if osd is None else osd,
+            "healthy": self._healthy_now,
+            "status": self._status_detected if detected else self._status_now,
+            "parity": r[p0:], "statistics": r[s0:t0], "thresholds": r[t0:p0],
+            "events": tuple(events) if events else (), "capability": self._capability,
+            "protection_level": float(r[S.PROTECTION]), "envelope": self._env,
+            "unverified": ep.unverified, "suspects": ep.suspects,
+            "time_status": S.TIME_STATUSES[self._time_code]})
+
+    def _internal_error(self, t: float, exc: Exception) -> Answer:
+        """The answer to a sample whose processing failed: NaN rate, an event naming it."""
+        self._state.counters[S.PHASE] = S.PHASE_HEALTH
+        ev = Event(t, None, "health", f"internal error: {type(exc).__name__}: {exc}")
+        return make_answer({
+            "t": t, "omega": np.full(3, _NAN), "omega_sd": np.full(3, _NAN),
+            "healthy": self._healthy_array(self._mask), "status": tuple(self._status),
+            "parity": np.full(max(self.n - 3, 0), _NAN), "statistics": np.full(self.K, _NAN),
+            "thresholds": np.full(self.K, _NAN), "events": (ev,),
+            "capability": self._model.capability, "protection_level": _INF,
+            "envelope": self._env, "unverified": np.ones(3, bool),
+            "suspects": self._episode.suspects,
+            "time_status": S.TIME_STATUSES[self._time_code]})
 
     def _step_stop(self, code: int, u: np.ndarray, corr: np.ndarray, ok: np.ndarray,
                    has_valid: bool, events: list[Event]) -> tuple[np.ndarray | None, bool]:
@@ -355,32 +293,9 @@ class Monitor:
             osd = self._advance(self._t1, u, corr, ok, has_valid, self._row, events, None)
         return osd, c[S.DETECTED] != 0
 
-    def _plain_array(self, a: Any, dtype: np.dtype) -> np.ndarray | None:
-        """A C-contiguous (n,) array of ``dtype`` as a (1, n) row; None for anything else
-        (the general path then reads it)."""
-        if (type(a) is np.ndarray and a.dtype is dtype and a.shape == self._shape1
-                and a.flags.c_contiguous):
-            return a[None]
-        return None
-
-    def _correction(self, correction: Any, N: int) -> np.ndarray:
-        """The correction as a C-contiguous float array of shape (N, n) or (1, n); zeros when
-        absent or not of a usable shape."""
-        if correction is None:
-            return self._no_correction
-        try:
-            c = np.asarray(correction, dtype=np.float64)
-        except (TypeError, ValueError):
-            return self._no_correction
-        if c.shape == (self.n,):
-            return np.ascontiguousarray(c).reshape(1, self.n)
-        if c.ndim == 2 and c.shape[1] == self.n and c.shape[0] in (1, N):
-            return np.ascontiguousarray(c)
-        return self._no_correction
-
     # ------------------------------------------------------------------ the loop
     def _advance(self, t: np.ndarray, raw: np.ndarray, corr: np.ndarray, valid: np.ndarray,
-                 has_valid: bool, out: np.ndarray, events: list[Event], rows: _Rows | None,
+                 has_valid: bool, out: np.ndarray, events: list[Event], rows: BlockRows | None,
                  chunk: int = _CHUNK, r0: int = 0, r1: int | None = None
                  ) -> np.ndarray | None:
         """Run the kernel over rows r0 … r1−1 (all by default), handling the samples it hands
@@ -402,7 +317,7 @@ class Monitor:
             if tc.shape[0] and (tc != self._time_code).any():
                 self._time_events(t, out[:, S.TIME_CODE], r, events, e)
             if rows is not None:
-                rows.fill(r, stop, self)
+                self._fill(rows, r, stop)
             r, osd = self._handle(stop, code, t, raw, corr, valid, has_valid, out, events, rows)
         return osd
 
@@ -416,7 +331,7 @@ class Monitor:
 
     def _handle(self, stop: int, code: int, t: np.ndarray, raw: np.ndarray, corr: np.ndarray,
                 valid: np.ndarray, has_valid: bool, out: np.ndarray, events: list[Event],
-                rows: _Rows | None) -> tuple[int, np.ndarray | None]:
+                rows: BlockRows | None) -> tuple[int, np.ndarray | None]:
         """Handle the sample the kernel stopped at; returns the next row and the sample's
         ω̂ sd when it is not the model's (incomplete sample)."""
         if code == S.STOP_NONE:
@@ -436,13 +351,13 @@ class Monitor:
             osd = self._on_incomplete(raw, corr, stop, valid[stop if has_valid else 0], out[stop])
         else:                                     # bits: cleared, detected/isolate, vibration
             if code & S.STOP_CLEARED:
-                self._clear_suspects()
+                self._episode.clear()
             if code & (S.STOP_DETECTED | S.STOP_ISOLATE):
                 self._on_detection(tr, code, raw, corr, stop, out[stop], events)
             if code & S.STOP_VIBRATION:
                 self._on_vibration(tr, raw, corr, stop, out[stop], events)
         if rows is not None:
-            rows.fill(stop, stop + 1, self, osd)
+            self._fill(rows, stop, stop + 1, osd)
         return stop + 1, osd
 
     # ------------------------------------------------------------------ stops
@@ -542,139 +457,20 @@ class Monitor:
 
     def _on_detection(self, t: float, code: int, raw: np.ndarray, corr: np.ndarray, r: int,
                       row: np.ndarray, events: list[Event]) -> None:
-        """Name a detection, test the fault hypotheses, exclude only a verified single
-        sensor; ω̂ and PL of the sample from the new set after an exclusion."""
-        mdl = self._model
-        c = self._state.counters
-        fired = int(c[S.FIRED])
-        stat = float(row[S.STATS0 + fired])
-        thr = float(row[self._layout.thresholds0 + fired])
+        """Name a detection, test the fault hypotheses (:class:`fdi.episode.Episode`),
+        exclude only a verified single sensor; ω̂ and PL of the sample from the new set after
+        an exclusion."""
+        mdl, st, ep = self._model, self._state, self._episode
+        fired = int(st.counters[S.FIRED])
         if code & S.STOP_DETECTED:
-            sensor, mag, reason, scale = self._attribute(mdl, fired)
-            dec, w = self._decide(mdl, row, fired)
-            single = mdl.capability == "isolate" and dec is not None \
-                and dec.consistent == (dec.best,)
-            events.append(Event(t, sensor if single else None, "detected", reason, stat, thr,
-                                scale, mag if single else None, envelope=self._env))
-            self._iso_due = self.settings.persistence
-            self._rows_seen = 1
-            self._suspect(t, mdl, dec, w, events)
+            ep.detected(t, st, mdl, row, fired, self._env, events)
         if not code & S.STOP_ISOLATE:
             return
-        rows = int(c[S.DETECTED_ROWS])
-        if rows < self._rows_seen:
-            # a new onset within the open detection (the kernel restarted its age when the
-            # evidence rose again from below the clearing levels): its hypotheses are
-            # decided afresh, not narrowed by the episode before (a false alarm)
-            self._iso_due = self.settings.persistence
-            self._fresh = True
-            self._no_fit = False
-        self._rows_seen = rows
-        if self._env or rows < self._iso_due:               # out of the envelope: no exclusion
+        k = ep.isolation_due(t, st, mdl, row, fired, self._env, events)
+        if k is None:
             return
-        self._iso_due = self._next_attempt(rows)
-        dec, w = self._decide(mdl, row, fired)
-        if dec is None or dec.exclude is None or mdl.capability != "isolate":
-            self._suspect(t, mdl, dec, w, events)         # a set that only detects narrows
-            return                                        # its suspects, never excludes
-        k = dec.exclude
-        wm = self._episode_window()
-        mag = magnitude(mdl.U, self._state.window_sum(wm), wm, k) if wm else None
-        others = [float(dec.residuals[j]) for j in range(mdl.m) if j != k]
-        events.append(Event(t, mdl.idx[k] + 1, "isolated", f"parity scale {w}",
-                            min(others) if others else _NAN, dec.rejection_level, w, mag,
-                            envelope=self._env))   # the weakest rejected alternative > c
         self._isolate(mdl.idx[k], "isolated")
-        ks = self._kset
-        reconstruct_row(raw, corr, r, ks.packed, self._state.values, row)
-
-    def _next_attempt(self, rows: int) -> int:
-        """Detection age (samples) of the next isolation decision: when the next longer
-        window lies wholly within the detection, then once per longest window."""
-        for w in self._scales:
-            if w > rows:
-                return w
-        return rows + max(self._scales)
-
-    def _decide(self, mdl: SetModel, row: np.ndarray, fired: int
-                ) -> tuple[IsolationDecision | None, int]:
-        """The isolation test (:func:`fdi.isolation.decide`) on the window of most evidence:
-        the longer of the scale that fired and the longest window within the detection.
-        Under the hypothesis of the truly faulty sensor its residual is χ²(df − 1) for any
-        window, whatever the fault's size or time profile, so the choice costs no risk."""
-        c = self._state.counters
-        if mdl.df < 1:
-            return None, 0
-        rows = max(int(c[S.DETECTED_ROWS]), 1)
-        count = int(c[S.WINDOW_COUNT])
-        k = fired if 0 <= fired < len(self._scales) else -1
-        for j, w in enumerate(self._scales):
-            if w <= rows and w <= count and (k < 0 or w > self._scales[k]):
-                k = j
-        if k < 0:
-            return None, 0
-        w = self._scales[k]
-        base = mdl.thr[k]
-        infl = float(row[self._layout.thresholds0 + k]) / base if base > 0 else _NAN
-        if not (infl >= 1.0 and math.isfinite(infl)):
-            infl = 1.0
-        var = w * self.thresholds.variance_factor[k] * infl
-        sub = chi2_threshold(self.thresholds.alpha[k], mdl.df - 1) if mdl.df > 1 else _INF
-        return decide(mdl.U, self._state.window_sum(w), var, self.settings.wrong_exclusion,
-                      sub), w
-
-    def _suspect(self, t: float, mdl: SetModel, dec: IsolationDecision | None, w: int,
-                 events: list[Event]) -> None:
-        """Record the suspected sensors of an active detection and the body axes a fault on
-        them would move; a ``"disagree"`` event when they are not a single sensor or change.
-
-        Within one detection the suspects only narrow: a hypothesis rejected once stays
-        rejected (each rejection is a decision at the stated risk), so the set is the
-        intersection of the consistent hypotheses of every decision; when that is empty no
-        single-sensor fault explains the episode and every healthy sensor is suspected.
-        """
-        every = tuple(range(mdl.m))
-        if self._no_fit:
-            return
-        cols = every if dec is None else dec.consistent
-        if self._fresh:
-            self._fresh = False
-        elif self._suspects and cols:
-            before = {i - 1 for i in self._suspects}
-            cols = tuple(j for j in cols if mdl.idx[j] in before)
-        none_fits = dec is not None and not cols
-        self._no_fit = none_fits
-        cols = cols or every
-        sus = tuple(sorted(mdl.idx[j] + 1 for j in cols))
-        G = mdl.G
-        axes = np.zeros(3, bool)
-        s_w = self._state.window_sum(w) if w else None
-        for j in cols:
-            g = np.abs(G[:, mdl.idx[j]])
-            axes |= moved_axes(g)         # and where the estimated fault moves it by one sd:
-            if s_w is not None:
-                f = abs(magnitude(mdl.U, s_w, w, j))
-                with np.errstate(invalid="ignore", over="ignore"):
-                    axes |= ~(g * f < mdl.omega_sd)
-        axes.setflags(write=False)
-        changed = sus != self._suspects
-        self._suspects = sus
-        self._unverified = axes
-        if changed and (len(sus) > 1 or mdl.capability != "isolate"):
-            names = [self.sensor_names[i - 1] for i in sus]
-            if none_fits:
-                why = ("no single-sensor fault explains the parity: "
-                       + _join(names) + " unverified")
-            else:
-                why = (_join(names) + (" disagree: cannot tell which" if len(sus) > 1 else
-                                       ": suspected (this set cannot isolate)"))
-            stat = _NAN
-            if dec is not None and len(dec.consistent) < mdl.m:
-                rej = [float(dec.residuals[j]) for j in range(mdl.m) if j not in dec.consistent]
-                stat = min(rej)
-            events.append(Event(t, None, "disagree", why, stat,
-                                dec.rejection_level if dec is not None else _NAN,
-                                w or None, None, sus, self._env))
+        reconstruct_row(raw, corr, r, self._kset.packed, st.values, row)
 
     def _env_change(self, t: float, env: int, events: list[Event]) -> None:
         """Leaving, changing or re-entering the operating envelope."""
@@ -689,42 +485,14 @@ class Monitor:
             open_ = bool(c[S.DETECTED])
             self._state.new_set(self._model.df)
             if not open_:
-                self._clear_suspects()
+                self._episode.clear()
                 return
             # a detection open at re-entry stays open on the fresh windows, with its suspects
             # and unverified axes, until every window has filled again and cleared it: an
             # excursion must not make a persisting fault look verified
             c[S.DETECTED] = 1
             c[S.HOLD_OPEN] = max(self._scales)      # the kernel's clear rule waits for it
-            self._iso_due = self.settings.persistence
-            self._rows_seen = 0                     # the same episode, on fresh windows
-
-    def _attribute(self, mdl: SetModel, fired: int) -> tuple[int, float | None, str,
-                                                            int | None]:
-        """GLT sensor (1-based), magnitude (SI), reason and window of the scale that fired."""
-        st = self._state
-        if fired >= len(self._scales):                       # the CUSUM bank fired
-            k = int(np.argmax(st.cusum_scores(mdl.idx)))
-            reason, scale = "cusum", None
-        else:
-            w = self._scales[fired]
-            k, _ = isolate(mdl.U, st.window_sum(w), w)
-            reason, scale = f"parity scale {w}", w
-        wm = self._episode_window()
-        mag = magnitude(mdl.U, st.window_sum(wm), wm, k) if wm else None
-        return mdl.idx[k] + 1, mag, reason, scale
-
-    def _episode_window(self) -> int:
-        """The longest window that lies within the detection episode (0: none); the fault
-        magnitude is estimated from it (no sample from before the onset of a step)."""
-        c = self._state.counters
-        rows = max(int(c[S.DETECTED_ROWS]), 1)
-        count = int(c[S.WINDOW_COUNT])
-        wm = 0
-        for w in self._scales:
-            if w <= rows and w <= count:
-                wm = w
-        return wm
+            self._episode.reopen()                  # the same episode, on fresh windows
 
     # ------------------------------------------------------------------ block
     def run(self, t: Any, raw: Any, valid: Any = None, *, parity: bool = False,
@@ -768,18 +536,18 @@ class Monitor:
             return self._run_rows(t, raw, valid, parity, correction, envelope)
         N = ta.shape[0]
         out = np.empty((N, self._layout.width(parity)))
-        rows = _Rows(N, n)
+        rows = BlockRows(N, n)
         events: list[Event] = []
         if N:
-            self._length_bad = False
+            self._input.length_bad = False
             c = self._state.counters
             c[S.HAS_VALID] = va is not None
             c[S.HAS_PARITY] = parity
             c[S.PHASE] = S.PHASE_HEALTH
-            corr = self._correction(correction, N)
-            vv = self._all_valid if va is None else va
+            corr = self._input.correction(correction, N)
+            vv = self._input.all_valid if va is None else va
             try:
-                for r0, r1, env in _envelope_runs(envelope, N, self._env):
+                for r0, r1, env in envelope_runs(envelope, N, self._env):
                     if env != self._env:
                         self._env_change(float(ta[r0]), env, events)
                     self._advance(ta, ra, corr, vv, va is not None, out, events, rows,
@@ -787,7 +555,19 @@ class Monitor:
             finally:
                 c[S.HAS_PARITY] = 1                          # step() always fills the parity
                 c[S.PHASE] = S.PHASE_HEALTH                  # and starts a sample afresh
-        return rows.result(ta, out, self._layout, parity, events)
+        lay = self._layout
+        return rows.result(ta, out[:, S.OMEGA0:S.OMEGA0 + 3], out[:, S.STATS0:lay.thresholds0],
+                           out[:, lay.thresholds0:lay.parity0], out[:, S.PROTECTION],
+                           out[:, lay.parity0:] if parity else None, out[:, S.TIME_CODE],
+                           events)
+
+    def _fill(self, rows: BlockRows, r0: int, r1: int, omega_sd: np.ndarray | None = None
+              ) -> None:
+        """Rows r0 … r1−1 of a block answered by the current set and episode."""
+        ep = self._episode
+        rows.fill(r0, r1, self._healthy_array(self._mask), self._model.capability,
+                  self._model.omega_sd if omega_sd is None else omega_sd, self._env,
+                  ep.unverified, not (ep.suspects or self._env))
 
     def _run_rows(self, t: Any, raw: Any, valid: Any, parity: bool, correction: Any,
                   envelope: Any = None) -> BlockResult:
@@ -807,9 +587,9 @@ class Monitor:
                 vl = list(valid)
             except TypeError:
                 vl = None
-        cl = self._correction(correction, N) if N else self._no_correction
+        cl = self._input.correction(correction, N) if N else self._input.no_correction
         codes = np.zeros(N, np.int64)
-        for r0, r1, e in _envelope_runs(envelope, N, 0):
+        for r0, r1, e in envelope_runs(envelope, N, 0):
             codes[r0:r1] = e
         answers = [self.step(ts[r], rows[r], vl[r] if vl is not None and r < len(vl) else None,
                              cl[r if cl.shape[0] > 1 else 0], int(codes[r]))
@@ -817,102 +597,6 @@ class Monitor:
         return block_from_answers(answers, self.n, self.K, parity)
 
 
-_ENV_LIMIT = 1 << 16
-"""Envelope codes are bit sets below 2^16; anything else counts as 0 (inside)."""
-
-
-def _env_code(x: Any) -> int:
-    """An envelope code as an int in [0, 2^16); 0 for anything else (never raises)."""
-    if type(x) is int:
-        return x if 0 < x < _ENV_LIMIT else 0
-    try:
-        v = int(x)
-    except Exception:
-        return 0
-    return v if 0 < v < _ENV_LIMIT and v == x else 0
-
-
 def _env_reason(code: int) -> str:
     """Why a sample is out of the envelope: the names of its bits, "shock+tumble"."""
     return "+".join(reason_names(code))
-
-
-def _join(names: list[str]) -> str:
-    """'a', 'a and b', 'a, b and c'."""
-    return names[0] if len(names) == 1 else ", ".join(names[:-1]) + " and " + names[-1]
-
-
-def _to_float(x: Any) -> float:
-    """A raw value as float; NaN for what is not a real number."""
-    if isinstance(x, complex):
-        return _NAN
-    try:
-        return float(x)
-    except (TypeError, ValueError, OverflowError):
-        return _NAN
-
-
-def _envelope_runs(envelope: Any, N: int, current: int) -> list[tuple[int, int, int]]:
-    """(r0, r1, code) runs of equal envelope code over N rows; one run at ``current`` when
-    there is no usable envelope (None, another shape, not integers)."""
-    if envelope is None or N == 0:
-        return [(0, N, current)] if N else []
-    try:
-        e = np.asarray(envelope)
-        if e.shape != (N,) or e.dtype.kind not in "iub":
-            return [(0, N, current)]
-        e = e.astype(np.int64)
-        e = np.where((e > 0) & (e < _ENV_LIMIT), e, 0)
-    except (TypeError, ValueError):
-        return [(0, N, current)]
-    cut = np.flatnonzero(np.diff(e)) + 1
-    starts = np.concatenate([[0], cut])
-    ends = np.concatenate([cut, [N]])
-    return [(int(a), int(b), int(e[a])) for a, b in zip(starts, ends, strict=True)]
-
-
-class _Rows:
-    """Per-row outputs that change only at the monitor's stops: health, capability, ω̂ sd,
-    envelope, unverified axes and whether the answer is verified."""
-
-    def __init__(self, N: int, n: int) -> None:
-        self.healthy = np.empty((N, n), bool)
-        self.cap = np.empty(N, np.int8)
-        self.omega_sd = np.empty((N, 3))
-        self.envelope = np.empty(N, np.int64)
-        self.unverified = np.empty((N, 3), bool)
-        self.verified = np.empty(N, bool)
-
-    def fill(self, r0: int, r1: int, mon: Monitor, omega_sd: np.ndarray | None = None) -> None:
-        if r1 <= r0:
-            return
-        _fill_rows(self.healthy, r0, r1, mon._healthy_array(mon._mask))
-        self.cap[r0:r1] = CAPABILITY_CODE[mon.model.capability]
-        _fill_rows(self.omega_sd, r0, r1, mon.model.omega_sd if omega_sd is None else omega_sd)
-        self.envelope[r0:r1] = mon._env
-        _fill_rows(self.unverified, r0, r1, mon._unverified)
-        self.verified[r0:r1] = not (mon._suspects or mon._env)
-
-    def result(self, t: np.ndarray, out: np.ndarray, lay: S.OutLayout, parity: bool,
-               events: list[Event]) -> BlockResult:
-        pl = out[:, S.PROTECTION]
-        pl[~self.verified] = _INF                    # not verified: no bound (as step)
-        return BlockResult(t=t, omega=out[:, S.OMEGA0:S.OMEGA0 + 3], omega_sd=self.omega_sd,
-                           healthy=self.healthy, statistics=out[:, S.STATS0:lay.thresholds0],
-                           thresholds=out[:, lay.thresholds0:lay.parity0],
-                           protection_level=pl,
-                           capability=CAPABILITY_NAMES[self.cap], events=events,
-                           parity=out[:, lay.parity0:] if parity else None,
-                           envelope=self.envelope, unverified=self.unverified,
-                           time_status=_TIME_NAMES[out[:, S.TIME_CODE].astype(np.intp)])
-
-
-def _fill_rows(a: np.ndarray, r0: int, r1: int, row: np.ndarray) -> None:
-    """a[r0:r1] = row by doubling contiguous copies (a row-major array with a few columns:
-    ~6× faster than numpy's broadcast, which loops over the rows)."""
-    a[r0] = row
-    k = 1
-    while r0 + k < r1:
-        m = min(k, r1 - r0 - k)
-        a[r0 + k:r0 + k + m] = a[r0:r0 + m]
-        k += m

@@ -53,6 +53,7 @@ from replay.effect_inputs import (
     row_inputs,
     stream_inputs,
 )
+from replay.envelope import envelope_tracker
 from replay.flight_data import Flight, concat_flights
 from replay.log_events import declared_intervals
 from replay.report import RunningReport
@@ -445,18 +446,10 @@ def default_envelope(cal: Calibration, kind: str, groups: Sequence[str],
                      declared: Sequence[Any] = ()) -> Any:
     """The envelope tracker of a set: the calibrated axes, one rate estimate per IMU group
     (leave-one-out subsets when the sensors are not grouped in IMUs) and the declared
-    intervals of the log (:class:`fdi.envelope.EnvelopeTracker`)."""
-    from fdi.envelope import EnvelopeTracker
-
-    idx: dict[str, list[int]] = {}
-    for i, g in enumerate(groups):
-        idx.setdefault(g, []).append(i)
-    grouped = len(idx) > 1 and "" not in idx
+    intervals of the log (:func:`replay.envelope.envelope_tracker`, the chain's rule:
+    IMU groups only when every sensor is in one of two or more)."""
     s = cal.kind(kind)
-    return EnvelopeTracker(H=s.H, groups=list(idx.values()) if grouped else None,
-                           declared=tuple(declared), validated_rate=s.validated_rate,
-                           validated_specific_force=s.validated_specific_force,
-                           validated_jolt=s.validated_jolt)
+    return envelope_tracker(s.H, groups, s, declared, whole_imus=True)
 
 
 def _envelope(choice: Any, cal: Calibration, kind: str, groups: Sequence[str],

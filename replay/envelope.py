@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from fdi.calfile import Calibration
+from fdi.calfile import Calibration, SensorSet
 from fdi.envelope import REASONS, EnvelopeSettings, EnvelopeTracker, reason_names
 from fdi.errors import ConfigError
 from replay.flight_data import Flight
@@ -27,6 +27,7 @@ __all__ = [
     "describe_summary",
     "envelope_periods",
     "envelope_summary",
+    "envelope_tracker",
     "flight_accel",
     "flight_envelope",
     "flight_rates",
@@ -78,6 +79,47 @@ def flight_accel(flight: Flight) -> np.ndarray | None:
     return np.stack(blocks, axis=1) if blocks else None
 
 
+def envelope_tracker(H: np.ndarray, groups: Sequence[str], limits: SensorSet | None = None,
+                     declared: Sequence[Any] = (), settings: EnvelopeSettings | None = None,
+                     *, whole_imus: bool) -> EnvelopeTracker:
+    """The envelope tracker of a sensor set: the one construction from a calibration.
+
+    Parameters
+    ----------
+    H : ndarray, shape (n, 3)
+        Sensor axes (the calibrated ones, or nominal axes without a calibration).
+    groups : sequence of str, length n (or empty)
+        IMU group of each sensor (``""``: in none); the rate estimates are the groups', in
+        order of first appearance.
+    limits : SensorSet, optional
+        The calibrated set whose validated rate, specific force and jolt bound the envelope
+        (None: no validated limits).
+    declared : sequence
+        Declared intervals of the log (:func:`replay.log_events.declared_intervals`).
+    settings : EnvelopeSettings, optional
+    whole_imus : bool
+        The rule for the rate estimates. True (the monitoring chain): the IMU groups only
+        when there are two or more and every sensor is in one, otherwise the leave-one-out
+        subsets (:func:`fdi.envelope.independent_estimates`). False (a flight's codes,
+        :func:`flight_envelope`): the IMU groups as they are, leave-one-out only when there
+        are none.
+    """
+    idx: dict[str, list[int]] = {}
+    for i, g in enumerate(groups):
+        idx.setdefault(g, []).append(i)
+    if whole_imus:
+        use = list(idx.values()) if len(idx) > 1 and "" not in idx else None
+    else:
+        use = list(idx.values()) or None
+    rate = force = jolt = None
+    if limits is not None:
+        rate, force, jolt = (limits.validated_rate, limits.validated_specific_force,
+                             limits.validated_jolt)
+    return EnvelopeTracker(settings, H=H, groups=use, declared=tuple(declared),
+                           validated_rate=rate, validated_specific_force=force,
+                           validated_jolt=jolt)
+
+
 def flight_envelope(flight: Flight, cal: Calibration | None = None,
                     settings: EnvelopeSettings | None = None, *,
                     categories: Sequence[str] = DEFAULT_DECLARED) -> np.ndarray:
@@ -87,13 +129,9 @@ def flight_envelope(flight: Flight, cal: Calibration | None = None,
     ``categories`` chooses which declared log events count (:mod:`replay.log_events`).
     """
     rates, H = flight_rates(flight, cal)
-    groups = list(flight.imu_groups().values()) or None
-    tr = EnvelopeTracker(settings, H=H, groups=groups,
-                         declared=declared_intervals(flight.events, categories),
-                         validated_rate=cal.gyro.validated_rate if cal is not None else None,
-                         validated_specific_force=(cal.gyro.validated_specific_force
-                                                   if cal is not None else None),
-                         validated_jolt=cal.gyro.validated_jolt if cal is not None else None)
+    tr = envelope_tracker(H, flight.imu, cal.gyro if cal is not None else None,
+                          declared_intervals(flight.events, categories), settings,
+                          whole_imus=False)
     return tr.update(flight.t, rates, flight_accel(flight))
 
 

@@ -40,7 +40,7 @@ recover: ``A_j = G_j·G_ref⁻¹``, ``c_j = b_j − A_j·b_ref`` and ``τ_j − 
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -173,19 +173,7 @@ class ImuSetSpec:
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0):
                 raise ConfigError(f"{name} must be positive, got {v}")
-        if self.time_offset_s and len(self.time_offset_s) != self.imus:
-            raise ConfigError(f"time offsets: {len(self.time_offset_s)} values for "
-                              f"{self.imus} IMUs (give one per IMU)")
-        if self.noise_scale and (len(self.noise_scale) != self.imus or not all(
-                math.isfinite(x) and x >= 0 for x in self.noise_scale)):
-            raise ConfigError(f"noise_scale: expected {self.imus} non-negative numbers, got "
-                              f"{self.noise_scale}")
-        if self.timing_jitter_s and (len(self.timing_jitter_s) != self.imus or not all(
-                math.isfinite(x) and x >= 0 for x in self.timing_jitter_s)):
-            raise ConfigError(f"timing jitter: expected {self.imus} finite values ≥ 0, got "
-                              f"{self.timing_jitter_s}")
-        if not all(math.isfinite(x) for x in self.time_offset_s):
-            raise ConfigError(f"time offsets must be finite, got {self.time_offset_s}")
+        self._check_per_imu()
         for name in ("misalignment_sd", "nonorthogonality_sd", "scale_sd", "bias_sd",
                      "noise_sd", "accel_noise_sd", "linear_accel"):
             v = getattr(self, name)
@@ -193,6 +181,25 @@ class ImuSetSpec:
                 raise ConfigError(f"{name} must be a non-negative number, got {v}")
         if any(not 1 <= j <= self.imus for j in self.effects.imus):
             raise ConfigError(f"effect IMUs {self.effects.imus} out of range 1..{self.imus}")
+
+    def _check_per_imu(self) -> None:
+        """The per-IMU tuples: one value per IMU (or none), finite, scales and jitter ≥ 0."""
+        if self.time_offset_s and len(self.time_offset_s) != self.imus:
+            raise ConfigError(f"time offsets: {len(self.time_offset_s)} values for "
+                              f"{self.imus} IMUs (give one per IMU)")
+        if self.noise_scale and not _per_imu_ok(self.noise_scale, self.imus):
+            raise ConfigError(f"noise_scale: expected {self.imus} non-negative numbers, got "
+                              f"{self.noise_scale}")
+        if self.timing_jitter_s and not _per_imu_ok(self.timing_jitter_s, self.imus):
+            raise ConfigError(f"timing jitter: expected {self.imus} finite values ≥ 0, got "
+                              f"{self.timing_jitter_s}")
+        if not all(math.isfinite(x) for x in self.time_offset_s):
+            raise ConfigError(f"time offsets must be finite, got {self.time_offset_s}")
+
+
+def _per_imu_ok(values: tuple[float, ...], imus: int) -> bool:
+    """One finite value ≥ 0 per IMU."""
+    return len(values) == imus and all(math.isfinite(x) and x >= 0 for x in values)
 
 
 def skew(v: np.ndarray) -> np.ndarray:
@@ -292,8 +299,25 @@ def simulate_imu_set(spec: ImuSetSpec) -> Flight:
     K = spec.imus
     imus = [_draw_imu(spec, j) for j in range(1, K + 1)]
     omega = body_rates(t, seed=spec.seed, max_rate_dps=spec.max_rate_dps)
-    # specific force on a fine grid so that it can be read at t + τ_j
-    taus = [m.tau for m in imus]
+    f_at = _specific_force(spec, N, [m.tau for m in imus])
+    env = _vibration_envelope(spec, N)
+    cols = [_imu_outputs(spec, j, m, t, f_at, env) for j, m in enumerate(imus, start=1)]
+    raw = np.hstack([u for u, _, _ in cols])
+    names = tuple(f"imu{j}.{a}" for j in range(1, K + 1) for a in _AXES)
+    groups = tuple(f"imu{j}" for j in range(1, K + 1) for _ in _AXES)
+    aux = _aux_channels(spec, names, groups, [a for _, a, _ in cols],
+                        [T for _, _, T in cols])
+    truth = _truth(spec, imus, N)
+    return Flight(t=t, raw=raw, valid=np.ones(raw.shape, bool), sample_rate_hz=fs,
+                  sensor_names=names, raw_unit="rad/s", omega_true=omega, truth=truth,
+                  source="<simulated>", kind="gyro", imu=groups, aux=aux)
+
+
+def _specific_force(spec: ImuSetSpec, N: int, taus: Sequence[float]
+                    ) -> Callable[[np.ndarray], np.ndarray]:
+    """The specific force (N', 3) at any times: computed on a grid four times finer than
+    the samples, padded beyond both ends, so that it can be read at t + τ_j."""
+    fs = float(spec.sample_rate_hz)
     pad = max(1.0, max(abs(x) for x in taus) * 2)
     up = 4
     tf = np.arange(-round(pad * fs) * up, (N + round(pad * fs)) * up) / (fs * up)
@@ -306,61 +330,74 @@ def simulate_imu_set(spec: ImuSetSpec) -> Flight:
     def f_at(tt: np.ndarray) -> np.ndarray:
         return np.column_stack([np.interp(tt, tf, ff[:, a]) for a in range(3)])
 
-    e = spec.effects
+    return f_at
+
+
+def _vibration_envelope(spec: ImuSetSpec, N: int) -> np.ndarray:
+    """The vibration envelope v(t) in [0, 1], shape (N,) (zeros without vibration noise)."""
     env = np.zeros(N)
-    if e.vibration_noise > 0:
-        env = np.abs(_smooth_noise(np.random.default_rng([int(spec.seed), 15]), N, fs, 1.0,
-                                   VIBRATION_CORR_S)[:, 0])
+    if spec.effects.vibration_noise > 0:
+        env = np.abs(_smooth_noise(np.random.default_rng([int(spec.seed), 15]), N,
+                                   float(spec.sample_rate_hz), 1.0, VIBRATION_CORR_S)[:, 0])
         env = np.clip(env - 0.5, 0.0, None)
         env /= max(float(env.max()), 1e-12)
-    raw_cols, acc_cols, temp_cols = [], [], []
-    T0 = 25.0
-    for j, m in enumerate(imus, start=1):
-        ts = t + m.tau
-        if spec.timing_jitter_s and spec.timing_jitter_s[j - 1] > 0:
-            jr = np.random.default_rng([int(spec.seed), 17, j])
-            ts = ts + spec.timing_jitter_s[j - 1] * jr.standard_normal(N)
-        w = body_rates(ts, seed=spec.seed, max_rate_dps=spec.max_rate_dps)
-        f = f_at(ts)
-        u = w @ m.G.T + m.bias + f @ m.gsens.T
-        if e.warm_up_s > 0:
-            u += np.exp(-t / e.warm_up_s)[:, None] * m.warm
-        temp = T0 + e.temperature_rise_c * (1 - np.exp(-t / e.temperature_tau_s))
-        u += (temp - T0)[:, None] * m.tcoef
-        if e.vibration_hz > 0:
-            u += m.vib_amp * np.sin(2 * math.pi * e.vibration_hz * t[:, None] + m.vib_phase)
-        nr = np.random.default_rng([int(spec.seed), 12, j])
-        ns = spec.noise_sd * (spec.noise_scale[j - 1] if spec.noise_scale else 1.0)
-        u += ns * nr.standard_normal((N, 3))
-        if e.random_walk > 0 and e.on(j):
-            u += np.cumsum(nr.standard_normal((N, 3)), axis=0) * (e.random_walk /
-                                                                  math.sqrt(fs))
-        vr = np.random.default_rng([int(spec.seed), 16, j])
-        if e.vibration_noise > 0 and e.on(j):
-            u += env[:, None] * e.vibration_noise * vr.standard_normal((N, 3))
-        raw_cols.append(u)
-        acc_cols.append(f + spec.accel_noise_sd * nr.standard_normal((N, 3))
-                        + env[:, None] * e.vibration_accel * vr.standard_normal((N, 3)))
-        temp_cols.append(temp + 0.05 * nr.standard_normal(N))
-    raw = np.hstack(raw_cols)
-    names = tuple(f"imu{j}.{a}" for j in range(1, K + 1) for a in _AXES)
-    groups = tuple(f"imu{j}" for j in range(1, K + 1) for _ in _AXES)
+    return env
+
+
+_T0 = 25.0
+"""Temperature (°C) at t = 0 and of the temperature coefficient's reference."""
+
+
+def _imu_outputs(spec: ImuSetSpec, j: int, m: _Imu, t: np.ndarray,
+                 f_at: Callable[[np.ndarray], np.ndarray], env: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """IMU j's gyro outputs (N, 3), accelerometer outputs (N, 3) and logged temperature
+    (N,) (module docstring)."""
+    fs = float(spec.sample_rate_hz)
+    N = t.shape[0]
+    e = spec.effects
+    ts = t + m.tau
+    if spec.timing_jitter_s and spec.timing_jitter_s[j - 1] > 0:
+        jr = np.random.default_rng([int(spec.seed), 17, j])
+        ts = ts + spec.timing_jitter_s[j - 1] * jr.standard_normal(N)
+    w = body_rates(ts, seed=spec.seed, max_rate_dps=spec.max_rate_dps)
+    f = f_at(ts)
+    u = w @ m.G.T + m.bias + f @ m.gsens.T
+    if e.warm_up_s > 0:
+        u += np.exp(-t / e.warm_up_s)[:, None] * m.warm
+    temp = _T0 + e.temperature_rise_c * (1 - np.exp(-t / e.temperature_tau_s))
+    u += (temp - _T0)[:, None] * m.tcoef
+    if e.vibration_hz > 0:
+        u += m.vib_amp * np.sin(2 * math.pi * e.vibration_hz * t[:, None] + m.vib_phase)
+    nr = np.random.default_rng([int(spec.seed), 12, j])
+    ns = spec.noise_sd * (spec.noise_scale[j - 1] if spec.noise_scale else 1.0)
+    u += ns * nr.standard_normal((N, 3))
+    if e.random_walk > 0 and e.on(j):
+        u += np.cumsum(nr.standard_normal((N, 3)), axis=0) * (e.random_walk / math.sqrt(fs))
+    vr = np.random.default_rng([int(spec.seed), 16, j])
+    if e.vibration_noise > 0 and e.on(j):
+        u += env[:, None] * e.vibration_noise * vr.standard_normal((N, 3))
+    acc = (f + spec.accel_noise_sd * nr.standard_normal((N, 3))
+           + env[:, None] * e.vibration_accel * vr.standard_normal((N, 3)))
+    return u, acc, temp + 0.05 * nr.standard_normal(N)
+
+
+def _aux_channels(spec: ImuSetSpec, names: tuple[str, ...], groups: tuple[str, ...],
+                  acc_cols: list[np.ndarray], temp_cols: list[np.ndarray]) -> AuxChannels:
+    """The accelerometers of every IMU, and its temperature when that effect is on."""
+    K = spec.imus
     kinds = ["accel"] * (3 * K)
     aux_names = list(names)
     aux_imu = list(groups)
     vals = [np.hstack(acc_cols)]
-    if e.temperature_coeff > 0:
+    if spec.effects.temperature_coeff > 0:
         kinds += ["temperature"] * K
         aux_names += [f"imu{j}" for j in range(1, K + 1)]
         aux_imu += [f"imu{j}" for j in range(1, K + 1)]
         vals.append(np.column_stack(temp_cols))
     values = np.hstack(vals)
-    aux = AuxChannels(tuple(kinds), tuple(aux_names), tuple(aux_imu), values,
-                      np.ones(values.shape, bool))
-    truth = _truth(spec, imus, N)
-    return Flight(t=t, raw=raw, valid=np.ones(raw.shape, bool), sample_rate_hz=fs,
-                  sensor_names=names, raw_unit="rad/s", omega_true=omega, truth=truth,
-                  source="<simulated>", kind="gyro", imu=groups, aux=aux)
+    return AuxChannels(tuple(kinds), tuple(aux_names), tuple(aux_imu), values,
+                       np.ones(values.shape, bool))
 
 
 def _jitter(spec: ImuSetSpec, js: Sequence[int]) -> list[float]:

@@ -13,7 +13,9 @@ parameter (a time, a frequency, a mounting) are here.
 Users add candidates with :func:`register_effect` or through the entry-point group
 ``rimu.effects`` (each entry point names a :class:`Candidate`, an
 :class:`~fdi.effect_specs.EffectSpec` or a callable returning one or a list); see
-``docs/diagnose.md`` and ``docs/effects.md``.
+``docs/diagnose.md`` and ``docs/effects.md``. The specs are read from the one effect
+registry (:mod:`fdi.effect_specs.registry`, which also reads the entry-point group); kept
+here are only the candidates that are not specs (a regressor the diagnosis alone knows).
 """
 
 from __future__ import annotations
@@ -21,7 +23,6 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from importlib import metadata
 from typing import Any
 
 import numpy as np
@@ -33,7 +34,7 @@ from fdi.effect_specs import (
     ENTRY_POINT_GROUP,
     EffectSpec,
     effect_specs,
-    entry_point_objects,
+    load_entry_points,
     register_spec,
 )
 from fdi.effect_specs.builtin import temperature_reference
@@ -135,6 +136,8 @@ class Candidate:
 
 
 _REGISTRY: dict[str, Candidate] = {}
+"""Candidates that are not effect specs, by name (one named as a spec stands in its place)."""
+_FROM_SPEC: dict[str, tuple[EffectSpec, Candidate]] = {}
 _LOADED_ENTRY_POINTS = False
 
 
@@ -142,9 +145,9 @@ def register_effect(candidate: Candidate | EffectSpec | None = None, /, **kw: An
                     ) -> Candidate:
     """Add a candidate effect (or replace one of the same name).
 
-    Either pass a :class:`Candidate`, an :class:`~fdi.effect_specs.EffectSpec` (also
-    registered for the simulator and the monitor, :func:`fdi.effect_specs.register_spec`)
-    or the candidate's fields as keywords::
+    Either pass a :class:`Candidate`, an :class:`~fdi.effect_specs.EffectSpec` (registered
+    in the one effect registry, so also for the simulator and the monitor,
+    :func:`fdi.effect_specs.register_spec`) or the candidate's fields as keywords::
 
         register_effect(name="humidity", kinds=("gyro",), unit="deg/h per %",
                         meaning="bias proportional to humidity",
@@ -152,26 +155,46 @@ def register_effect(candidate: Candidate | EffectSpec | None = None, /, **kw: An
     """
     c = candidate if candidate is not None else Candidate(**kw)
     if isinstance(c, EffectSpec):
-        c = Candidate.from_spec(register_spec(c))
+        _REGISTRY.pop(c.name, None)
+        return _from_spec(register_spec(c))
     if not isinstance(c, Candidate):
         raise ConfigError(f"register_effect: expected a Candidate, got {type(c).__name__}")
     _REGISTRY[c.name] = c
     return c
 
 
+def _from_spec(spec: EffectSpec) -> Candidate:
+    """The candidate of a registered spec (made once per spec object)."""
+    hit = _FROM_SPEC.get(spec.name)
+    if hit is None or hit[0] is not spec:
+        hit = _FROM_SPEC[spec.name] = (spec, Candidate.from_spec(spec))
+    return hit[1]
+
+
 def _load_entry_points() -> None:
+    """The entry-point group, read strictly through the effect registry (a broken plug-in
+    is named): its specs are registered there, its candidates here."""
     global _LOADED_ENTRY_POINTS
     if _LOADED_ENTRY_POINTS:
         return
     _LOADED_ENTRY_POINTS = True
-    for c in entry_point_objects(metadata.entry_points(group=ENTRY_POINT_GROUP)):
+    for c in load_entry_points(strict=True):
         register_effect(c)
+
+
+def _all() -> dict[str, Candidate]:
+    """Every candidate by name: the registry's specs (built-in first, then users'), then
+    the candidates that are not specs."""
+    _load_entry_points()
+    out = {sp.name: _REGISTRY.get(sp.name) or _from_spec(sp) for sp in effect_specs()}
+    for name, c in _REGISTRY.items():
+        out.setdefault(name, c)
+    return out
 
 
 def candidates(kind: str | None = None) -> list[Candidate]:
     """Registered candidates (built-in first, then users'), optionally for one kind."""
-    _load_entry_points()
-    return [c for c in _REGISTRY.values() if kind is None or kind in c.kinds]
+    return [c for c in _all().values() if kind is None or kind in c.kinds]
 
 
 def get_candidate(name: str) -> Candidate:
@@ -182,12 +205,12 @@ def get_candidate(name: str) -> Candidate:
     ConfigError
         Unknown name (the message lists the known ones).
     """
-    _load_entry_points()
+    known = _all()
     try:
-        return _REGISTRY[name]
+        return known[name]
     except KeyError:
         raise ConfigError(f"unknown effect {name!r}; expected one of "
-                          f"{', '.join(_REGISTRY)}") from None
+                          f"{', '.join(known)}") from None
 
 
 # -- searches for effects with an unknown parameter -------------------------------------
@@ -297,9 +320,6 @@ def mount_search(data: KindData, sensor: int, Q: np.ndarray,
 SEARCHES: dict[str, Callable[..., tuple[dict[str, Any], int]]] = {
     "time_s": step_search, "frequency_hz": line_search, "mount": mount_search}
 """The search of each parameter a built-in spec searches (``EffectSpec.search``)."""
-
-for _s in effect_specs():
-    register_effect(Candidate.from_spec(_s))
 
 
 def effect_searching(parameter: str) -> str:

@@ -31,7 +31,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from calibration.inflight.fit import ImuAlignment, InflightFit, axis_noise
+from calibration.inflight.fit import ImuAlignmentFit, InflightFit, axis_noise
 from calibration.inflight.offset_check import SIGN_CONVENTION
 from calibration.inflight.timing import flight_identity
 from calibration.residual_models import with_residual_models
@@ -43,6 +43,7 @@ from fdi.extras import (
     CalibrationExtras,
     FlightIdentity,
     FlightValues,
+    ImuAlignment,
     ImuTiming,
     InflightAlignment,
     InflightTiming,
@@ -50,7 +51,6 @@ from fdi.extras import (
     Method,
     ParameterRecord,
 )
-from fdi.extras import ImuAlignment as ImuAlignmentRecord
 from fdi.units import RAW_UNITS
 from replay.envelope import flight_accel
 from replay.flight_data import Flight
@@ -204,12 +204,12 @@ def _rows(m: np.ndarray) -> tuple[tuple[float, ...], ...]:
     return tuple(tuple(r) for r in np.asarray(m, float).tolist())
 
 
-def _alignment(a: ImuAlignment, axis_sd: np.ndarray) -> ImuAlignmentRecord:
+def _alignment(a: ImuAlignmentFit, axis_sd: np.ndarray) -> ImuAlignment:
     """The typed record of one IMU's fitted alignment."""
     parts = a.parts()
     r = a.residual[np.all(np.isfinite(a.residual), axis=1)]
     lag1 = [float(np.corrcoef(r[1:, k], r[:-1, k])[0, 1]) for k in range(3)]
-    return ImuAlignmentRecord(
+    return ImuAlignment(
         model=a.model, A=_rows(a.A), A_sd=_rows(np.sqrt(np.diag(a.A_cov)).reshape(3, 3)),
         **{name: tuple(v.tolist()) for name, (v, _) in parts.items()},
         **{f"{name}_sd": tuple(sd.tolist()) for name, (_, sd) in parts.items()},

@@ -50,7 +50,7 @@ from fdi.extras import OffsetCheck
 from replay.flight_data import Flight
 
 __all__ = ["ESTIMATED", "EXCITATION_MIN", "FINDING_RATIO", "HELD", "INFORMED", "MODELS",
-           "TAU_EXCITATION_MIN", "VIF_MAX", "AxisFinding", "Excitation", "ImuAlignment",
+           "TAU_EXCITATION_MIN", "VIF_MAX", "AxisFinding", "Excitation", "ImuAlignmentFit",
            "InflightFit",
            "ParameterStatus", "axis_noise", "decompose", "fit_inflight", "fit_pair",
            "fit_pair_prior", "imu_rates"]
@@ -151,8 +151,9 @@ class ParameterStatus:
 
 
 @dataclass(frozen=True, eq=False)
-class ImuAlignment:
-    """In-flight calibration of one IMU against the reference (SI).
+class ImuAlignmentFit:
+    """In-flight calibration of one IMU against the reference (SI): the fit (the
+    calibration file's record of it is :class:`fdi.extras.ImuAlignment`).
 
     Attributes
     ----------
@@ -232,7 +233,7 @@ class InflightFit:
     reference : str
     imus : tuple of str
         All IMU groups in flight order.
-    alignments : dict of str to ImuAlignment
+    alignments : dict of str to ImuAlignmentFit
         One per IMU other than the reference.
     used : ndarray of bool, shape (N,)
         Samples the fit used.
@@ -245,7 +246,7 @@ class InflightFit:
 
     reference: str
     imus: tuple[str, ...]
-    alignments: dict[str, ImuAlignment]
+    alignments: dict[str, ImuAlignmentFit]
     used: np.ndarray
     left_out: tuple[Segment, ...]
     sample_rate_hz: float
@@ -392,7 +393,7 @@ def _design(model: str, z: np.ndarray, dz: np.ndarray, A: np.ndarray, with_tau: 
 def fit_pair(t: np.ndarray, y_ref: np.ndarray, y: np.ndarray, used: np.ndarray, *,
              model: str = "full", time_offset: bool = True, label: str = "imu",
              sample_rate_hz: float | None = None, check: bool = True,
-             gain: np.ndarray | None = None, jitter: bool = True) -> ImuAlignment:
+             gain: np.ndarray | None = None, jitter: bool = True) -> ImuAlignmentFit:
     """Fit ``y = A·y_ref(t+τ) + c`` on the samples ``used`` (module docstring).
 
     Parameters
@@ -501,7 +502,7 @@ def fit_pair(t: np.ndarray, y_ref: np.ndarray, y: np.ndarray, used: np.ndarray, 
     # timing jitter: the residual against the angular acceleration IMU j sees, A·ω̇_ref
     jit = (fit_timing_jitter(fit.residual, dz[inside] @ A.T, lags=fit.lags) if jitter
            else JitterFit(0.0, 0.0, 0.0, 0.0, np.zeros((3, 3)), 0))
-    return ImuAlignment(imu=label, model=model, A=A, A_cov=A_cov, c=beta[ci],
+    return ImuAlignmentFit(imu=label, model=model, A=A, A_cov=A_cov, c=beta[ci],
                         c_cov=cov[ci, ci],
                         time_offset_s=tau if time_offset else 0.0,
                         time_offset_sd_s=sd_tau,
@@ -583,7 +584,7 @@ class AxisFinding:
                 "channel is weighted by its own noise)")
 
 
-def axis_noise(alignments: dict[str, ImuAlignment], reference: str
+def axis_noise(alignments: dict[str, ImuAlignmentFit], reference: str
                ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
     """Noise covariance of the reference (its frame) and of each IMU (its own frame).
 
@@ -640,7 +641,7 @@ def _psd(C: np.ndarray, floor: float) -> np.ndarray:
     return (V * np.maximum(w, floor)) @ V.T
 
 
-def _findings(alignments: dict[str, ImuAlignment], reference: str,
+def _findings(alignments: dict[str, ImuAlignmentFit], reference: str,
               own: dict[str, np.ndarray]) -> tuple[AxisFinding, ...]:
     """Axes whose own noise exceeds :data:`FINDING_RATIO` × the others' on that body axis
     (needs three IMUs or more: with two the residual cannot be split)."""
@@ -773,7 +774,7 @@ def fit_pair_prior(t: np.ndarray, y_ref: np.ndarray, y: np.ndarray, used: np.nda
                    time_offset: bool = True, label: str = "imu",
                    sample_rate_hz: float | None = None, ref_noise: np.ndarray | None = None,
                    check: bool = True, jitter: bool = True, gate: bool = True
-                   ) -> ImuAlignment:
+                   ) -> ImuAlignmentFit:
     """Fit ``y = (I + E)·R·y_ref(t+τ) + c`` with a prior on E and τ (:mod:`.prior`).
 
     Every reference axis whose rate varies by at least :data:`EXCITATION_MIN` times the
@@ -975,7 +976,7 @@ def fit_pair_prior(t: np.ndarray, y_ref: np.ndarray, y: np.ndarray, used: np.nda
         params[-1] = replace(params[-1], sd=sd_tau)
     jit = (fit_timing_jitter(fit.residual, dz[inside] @ (np.eye(3) + E).T, lags=fit.lags)
            if jitter else JitterFit(0.0, 0.0, 0.0, 0.0, np.zeros((3, 3)), 0))
-    return ImuAlignment(imu=label, model=model, A=A, A_cov=A_cov, c=fit.beta[ci],
+    return ImuAlignmentFit(imu=label, model=model, A=A, A_cov=A_cov, c=fit.beta[ci],
                         c_cov=cov[ci, ci], time_offset_s=tau if fit_tau else 0.0,
                         time_offset_sd_s=sd_tau if time_offset else 0.0,
                         residual=residual, lags=fit.lags, excitation=exc, notes=tuple(notes),

@@ -25,6 +25,7 @@ from fdi.effect_specs.registry import (
     effect_specs,
     entry_point_objects,
     get_spec,
+    load_entry_points,
     register_spec,
 )
 from fdi.effect_specs.spec import (
@@ -58,6 +59,7 @@ __all__ = [
     "effect_specs",
     "entry_point_objects",
     "get_spec",
+    "load_entry_points",
     "register_spec",
     "temperature_profile",
 ]

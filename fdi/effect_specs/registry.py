@@ -1,10 +1,13 @@
 """The effect registry: built-in specs first, then users' (in-process or entry points).
 
-Users add an :class:`~fdi.effect_specs.spec.EffectSpec` with :func:`register_spec` or
-through the entry-point group :data:`ENTRY_POINT_GROUP` (an entry point names a spec, a
-list of them or a callable returning either); the diagnosis, the simulator and the monitor
-then treat it as a built-in one (its forms that are None it does not have). Entry points
-naming anything else (a ``calibration.diagnose.Candidate``) are left to the diagnosis.
+The one registry of effects and the one reader of the entry-point group
+:data:`ENTRY_POINT_GROUP`. Users add an :class:`~fdi.effect_specs.spec.EffectSpec` with
+:func:`register_spec` or through the group (an entry point names a spec, a list of them or
+a callable returning either); the diagnosis, the simulator and the monitor then treat it as
+a built-in one (its forms that are None it does not have). :func:`load_entry_points` reads
+the group, registers its specs and hands back what else it names (a
+``calibration.diagnose.Candidate``, a regressor the diagnosis alone knows), which the
+diagnosis keeps beside the specs (``calibration.diagnose.library``).
 """
 
 from __future__ import annotations
@@ -16,7 +19,7 @@ from fdi.effect_specs.spec import EffectSpec
 from fdi.errors import ConfigError
 
 __all__ = ["ENTRY_POINT_GROUP", "builtin_names", "effect_specs", "entry_point_objects",
-           "get_spec", "register_spec"]
+           "get_spec", "load_entry_points", "register_spec"]
 
 ENTRY_POINT_GROUP = "rimu.effects"
 """The entry-point group of user effects."""
@@ -68,6 +71,26 @@ def entry_point_objects(entry_points: object = None, *, strict: bool = True
     return out
 
 
+def load_entry_points(*, strict: bool = True) -> list[object]:
+    """Read the entry-point group: register every spec it names (:func:`register_spec`)
+    and return the other objects, in order.
+
+    ``strict`` False skips an entry point that cannot be loaded.
+
+    Raises
+    ------
+    ConfigError
+        ``strict``: an entry point that cannot be loaded (named).
+    """
+    others: list[object] = []
+    for obj in entry_point_objects(strict=strict):
+        if isinstance(obj, EffectSpec):
+            register_spec(obj)
+        else:
+            others.append(obj)
+    return others
+
+
 def _load() -> None:
     global _LOADED
     if _LOADED:
@@ -75,9 +98,7 @@ def _load() -> None:
     _LOADED = True
     # a broken plug-in is skipped here (the knob list and the monitor go on without it);
     # the diagnosis loads the group strictly and names it
-    for obj in entry_point_objects(strict=False):
-        if isinstance(obj, EffectSpec):
-            register_spec(obj)
+    load_entry_points(strict=False)
 
 
 def effect_specs() -> tuple[EffectSpec, ...]:

@@ -114,7 +114,7 @@ def _setup(args: argparse.Namespace) -> tuple[Any, Any, Any, Any, str]:
 
 def _noise(args: argparse.Namespace, noise: Any) -> Any:
     """The preset's noise model with the gyro bias instability / random walk options."""
-    from calibration.simulate import NoiseModel
+    from calibration.simulate import SessionNoise
 
     if args.bias_instability_dph < 0 or args.rate_random_walk_dph_rth < 0 \
             or args.bias_correlation_s <= 0:
@@ -122,7 +122,7 @@ def _noise(args: argparse.Namespace, noise: Any) -> Any:
                           "--bias-correlation-s > 0")
     if not (args.bias_instability_dph or args.rate_random_walk_dph_rth):
         return noise
-    base = noise or NoiseModel()
+    base = noise or SessionNoise()
     return dataclasses.replace(
         base, bias_instability={**base.bias_instability,
                                 "gyro": args.bias_instability_dph * DPH},

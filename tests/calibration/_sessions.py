@@ -3,14 +3,14 @@
 import dataclasses
 
 from calibration.presets import preset
-from calibration.simulate import NoiseModel, simulate_session
+from calibration.simulate import SessionNoise, simulate_session
 
 
 def session(name, seed=0, *, white=True, **kw):
     """(session, truth) of a preset; ``white=False`` gives noise-free outputs."""
     seq, truth, noise = preset(name)
     s = simulate_session(None, seq, truth, seed=seed,
-                         noise=noise if white else NoiseModel(white=False), **kw)
+                         noise=noise if white else SessionNoise(white=False), **kw)
     return s, truth
 
 

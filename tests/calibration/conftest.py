@@ -9,7 +9,7 @@ import pytest
 
 from calibration.presets import preset
 from calibration.sequence import Sequence, sequence_from_dict
-from calibration.simulate import NoiseModel, simulate_session
+from calibration.simulate import SessionNoise, simulate_session
 
 TINY_SEQUENCE_DOC = {
     "schema": "rimu.sequence/1",
@@ -70,4 +70,4 @@ def tiny_session(tiny_sequence, cone_preset):
 @pytest.fixture(scope="session")
 def noise_free():
     """A noise model with no noise at all."""
-    return NoiseModel(white=False)
+    return SessionNoise(white=False)

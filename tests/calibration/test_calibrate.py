@@ -181,12 +181,12 @@ def test_rank_deficient_sequence_names_steps():
 
 def test_warns_when_white_noise_does_not_explain_the_step_differences():
     from calibration.presets import preset
-    from calibration.simulate import NoiseModel, simulate_session
+    from calibration.simulate import SessionNoise, simulate_session
     from fdi.units import DPH
 
     seq, truth, _ = preset("tetrad-paper")
     s = simulate_session(None, seq, truth, seed=1,
-                         noise=NoiseModel(bias_instability={"gyro": 5 * DPH}))
+                         noise=SessionNoise(bias_instability={"gyro": 5 * DPH}))
     cal = calibrate(s, allan=False)
     assert any("rate-step differences scatter more" in w for w in cal.extra["warnings"])
     assert any("step means of the residuals scatter" in w for w in cal.extra["warnings"])

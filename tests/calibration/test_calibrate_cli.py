@@ -74,12 +74,12 @@ def test_noise_model_option_and_summary(tmp_path, capsys):
     """A session with 1 deg/h bias instability: 'auto' (default) prints the fitted
     Gauss-Markov bias and the sd factors; '--noise-model white' keeps the white sds."""
     from calibration.presets import preset
-    from calibration.simulate import NoiseModel, simulate_session
+    from calibration.simulate import SessionNoise, simulate_session
     from fdi.units import DPH
 
     seq, truth, _ = preset("tetrad-paper")
     s = simulate_session(None, seq, truth, seed=1,
-                         noise=NoiseModel(bias_instability={"gyro": 1.0 * DPH}))
+                         noise=SessionNoise(bias_instability={"gyro": 1.0 * DPH}))
     d = tmp_path / "coloured"
     save_session(s, d)
     docs = {}

@@ -62,7 +62,7 @@ from calibration.calibrate import calibrate
 from calibration.compare import compare
 from calibration.presets import preset
 from calibration.residuals import GM_SIGMA_CAP_RECORDS
-from calibration.simulate import NoiseModel, simulate_session
+from calibration.simulate import SessionNoise, simulate_session
 from fdi.units import DPH
 
 HOLDOUT = range(1000, 1100)
@@ -114,7 +114,7 @@ def test_coloured_noise_honest_on_fresh_seeds():
     the module docstring); the biases pooled over the four gyros, per method: sd(z) in
     0.75-1.3 (0.84 / 0.82) and at most the 99.9 % binomial quantile of 400 × 0.27 % (5)
     beyond 3σ (0 / 0). The term is kept in every session."""
-    nm = NoiseModel(bias_instability={"gyro": 1.0 * DPH}, bias_correlation_s=100.0)
+    nm = SessionNoise(bias_instability={"gyro": 1.0 * DPH}, bias_correlation_s=100.0)
     z, kept, _ = _z_by_key(nm, FRESH)
     assert len(z) == 4 * 5, sorted(z)
     assert kept == len(FRESH)
@@ -140,7 +140,7 @@ def test_short_correlation_is_not_over_widened():
     bias sd(error/σ) per method at least 0.6 (measured 0.73 / 0.71 on seeds 500-559) and
     at most 1.3, beyond 3σ at most the 99.9 % binomial quantile of 120 × 0.27 %; the
     correlation time used stays within a quarter of the record."""
-    nm = NoiseModel(bias_instability={"gyro": 1.0 * DPH}, bias_correlation_s=30.0)
+    nm = SessionNoise(bias_instability={"gyro": 1.0 * DPH}, bias_correlation_s=30.0)
     z, kept, tau_frac = _z_by_key(nm, range(500, 530))
     assert kept >= 27, kept
     assert np.all(tau_frac <= GM_SIGMA_CAP_RECORDS * (1 + 1e-9)), tau_frac

@@ -25,7 +25,7 @@ from calibration.residuals import (
     gauss_markov_segment_corr,
     gauss_markov_sigma_candidates,
 )
-from calibration.simulate import NoiseModel, simulate_session
+from calibration.simulate import SessionNoise, simulate_session
 from fdi.errors import CalibrationError
 from fdi.units import DPH
 
@@ -36,7 +36,7 @@ MC_SEEDS = range(100)
 
 def _coloured(bi_dph=BI_DPH, seed=0):
     seq, truth, _ = preset("tetrad-paper")
-    nm = NoiseModel(bias_instability={"gyro": bi_dph * DPH}, bias_correlation_s=TAU_C_S)
+    nm = SessionNoise(bias_instability={"gyro": bi_dph * DPH}, bias_correlation_s=TAU_C_S)
     return simulate_session(None, seq, truth, seed=seed, noise=nm), truth
 
 

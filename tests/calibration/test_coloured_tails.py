@@ -68,7 +68,7 @@ from scipy.signal import lfilter
 from calibration.calibrate import gyro_stages
 from calibration.presets import preset
 from calibration.residuals import fit_gauss_markov, gauss_markov_segment_corr
-from calibration.simulate import NoiseModel, simulate_session
+from calibration.simulate import SessionNoise, simulate_session
 from calibration.uncertainty import segment_times, split_with_cov
 from fdi.units import DPH
 
@@ -166,7 +166,7 @@ def test_bias_z_is_not_student_t_with_the_fitted_dof():
       (measured 1.68) and < 0.5 where τ̂c > 400 s (0.16); all |z| > 3 have τ̂c < 150 s.
     """
     seq, truth, _ = preset("tetrad-paper")
-    nm = NoiseModel(bias_instability={"gyro": 1.0 * DPH}, bias_correlation_s=100.0)
+    nm = SessionNoise(bias_instability={"gyro": 1.0 * DPH}, bias_correlation_s=100.0)
     rows = [_bias_z_dof(simulate_session(None, seq, truth, seed=s, noise=nm), truth)
             for s in DEV_SEEDS]
     assert all(r is not None for r in rows), "the Gauss-Markov term is kept in every session"

@@ -38,7 +38,7 @@ from calibration.diagnose import assess, diagnose
 from calibration.diagnose.coloured import GlsModel, NoiseSet, block_corr, block_noise
 from calibration.presets import preset
 from calibration.residuals import gauss_markov_segment_corr
-from calibration.simulate import NoiseModel, simulate_session
+from calibration.simulate import SessionNoise, simulate_session
 from fdi.units import DPH
 
 BI_DPH, TAU_C_S = 1.0, 100.0
@@ -46,7 +46,7 @@ BI_DPH, TAU_C_S = 1.0, 100.0
 
 def _coloured(seed, effects=None, sensors=None, name="tetrad-paper"):
     seq, truth, _ = preset(name)
-    nm = NoiseModel(bias_instability={"gyro": BI_DPH * DPH}, bias_correlation_s=TAU_C_S)
+    nm = SessionNoise(bias_instability={"gyro": BI_DPH * DPH}, bias_correlation_s=TAU_C_S)
     return simulate_session(None, seq, truth, seed=seed, noise=nm, effects=effects or {},
                             effect_sensors=sensors), truth
 

@@ -5,6 +5,7 @@ import pytest
 from _diagnose_sessions import add_signal, calibrate_fast, session
 
 import calibration.diagnose.library as library
+import fdi.effect_specs.registry as effect_registry
 from calibration.diagnose import Candidate, diagnose, register_effect
 from fdi.units import DPH, G0
 
@@ -58,6 +59,6 @@ def test_entry_point_group(registry, monkeypatch):
         def load(self):
             return G_SQUARED
 
-    monkeypatch.setattr(library.metadata, "entry_points",
+    monkeypatch.setattr(effect_registry.metadata, "entry_points",
                         lambda group: [EP()] if group == "rimu.effects" else [])
     assert "g_squared_sensitivity" in [c.name for c in library.candidates("gyro")]

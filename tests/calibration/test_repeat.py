@@ -19,7 +19,7 @@ from calibration.calibrate import calibrate
 from calibration.calibrate_checked import calibrate_checked
 from calibration.presets import preset
 from calibration.repeat import repeat_sessions, repeatability, run_to_run_sd
-from calibration.simulate import NoiseModel, simulate_session
+from calibration.simulate import SessionNoise, simulate_session
 from calibration.stack import stack_mismatch, stack_sessions
 from fdi.errors import ConfigError
 from fdi.units import DPH
@@ -174,7 +174,7 @@ def test_slow_wander_bias_scatters_and_run_to_run_sd_covers_truth():
     6 of 16 with 12 runs while developing): many runs are needed to see it one by one."""
     bi, tc = 1.0 * DPH, 300.0
     seq, truth, _ = preset("tetrad-paper")
-    nm = NoiseModel(bias_instability={"gyro": bi}, bias_correlation_s=tc)
+    nm = SessionNoise(bias_instability={"gyro": bi}, bias_correlation_s=tc)
     sd_true = None
     cover = n = 0
     ratios, qs = [], []
@@ -202,7 +202,7 @@ def test_slow_wander_bias_scatters_and_run_to_run_sd_covers_truth():
 
 def _coloured_runs(base, n, warmup=None):
     seq, truth, _ = preset("tetrad-paper")
-    nm = NoiseModel(bias_instability={"gyro": 1.0 * DPH}, bias_correlation_s=100.0)
+    nm = SessionNoise(bias_instability={"gyro": 1.0 * DPH}, bias_correlation_s=100.0)
     eff = {"warmup": warmup} if warmup else {}
     return [simulate_session(None, seq, truth, seed=base + j, noise=nm, effects=eff,
                              effect_sensors=[3] if warmup else None) for j in range(n)]

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from calibration.sequence import load_sequence, sequence_from_dict
-from calibration.simulate import NoiseModel, simulate_session
+from calibration.simulate import SessionNoise, simulate_session
 from calibration.turntable import earth_rate_n
 from fdi.errors import FileFormatError
 from fdi.units import DPS
@@ -85,7 +85,7 @@ def test_session_inputs_follow_the_sequence(name):
     lat = -23.2
     from calibration.presets import preset
     _, truth, _ = preset(name)
-    s = simulate_session(None, seq, truth, seed=0, noise=NoiseModel(white=False),
+    s = simulate_session(None, seq, truth, seed=0, noise=SessionNoise(white=False),
                          latitude_deg=lat)
     wt, we, _ = s.inputs()
     w_up = earth_rate_n(math.radians(lat))[2]

@@ -9,7 +9,7 @@ import pytest
 
 from calibration.effects import EFFECTS, WARMUP_TAU_S, parse_effect_sensors, parse_effects
 from calibration.presets import preset, random_truth
-from calibration.simulate import NoiseModel, simulate_session, true_raw_means
+from calibration.simulate import SessionNoise, simulate_session, true_raw_means
 from calibration.truth import load_truth, save_truth
 from fdi.calfile import load_calibration
 from fdi.errors import ConfigError, FileFormatError
@@ -178,8 +178,8 @@ def test_noise_processes(tiny_sequence, cone_preset):
     _, truth, _ = cone_preset
     q = 1e-3
     rw = simulate_session(None, tiny_sequence, truth, seed=2,
-                          noise=NoiseModel(white=False, random_walk={"gyro": q}))
-    clean = simulate_session(None, tiny_sequence, truth, seed=2, noise=NoiseModel(white=False))
+                          noise=SessionNoise(white=False, random_walk={"gyro": q}))
+    clean = simulate_session(None, tiny_sequence, truth, seed=2, noise=SessionNoise(white=False))
     inc = np.diff((rw.raw_gyro - clean.raw_gyro) * truth.gyro.scale_factors, axis=0)
     # increments of a random walk of density q at fs: sd q/sqrt(fs); 6*299 increments
     np.testing.assert_allclose(inc.std(), q / np.sqrt(truth.sample_rate_hz), rtol=0.06)
@@ -187,9 +187,9 @@ def test_noise_processes(tiny_sequence, cone_preset):
     seq, _, _ = cone_preset
     sd = 0.05 * DPS
     gm = simulate_session(None, seq, truth, seed=3,
-                          noise=NoiseModel(white=False, bias_instability={"gyro": sd},
+                          noise=SessionNoise(white=False, bias_instability={"gyro": sd},
                                            bias_correlation_s=0.5))
-    clean = simulate_session(None, seq, truth, seed=3, noise=NoiseModel(white=False))
+    clean = simulate_session(None, seq, truth, seed=3, noise=SessionNoise(white=False))
     b = (gm.raw_gyro - clean.raw_gyro) * truth.gyro.scale_factors
     # stationary Gauss-Markov: sd as set; ~ 6 * 368 s / (2 * 0.5 s) independent pieces
     np.testing.assert_allclose(b.std(), sd, rtol=0.1)

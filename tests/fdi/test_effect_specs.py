@@ -23,7 +23,7 @@ import fdi.effect_specs.registry as registry
 from calibration.diagnose.context import kind_data
 from calibration.effects import EFFECTS
 from calibration.presets import preset
-from calibration.simulate import EffectContext, NoiseModel, simulate_session
+from calibration.simulate import EffectContext, SessionNoise, simulate_session
 from fdi.calfile import EffectTerm
 from fdi.effect_specs import BUILTIN, EffectSpec, RuntimeForm, builtin_names
 from fdi.effects import COMPENSABLE, NOT_COMPENSABLE, Compensator, term_correction
@@ -34,7 +34,7 @@ from fdi.units import DPH, G0
 def session():
     """A noise-free tetrad session with the simulated temperature column (knob at 0)."""
     seq, truth, _ = preset("tetrad-paper")
-    s = simulate_session(None, seq, truth, seed=4, noise=NoiseModel(white=False),
+    s = simulate_session(None, seq, truth, seed=4, noise=SessionNoise(white=False),
                          effects={"temperature": 0.0})
     return s, truth, kind_data(s, truth)["gyro"]
 

@@ -31,7 +31,7 @@ from scipy.stats import poisson
 from calibration.diagnose.context import kind_data
 from calibration.diagnose.library import get_candidate
 from calibration.presets import preset
-from calibration.simulate import NoiseModel, simulate_session
+from calibration.simulate import SessionNoise, simulate_session
 from fdi.calfile import EffectTerm
 from fdi.effects import COMPENSABLE, Compensator, term_correction
 from fdi.effects_monitor import CompensatedMonitor
@@ -46,7 +46,7 @@ from studies.synthetic import synthetic_calibration
 @pytest.fixture(scope="module")
 def session_data():
     seq, truth, _ = preset("tetrad-paper")
-    s = simulate_session(None, seq, truth, seed=4, noise=NoiseModel(white=False))
+    s = simulate_session(None, seq, truth, seed=4, noise=SessionNoise(white=False))
     t = s.t - s.t[0]
     T = 25 + 10 * (1 - np.exp(-t / 500))[:, None] + 0.3 * np.arange(4)[None, :]
     s = dataclasses.replace(s, temperature_degC=T)
