@@ -54,6 +54,7 @@ from replay.effect_inputs import (
     stream_inputs,
 )
 from replay.envelope import envelope_tracker
+from replay.envelope_lead import LeadHold
 from replay.flight_data import Flight, concat_flights
 from replay.log_events import declared_intervals
 from replay.report import RunningReport
@@ -143,12 +144,25 @@ class MonitorChain:
         self.injector = injector
         self.report = report
         self.envelope = envelope
+        # a moved sample reaches ahead in time: its envelope code covers those samples
+        # (replay.envelope_lead); the answers come that many sample periods later
+        lead = self._lead_samples()
+        self._hold = LeadHold(lead) if envelope is not None and lead > 0 else None
         self.thresholds_how = thresholds_how
         self.recorder: Any = None
         self.last_answers: list[Answer] = []
         comp = getattr(monitor, "compensator", None)
         self._needs_inputs = comp is not None and bool(
             comp.needs & {"specific_force", "temperature"})
+
+    def _lead_samples(self) -> int:
+        """Samples past its time a moved sample is made from (0: nothing moved ahead)."""
+        if self.aligner is None:
+            return 0
+        fs = float(self.cal.sample_rate_hz)
+        ahead = float(self.aligner.delay_s) * fs if fs > 0 else 0.0
+        extra = int(getattr(self.aligner, "hold_samples", 0) or 0)
+        return (int(np.ceil(ahead - 1e-9)) if ahead > 0 else 0) + (extra if ahead > 0 else 0)
 
     # -------------------------------------------------------------- what it does
     @property
@@ -243,7 +257,7 @@ class MonitorChain:
             pieces = [p for p in (self.aligner.push(flight), self.aligner.flush())
                       if p is not None]
             flight = pieces[0] if len(pieces) == 1 else concat_flights(pieces)
-        return self._monitor(flight, False, None, None)
+        return self._monitor(flight, False, None, None, final=True)
 
     def finish(self, *, stepwise: bool = False,
                on_event: Callable[[Event], None] | None = None, pacer: Any = None
@@ -251,7 +265,7 @@ class MonitorChain:
         """Monitor the samples still held back (end of the source)."""
         if self.aligner is None:
             return None
-        return self._monitor(self.aligner.flush(), stepwise, on_event, pacer)
+        return self._monitor(self.aligner.flush(), stepwise, on_event, pacer, final=True)
 
     def block(self, piece: Flight) -> ChainBlock:
         """What the envelope is decided from, for the samples of ``piece``."""
@@ -296,17 +310,33 @@ class MonitorChain:
         force, temp, _ = flight_effect_inputs(piece)
         return {k: v for k, v in (("force", force), ("temperature", temp)) if v is not None}
 
+    def _codes(self, piece: Flight | None, final: bool
+               ) -> tuple[Flight | None, np.ndarray | None]:
+        """The samples to monitor now and their envelope codes (None: no envelope): the
+        operating envelope of these samples (fdi.envelope), context for the monitor, which
+        suspends exclusion while outside; with samples moved ahead in time, each code
+        covers the samples its sample is made from (replay.envelope_lead)."""
+        new = piece is not None and piece.t.shape[0] > 0
+        codes = None
+        if self.envelope is not None and new:
+            blk = self.block(piece)
+            codes = np.asarray(self.envelope.update(blk.t, blk.rates, blk.accel))
+        if self._hold is None:
+            return (piece if new else None), codes
+        if new:
+            return self._hold.push(piece, codes, final=final)
+        return self._hold.release() if final else (None, None)
+
     def _monitor(self, piece: Flight | None, stepwise: bool,
-                 on_event: Callable[[Event], None] | None, pacer: Any) -> BlockResult | None:
+                 on_event: Callable[[Event], None] | None, pacer: Any, *,
+                 final: bool = False) -> BlockResult | None:
         self.last_answers = []
+        piece, codes = self._codes(piece, final)
         if piece is None or piece.t.shape[0] == 0:
             return None
         kw = self._inputs(piece)
-        if self.envelope is not None:
-            # the operating envelope of these samples (fdi.envelope): context for the
-            # monitor, which suspends exclusion while outside
-            blk = self.block(piece)
-            kw["envelope"] = np.asarray(self.envelope.update(blk.t, blk.rates, blk.accel))
+        if codes is not None:
+            kw["envelope"] = codes
         if pacer is not None:
             result = pacer.run(self.monitor, piece.t, piece.raw, piece.valid, **kw)
         elif stepwise:

@@ -123,7 +123,8 @@ def test_bad_events_are_refused_naming_the_field(tmp_path, bad, field):
 
 def test_shared_ulogs_give_their_messages_and_no_declared_event():
     """The shared ULogs are short samples: vehicle_status and estimator_status exist with
-    every flag clear, so only the logged text messages come out (category info)."""
+    every flag clear, so only the logged text messages come out (category info), after the
+    firmware the log names at its start (replay.firmware)."""
     from replay.ingest.px4 import read_px4
     from tests.calibration._erle import SHARED
 
@@ -131,8 +132,11 @@ def test_shared_ulogs_give_their_messages_and_no_declared_event():
     if not path.exists():
         pytest.skip(f"{path} not found (set RIMU_SHARED_DATA)")
     read = read_px4(path)
-    assert [e.text for e in read.events] == ["[commander] Takeoff detected",
+    assert [e.text for e in read.events] == ["PX4 v1.11.2 8583f1da CUBEPILOT_CUBEORANGE",
+                                             "[commander] Takeoff detected",
                                              "[commander] Landing detected",
                                              "[commander] Disarmed by landing"]
     assert {e.category for e in read.events} == {"info"}
-    assert read.events[0].t_s == pytest.approx(22.683736)
+    assert read.events[0].source == "ulog.info"
+    assert read.events[0].t_s == pytest.approx(20.309082)
+    assert read.events[1].t_s == pytest.approx(22.683736)
