@@ -291,10 +291,13 @@ def _concat(a: Flight, b: Flight) -> Flight:
 
 def flight_identity(flight: Flight) -> dict[str, object]:
     """What identifies a flight: its source log (file name), sample count, first and last
-    time (s) and a fingerprint of its samples (sha256 of the times and rates, rounded to
-    1e-9, first 16 hex digits)."""
+    time (s), a fingerprint of its samples (sha256 of the times and rates, rounded to
+    1e-9, first 16 hex digits) and the firmware its log names (``""`` when none,
+    :func:`replay.firmware.firmware_of`)."""
     import hashlib
     from pathlib import PurePath
+
+    from replay.firmware import firmware_of
 
     t = np.asarray(flight.t, float)
     h = hashlib.sha256()
@@ -302,4 +305,5 @@ def flight_identity(flight: Flight) -> dict[str, object]:
     h.update(np.round(np.nan_to_num(np.asarray(flight.raw, float)), 9).tobytes())
     return {"source": PurePath(str(flight.source)).name, "samples": int(t.shape[0]),
             "t0_s": float(t[0]) if t.size else 0.0, "t1_s": float(t[-1]) if t.size else 0.0,
-            "fingerprint": h.hexdigest()[:16]}
+            "fingerprint": h.hexdigest()[:16],
+            "firmware": firmware_of(getattr(flight, "events", ()) or ())}

@@ -410,7 +410,8 @@ def same_power_up(cal: Calibration, flight: Any) -> bool | None:
     every Xsens DOT path of the shared data is ``IMU_1.csv`` … ``IMU_4.csv``, and
     autopilots number their logs from 1 on every card) with times inside the calibrated
     flight's. A calibration of several flights together is the power-up of none of them
-    (its bias is their mean): False.
+    (its bias is their mean): False. A flight whose log names another firmware than the
+    calibration's (:mod:`replay.firmware`) is another power-up: False.
     """
     from replay.time_offsets import flight_identity
 
@@ -424,6 +425,8 @@ def same_power_up(cal: Calibration, flight: Any) -> bool | None:
     here = flight_identity(flight)
     if here["fingerprint"] == known.fingerprint:
         return True
+    if known.firmware and here["firmware"] and here["firmware"] != known.firmware:
+        return False                # another firmware build: another power-up (replay.firmware)
     if (here["samples"] == known.samples and known.t0_s is not None and known.t1_s is not None
             and abs(here["t0_s"] - known.t0_s) < 1e-3 and abs(here["t1_s"] - known.t1_s) < 1e-3):
         return True                 # the same recording read again (another format, float32)

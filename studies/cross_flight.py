@@ -162,7 +162,8 @@ def _count(res: Any) -> dict[str, Any]:
 
 def _pair(name_cal: str, name_mon: str, flight: Any, cal: Any, thr: Any, own: Any,
           steps: bool) -> dict[str, Any]:
-    from calibration.inflight.fits_flight import parameter_checks
+    from calibration.inflight.fits_flight import calibration_firmware, parameter_checks
+    from replay.time_offsets import flight_identity
 
     row: dict[str, Any] = {"calibrated_on": name_cal, "monitored": name_mon}
     for label, mode in (("before", "off"), ("after", "auto")):
@@ -178,7 +179,17 @@ def _pair(name_cal: str, name_mon: str, flight: Any, cal: Any, thr: Any, own: An
                 row["steps"] = _step_runs(flight, cal, thr, res, ons)
     row["misfit"] = ([c.to_dict() for c in parameter_checks(cal, own) if not c.fits]
                      if own is not None else [])
+    row["firmware"] = {"calibration": calibration_firmware(cal),
+                       "flight": str(flight_identity(flight)["firmware"])}
     return row
+
+
+def _firmware(row: dict[str, Any]) -> str:
+    """``same``, ``changed`` or ``-`` (a log names none) for the table."""
+    fw = row.get("firmware") or {}
+    a, b = fw.get("calibration", ""), fw.get("flight", "")
+    return "-" if not a or not b else "same" if a == b else "changed"
+
 
 
 def merged(docs: Sequence[dict[str, Any]], key: str) -> dict[str, Any]:
@@ -289,8 +300,8 @@ def erle_flights() -> dict[str, Any]:
 def table(doc: dict[str, Any]) -> str:
     """A markdown table of :func:`cross_pairs`."""
     lines = ["| calibrated on -> monitored | alarms in envelope (before -> after) | "
-             "exposure s | excluded | unverified | 10 deg/s step within 1 s | misfit "
-             "parameters |", "| --- | --- | --- | --- | --- | --- | --- |"]
+             "exposure s | excluded | unverified | 10 deg/s step within 1 s | firmware | "
+             "misfit parameters |", "| --- | --- | --- | --- | --- | --- | --- | --- |"]
     for r in doc["pairs"]:
         b, a = r["before"], r["after"]
         st = r.get("steps", [])
@@ -303,7 +314,7 @@ def table(doc: dict[str, Any]) -> str:
             f"{a['alarms_in_envelope']} | {3600 * a['hours_in_envelope']:.0f} | "
             f"{b['excluded'] or '-'} -> {a['excluded'] or '-'} | "
             f"{100 * b['unverified_fraction']:.1f}% -> {100 * a['unverified_fraction']:.1f}% | "
-            f"{ok} of {len(st)} | "
+            f"{ok} of {len(st)} | {_firmware(r)} | "
             f"{', '.join(sorted({m['imu'] + ' ' + m['parameter'] for m in r['misfit']}))} |")
     for label in ("before", "after"):
         p = doc[label]
@@ -365,7 +376,9 @@ def markdown(doc: dict[str, Any]) -> str:
     for key in ("erle", "xsens"):
         if key not in doc:
             continue
-        out += ["", f"**{TITLES[key]}**", "", table(doc[key]), "", *verdicts(doc[key])]
+        own = doc[key].get("commit")
+        when = [] if own is None else ["", f"(this group: commit {own}, merged with --merge)"]
+        out += ["", f"**{TITLES[key]}**", *when, "", table(doc[key]), "", *verdicts(doc[key])]
     out.append(END)
     return "\n".join(out)
 
@@ -395,6 +408,8 @@ def main(argv: Sequence[str] | None = None) -> None:
                     help="write the generated block into this markdown file (repeatable)")
     ap.add_argument("--from-json", action="store_true",
                     help="only rewrite the --doc blocks from --out")
+    ap.add_argument("--merge", action="store_true",
+                    help="keep the groups of --out that this run does not compute")
     a = ap.parse_args(argv)
     if a.from_json:
         doc = json.loads(Path(a.out).read_text(encoding="utf-8"))
@@ -407,6 +422,12 @@ def main(argv: Sequence[str] | None = None) -> None:
     t0 = time.monotonic()
     groups = a.groups.split(",")
     doc: dict[str, Any] = {}
+    if a.merge and Path(a.out).exists():
+        kept = json.loads(Path(a.out).read_text(encoding="utf-8"))
+        for k in TITLES:
+            if k in kept and k not in groups:       # each kept group keeps its own commit
+                doc[k] = {"commit": kept.get("commit", "?"), "wall_s": kept.get("wall_s"),
+                          **kept[k]}
     try:
         doc["commit"] = subprocess.run(["git", "rev-parse", "--short", "HEAD"], check=True,
                                        capture_output=True, text=True,

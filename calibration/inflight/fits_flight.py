@@ -20,7 +20,9 @@ two-sided, and a parameter does not fit at ``alpha`` family-wise (Bonferroni ove
 parameter tested). :func:`mismatch_warnings` turns the failures into one line per IMU and
 parameter, naming both values (``imu2 scale x/y/z: calibration +5.6/+4.0/+3.0 %, this
 flight -0.5/+0.2/-0.5 %``), for ``rimu diagnose FLIGHT --cal CAL`` and ``rimu
-monitor-file``.
+monitor-file``. When the calibration's flights and this one name their firmware and it
+differs (:mod:`replay.firmware`), :func:`flight_mismatch` says so first: the time offset,
+filtering and driver scale belong to the firmware and may not carry.
 """
 
 from __future__ import annotations
@@ -34,10 +36,12 @@ from scipy import stats
 from fdi.calfile import Calibration
 from fdi.errors import RimuError
 from fdi.units import DPS
+from replay.firmware import firmware_change
+from replay.time_offsets import flight_identity
 from replay.turn_on import same_power_up
 
-__all__ = ["ParameterCheck", "flight_calibration", "flight_mismatch", "mismatch_warnings",
-           "parameter_checks"]
+__all__ = ["ParameterCheck", "calibration_firmware", "flight_calibration", "flight_mismatch",
+           "mismatch_warnings", "parameter_checks"]
 
 _AXES = "xyz"
 _MS = 1e-3
@@ -248,10 +252,28 @@ def flight_mismatch(cal: Calibration, flight: Any, *, alpha: float = 0.01
     checks."""
     if cal.extras.inflight_alignment is None or same_power_up(cal, flight):
         return [], []
+    fw = firmware_change(calibration_firmware(cal), str(flight_identity(flight)["firmware"]))
+    first = [fw] if fw else []
     try:
         fc = flight_calibration(flight)
     except RimuError as e:
-        return [], [f"the calibration's parameters could not be checked against this flight: "
-                    f"its in-flight fit refuses it ({e})"]
+        return [], [*first, f"the calibration's parameters could not be checked against this "
+                            f"flight: its in-flight fit refuses it ({e})"]
     checks = parameter_checks(cal, fc, alpha=alpha)
-    return checks, mismatch_warnings(checks)
+    return checks, [*first, *mismatch_warnings(checks)]
+
+
+def calibration_firmware(cal: Calibration) -> str:
+    """The firmware the calibration's flights name (``extra.inflight``): that of its flight,
+    or of each flight calibrated together (different ones joined by ``" | "``); ``""``
+    when none names one."""
+    names: list[str] = []
+    alignment = cal.extras.inflight_alignment
+    for fv in (alignment.flights if alignment is not None else ()):
+        if fv.flight is not None and fv.flight.firmware and fv.flight.firmware not in names:
+            names.append(fv.flight.firmware)
+    inflight = cal.extras.inflight
+    own = inflight.flight if inflight is not None else None
+    if not names and own is not None and own.firmware:
+        names.append(own.firmware)
+    return " | ".join(names)

@@ -56,6 +56,9 @@ class FlightIdentity:
         First and last sample time (s).
     fingerprint : str
         16 hex digits of a sha256 of the times and rates (rounded to 1e-9).
+    firmware : str
+        The firmware the log names (:func:`replay.firmware.firmware_of`); ``""`` when it
+        names none (the file then carries no ``firmware`` field).
     """
 
     source: str
@@ -63,11 +66,13 @@ class FlightIdentity:
     t0_s: float
     t1_s: float
     fingerprint: str
+    firmware: str = ""
 
     def to_dict(self) -> dict[str, Any]:
         """The JSON record."""
         return {"source": self.source, "samples": self.samples, "t0_s": self.t0_s,
-                "t1_s": self.t1_s, "fingerprint": self.fingerprint}
+                "t1_s": self.t1_s, "fingerprint": self.fingerprint,
+                **({"firmware": self.firmware} if self.firmware else {})}
 
 
 @dataclass(frozen=True)
@@ -236,7 +241,8 @@ def _flight(r: Fields) -> FlightIdentity | None:
                           samples=f.integer("samples", 0, lo=0),
                           t0_s=f.number("t0_s", 0.0, finite=False),
                           t1_s=f.number("t1_s", 0.0, finite=False),
-                          fingerprint=f.string("fingerprint", "", nonempty=False))
+                          fingerprint=f.string("fingerprint", "", nonempty=False),
+                          firmware=f.string("firmware", "", nonempty=False))
 
 
 def _piece(r: Fields) -> OffsetPiece:

@@ -14,7 +14,9 @@ motor as category ``crash`` (PX4's failure detector: the attitude is beyond its 
 the vehicle is terminated), the other bits and ``vehicle_status.failsafe`` as ``info``;
 ``estimator_status.filter_fault_flags`` (instance 0) as ``estimator``; each span from the
 first sample with the bits set to the first sample where they clear. The log's text
-messages (``logged_messages``) as ``info``.
+messages (``logged_messages``) as ``info``, and the firmware it was recorded under (its
+info fields, :func:`replay.firmware.px4_firmware_text`) as one ``info`` event at the
+log's start.
 
 Damage: pyulog stops silently where the file is cut (or where a corrupt header claims more
 bytes than the file has), and flags other corruption (``file_corruption``) while
@@ -46,6 +48,7 @@ import numpy as np
 
 from fdi.errors import ConfigError, FileFormatError
 from fdi.units import TIME_UNITS
+from replay.firmware import ULOG_INFO_SOURCE, px4_firmware_text
 from replay.ingest.stream import Damage, ImuStream, LogRead
 from replay.log_events import LogEvent, flag_intervals
 
@@ -528,4 +531,8 @@ def px4_events(u: Any) -> tuple[LogEvent, ...]:
     for m in getattr(u, "logged_messages", ()):
         ts = float(m.timestamp) * TIME_UNITS["us"]
         out.append(LogEvent(ts, ts, "logged_message", str(m.message).strip()))
+    fw = px4_firmware_text(getattr(u, "msg_info_dict", None) or {})
+    if fw:                          # the firmware the log was recorded under (replay.firmware)
+        ts = float(getattr(u, "start_timestamp", 0) or 0) * TIME_UNITS["us"]
+        out.append(LogEvent(ts, ts, ULOG_INFO_SOURCE, fw))
     return tuple(sorted(out, key=lambda e: e.t_s))

@@ -112,10 +112,12 @@ def run(args: argparse.Namespace) -> int:
     warning = other_flight_warning(cal, flight)
     if warning:
         logging.getLogger("rimu").warning(warning)
+    misfits: list[str] = []
     if not args.no_parameter_check:
         from calibration.inflight.fits_flight import flight_mismatch
 
-        for w in flight_mismatch(cal, flight)[1]:      # every parameter, not only the offset
+        misfits = flight_mismatch(cal, flight)[1]       # every parameter, not only the offset
+        for w in misfits:
             logging.getLogger("rimu").warning(w)
     chain = chain_for_flight(flight, cal, ChainOptions(
         thresholds_file=args.thresholds, calibration_file=args.cal,
@@ -128,6 +130,8 @@ def run(args: argparse.Namespace) -> int:
     current().stage(f"monitoring {flight.t.shape[0]} samples")
     _, report = run_flight(chain, flight)
     report["time_base"] = flight.time_base.to_dict()     # the gaps it monitored across
+    if misfits:                 # what of the calibration does not fit this flight (firmware too)
+        report["calibration_misfit"] = misfits
     print(format_report(report, max_events=args.max_events))
     from replay.report import decoding_hint
 
