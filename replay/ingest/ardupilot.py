@@ -45,18 +45,20 @@ from fdi.errors import FileFormatError
 from fdi.units import TIME_UNITS
 from replay.ingest.ardupilot_events import ERR_SUBSYSTEMS, EV_IDS, ardupilot_events
 from replay.ingest.dataflash_damage import (
-    _damage,
-    _first_damage,
-    _scan,  # noqa: F401  (re-exported: the framing walk, as the tests reach it)
-    _trusted_counts,
+    damage_record,
+    first_damage,
+    trusted_counts,
 )
+
+# the framing walk, re-exported under the name the tests reach it by
+from replay.ingest.dataflash_damage import scan as _scan  # noqa: F401
 from replay.ingest.dataflash_fmt import (
-    _FMT_ID,
-    _FMT_LEN,
-    _HEAD,
     EVENT_TYPES,
+    FMT_ID,
+    FMT_LEN,
+    HEAD,
     IMU_TYPES,
-    _fmt_check,
+    fmt_check,
     fmt_repairs,
 )
 from replay.ingest.stream import ImuStream, LogRead
@@ -69,7 +71,7 @@ def looks_like_dataflash(path: str | Path) -> bool:
     """True when the file starts with a DataFlash message header (``A3 95 80``: FMT)."""
     try:
         with open(path, "rb") as fh:
-            return fh.read(3) == _HEAD + b"\x80"
+            return fh.read(3) == HEAD + b"\x80"
     except OSError:
         return False
 
@@ -115,9 +117,9 @@ def _patched_reader(path: str, patches: dict[int, bytes]) -> Any:
                                       access=mmap.ACCESS_COPY)
             for off, rec in patches.items():
                 self.data_map[off:off + len(rec)] = rec
-            self.HEAD1, self.HEAD2 = _HEAD
+            self.HEAD1, self.HEAD2 = HEAD
             self.unpackers = {}
-            self.formats = {_FMT_ID: DFReader.DFFormat(_FMT_ID, "FMT", _FMT_LEN, "BBnNZ",
+            self.formats = {FMT_ID: DFReader.DFFormat(FMT_ID, "FMT", FMT_LEN, "BBnNZ",
                                                        "Type,Length,Name,Format,Columns")}
             self._zero_time_base = False
             self.prev_type = None
@@ -132,7 +134,7 @@ def _patched_reader(path: str, patches: dict[int, bytes]) -> Any:
 def _open(path: str) -> Any:
     from pymavlink import DFReader
 
-    patches, warnings = _fmt_check(path)
+    patches, warnings = fmt_check(path)
     try:
         with _quiet():
             r = _patched_reader(path, patches) if patches else DFReader.DFReader_binary(path)
@@ -301,13 +303,13 @@ def read_ardupilot(path: str | Path, *, salvage: bool = False) -> LogRead:
     if r.fmt_warnings and not salvage:
         raise FileFormatError(p, f"{r.fmt_warnings[0]}; --salvage repairs it or skips the "
                                  "type it defines, with a warning")
-    damage = _first_damage(r)
+    damage = first_damage(r)
     counts = {t: int(r.counts[r.name_to_id[t]]) for t in (*IMU_TYPES, *EVENT_TYPES)
               if t in r.name_to_id}
     stretches: list[dict[str, Any]] = []
     trusted: dict[int, int] = {}
     if damage is not None:
-        stretches, trusted, counts = _trusted_counts(r, counts)
+        stretches, trusted, counts = trusted_counts(r, counts)
     types = [t for t in IMU_TYPES if counts.get(t, 0) > 0]
     if not types:
         raise FileFormatError(p, f"no IMU messages ({', '.join(IMU_TYPES)}) in the log")
@@ -320,7 +322,7 @@ def read_ardupilot(path: str | Path, *, salvage: bool = False) -> LogRead:
                        events=ardupilot_events(raw_events))
     cols = _collect(r, types, fields, r.data_len + 1, raw_events, trusted)
     streams = _streams(cols, fields)
-    dmg = _damage(p, damage, stretches, streams, cols)
+    dmg = damage_record(p, damage, stretches, streams, cols)
     if not salvage:
         raise dmg.error()
     return LogRead(p, "ardupilot", tuple(streams), dmg, meta,

@@ -1,9 +1,9 @@
 """Damage in a DataFlash log: where its framing breaks, what is trusted, what is lost.
 
-From pymavlink's index (:func:`_first_damage`: a message that runs past the end of the
+From pymavlink's index (:func:`first_damage`: a message that runs past the end of the
 file, bytes that belong to no message) and from rimu's own walk of the framing, which
-resynchronises after damage (:func:`_scan`, :func:`_stretches`): each damaged stretch with
-the messages dropped and the IMU samples lost there (:func:`_damage`). The reader is
+resynchronises after damage (:func:`scan`, :func:`_stretches`): each damaged stretch with
+the messages dropped and the IMU samples lost there (:func:`damage_record`). The reader is
 :mod:`replay.ingest.ardupilot` (its module docstring says what is kept).
 """
 
@@ -13,13 +13,13 @@ from typing import Any
 
 import numpy as np
 
-from replay.ingest.dataflash_fmt import _HEAD, IMU_TYPES
+from replay.ingest.dataflash_fmt import HEAD, IMU_TYPES
 from replay.ingest.stream import Damage, ImuStream
 
-__all__: list[str] = []
+__all__ = ["damage_record", "first_damage", "scan", "trusted_counts"]
 
 
-def _first_damage(r: Any) -> tuple[int, str] | None:
+def first_damage(r: Any) -> tuple[int, str] | None:
     """(offset, what) of the first truncated or unaccounted byte, from pymavlink's index."""
     starts, lens, names = [], [], []
     for mtype, offs in enumerate(r.offsets):
@@ -60,7 +60,7 @@ def _first_damage(r: Any) -> tuple[int, str] | None:
     return None
 
 
-def _scan(r: Any, data: bytes) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def scan(r: Any, data: bytes) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Starts, lengths and type ids of the messages of ``data``, found by walking the
     framing and resynchronising after damage (pymavlink's indexer stops at the first
     unknown message id: one flipped id byte hid the rest of the log).
@@ -74,7 +74,7 @@ def _scan(r: Any, data: bytes) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """
     lens = {int(k): int(f.len) for k, f in r.formats.items()}
     n = len(data)
-    h0, h1 = _HEAD
+    h0, h1 = HEAD
 
     def header(q: int) -> int:
         """The length of the message whose header starts at q, or 0."""
@@ -103,9 +103,9 @@ def _scan(r: Any, data: bytes) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
             if pos + ln >= n or header(pos + ln):
                 pos += ln
                 continue
-        q = data.find(_HEAD, pos + 1)
+        q = data.find(HEAD, pos + 1)
         while q != -1 and not good(q):
-            q = data.find(_HEAD, q + 1)
+            q = data.find(HEAD, q + 1)
         if q == -1:
             break
         pos = q
@@ -121,7 +121,7 @@ def _an(name: str) -> str:
 def _damaged_header(r: Any, data: bytes, a: int, b: int) -> str | None:
     """The type name when bytes ``[a, b)`` are exactly one message whose sync bytes are
     damaged (one of the two intact, a known type whose length is ``b - a``), else None."""
-    if b - a < 3 or not (data[a] == _HEAD[0] or data[a + 1] == _HEAD[1]):
+    if b - a < 3 or not (data[a] == HEAD[0] or data[a + 1] == HEAD[1]):
         return None
     fmt = r.formats.get(data[a + 2])
     return fmt.name if fmt is not None and fmt.len == b - a else None
@@ -136,7 +136,7 @@ def _stretches(r: Any, data: bytes) -> tuple[list[dict[str, Any]], dict[int, int
     too (DataFlash has no checksum: its body may hold the first corrupt bytes), unless the
     break is exactly one message whose sync bytes alone are damaged.
     """
-    o, ln, ty = _scan(r, data)
+    o, ln, ty = scan(r, data)
     n_data = int(r.data_len)
     out: list[dict[str, Any]] = []
     keep: list[int] = []                 # indices into o of trusted messages
@@ -190,11 +190,11 @@ def _stretches(r: Any, data: bytes) -> tuple[list[dict[str, Any]], dict[int, int
     return out, {int(o[i]): int(ty[i]) for i in keep}
 
 
-def _trusted_counts(r: Any, counts: dict[str, int]
+def trusted_counts(r: Any, counts: dict[str, int]
                     ) -> tuple[list[dict[str, Any]], dict[int, int], dict[str, int]]:
     """The damaged stretches, the trusted messages ({start: type id}) and the count of
     each type among them. pymavlink's index stops at the first unknown message id: count
-    from rimu's own walk of the framing (:func:`_scan`), which resynchronises after the
+    from rimu's own walk of the framing (:func:`scan`), which resynchronises after the
     damage."""
     data = bytes(r.data_map[:int(r.data_len)])          # with repaired FMT records
     stretches, trusted = _stretches(r, data)
@@ -223,7 +223,7 @@ def _lost_samples(stretches: list[dict[str, Any]], streams: list[ImuStream],
         x["lost"] = {"imu_samples": lost}
 
 
-def _damage(p: str, damage: tuple[int, str], stretches: list[dict[str, Any]],
+def damage_record(p: str, damage: tuple[int, str], stretches: list[dict[str, Any]],
             streams: list[ImuStream], cols: dict[tuple[str, int], dict[str, list[float]]]
             ) -> Damage:
     """The log's damage record: the first stretch (or pymavlink's first damage), the IMU

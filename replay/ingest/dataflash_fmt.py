@@ -12,16 +12,16 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["EVENT_TYPES", "IMU_TYPES", "fmt_repairs"]
+__all__ = ["EVENT_TYPES", "FMT_ID", "FMT_LEN", "HEAD", "IMU_TYPES", "fmt_check", "fmt_repairs"]
 
-_HEAD = b"\xa3\x95"
+HEAD = b"\xa3\x95"
 """The two sync bytes that start every DataFlash message."""
 IMU_TYPES = ("IMU", "IMU2", "IMU3")
 """DataFlash message types that carry IMU samples."""
 EVENT_TYPES = ("ERR", "EV", "MSG")
 """DataFlash message types read as events."""
-_FMT_ID = 0x80
-_FMT_LEN = 89
+FMT_ID = 0x80
+FMT_LEN = 89
 _CHAR_SIZE = {"a": 64, "b": 1, "B": 1, "g": 2, "h": 2, "H": 2, "i": 4, "I": 4, "f": 4,
               "n": 4, "N": 16, "Z": 64, "c": 2, "C": 2, "e": 4, "E": 4, "L": 4, "d": 8,
               "M": 1, "q": 8, "Q": 8}
@@ -63,13 +63,13 @@ def _fmt_problems(fields: tuple[int, int, bytes, bytes, bytes]) -> list[str]:
 def _frames_at(data: bytes, mtype: int, length: int) -> tuple[int, int]:
     """(messages of id ``mtype`` followed by a header ``length`` bytes on, messages of
     that id): how well a length frames a type."""
-    pat = _HEAD + bytes([mtype])
+    pat = HEAD + bytes([mtype])
     n = hit = 0
     k = data.find(pat)
     while k >= 0 and n < 2000:
         n += 1
         e = k + length
-        hit += e >= len(data) or data[e:e + 2] == _HEAD
+        hit += e >= len(data) or data[e:e + 2] == HEAD
         k = data.find(pat, k + 1)
     return hit, n
 
@@ -78,18 +78,18 @@ def _fmt_records(data: bytes) -> list[int]:
     """Start of every FMT record: the FMT id after the sync bytes, or a record where the
     89-byte run of FMT records expects one with at most one of its header bytes damaged."""
     recs = []
-    k = data.find(_HEAD + bytes([_FMT_ID]))
+    k = data.find(HEAD + bytes([FMT_ID]))
     while k >= 0:
         recs.append(k)
-        k = data.find(_HEAD + bytes([_FMT_ID]), k + 1)
+        k = data.find(HEAD + bytes([FMT_ID]), k + 1)
     known = set(recs)
     for k in list(recs):
-        for q in (k - _FMT_LEN, k + _FMT_LEN):
-            if q < 0 or q in known or q + _FMT_LEN > len(data):
+        for q in (k - FMT_LEN, k + FMT_LEN):
+            if q < 0 or q in known or q + FMT_LEN > len(data):
                 continue
-            one_sync = data[q + 2] == _FMT_ID and (data[q] == _HEAD[0]) != (
-                data[q + 1] == _HEAD[1])
-            one_id = data[q:q + 2] == _HEAD and data[q + 2] != _FMT_ID and not _fmt_problems(
+            one_sync = data[q + 2] == FMT_ID and (data[q] == HEAD[0]) != (
+                data[q + 1] == HEAD[1])
+            one_id = data[q:q + 2] == HEAD and data[q + 2] != FMT_ID and not _fmt_problems(
                 _fmt_fields(data, q))
             if one_sync or one_id:
                 recs.append(q)
@@ -139,10 +139,10 @@ def fmt_repairs(data: bytes) -> tuple[dict[int, bytes], list[str]]:
     recs = _fmt_records(data)
     fields = {k: _fmt_fields(data, k) for k in recs}
     good = {k: f for k, f in fields.items() if not _fmt_problems(f)
-            and data[k:k + 3] == _HEAD + bytes([_FMT_ID])}
+            and data[k:k + 3] == HEAD + bytes([FMT_ID])}
     # the headers are counted only when a definition is damaged or has no message (a
     # flipped type id leaves a consistent definition whose id never appears)
-    idle = any(data.find(_HEAD + bytes([f[0]])) < 0 for f in good.values())
+    idle = any(data.find(HEAD + bytes([f[0]])) < 0 for f in good.values())
     seen = _id_counts(data) if idle or len(good) < len(recs) else np.zeros(256, np.int64)
     patches: dict[int, bytes] = {}
     warnings: list[str] = []
@@ -174,18 +174,18 @@ def _id_counts(data: bytes) -> np.ndarray:
         b = np.frombuffer(data[a:a + step + 2], np.uint8)
         if b.shape[0] < 3:
             break
-        at = np.flatnonzero((b[:-2] == _HEAD[0]) & (b[1:-1] == _HEAD[1]))
+        at = np.flatnonzero((b[:-2] == HEAD[0]) & (b[1:-1] == HEAD[1]))
         out += np.bincount(b[at + 2], minlength=256)
     return out
 
 
 def _record(mtype: int, length: int, name: bytes, fmt: bytes, cols: bytes) -> bytes:
-    return (_HEAD + bytes([_FMT_ID, mtype, length]) + name.ljust(4, b"\0")[:4]
+    return (HEAD + bytes([FMT_ID, mtype, length]) + name.ljust(4, b"\0")[:4]
             + fmt.ljust(16, b"\0")[:16] + cols.ljust(64, b"\0")[:64])
 
 
 def _defined(good: dict[int, Fields]) -> set[int]:
-    return {f[0] for f in good.values()} | {_FMT_ID}
+    return {f[0] for f in good.values()} | {FMT_ID}
 
 
 def _retargets(data: bytes, good: dict[int, Fields], seen: np.ndarray) -> dict[int, int]:
@@ -295,7 +295,7 @@ def _repair_one(data: bytes, f: Fields, good: dict[int, Fields]) -> tuple[Fields
              b""), f"{what}: {label} messages framed ({n_bytes} bytes) but not read")
 
 
-def _fmt_check(path: str) -> tuple[dict[int, bytes], list[str]]:
+def fmt_check(path: str) -> tuple[dict[int, bytes], list[str]]:
     """:func:`fmt_repairs` of the file at ``path`` (nothing when it cannot be mapped)."""
     import mmap
 
