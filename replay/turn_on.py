@@ -427,13 +427,52 @@ def same_power_up(cal: Calibration, flight: Any) -> bool | None:
         return True
     if known.firmware and here["firmware"] and here["firmware"] != known.firmware:
         return False                # another firmware build: another power-up (replay.firmware)
-    if (here["samples"] == known.samples and known.t0_s is not None and known.t1_s is not None
-            and abs(here["t0_s"] - known.t0_s) < 1e-3 and abs(here["t1_s"] - known.t1_s) < 1e-3):
+    if _read_again(here, known):
         return True                 # the same recording read again (another format, float32)
+    return _part_of_log(here, known, flight.source, cal.extras.source)
+
+
+def _read_again(here: dict[str, Any], known: Any) -> bool:
+    """The same recording read again: the same sample count, first and last times within
+    1 ms of the calibrated flight's.
+
+    Parameters
+    ----------
+    here : dict
+        :func:`replay.time_offsets.flight_identity` of the flight.
+    known : FlightIdentity
+        The calibrated flight's (``extra.inflight.flight``).
+
+    Returns
+    -------
+    bool
+    """
+    return (here["samples"] == known.samples and known.t0_s is not None
+            and known.t1_s is not None and abs(here["t0_s"] - known.t0_s) < 1e-3
+            and abs(here["t1_s"] - known.t1_s) < 1e-3)
+
+
+def _part_of_log(here: dict[str, Any], known: Any, source: Any, whole: Any) -> bool:
+    """A part of the calibrated log: the same source file, the same whole path, and times
+    inside the calibrated flight's.
+
+    Parameters
+    ----------
+    here : dict
+        :func:`replay.time_offsets.flight_identity` of the flight.
+    known : FlightIdentity
+    source : str or Path
+        The flight's source.
+    whole : str or None
+        The path the calibration was made from (``extra.source``).
+
+    Returns
+    -------
+    bool
+    """
     if not known.source or here["source"] != known.source or not here["samples"]:
         return False
-    whole = cal.extras.source
-    if not whole or str(flight.source) != str(whole):
+    if not whole or str(source) != str(whole):
         return False                # only the file name agrees: another log of that name
     t0, t1 = known.t0_s, known.t1_s
     return (t0 is not None and t1 is not None and here["t0_s"] >= t0 - 1e-6
