@@ -252,6 +252,37 @@ def repeatability(cals: Sequence[Calibration], *, alpha: float = 0.01) -> Repeat
         raise ConfigError(f"repeatability needs at least two sessions, got {len(cals)}")
     if not 0 < alpha < 1:
         raise ConfigError(f"alpha must be between 0 and 1, got {alpha!r}")
+    rows = _parameter_rows(cals)
+    stats = [_parameter_stats(x, s) for *_, x, s in rows]
+    thr, flag = _holm([st[1] for st in stats], alpha)
+    out = []
+    for j, ((kind, i, name, p, unit, x, s), (Q, pv, tau, ci, mu, musd)) in enumerate(
+            zip(rows, stats, strict=True)):
+        out.append(ParameterRepeat(kind, i, name, p, unit, x, s, mu, musd, Q, x.size - 1, pv,
+                                   float(thr[j]), tau, ci,
+                                   "scatters beyond its σ" if flag[j] else "repeatable"))
+    return Repeatability(alpha, len(cals), tuple(out))
+
+
+_Row = tuple[str, int, str, str, str, np.ndarray, np.ndarray]
+
+
+def _parameter_rows(cals: Sequence[Calibration]) -> list[_Row]:
+    """Every parameter of every sensor over the sessions, in its reporting unit.
+
+    Parameters
+    ----------
+    cals : sequence of Calibration
+
+    Returns
+    -------
+    list of (kind, index, name, parameter, unit, values, sds)
+
+    Raises
+    ------
+    ConfigError
+        A session's sensors differ from the first's, or a value or σ is not usable.
+    """
     ref = cals[0]
     rows = []
     for kind, sset in ref.sets.items():
@@ -265,43 +296,87 @@ def repeatability(cals: Sequence[Calibration], *, alpha: float = 0.01) -> Repeat
             for p in _PARAMS:
                 x = np.array([v[p][0] for v in vals])
                 s = np.array([v[p][1] for v in vals])
-                if p == "bias":
-                    f, unit = input_unit_factor(c.bias_unit), c.bias_unit
-                elif p == "scale_factor":
-                    f, unit = abs(float(np.mean(x))) * 1e-6, "ppm of mean"
-                else:
-                    f, unit = 1e-3, "mrad"
+                f, unit = _reporting_unit(p, c.bias_unit, x)
                 if not np.all(np.isfinite(s) & (s > 0)) or not np.all(np.isfinite(x)):
                     raise ConfigError(f"{kind} {c.name} {p}: every session needs a finite "
                                       f"value and a positive sd, got {x.tolist()} ± "
                                       f"{s.tolist()}")
                 rows.append((kind, i, c.name, p, unit, x / f, s / f))
-    out = []
-    stats = []
-    for *_, x, s in rows:
-        n = x.size
-        Q = _q(x, s**2)
-        pv = float(scipy.stats.chi2.sf(Q, n - 1))
-        tau, ci = run_to_run_sd(x, s)
-        w = 1.0 / (s**2 + tau**2)
-        stats.append((Q, pv, tau, ci, float(np.sum(w * x) / w.sum()),
-                      float(1 / np.sqrt(w.sum()))))
-    # Holm over all parameters: k-th smallest p against α/(m − k), stop at the first pass
-    m = len(rows)
-    order = np.argsort([st[1] for st in stats], kind="stable")
+    return rows
+
+
+def _reporting_unit(p: str, bias_unit: str, x: np.ndarray) -> tuple[float, str]:
+    """Factor (SI per unit) and name of the unit parameter ``p`` is reported in.
+
+    Parameters
+    ----------
+    p : str
+        One of :data:`_PARAMS`.
+    bias_unit : str
+        The sensor's bias unit.
+    x : ndarray
+        The sessions' values (SI): the scale factor is reported in ppm of their mean.
+
+    Returns
+    -------
+    (float, str)
+    """
+    if p == "bias":
+        return input_unit_factor(bias_unit), bias_unit
+    if p == "scale_factor":
+        return abs(float(np.mean(x))) * 1e-6, "ppm of mean"
+    return 1e-3, "mrad"
+
+
+def _parameter_stats(x: np.ndarray, s: np.ndarray
+                     ) -> tuple[float, float, float, tuple[float, float], float, float]:
+    """Cochran's Q, its p-value, the run-to-run sd with its interval, and the
+    random-effects mean with its sd, of one parameter over the sessions.
+
+    Parameters
+    ----------
+    x, s : ndarray
+        Values and sds.
+
+    Returns
+    -------
+    (Q, p, tau, (lo, hi), mean, mean_sd)
+    """
+    n = x.size
+    Q = _q(x, s**2)
+    pv = float(scipy.stats.chi2.sf(Q, n - 1))
+    tau, ci = run_to_run_sd(x, s)
+    w = 1.0 / (s**2 + tau**2)
+    return Q, pv, tau, ci, float(np.sum(w * x) / w.sum()), float(1 / np.sqrt(w.sum()))
+
+
+def _holm(pvalues: Sequence[float], alpha: float) -> tuple[np.ndarray, np.ndarray]:
+    """Holm over all parameters: the k-th smallest p against α/(m − k), stop at the first
+    pass.
+
+    Parameters
+    ----------
+    pvalues : sequence of float
+    alpha : float
+        Family-wise level.
+
+    Returns
+    -------
+    thr : ndarray
+        Each test's threshold.
+    flag : ndarray of bool
+        Rejected.
+    """
+    m = len(pvalues)
+    order = np.argsort(pvalues, kind="stable")
     thr = np.empty(m)
     flag = np.zeros(m, bool)
     going = True
     for k, j in enumerate(order):
         thr[j] = alpha / (m - k)
-        going = going and stats[j][1] <= thr[j]
+        going = going and pvalues[j] <= thr[j]
         flag[j] = going
-    for j, ((kind, i, name, p, unit, x, s), (Q, pv, tau, ci, mu, musd)) in enumerate(
-            zip(rows, stats, strict=True)):
-        out.append(ParameterRepeat(kind, i, name, p, unit, x, s, mu, musd, Q, x.size - 1, pv,
-                                   float(thr[j]), tau, ci,
-                                   "scatters beyond its σ" if flag[j] else "repeatable"))
-    return Repeatability(alpha, len(cals), tuple(out))
+    return thr, flag
 
 
 def repeat_sessions(sessions: Sequence[Session], *, alpha: float = 0.01,

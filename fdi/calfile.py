@@ -463,8 +463,6 @@ class Calibration:
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dictionary in the ``rimu.calibration/3`` layout (``/4`` with drift)."""
-        from fdi.parity import parity_matrix
-
         drift = {kind: s.drift.to_dict() for kind, s in self.sets.items()
                  if s.drift is not None}
         schema = CALIBRATION_SCHEMA_DRIFT if drift else self.schema
@@ -473,30 +471,9 @@ class Calibration:
                                "noise_covariance": {"unit": {},
                                                     "sample_rate_hz": self.sample_rate_hz},
                                "misalignment_matrices": {}, "allan": {}}
-        tails = {kind: s.tails.to_dict() for kind, s in self.sets.items()
-                 if s.tails is not None}
-        if tails:
-            doc["residual_tails"] = to_jsonable(tails)
-        if drift:
-            doc["parity_drift"] = to_jsonable(drift)
-        vr = {kind: _range_to_dict(s) for kind, s in self.sets.items()
-              if s.validated_rate is not None}
-        if vr:
-            doc["validated_range"] = vr
+        doc.update(self._model_blocks(drift))
         for kind, s in self.sets.items():
-            doc["sensors"][kind] = [_sensor_to_dict(c) for c in s.sensors]
-            doc["noise_covariance"][kind] = s.noise_covariance.tolist()
-            doc["noise_covariance"]["unit"][kind] = f"({_INPUT_SI[kind]})^2"
-            doc["misalignment_matrices"][kind] = [
-                {"sensors": [i + 1 for i in g], "M": np.atleast_2d(M).tolist()}
-                for g, M in zip(s.groups, s.misalignment_matrices, strict=False)]
-            if s.allan is not None:
-                doc["allan"][kind] = {"tau_s": s.allan.tau_s.tolist(),
-                                      "adev": s.allan.adev.tolist(),
-                                      "unit": _INPUT_SI[kind]}
-            par = {"nominal": parity_matrix(s.H_nominal).tolist(),
-                   "calibrated": parity_matrix(s.H).tolist()}
-            doc["parity" if kind == "gyro" else "parity_accel"] = par
+            _add_set(doc, kind, s)
         if self.earth_rate_dph is not None:
             doc["earth_rate_dph"] = self.earth_rate_dph
             doc["earth_rate_dph_sd"] = self.earth_rate_dph_sd
@@ -508,9 +485,64 @@ class Calibration:
         doc["extra"] = to_jsonable(dict(self.extra))
         return doc
 
+    def _model_blocks(self, drift: dict[str, Any]) -> dict[str, Any]:
+        """The residual tails, parity drift and validated range of the sets that have them,
+        in the file's order.
+
+        Parameters
+        ----------
+        drift : dict
+            Each set's drift model as written.
+
+        Returns
+        -------
+        dict
+            Only the blocks some set has.
+        """
+        out: dict[str, Any] = {}
+        tails = {kind: s.tails.to_dict() for kind, s in self.sets.items()
+                 if s.tails is not None}
+        if tails:
+            out["residual_tails"] = to_jsonable(tails)
+        if drift:
+            out["parity_drift"] = to_jsonable(drift)
+        vr = {kind: _range_to_dict(s) for kind, s in self.sets.items()
+              if s.validated_rate is not None}
+        if vr:
+            out["validated_range"] = vr
+        return out
+
     def save(self, path: str | Path) -> None:
         """Write the calibration as JSON."""
         Path(path).write_text(json.dumps(self.to_dict(), indent=1) + "\n", encoding="utf-8")
+
+
+def _add_set(doc: dict[str, Any], kind: str, s: SensorSet) -> None:
+    """Write one sensor set's sensors, noise, misalignment matrices, Allan table and parity
+    matrices into the calibration document.
+
+    Parameters
+    ----------
+    doc : dict
+        :meth:`Calibration.to_dict`'s document, its per-kind blocks open.
+    kind : str
+    s : SensorSet
+    """
+    from fdi.parity import parity_matrix
+
+    doc["sensors"][kind] = [_sensor_to_dict(c) for c in s.sensors]
+    doc["noise_covariance"][kind] = s.noise_covariance.tolist()
+    doc["noise_covariance"]["unit"][kind] = f"({_INPUT_SI[kind]})^2"
+    doc["misalignment_matrices"][kind] = [
+        {"sensors": [i + 1 for i in g], "M": np.atleast_2d(M).tolist()}
+        for g, M in zip(s.groups, s.misalignment_matrices, strict=False)]
+    if s.allan is not None:
+        doc["allan"][kind] = {"tau_s": s.allan.tau_s.tolist(),
+                              "adev": s.allan.adev.tolist(),
+                              "unit": _INPUT_SI[kind]}
+    par = {"nominal": parity_matrix(s.H_nominal).tolist(),
+           "calibrated": parity_matrix(s.H).tolist()}
+    doc["parity" if kind == "gyro" else "parity_accel"] = par
 
 
 def _canonical(v: Any) -> Any:

@@ -502,46 +502,61 @@ def noise_update(z, df, sensors, mats, fconst, iconst_vib_on, vib_dwell, noise, 
 
     From the difference of two consecutive whitened parities d = z_t − z_{t−1} (the last
     complete sample of the same set; nothing out of the envelope): the level of the whole
-    parity, v += λ(min(|d|²/(2·df), clip·v) − v), and along each sensor's unit whitened
-    column e_i, v_i += λ(min((e_iᵀd)²/2, clip·v_i) − v_i); 1 is the calibrated level. A
-    difference removes what changes slowly (a bias, a drift) and keeps what is noise. The
-    vibration test: the sensor with the largest v_i, above ``VIB_LEVEL`` and more than
-    ``VIB_RATIO`` times the next largest, for ``vib_dwell`` samples in a row.
+    parity and of each sensor (:func:`_noise_levels`). A difference removes what changes
+    slowly (a bias, a drift) and keeps what is noise. Then the vibration test
+    (:func:`_vibration_test`).
     """
     if counters[ENV_OUT] != 0:
         return -1
-    n = sensors.shape[1]
     if counters[ZPREV_OK] != 0:
-        lam = fconst[NOISE_GAIN]
-        clip = fconst[NOISE_CLIP]
-        acc = 0.0
-        for j in range(df):
-            d = z[j] - zprev[j]
-            acc = acc + d * d
-        q = acc / (2.0 * df)
-        v = noise[0]
-        if math.isfinite(q):
-            if q > clip * v:
-                q = clip * v
-            noise[0] = v + lam * (q - v)
-        u0 = 2 * df + 3
-        for i in range(n):
-            if sensors[IN_SET, i] == 0.0:
-                continue
-            a = 0.0
-            for j in range(df):
-                a = a + mats[u0 + j, i] * (z[j] - zprev[j])
-            q = 0.5 * (a * a)
-            vi = vib[i]
-            if math.isfinite(q):
-                if q > clip * vi:
-                    q = clip * vi
-                vib[i] = vi + lam * (q - vi)
+        _noise_levels(z, df, sensors, mats, fconst, noise, zprev, vib)
     for j in range(df):
         zprev[j] = z[j]
     counters[ZPREV_OK] = 1
     if not iconst_vib_on:
         return -1
+    return _vibration_test(sensors, fconst, vib_dwell, vib, counters)
+
+
+@njit(**_INLINE)
+def _noise_levels(z, df, sensors, mats, fconst, noise, zprev, vib) -> None:
+    """One step of the noise levels from d = z − zprev: of the whole parity,
+    v += λ(min(|d|²/(2·df), clip·v) − v), and along each sensor's unit whitened column e_i,
+    v_i += λ(min((e_iᵀd)²/2, clip·v_i) − v_i); 1 is the calibrated level. A non-finite
+    step leaves a level as it was."""
+    n = sensors.shape[1]
+    lam = fconst[NOISE_GAIN]
+    clip = fconst[NOISE_CLIP]
+    acc = 0.0
+    for j in range(df):
+        d = z[j] - zprev[j]
+        acc = acc + d * d
+    q = acc / (2.0 * df)
+    v = noise[0]
+    if math.isfinite(q):
+        if q > clip * v:
+            q = clip * v
+        noise[0] = v + lam * (q - v)
+    u0 = 2 * df + 3
+    for i in range(n):
+        if sensors[IN_SET, i] == 0.0:
+            continue
+        a = 0.0
+        for j in range(df):
+            a = a + mats[u0 + j, i] * (z[j] - zprev[j])
+        q = 0.5 * (a * a)
+        vi = vib[i]
+        if math.isfinite(q):
+            if q > clip * vi:
+                q = clip * vi
+            vib[i] = vi + lam * (q - vi)
+
+
+@njit(**_INLINE)
+def _vibration_test(sensors, fconst, vib_dwell, vib, counters) -> int:
+    """The sensor with the largest v_i, above ``VIB_LEVEL`` and more than ``VIB_RATIO`` times
+    the next largest, for ``vib_dwell`` samples in a row (−1: none yet)."""
+    n = sensors.shape[1]
     top = -1
     v1 = -np.inf
     v2 = -np.inf

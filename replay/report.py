@@ -282,7 +282,9 @@ class RunningReport:
         """The report's ``summary``: events, isolations, delays, rate error, integrity."""
         isolated = sorted({int(e["sensor"]) for e in events
                            if e["type"] in _ISOLATING and e.get("sensor") is not None})
-        summary: dict[str, Any] = {
+        in_env, out_env = _alarms_by_envelope(events)
+        rms, rms_axis, breaches = self._rate_error()
+        return {
             "events": len(events),
             "isolated_sensors": isolated,
             "healthy_at_end": (self.healthy_end if self.healthy_end is not None
@@ -292,28 +294,46 @@ class RunningReport:
             "detection_delay_s": [o["detection_delay_s"] for o in outcomes],
             "isolation_delay_s": [o["isolation_delay_s"] for o in outcomes],
             "isolation_correct": [o["isolation_correct"] for o in outcomes],
-            "rate_error_rms_dps": None,
-            "rate_error_rms_axis_dps": None,
-            "rate_available_fraction": self.n_ok / self.samples if self.samples else 0.0,
+            "rate_error_rms_dps": rms,
+            "rate_error_rms_axis_dps": rms_axis,
+            "rate_available_fraction": self._fraction(self.n_ok),
             "protection_level_median_dps": self._pl.median(),
-            "verified_fraction": self.n_verified / self.samples if self.samples else 0.0,
-            "integrity_breaches": None,
-            "envelope_out_fraction": self.n_out / self.samples if self.samples else 0.0,
+            "verified_fraction": self._fraction(self.n_verified),
+            "integrity_breaches": breaches,
+            "envelope_out_fraction": self._fraction(self.n_out),
             "envelope_periods": self._periods(),
-            "alarms_in_envelope": sum(1 for e in events if e["type"] == "detected"
-                                      and not e.get("envelope")),
-            "alarms_out_of_envelope": sum(1 for e in events if e["type"] == "detected"
-                                          and e.get("envelope")),
-            "unverified_fraction": self.n_unverified / self.samples if self.samples else 0.0,
-            "unverified_axis_fraction": (self._unv_axis / self.samples).tolist()
-            if self.samples else [0.0, 0.0, 0.0],
+            "alarms_in_envelope": in_env,
+            "alarms_out_of_envelope": out_env,
+            "unverified_fraction": self._fraction(self.n_unverified),
+            "unverified_axis_fraction": ((self._unv_axis / self.samples).tolist()
+                                         if self.samples else [0.0, 0.0, 0.0]),
         }
-        if self._n_err:
-            summary["rate_error_rms_dps"] = float(np.sqrt(self._err_sq.sum()
-                                                          / (3 * self._n_err)))
-            summary["rate_error_rms_axis_dps"] = np.sqrt(self._err_sq / self._n_err).tolist()
-            summary["integrity_breaches"] = self._breaches
-        return summary
+
+    def _fraction(self, count: int) -> float:
+        """``count`` as a fraction of the samples so far (0 before any).
+
+        Parameters
+        ----------
+        count : int
+
+        Returns
+        -------
+        float
+        """
+        return count / self.samples if self.samples else 0.0
+
+    def _rate_error(self) -> tuple[float | None, list[float] | None, int | None]:
+        """RMS rate error over all axes and per axis (deg/s) and the integrity breaches;
+        None each without truth.
+
+        Returns
+        -------
+        (float or None, list of float or None, int or None)
+        """
+        if not self._n_err:
+            return None, None, None
+        return (float(np.sqrt(self._err_sq.sum() / (3 * self._n_err))),
+                np.sqrt(self._err_sq / self._n_err).tolist(), self._breaches)
 
     def build(self, flight: Flight, cal: Calibration, *,
               frames: Mapping[str, Any] | None = None, kind: str | None = None,
@@ -343,6 +363,22 @@ class RunningReport:
         if extra:
             report.update(dict(extra))
         return report
+
+
+def _alarms_by_envelope(events: list[dict[str, Any]]) -> tuple[int, int]:
+    """Detections inside and outside the envelope.
+
+    Parameters
+    ----------
+    events : list of dict
+        The report's events.
+
+    Returns
+    -------
+    (int, int)
+    """
+    return (sum(1 for e in events if e["type"] == "detected" and not e.get("envelope")),
+            sum(1 for e in events if e["type"] == "detected" and e.get("envelope")))
 
 
 def build_report(result: Any, flight: Flight, cal: Calibration, *,

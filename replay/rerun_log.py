@@ -146,8 +146,29 @@ class Recorder:
         t0 = time.perf_counter()
         if self._t_first is None:
             self._t_first = float(t[0])
-        s, names = self.s, self.names
         unit = DPS if self.kind == "gyro" else 1.0
+        self._log_sensors(t, result, flight, unit)
+        self._log_detector(t, result)
+        self._log_omega(t, result, flight, unit)
+        self._log_integrity(t, result, unit)
+        self._static_done = True
+        self._log_events(result)
+        self.rows += int(t.size)
+        self.log_s += time.perf_counter() - t0
+
+    def _log_sensors(self, t: np.ndarray, result: Any, flight: Any, unit: float) -> None:
+        """Raw, compensated and health series per sensor, and the parity vector.
+
+        Parameters
+        ----------
+        t : ndarray
+            Sample times (s).
+        result : BlockResult
+        flight : Flight
+        unit : float
+            SI per displayed unit (deg/s for gyros).
+        """
+        s, names = self.s, self.names
         raw = np.asarray(flight.raw, float)
         self._series("sensors/raw", t, raw, names)
         self._series("sensors/compensated", t, (raw * s.scale_factors - s.biases) / unit, names)
@@ -157,11 +178,31 @@ class Recorder:
             par = np.full((t.size, max(s.n - 3, 1)), np.nan)
         par = np.asarray(par, float)
         self._series("parity", t, par, [f"p{j + 1}" for j in range(par.shape[1])])
+
+    def _log_detector(self, t: np.ndarray, result: Any) -> None:
+        """Each detector statistic beside its threshold.
+
+        Parameters
+        ----------
+        t : ndarray
+        result : BlockResult
+        """
         stats = np.asarray(result.statistics, float)
         thr = np.asarray(result.thresholds, float)
         for j, name in enumerate(_scale_names(self.thresholds, stats.shape[1])):
             self._series(f"detector/{name}", t, np.column_stack([stats[:, j], thr[:, j]]),
                          ["statistic", "threshold"])
+
+    def _log_omega(self, t: np.ndarray, result: Any, flight: Any, unit: float) -> None:
+        """The estimated rate, and with the truth, the true rate and the error.
+
+        Parameters
+        ----------
+        t : ndarray
+        result : BlockResult
+        flight : Flight
+        unit : float
+        """
         axes = ["x", "y", "z"]
         omega = np.asarray(result.omega, float) / unit
         self._series("omega/estimate", t, omega, [f"ω̂{a}" for a in axes])
@@ -170,6 +211,18 @@ class Recorder:
             tru = np.asarray(tru, float) / unit
             self._series("omega/truth", t, tru, [f"ω{a}" for a in axes])
             self._series("omega/error", t, omega - tru, [f"δω{a}" for a in axes])
+
+    def _log_integrity(self, t: np.ndarray, result: Any, unit: float) -> None:
+        """Protection level, and where the answer carries them, the unverified axes and the
+        envelope code.
+
+        Parameters
+        ----------
+        t : ndarray
+        result : BlockResult
+        unit : float
+        """
+        axes = ["x", "y", "z"]
         self._series("integrity/protection_level_dps", t,
                      np.asarray(result.protection_level, float) / unit, ["protection level"])
         unv = getattr(result, "unverified", None)
@@ -180,17 +233,23 @@ class Recorder:
         if env is not None and np.shape(env) == (t.size,):
             self._series("integrity/envelope", t, np.asarray(env, float)[:, None],
                          ["out of envelope (code)"])
-        self._static_done = True
+
+    def _log_events(self, result: Any) -> None:
+        """The piece's events as a text log.
+
+        Parameters
+        ----------
+        result : BlockResult
+        """
         ev = list(result.events)
-        if ev:
-            et = np.array([float(e.t) for e in ev])
-            self.rec.send_columns(
-                "events", indexes=[rr.TimeColumn("time", duration=et)],
-                columns=rr.TextLog.columns(text=[_event_text(e, names) for e in ev],
-                                           level=[_LEVEL.get(e.type, "INFO") for e in ev]))
-            self._events += len(ev)
-        self.rows += int(t.size)
-        self.log_s += time.perf_counter() - t0
+        if not ev:
+            return
+        et = np.array([float(e.t) for e in ev])
+        self.rec.send_columns(
+            "events", indexes=[rr.TimeColumn("time", duration=et)],
+            columns=rr.TextLog.columns(text=[_event_text(e, self.names) for e in ev],
+                                       level=[_LEVEL.get(e.type, "INFO") for e in ev]))
+        self._events += len(ev)
 
     def abort(self) -> None:
         """Stop recording without finishing (after an error); harmless after :meth:`close`."""

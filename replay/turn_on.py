@@ -220,43 +220,129 @@ def find_rest(t: np.ndarray, rates: np.ndarray, accel: np.ndarray | None, H: np.
     if N < 2 * w:
         return None
     sls = _windows(N, w)
-    pinv = np.linalg.pinv(np.asarray(H, float))
+    still, moving = _still_windows(y, accel, sls, np.linalg.pinv(np.asarray(H, float)), w)
+    first_move = int(np.argmax(moving)) if moving.any() else len(sls)
+    best = _longest_run(still[:first_move])
+    if (best[1] - best[0]) * w / sample_rate_hz < MIN_REST_S - 1e-9:
+        return None
+    i0, i1 = sls[best[0]].start, sls[best[1] - 1].stop
+    return RestStretch(t0_s=float(t[i0]), t1_s=float(t[i1 - 1]), samples=int(i1 - i0),
+                       takeoff_s=float(t[sls[first_move].start]) if first_move < len(sls)
+                       else None,
+                       judged_on="gyros and accelerometers" if accel is not None else "gyros")
+
+
+def _still_windows(y: np.ndarray, accel: np.ndarray | None, sls: list[slice],
+                   pinv: np.ndarray, w: int) -> tuple[np.ndarray, np.ndarray]:
+    """Which windows are still and which show motion (module docstring, step 1).
+
+    Parameters
+    ----------
+    y : ndarray, shape (N, n)
+        Calibrated gyro outputs (rad/s).
+    accel : ndarray, shape (N, k, 3), or None
+    sls : list of slice
+        The windows.
+    pinv : ndarray, shape (3, n)
+        Pseudo-inverse of the gyro axes.
+    w : int
+        Window length (samples).
+
+    Returns
+    -------
+    still, moving : ndarray of bool, shape (len(sls),)
+    """
     still = np.zeros(len(sls), bool)
     moving = np.zeros(len(sls), bool)
     prev_m = prev_a = None
     for j, sl in enumerate(sls):
-        yw = y[sl]
-        ok = bool(np.all(np.isfinite(yw)))
-        m = yw.mean(axis=0) if ok else None
-        s = yw.std(axis=0, ddof=1) if ok else None
-        quiet = ok
-        if ok:
-            rate = float(np.linalg.norm(pinv @ m))
-            moving[j] = rate > MOTION_RATE_DPS * DPS or bool(np.any(s > MOTION_GYRO_SD_DPS * DPS))
-            quiet = rate < REST_RATE_DPS * DPS and bool(np.all(s <= REST_GYRO_SD_DPS * DPS))
-            if quiet and prev_m is not None:
-                step = np.maximum(4.0 * s * math.sqrt(2.0 / w), REST_GYRO_STEP_DPS * DPS)
-                quiet = bool(np.all(np.abs(m - prev_m) <= step))
+        m, quiet, moving[j] = _gyro_window(y[sl], pinv, prev_m, w)
         if accel is not None:
-            aw = np.asarray(accel[sl], float)
-            if not np.all(np.isfinite(aw)):
-                quiet = False
-                am = None
-            else:
-                am = aw.mean(axis=0)                                  # (k, 3)
-                dev = np.abs(np.linalg.norm(am, axis=1) - G0)
-                asd = aw.std(axis=0, ddof=1)
-                moving[j] = moving[j] or bool(np.any(asd > MOTION_ACCEL_SD))
-                quiet = (quiet and bool(np.all(dev <= REST_G_TOLERANCE))
-                         and bool(np.all(asd <= REST_ACCEL_SD)))
-                if quiet and prev_a is not None:
-                    quiet = bool(np.all(np.linalg.norm(am - prev_a, axis=1) < REST_ACCEL_STEP))
-            prev_a = am
+            prev_a, quiet, moving[j] = _accel_window(np.asarray(accel[sl], float), prev_a,
+                                                     quiet, moving[j])
         prev_m = m
         still[j] = quiet and not moving[j]
-    first_move = int(np.argmax(moving)) if moving.any() else len(sls)
+    return still, moving
+
+
+def _gyro_window(yw: np.ndarray, pinv: np.ndarray, prev_m: np.ndarray | None, w: int
+                 ) -> tuple[np.ndarray | None, bool, bool]:
+    """The gyros' verdict on one window.
+
+    Parameters
+    ----------
+    yw : ndarray, shape (w, n)
+    pinv : ndarray, shape (3, n)
+    prev_m : ndarray or None
+        The previous window's mean (None when it was not finite).
+    w : int
+
+    Returns
+    -------
+    m : ndarray or None
+        The window's mean; None when a value is not finite.
+    quiet : bool
+        Slow, low-noise and no step from the previous window.
+    moving : bool
+        Fast or noisy.
+    """
+    if not np.all(np.isfinite(yw)):
+        return None, False, False
+    m = yw.mean(axis=0)
+    s = yw.std(axis=0, ddof=1)
+    rate = float(np.linalg.norm(pinv @ m))
+    moving = rate > MOTION_RATE_DPS * DPS or bool(np.any(s > MOTION_GYRO_SD_DPS * DPS))
+    quiet = rate < REST_RATE_DPS * DPS and bool(np.all(s <= REST_GYRO_SD_DPS * DPS))
+    if quiet and prev_m is not None:
+        step = np.maximum(4.0 * s * math.sqrt(2.0 / w), REST_GYRO_STEP_DPS * DPS)
+        quiet = bool(np.all(np.abs(m - prev_m) <= step))
+    return m, quiet, moving
+
+
+def _accel_window(aw: np.ndarray, prev_a: np.ndarray | None, quiet: bool, moving: bool
+                  ) -> tuple[np.ndarray | None, bool, bool]:
+    """The accelerometers' verdict on one window, added to the gyros'.
+
+    Parameters
+    ----------
+    aw : ndarray, shape (w, k, 3)
+    prev_a : ndarray or None
+        The previous window's mean specific force (None when it was not finite).
+    quiet, moving : bool
+        The gyros' verdict.
+
+    Returns
+    -------
+    am : ndarray, shape (k, 3), or None
+        The window's mean; None when a value is not finite.
+    quiet, moving : bool
+    """
+    if not np.all(np.isfinite(aw)):
+        return None, False, moving
+    am = aw.mean(axis=0)                                  # (k, 3)
+    dev = np.abs(np.linalg.norm(am, axis=1) - G0)
+    asd = aw.std(axis=0, ddof=1)
+    moving = moving or bool(np.any(asd > MOTION_ACCEL_SD))
+    quiet = (quiet and bool(np.all(dev <= REST_G_TOLERANCE))
+             and bool(np.all(asd <= REST_ACCEL_SD)))
+    if quiet and prev_a is not None:
+        quiet = bool(np.all(np.linalg.norm(am - prev_a, axis=1) < REST_ACCEL_STEP))
+    return am, quiet, moving
+
+
+def _longest_run(still: np.ndarray) -> tuple[int, int]:
+    """The first longest run of True, as (start, stop) indices; (0, 0) when none.
+
+    Parameters
+    ----------
+    still : ndarray of bool
+
+    Returns
+    -------
+    (int, int)
+    """
     best, run, start = (0, 0), 0, 0
-    for j in range(first_move):
+    for j in range(len(still)):
         if still[j]:
             if run == 0:
                 start = j
@@ -265,13 +351,7 @@ def find_rest(t: np.ndarray, rates: np.ndarray, accel: np.ndarray | None, H: np.
                 best = (start, start + run)
         else:
             run = 0
-    if (best[1] - best[0]) * w / sample_rate_hz < MIN_REST_S - 1e-9:
-        return None
-    i0, i1 = sls[best[0]].start, sls[best[1] - 1].stop
-    return RestStretch(t0_s=float(t[i0]), t1_s=float(t[i1 - 1]), samples=int(i1 - i0),
-                       takeoff_s=float(t[sls[first_move].start]) if first_move < len(sls)
-                       else None,
-                       judged_on="gyros and accelerometers" if accel is not None else "gyros")
+    return best
 
 
 def estimate_rest_bias(flight: Any, cal: Calibration, stretch: RestStretch, kind: str = "gyro"
@@ -349,22 +429,50 @@ def same_power_up(cal: Calibration, flight: Any) -> bool | None:
         return False                # another firmware build: another power-up (replay.firmware)
     if _read_again(here, known):
         return True                 # the same recording read again (another format, float32)
-    return _part_of_the_log(cal, flight, here, known)
+    return _part_of_log(here, known, flight.source, cal.extras.source)
 
 
 def _read_again(here: dict[str, Any], known: Any) -> bool:
-    """The same sample count, first and last times within 1 ms of the calibrated flight's."""
-    return bool(here["samples"] == known.samples and known.t0_s is not None
-                and known.t1_s is not None and abs(here["t0_s"] - known.t0_s) < 1e-3
-                and abs(here["t1_s"] - known.t1_s) < 1e-3)
+    """The same recording read again: the same sample count, first and last times within
+    1 ms of the calibrated flight's.
+
+    Parameters
+    ----------
+    here : dict
+        :func:`replay.time_offsets.flight_identity` of the flight.
+    known : FlightIdentity
+        The calibrated flight's (``extra.inflight.flight``).
+
+    Returns
+    -------
+    bool
+    """
+    return (here["samples"] == known.samples and known.t0_s is not None
+            and known.t1_s is not None and abs(here["t0_s"] - known.t0_s) < 1e-3
+            and abs(here["t1_s"] - known.t1_s) < 1e-3)
 
 
-def _part_of_the_log(cal: Calibration, flight: Any, here: dict[str, Any], known: Any) -> bool:
-    """The same whole source path as the calibration's, with times inside its flight's."""
+def _part_of_log(here: dict[str, Any], known: Any, source: Any, whole: Any) -> bool:
+    """A part of the calibrated log: the same source file, the same whole path, and times
+    inside the calibrated flight's.
+
+    Parameters
+    ----------
+    here : dict
+        :func:`replay.time_offsets.flight_identity` of the flight.
+    known : FlightIdentity
+    source : str or Path
+        The flight's source.
+    whole : str or None
+        The path the calibration was made from (``extra.source``).
+
+    Returns
+    -------
+    bool
+    """
     if not known.source or here["source"] != known.source or not here["samples"]:
         return False
-    whole = cal.extras.source
-    if not whole or str(flight.source) != str(whole):
+    if not whole or str(source) != str(whole):
         return False                # only the file name agrees: another log of that name
     t0, t1 = known.t0_s, known.t1_s
     return (t0 is not None and t1 is not None and here["t0_s"] >= t0 - 1e-6

@@ -340,36 +340,85 @@ def _promote_steps(datas: Mapping[str, KindData], out: Selection,
     failed), so the family-wise level stays at most α.
     """
     while True:
-        tried = sorted(((r["p_value"], key, r) for key, recs in found.items()
-                        for r in recs if r["test"] == "change_point"
-                        and key[0] in step.kinds and testable(step, datas[key[0]]) is None
-                        and not any((s.kind, s.sensor, s.candidate.name)
-                                    == (*key, step.name) for s in out.claimed)),
-                       key=lambda x: x[0])
-        done = False
-        for p, (kind, i), rec in tried:
-            d = datas[kind]
-            keys = [(kind, j) for j in range(d.n)]
-            shared_noise = {id(m.noise): m.noise for k in keys
-                            if isinstance(m := out.models[k], GlsModel)}
-            trial = copy.deepcopy({k: out.models[k] for k in keys}, shared_noise)
-            params = {"time_s": float(rec["time_s"])}
-            if not trial[(kind, i)].add(step.columns(d, i, params)):
-                continue
-            shared = shared_regressors(d)
-            new = {k: r for k in keys
-                   if (r := _sensor_probes(d, kind, k[1], trial[k], out, thr, shared))}
-            if (kind, i) in new or any(k not in found for k in new):
-                continue
-            out.models.update(trial)
-            for k in keys:
-                found.pop(k, None)
-            found.update(new)
-            out.claimed.append(Selected(step, kind, i, params, float(p), thr, (),
-                                        float(np.log(max(p, 1e-300)))))
-            out.promoted.append({"kind": kind, "sensor": i + 1, "name": step.name,
-                                 "p_value": float(p), "time_s": params["time_s"]})
-            done = True
-            break
-        if not done:
+        for p, key, rec in _step_probes(datas, out, found, step):
+            if _claim_step(datas, out, found, thr, step, p, key, rec):
+                break
+        else:
             return
+
+
+def _step_probes(datas: Mapping[str, KindData], out: Selection,
+                 found: dict[tuple[str, int], list[dict[str, Any]]], step: Candidate
+                 ) -> list[tuple[float, tuple[str, int], dict[str, Any]]]:
+    """Failing ``change_point`` probes a step could explain, in order of their p.
+
+    Parameters
+    ----------
+    datas : mapping of str to KindData
+    out : Selection
+    found : dict
+        Failing probes per (kind, sensor).
+    step : Candidate
+        ``bias_step``.
+
+    Returns
+    -------
+    list of (p, (kind, sensor), probe record)
+        Probes on a kind the step applies to and can be tested on, whose sensor has not
+        claimed the step yet.
+    """
+    def open_(key: tuple[str, int]) -> bool:
+        return (key[0] in step.kinds and testable(step, datas[key[0]]) is None
+                and not any((s.kind, s.sensor, s.candidate.name) == (*key, step.name)
+                            for s in out.claimed))
+
+    return sorted(((r["p_value"], key, r) for key, recs in found.items()
+                   for r in recs if r["test"] == "change_point" and open_(key)),
+                  key=lambda x: x[0])
+
+
+def _claim_step(datas: Mapping[str, KindData], out: Selection,
+                found: dict[tuple[str, int], list[dict[str, Any]]], thr: float,
+                step: Candidate, p: float, key: tuple[str, int], rec: dict[str, Any]) -> bool:
+    """Try the step at one probe's time; claim it when it explains the sensor
+    (:func:`_promote_steps`).
+
+    Parameters
+    ----------
+    datas, out, found, thr, step
+        As :func:`_promote_steps`; ``out`` and ``found`` are updated on a claim.
+    p : float
+        The probe's p.
+    key : (str, int)
+        (kind, sensor) of the probe.
+    rec : dict
+        The probe's record (``time_s``).
+
+    Returns
+    -------
+    bool
+        Claimed.
+    """
+    kind, i = key
+    d = datas[kind]
+    keys = [(kind, j) for j in range(d.n)]
+    shared_noise = {id(m.noise): m.noise for k in keys
+                    if isinstance(m := out.models[k], GlsModel)}
+    trial = copy.deepcopy({k: out.models[k] for k in keys}, shared_noise)
+    params = {"time_s": float(rec["time_s"])}
+    if not trial[(kind, i)].add(step.columns(d, i, params)):
+        return False
+    shared = shared_regressors(d)
+    new = {k: r for k in keys
+           if (r := _sensor_probes(d, kind, k[1], trial[k], out, thr, shared))}
+    if (kind, i) in new or any(k not in found for k in new):
+        return False
+    out.models.update(trial)
+    for k in keys:
+        found.pop(k, None)
+    found.update(new)
+    out.claimed.append(Selected(step, kind, i, params, float(p), thr, (),
+                                float(np.log(max(p, 1e-300)))))
+    out.promoted.append({"kind": kind, "sensor": i + 1, "name": step.name,
+                         "p_value": float(p), "time_s": params["time_s"]})
+    return True

@@ -820,17 +820,104 @@ def fit_pair_prior(t: np.ndarray, y_ref: np.ndarray, y: np.ndarray, used: np.nda
         Too few usable samples (the message names the IMU and what to do).
     """
     fs = float(sample_rate_hz or (1.0 / np.median(np.diff(t))))
+    tau0 = 0.0
     if gate and ref_noise is None:
-        a0 = fit_pair_prior(t, y_ref, y, used, prior=prior, mounting=mounting, model=model,
-                            time_offset=time_offset, label=label, sample_rate_hz=fs,
-                            check=False, jitter=False, gate=False)
-        r0 = a0.residual[np.all(np.isfinite(a0.residual), axis=1)]
-        R0 = np.eye(3) if mounting is None else np.asarray(mounting, float)
-        ref_noise = R0.T @ np.cov(r0.T) @ R0 / 2
-        tau0 = a0.time_offset_s
-    else:
-        tau0 = 0.0
+        ref_noise, tau0 = _prior_first_pass(t, y_ref, y, used, prior=prior, mounting=mounting,
+                                            model=model, time_offset=time_offset,
+                                            label=label, fs=fs)
     R = np.eye(3) if mounting is None else np.asarray(mounting, float)
+    ok, core = _prior_samples(used, y_ref, y, label)
+    pm = _PriorModel.of(model, prior, fs)
+    tt = t[ok]
+    spline = CubicSpline(tt, y_ref[ok], axis=0)
+    Sr_given = None if ref_noise is None else R @ np.asarray(ref_noise, float) @ R.T
+    s = _solve_prior(tt, y[ok], spline, core[ok], R, pm, tau0=tau0, Sr_given=Sr_given,
+                     fs=fs, time_offset=time_offset, gate=gate)
+    fit, E, tau, fit_tau = s.fit, s.E, s.tau, s.fit_tau
+    q = pm.basis.shape[1]
+    A = (np.eye(3) + E) @ R
+    cov = fit.cov
+    Ecov = pm.basis @ cov[:q, :q] @ pm.basis.T
+    K = np.kron(np.eye(3), R.T)                      # vec(A) = K·vec(I + E)
+    A_cov = K @ Ecov @ K.T
+    ci = slice(q, q + 3)
+    sd = np.sqrt(np.clip(np.diag(cov), 0, None))
+    params = _prior_parameters(fit.beta, sd, pm, s.col_ratio)
+    sd_tau = float(sd[-1]) if fit_tau else pm.tau_sd
+    if time_offset:
+        params.append(_tau_status(tau, sd_tau, pm.tau_sd, s.tau_ratio, fit_tau))
+    residual = np.full(y.shape, np.nan)
+    rows = np.flatnonzero(ok)[s.inside]
+    residual[rows] = fit.residual
+    exc = _prior_excitation(s.X, pm, params, s.tau_ratio, fit_tau)
+    notes = _prior_notes(params, R)
+    chk: OffsetCheck | None = None
+    if fit_tau and check:
+        chk, sd_tau, note = _prior_offset_check(t, y_ref, y, rows, s, q, sd_tau, fs=fs,
+                                                label=label, A=A)
+        if note:
+            notes.append(note)
+        params[-1] = replace(params[-1], sd=sd_tau)
+    jit = (fit_timing_jitter(fit.residual, s.dz[s.inside] @ (np.eye(3) + E).T,
+                             lags=fit.lags)
+           if jitter else JitterFit(0.0, 0.0, 0.0, 0.0, np.zeros((3, 3)), 0))
+    return ImuAlignmentFit(imu=label, model=model, A=A, A_cov=A_cov, c=fit.beta[ci],
+                        c_cov=cov[ci, ci], time_offset_s=tau if fit_tau else 0.0,
+                        time_offset_sd_s=sd_tau if time_offset else 0.0,
+                        residual=residual, lags=fit.lags, excitation=exc, notes=tuple(notes),
+                        check=chk, timing_jitter_s=jit.tau_s,
+                        timing_jitter_sd_s=jit.tau_sd_s, mounting=R,
+                        parameters=tuple(params))
+
+
+def _prior_first_pass(t: np.ndarray, y_ref: np.ndarray, y: np.ndarray, used: np.ndarray, *,
+                      prior: Prior, mounting: np.ndarray | None, model: str,
+                      time_offset: bool, label: str, fs: float) -> tuple[np.ndarray, float]:
+    """The ungated first pass of :func:`fit_pair_prior`: the reference noise it implies
+    (half the residual covariance, in the reference's frame) and its time offset.
+
+    Parameters
+    ----------
+    t, y_ref, y, used, prior, mounting, model, time_offset, label
+        As :func:`fit_pair_prior`.
+    fs : float
+        Sample rate (Hz).
+
+    Returns
+    -------
+    ref_noise : ndarray, shape (3, 3)
+    tau0 : float
+        Time offset of the first pass (s), where the gated fit starts.
+    """
+    a0 = fit_pair_prior(t, y_ref, y, used, prior=prior, mounting=mounting, model=model,
+                        time_offset=time_offset, label=label, sample_rate_hz=fs,
+                        check=False, jitter=False, gate=False)
+    r0 = a0.residual[np.all(np.isfinite(a0.residual), axis=1)]
+    R0 = np.eye(3) if mounting is None else np.asarray(mounting, float)
+    return R0.T @ np.cov(r0.T) @ R0 / 2, a0.time_offset_s
+
+
+def _prior_samples(used: np.ndarray, y_ref: np.ndarray, y: np.ndarray, label: str
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """Samples :func:`fit_pair_prior` fits: used with both rates finite, and the core of
+    those (:data:`_EDGE` samples off each side of a dropped block).
+
+    Parameters
+    ----------
+    used : ndarray of bool, shape (N,)
+    y_ref, y : ndarray, shape (N, 3)
+    label : str
+        The IMU, for the message.
+
+    Returns
+    -------
+    ok, core : ndarray of bool, shape (N,)
+
+    Raises
+    ------
+    CalibrationError
+        Fewer than 50 such samples.
+    """
     ok = used & np.all(np.isfinite(y_ref), axis=1) & np.all(np.isfinite(y), axis=1)
     if ok.sum() < 50:
         raise CalibrationError(
@@ -838,77 +925,149 @@ def fit_pair_prior(t: np.ndarray, y_ref: np.ndarray, y: np.ndarray, used: np.nda
             "finite rates (need 50): choose a longer part of the record (--window)")
     core = ok & ndimage.binary_erosion(ok, structure=np.ones(2 * _EDGE + 1, bool),
                                        border_value=True)
-    basis = np.linalg.inv(_decomposition_matrix()) if model == "full" else _rotation_basis()
-    sds = prior.sds() if model == "full" else prior.sds()[:3]
-    names = list(PARAMETERS) if model == "full" else list(PARAMETERS[:3])
-    involves = _columns_of(basis)
-    q = basis.shape[1]
-    tau_sd = prior.tau_sd(fs)
-    tt = t[ok]
-    spline = CubicSpline(tt, y_ref[ok], axis=0)
+    return ok, core
+
+
+@dataclass(frozen=True)
+class _PriorModel:
+    """The parametrisation of E a :func:`fit_pair_prior` model uses.
+
+    Attributes
+    ----------
+    basis : ndarray, shape (9, q)
+        vec(E) = basis·β.
+    sds : ndarray, shape (q,)
+        Prior sds of β.
+    names : list of str
+    involves : list of list of int
+        For each parameter, the columns of E it involves.
+    tau_sd : float
+        Prior sd of the time offset (s).
+    """
+
+    basis: np.ndarray
+    sds: np.ndarray
+    names: list[str]
+    involves: list[list[int]]
+    tau_sd: float
+
+    @classmethod
+    def of(cls, model: str, prior: Prior, fs: float) -> _PriorModel:
+        """``"full"`` (the nine parameters of :data:`PARAMETERS`) or ``"rotation"``.
+
+        Parameters
+        ----------
+        model : str
+        prior : Prior
+        fs : float
+            Sample rate (Hz).
+
+        Returns
+        -------
+        _PriorModel
+        """
+        full = model == "full"
+        basis = np.linalg.inv(_decomposition_matrix()) if full else _rotation_basis()
+        sds = prior.sds() if full else prior.sds()[:3]
+        names = list(PARAMETERS) if full else list(PARAMETERS[:3])
+        return cls(basis, sds, names, _columns_of(basis), prior.tau_sd(fs))
+
+
+@dataclass(frozen=True, eq=False)
+class _PriorSolution:
+    """Where the Gauss–Newton iteration of :func:`_solve_prior` ends.
+
+    Attributes
+    ----------
+    fit : StackedFit
+    X : ndarray, shape (n, 3, p)
+        The last design.
+    inside : ndarray of bool
+        Fitted samples (of the usable ones) whose shifted time lies in the record.
+    dz : ndarray, shape (n_ok, 3)
+        Derivative of the mounted reference at the shifted times.
+    E : ndarray, shape (3, 3)
+    tau : float
+    fit_tau : bool
+    col_ratio : ndarray, shape (3,)
+        Excitation of each reference axis.
+    tau_ratio : float
+        Excitation of the time offset.
+    w : ndarray, shape (3,)
+        Channel weights (inverse residual variance).
+    """
+
+    fit: StackedFit
+    X: np.ndarray
+    inside: np.ndarray
+    dz: np.ndarray
+    E: np.ndarray
+    tau: float
+    fit_tau: bool
+    col_ratio: np.ndarray
+    tau_ratio: float
+    w: np.ndarray
+
+
+def _solve_prior(tt: np.ndarray, y_ok: np.ndarray, spline: CubicSpline, core_ok: np.ndarray,
+                 R: np.ndarray, pm: _PriorModel, *, tau0: float, Sr_given: np.ndarray | None,
+                 fs: float, time_offset: bool, gate: bool) -> _PriorSolution:
+    """The Gauss–Newton iteration in τ of :func:`fit_pair_prior`.
+
+    Parameters
+    ----------
+    tt : ndarray, shape (n_ok,)
+        Times of the usable samples.
+    y_ok : ndarray, shape (n_ok, 3)
+        The IMU's rates there.
+    spline : CubicSpline
+        The reference through those samples.
+    core_ok : ndarray of bool, shape (n_ok,)
+        Usable samples away from a dropped block.
+    R : ndarray, shape (3, 3)
+        Mounting.
+    pm : _PriorModel
+    tau0 : float
+        Starting time offset (s).
+    Sr_given : ndarray, shape (3, 3), optional
+        Reference noise covariance in the IMU's frame; None to take it from the residual.
+    fs : float
+    time_offset, gate : bool
+        As :func:`fit_pair_prior`.
+
+    Returns
+    -------
+    _PriorSolution
+    """
     tau = tau0
     E = np.zeros((3, 3))
     fit_tau = time_offset
     w = None
-    Sr_given = None if ref_noise is None else R @ np.asarray(ref_noise, float) @ R.T
     col_ratio = np.full(3, np.inf)
     tau_ratio = np.inf
     fit = X = inside = dz = None
     for it in range(_GN_ITER if time_offset else 2):
-        inside = (tt + tau >= tt[0]) & (tt + tau <= tt[-1]) & core[ok]
+        inside = (tt + tau >= tt[0]) & (tt + tau <= tt[-1]) & core_ok
         z = spline(tt + tau) @ R.T
         dz = spline(tt + tau, 1) @ R.T
         zi, dzi = z[inside], dz[inside]
-        Y = y[ok][inside] - zi
-        n = zi.shape[0]
+        Y = y_ok[inside] - zi
         if w is None:
             w = 1.0 / np.maximum(np.var(Y, axis=0), 1e-30)
             Sr = Sr_given if Sr_given is not None else np.diag(0.5 / w)
         sig_r = np.sqrt(np.clip(np.diag(Sr), 1e-30, None))
         if it == 0 or Sr_given is None:
-            col_ratio = np.std(zi, axis=0) / sig_r
-            A_now = np.eye(3) + E
-            tau_ratio = float(np.max(np.std(dzi @ A_now.T, axis=0) / (fs * sig_r)))
-            fit_tau = time_offset and (tau_ratio >= TAU_EXCITATION_MIN or not gate)
+            col_ratio, tau_ratio, fit_tau = _prior_gate(zi, dzi, E, sig_r, fs,
+                                                        time_offset=time_offset, gate=gate)
             if not fit_tau:
                 tau = 0.0
         excited = (col_ratio >= EXCITATION_MIN) | (not gate)
-        # an axis not excited keeps only its mean in the regressors: the data then say
-        # nothing of its columns beyond their product with the mean rate (the reference's
-        # bias, confounded with c), so c carries the prior's uncertainty of E·z̄
-        # (the variation left out is "considered": its effect through the prior's spread
-        # of E goes into the covariance of what is estimated, stacked_ridge)
-        zx = np.where(excited[None, :], zi, zi.mean(axis=0, keepdims=True))
-        XE = np.zeros((n, 3, 9))
-        XC = np.zeros((n, 3, 9))
-        for k in range(3):
-            XE[:, k, 3 * k:3 * k + 3] = zx
-            XC[:, k, 3 * k:3 * k + 3] = zi - zx
-        p = q + 3 + fit_tau
-        X = np.zeros((n, 3, p))
-        X[:, :, :q] = XE @ basis
-        for k in range(3):
-            X[:, k, q + k] = 1.0
-        A_now = np.eye(3) + E
-        if fit_tau:
-            X[:, :, -1] = dzi @ A_now.T
-        Lam = np.zeros((p, p))
-        Lam[:q, :q] = np.diag(1.0 / sds**2)
-        mu = np.zeros(p)
-        if fit_tau:
-            Lam[-1, -1] = 1.0 / tau_sd**2
-            mu[-1] = -tau
-        v, kappa = _spline_noise(round(float((tau * fs) % 1.0), 3))
-        mE = -n * v * ((A_now @ Sr) * excited[None, :] * w[:, None]).ravel()
-        mom = np.zeros(p)
-        mom[:q] = basis.T @ mE
-        if fit_tau:
-            mom[-1] = -n * kappa * fs * float(np.sum(w * np.diag(A_now @ Sr @ A_now.T)))
-        Xc = np.zeros_like(X)
-        Xc[:, :, :q] = XC @ basis
+        X, Xc = _prior_design(zi, dzi, excited, pm.basis, E, fit_tau)
+        mu, Lam, mom = _prior_system(X.shape[0], pm, E, Sr, w, excited, tau=tau, fs=fs,
+                                     fit_tau=fit_tau)
         fit = stacked_ridge(X, Y, w, mu, Lam, moment=mom,
                             consider=Xc if np.any(~excited) else None)
-        E = (basis @ fit.beta[:q]).reshape(3, 3)
+        E = (pm.basis @ fit.beta[:pm.basis.shape[1]]).reshape(3, 3)
         w = 1.0 / np.maximum(np.var(fit.residual, axis=0), 1e-30)
         if Sr_given is None:
             Sr = np.cov(fit.residual.T) / 2
@@ -917,32 +1076,218 @@ def fit_pair_prior(t: np.ndarray, y_ref: np.ndarray, y: np.ndarray, used: np.nda
             tau += step
             if abs(step) < 1e-3 * max(fit.sd[-1], 1e-9):
                 break
-    A = (np.eye(3) + E) @ R
-    cov = fit.cov
-    Ecov = basis @ cov[:q, :q] @ basis.T
-    K = np.kron(np.eye(3), R.T)                      # vec(A) = K·vec(I + E)
-    A_cov = K @ Ecov @ K.T
-    ci = slice(q, q + 3)
-    sd = np.sqrt(np.clip(np.diag(cov), 0, None))
+    return _PriorSolution(fit, X, inside, dz, E, tau, fit_tau, col_ratio, tau_ratio, w)
+
+
+def _prior_gate(zi: np.ndarray, dzi: np.ndarray, E: np.ndarray, sig_r: np.ndarray,
+                fs: float, *, time_offset: bool, gate: bool
+                ) -> tuple[np.ndarray, float, bool]:
+    """Excitation of each reference axis and of the time offset, and whether τ is fitted.
+
+    Parameters
+    ----------
+    zi, dzi : ndarray, shape (n, 3)
+        Mounted reference rate and its derivative on the fitted samples.
+    E : ndarray, shape (3, 3)
+        Current gain beyond the mounting.
+    sig_r : ndarray, shape (3,)
+        Reference noise sd per axis (rad/s).
+    fs : float
+    time_offset, gate : bool
+        As :func:`fit_pair_prior`.
+
+    Returns
+    -------
+    col_ratio : ndarray, shape (3,)
+    tau_ratio : float
+    fit_tau : bool
+    """
+    col_ratio = np.std(zi, axis=0) / sig_r
+    A_now = np.eye(3) + E
+    tau_ratio = float(np.max(np.std(dzi @ A_now.T, axis=0) / (fs * sig_r)))
+    fit_tau = time_offset and (tau_ratio >= TAU_EXCITATION_MIN or not gate)
+    return col_ratio, tau_ratio, fit_tau
+
+
+def _prior_design(zi: np.ndarray, dzi: np.ndarray, excited: np.ndarray, basis: np.ndarray,
+                  E: np.ndarray, fit_tau: bool) -> tuple[np.ndarray, np.ndarray]:
+    """The design of one Gauss–Newton step and the considered part left out of it.
+
+    An axis not excited keeps only its mean in the regressors: the data then say nothing
+    of its columns beyond their product with the mean rate (the reference's bias,
+    confounded with c), so c carries the prior's uncertainty of E·z̄ (the variation left
+    out is "considered": its effect through the prior's spread of E goes into the
+    covariance of what is estimated, :func:`~calibration.inflight.regression.stacked_ridge`).
+
+    Parameters
+    ----------
+    zi, dzi : ndarray, shape (n, 3)
+        Mounted reference rate and its derivative on the fitted samples.
+    excited : ndarray of bool, shape (3,)
+        Reference axes whose variation is used.
+    basis : ndarray, shape (9, q)
+    E : ndarray, shape (3, 3)
+    fit_tau : bool
+
+    Returns
+    -------
+    X, Xc : ndarray, shape (n, 3, q + 3 + fit_tau)
+        The design (E parameters, three biases, τ last when fitted) and the considered
+        regressors (zero but for the E columns).
+    """
+    n = zi.shape[0]
+    q = basis.shape[1]
+    zx = np.where(excited[None, :], zi, zi.mean(axis=0, keepdims=True))
+    XE = np.zeros((n, 3, 9))
+    XC = np.zeros((n, 3, 9))
+    for k in range(3):
+        XE[:, k, 3 * k:3 * k + 3] = zx
+        XC[:, k, 3 * k:3 * k + 3] = zi - zx
+    p = q + 3 + fit_tau
+    X = np.zeros((n, 3, p))
+    X[:, :, :q] = XE @ basis
+    for k in range(3):
+        X[:, k, q + k] = 1.0
+    A_now = np.eye(3) + E
+    if fit_tau:
+        X[:, :, -1] = dzi @ A_now.T
+    Xc = np.zeros_like(X)
+    Xc[:, :, :q] = XC @ basis
+    return X, Xc
+
+
+def _prior_system(n: int, pm: _PriorModel, E: np.ndarray, Sr: np.ndarray, w: np.ndarray,
+                  excited: np.ndarray, *, tau: float, fs: float, fit_tau: bool
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Prior mean and precision of one step, and the moment bias of the reference noise.
+
+    Parameters
+    ----------
+    n : int
+        Fitted samples.
+    pm : _PriorModel
+    E : ndarray, shape (3, 3)
+    Sr : ndarray, shape (3, 3)
+        Reference noise covariance (the IMU's frame).
+    w : ndarray, shape (3,)
+        Channel weights.
+    excited : ndarray of bool, shape (3,)
+    tau : float
+        Current time offset (s); the prior holds the step at ``-tau``.
+    fs : float
+    fit_tau : bool
+
+    Returns
+    -------
+    mu : ndarray, shape (p,)
+    Lam : ndarray, shape (p, p)
+    mom : ndarray, shape (p,)
+        As :func:`_debias` (first order), the unexcited axes left out.
+    """
+    q = pm.basis.shape[1]
+    p = q + 3 + fit_tau
+    A_now = np.eye(3) + E
+    Lam = np.zeros((p, p))
+    Lam[:q, :q] = np.diag(1.0 / pm.sds**2)
+    mu = np.zeros(p)
+    if fit_tau:
+        Lam[-1, -1] = 1.0 / pm.tau_sd**2
+        mu[-1] = -tau
+    v, kappa = _spline_noise(round(float((tau * fs) % 1.0), 3))
+    mE = -n * v * ((A_now @ Sr) * excited[None, :] * w[:, None]).ravel()
+    mom = np.zeros(p)
+    mom[:q] = pm.basis.T @ mE
+    if fit_tau:
+        mom[-1] = -n * kappa * fs * float(np.sum(w * np.diag(A_now @ Sr @ A_now.T)))
+    return mu, Lam, mom
+
+
+def _prior_parameters(beta: np.ndarray, sd: np.ndarray, pm: _PriorModel,
+                      col_ratio: np.ndarray) -> list[ParameterStatus]:
+    """Status of each parameter of E: estimated when its sd is at most :data:`INFORMED`
+    times its prior sd, held otherwise; its excitation the largest of the axes it involves.
+
+    Parameters
+    ----------
+    beta, sd : ndarray
+        Estimate and sd (E parameters first).
+    pm : _PriorModel
+    col_ratio : ndarray, shape (3,)
+
+    Returns
+    -------
+    list of ParameterStatus
+    """
     params = []
-    for j in range(q):
-        r = float(max(col_ratio[m] for m in involves[j]))
-        st = ESTIMATED if sd[j] <= INFORMED * sds[j] else HELD
-        params.append(ParameterStatus(names[j], float(fit.beta[j]), float(sd[j]),
-                                      float(sds[j]), st, r))
-    sd_tau = float(sd[-1]) if fit_tau else tau_sd
-    tau_status = ESTIMATED if fit_tau and sd_tau <= INFORMED * tau_sd else HELD
-    if time_offset:
-        params.append(ParameterStatus("time offset", tau if fit_tau else 0.0, sd_tau, tau_sd,
-                                      tau_status, tau_ratio))
-    residual = np.full(y.shape, np.nan)
-    rows = np.flatnonzero(ok)[inside]
-    residual[rows] = fit.residual
-    ex_names = [*names, "bias x", "bias y", "bias z"] + (["time offset"] if fit_tau else [])
+    for j in range(pm.basis.shape[1]):
+        r = float(max(col_ratio[m] for m in pm.involves[j]))
+        st = ESTIMATED if sd[j] <= INFORMED * pm.sds[j] else HELD
+        params.append(ParameterStatus(pm.names[j], float(beta[j]), float(sd[j]),
+                                      float(pm.sds[j]), st, r))
+    return params
+
+
+def _tau_status(tau: float, sd_tau: float, tau_sd: float, tau_ratio: float, fit_tau: bool
+                ) -> ParameterStatus:
+    """Status of the time offset (held at 0 when not fitted).
+
+    Parameters
+    ----------
+    tau, sd_tau : float
+        Estimate and sd (s).
+    tau_sd : float
+        Prior sd (s).
+    tau_ratio : float
+    fit_tau : bool
+
+    Returns
+    -------
+    ParameterStatus
+    """
+    status = ESTIMATED if fit_tau and sd_tau <= INFORMED * tau_sd else HELD
+    return ParameterStatus("time offset", tau if fit_tau else 0.0, sd_tau, tau_sd, status,
+                           tau_ratio)
+
+
+def _prior_excitation(X: np.ndarray, pm: _PriorModel, params: list[ParameterStatus],
+                      tau_ratio: float, fit_tau: bool) -> Excitation:
+    """Excitation of the last design, with the ratios the gate judged.
+
+    Parameters
+    ----------
+    X : ndarray, shape (n, 3, p)
+    pm : _PriorModel
+    params : list of ParameterStatus
+        E parameters first.
+    tau_ratio : float
+    fit_tau : bool
+
+    Returns
+    -------
+    Excitation
+    """
+    q = pm.basis.shape[1]
+    p = X.shape[2]
+    tau_names = ["time offset"] if fit_tau else []
+    ex_names = [*pm.names, "bias x", "bias y", "bias z", *tau_names]
     exc = _excitation(X, ex_names, list(range(q, q + 3)), np.ones(p))
     ratio = np.array([pp.excitation for pp in params[:q]]
                      + ([tau_ratio] if fit_tau else []))
-    exc = replace(exc, ratio=ratio)
+    return replace(exc, ratio=ratio)
+
+
+def _prior_notes(params: list[ParameterStatus], R: np.ndarray) -> list[str]:
+    """Notes of a :func:`fit_pair_prior` alignment: the method, what is held, the mounting.
+
+    Parameters
+    ----------
+    params : list of ParameterStatus
+    R : ndarray, shape (3, 3)
+
+    Returns
+    -------
+    list of str
+    """
     notes = ["posterior mode with the prior as pseudo-observations; channels weighted by "
              "their own residual variance; corrected for the reference noise in the "
              "regressors (first order)"]
@@ -952,34 +1297,57 @@ def fit_pair_prior(t: np.ndarray, y_ref: np.ndarray, y: np.ndarray, used: np.nda
                      + ", ".join(held))
     if not np.allclose(R, np.eye(3)):
         notes.append(f"mounting {mounting_text(R)}")
-    chk: OffsetCheck | None = None
-    if fit_tau and check:
-        fitted = np.zeros(t.shape[0], bool)
-        fitted[rows] = True
-        data_cols = [j for j in range(q) if np.any(np.std(X[:, :, j], axis=0) > 0)]
-        data_cols += list(range(q, p))
-        sw = np.sqrt(w)
+    return notes
 
-        def piece(mask: np.ndarray) -> tuple[float, float, str]:
-            kw = dict(time_offset=True, label=label, sample_rate_hz=fs, check=False,
-                      jitter=False)
-            a = fit_pair(t, y_ref, y, mask, model="fixed", gain=A, **kw)
-            return a.time_offset_s, a.time_offset_sd_s, a.model
 
-        try:
-            chk = check_offset(t, fitted, X[:, :, data_cols] * sw[None, :, None],
-                               fit.residual * sw, sd_tau, fs, piece)
-            sd_tau = max(sd_tau, 1e-3 * (1e3 * chk.sd_s))
-        except np.linalg.LinAlgError:
-            notes.append("time offset: the piece and bootstrap checks could not be computed "
-                         "(singular design); HAC sd reported")
-        params[-1] = replace(params[-1], sd=sd_tau)
-    jit = (fit_timing_jitter(fit.residual, dz[inside] @ (np.eye(3) + E).T, lags=fit.lags)
-           if jitter else JitterFit(0.0, 0.0, 0.0, 0.0, np.zeros((3, 3)), 0))
-    return ImuAlignmentFit(imu=label, model=model, A=A, A_cov=A_cov, c=fit.beta[ci],
-                        c_cov=cov[ci, ci], time_offset_s=tau if fit_tau else 0.0,
-                        time_offset_sd_s=sd_tau if time_offset else 0.0,
-                        residual=residual, lags=fit.lags, excitation=exc, notes=tuple(notes),
-                        check=chk, timing_jitter_s=jit.tau_s,
-                        timing_jitter_sd_s=jit.tau_sd_s, mounting=R,
-                        parameters=tuple(params))
+def _prior_offset_check(t: np.ndarray, y_ref: np.ndarray, y: np.ndarray, rows: np.ndarray,
+                        s: _PriorSolution, q: int, sd_tau: float, *, fs: float, label: str,
+                        A: np.ndarray) -> tuple[OffsetCheck | None, float, str]:
+    """The piece and bootstrap checks of a fitted time offset
+    (:func:`calibration.inflight.offset_check.check_offset`).
+
+    Parameters
+    ----------
+    t, y_ref, y : ndarray
+        As :func:`fit_pair_prior`.
+    rows : ndarray of int
+        Samples fitted.
+    s : _PriorSolution
+    q : int
+        Parameters of E.
+    sd_tau : float
+        HAC sd of τ (s).
+    fs : float
+    label : str
+    A : ndarray, shape (3, 3)
+        The fitted gain (the pieces are fitted with it fixed).
+
+    Returns
+    -------
+    chk : OffsetCheck or None
+        None when the checks could not be computed.
+    sd_tau : float
+        The largest of the sds (through the file's ms), or the HAC sd.
+    note : str
+        Empty, or why the checks are missing.
+    """
+    p = s.X.shape[2]
+    fitted = np.zeros(t.shape[0], bool)
+    fitted[rows] = True
+    data_cols = [j for j in range(q) if np.any(np.std(s.X[:, :, j], axis=0) > 0)]
+    data_cols += list(range(q, p))
+    sw = np.sqrt(s.w)
+
+    def piece(mask: np.ndarray) -> tuple[float, float, str]:
+        kw = dict(time_offset=True, label=label, sample_rate_hz=fs, check=False,
+                  jitter=False)
+        a = fit_pair(t, y_ref, y, mask, model="fixed", gain=A, **kw)
+        return a.time_offset_s, a.time_offset_sd_s, a.model
+
+    try:
+        chk = check_offset(t, fitted, s.X[:, :, data_cols] * sw[None, :, None],
+                           s.fit.residual * sw, sd_tau, fs, piece)
+    except np.linalg.LinAlgError:
+        return None, sd_tau, ("time offset: the piece and bootstrap checks could not be "
+                              "computed (singular design); HAC sd reported")
+    return chk, max(sd_tau, 1e-3 * (1e3 * chk.sd_s)), ""

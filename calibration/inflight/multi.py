@@ -29,7 +29,15 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from calibration.inflight.fit import ESTIMATED, HELD, INFORMED, InflightFit, _decomposition_matrix
+from calibration.inflight.fit import (
+    ESTIMATED,
+    HELD,
+    INFORMED,
+    ImuAlignmentFit,
+    InflightFit,
+    ParameterStatus,
+    _decomposition_matrix,
+)
 from calibration.inflight.prior import Prior, mounting_text
 from fdi.errors import CalibrationError
 
@@ -120,15 +128,8 @@ def combine_fits(fits: list[InflightFit]) -> JointFit:
         The flights do not hold the same IMUs, reference or mountings (the message names
         the IMU, the flights and what to do).
     """
-    if len(fits) < 2:
-        raise CalibrationError("calibrating flights together needs two flights or more")
+    _check_same_set(fits)
     first = fits[0]
-    for f in fits[1:]:
-        if f.imus != first.imus or f.reference != first.reference:
-            raise CalibrationError(
-                f"{f.source}: IMUs {', '.join(f.imus)} (reference {f.reference}) differ from "
-                f"{first.source}'s {', '.join(first.imus)} (reference {first.reference}): "
-                "calibrate flights of one IMU set together, with the same --reference")
     base = int(np.argmax([int(f.used.sum()) for f in fits]))
     prior = first.prior or Prior()
     notes = []
@@ -136,25 +137,9 @@ def combine_fits(fits: list[InflightFit]) -> JointFit:
     rel_sd, cs, mounts = {}, {}, {}
     for g in first.alignments:
         als = [f.alignments[g] for f in fits]
-        R = np.asarray(als[0].mounting, float)
-        for f, a in zip(fits, als, strict=True):
-            if not np.allclose(a.mounting, R):
-                raise CalibrationError(
-                    f"{g}: mounted {mounting_text(a.mounting)} on {f.source} but "
-                    f"{mounting_text(R)} on {first.source}: calibrate the flights separately, "
-                    "or declare the mounting")
+        R = _common_mounting(g, fits, als)
         model = als[0].model
-        Lam = _prior_precision_E(prior, model)
-        P = Lam.copy()
-        rhs = np.zeros(9)
-        for a in als:
-            E, C = a.small
-            Ci = np.linalg.pinv(C, hermitian=True)
-            w, V = np.linalg.eigh(0.5 * (Ci - Lam + (Ci - Lam).T))
-            P += (V * np.clip(w, 0, None)) @ V.T
-            rhs += Ci @ E.ravel()
-        Pc = np.linalg.pinv(P, hermitian=True)
-        E = (Pc @ rhs).reshape(3, 3)
+        E, Pc = _joint_small(als, _prior_precision_E(prior, model))
         K = np.kron(np.eye(3), R.T)
         A = (np.eye(3) + E) @ R
         A_cov = K @ Pc @ K.T
@@ -162,40 +147,12 @@ def combine_fits(fits: list[InflightFit]) -> JointFit:
         cs[g], mounts[g] = c, R
         rel_sd[g] = np.std(c, axis=0, ddof=1)
         c_cov = np.sum([a.c_cov for a in als], axis=0) / len(als) ** 2
-        taus = np.array([a.time_offset_s for a in als])
-        tsd = np.array([max(a.time_offset_sd_s, 1e-12) for a in als])
-        wt = 1.0 / tsd**2
-        tau = float(np.sum(wt * taus) / np.sum(wt))
-        chi2 = float(np.sum(wt * (taus - tau) ** 2))
-        tau_sd = float(np.sqrt(1.0 / np.sum(wt)))
-        if len(als) > 1 and chi2 > 3.0 * (len(als) - 1):
-            spread = float(np.std(taus, ddof=1))
-            tau_sd = max(tau_sd, spread)
-            notes.append(f"{g}: the time offset moves between flights ("
-                         + ", ".join(f"{1e3 * x:+.2f}" for x in taus)
-                         + f" ms): it is a per-flight parameter here, its spread "
-                         f"{1e3 * spread:.2f} ms is its sd")
+        tau, tau_sd, note = _joint_time_offset(g, als)
+        if note:
+            notes.append(note)
         jit = max(a.timing_jitter_s for a in als)
         jit_sd = max(a.timing_jitter_sd_s for a in als)
-        # parameter statuses of the joint: estimated when the flights together inform it
-        T = _decomposition_matrix()
-        if model == "full":
-            phi = T @ E.ravel()
-            phi_sd = np.sqrt(np.clip(np.diag(T @ Pc @ T.T), 0, None))
-        else:
-            phi = (T @ E.ravel())[:3]
-            phi_sd = np.sqrt(np.clip(np.diag(T @ Pc @ T.T), 0, None))[:3]
-        params = []
-        for j, p in enumerate(p for p in als[0].parameters if p.name != "time offset"):
-            params.append(replace(p, value=float(phi[j]), sd=float(phi_sd[j]),
-                                  status=ESTIMATED if phi_sd[j] <= INFORMED * p.prior_sd
-                                  else HELD,
-                                  excitation=max(a.parameters[j].excitation for a in als)))
-        tp = [p for p in als[0].parameters if p.name == "time offset"]
-        if tp:
-            params.append(replace(tp[0], value=tau, sd=tau_sd,
-                                  status=ESTIMATED if tau_sd <= INFORMED * tp[0].prior_sd
-                                  else HELD))
+        params = _joint_parameters(als, model, E, Pc, tau, tau_sd)
         b = als[base]
         alignments[g] = replace(
             b, A=A, A_cov=A_cov, c=c.mean(axis=0), c_cov=c_cov, time_offset_s=tau,
@@ -211,3 +168,152 @@ def combine_fits(fits: list[InflightFit]) -> JointFit:
                     findings=tuple(dict.fromkeys(x for f in fits for x in f.findings)))
     return JointFit(fit=joint, base=base, fits=tuple(fits), turn_on_sd=turn_on,
                     relative_sd=rel_sd, notes=tuple(notes))
+
+
+def _check_same_set(fits: list[InflightFit]) -> None:
+    """Refuse fewer than two flights, or flights of different IMUs or references.
+
+    Parameters
+    ----------
+    fits : list of InflightFit
+
+    Raises
+    ------
+    CalibrationError
+        The message names the flights and what to do.
+    """
+    if len(fits) < 2:
+        raise CalibrationError("calibrating flights together needs two flights or more")
+    first = fits[0]
+    for f in fits[1:]:
+        if f.imus != first.imus or f.reference != first.reference:
+            raise CalibrationError(
+                f"{f.source}: IMUs {', '.join(f.imus)} (reference {f.reference}) differ from "
+                f"{first.source}'s {', '.join(first.imus)} (reference {first.reference}): "
+                "calibrate flights of one IMU set together, with the same --reference")
+
+
+def _common_mounting(g: str, fits: list[InflightFit], als: list[ImuAlignmentFit]) -> np.ndarray:
+    """The mounting of IMU ``g``, which every flight must share.
+
+    Parameters
+    ----------
+    g : str
+    fits : list of InflightFit
+    als : list of ImuAlignmentFit
+        ``g``'s alignment in each flight.
+
+    Returns
+    -------
+    ndarray, shape (3, 3)
+
+    Raises
+    ------
+    CalibrationError
+        A flight mounts it otherwise (the message names both flights).
+    """
+    R = np.asarray(als[0].mounting, float)
+    for f, a in zip(fits, als, strict=True):
+        if not np.allclose(a.mounting, R):
+            raise CalibrationError(
+                f"{g}: mounted {mounting_text(a.mounting)} on {f.source} but "
+                f"{mounting_text(R)} on {fits[0].source}: calibrate the flights separately, "
+                "or declare the mounting")
+    return R
+
+
+def _joint_small(als: list[ImuAlignmentFit], Lam: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """E of the flights' data combined with the one prior (module docstring).
+
+    Parameters
+    ----------
+    als : list of ImuAlignmentFit
+        One IMU's alignment in each flight.
+    Lam : ndarray, shape (9, 9)
+        Prior precision of vec(E).
+
+    Returns
+    -------
+    E : ndarray, shape (3, 3)
+    Pc : ndarray, shape (9, 9)
+        Its posterior covariance.
+    """
+    P = Lam.copy()
+    rhs = np.zeros(9)
+    for a in als:
+        E, C = a.small
+        Ci = np.linalg.pinv(C, hermitian=True)
+        w, V = np.linalg.eigh(0.5 * (Ci - Lam + (Ci - Lam).T))
+        P += (V * np.clip(w, 0, None)) @ V.T
+        rhs += Ci @ E.ravel()
+    Pc = np.linalg.pinv(P, hermitian=True)
+    return (Pc @ rhs).reshape(3, 3), Pc
+
+
+def _joint_time_offset(g: str, als: list[ImuAlignmentFit]) -> tuple[float, float, str]:
+    """Inverse-variance mean of the flights' time offsets; their spread is the sd when
+    they disagree (χ² above three per degree of freedom).
+
+    Parameters
+    ----------
+    g : str
+    als : list of ImuAlignmentFit
+
+    Returns
+    -------
+    tau, tau_sd : float
+        s.
+    note : str
+        Empty, or the flights' offsets when they move between flights.
+    """
+    taus = np.array([a.time_offset_s for a in als])
+    tsd = np.array([max(a.time_offset_sd_s, 1e-12) for a in als])
+    wt = 1.0 / tsd**2
+    tau = float(np.sum(wt * taus) / np.sum(wt))
+    chi2 = float(np.sum(wt * (taus - tau) ** 2))
+    tau_sd = float(np.sqrt(1.0 / np.sum(wt)))
+    if not (len(als) > 1 and chi2 > 3.0 * (len(als) - 1)):
+        return tau, tau_sd, ""
+    spread = float(np.std(taus, ddof=1))
+    note = (f"{g}: the time offset moves between flights ("
+            + ", ".join(f"{1e3 * x:+.2f}" for x in taus)
+            + f" ms): it is a per-flight parameter here, its spread "
+            f"{1e3 * spread:.2f} ms is its sd")
+    return tau, max(tau_sd, spread), note
+
+
+def _joint_parameters(als: list[ImuAlignmentFit], model: str, E: np.ndarray, Pc: np.ndarray,
+                      tau: float, tau_sd: float) -> list[ParameterStatus]:
+    """Parameter statuses of the joint: estimated when the flights together inform it.
+
+    Parameters
+    ----------
+    als : list of ImuAlignmentFit
+    model : str
+        ``"full"`` or ``"rotation"``.
+    E, Pc : ndarray
+        The joint E and its covariance.
+    tau, tau_sd : float
+        The joint time offset and its sd (s).
+
+    Returns
+    -------
+    list of ParameterStatus
+    """
+    T = _decomposition_matrix()
+    phi = T @ E.ravel()
+    phi_sd = np.sqrt(np.clip(np.diag(T @ Pc @ T.T), 0, None))
+    if model != "full":
+        phi, phi_sd = phi[:3], phi_sd[:3]
+    params = []
+    for j, p in enumerate(p for p in als[0].parameters if p.name != "time offset"):
+        params.append(replace(p, value=float(phi[j]), sd=float(phi_sd[j]),
+                              status=ESTIMATED if phi_sd[j] <= INFORMED * p.prior_sd
+                              else HELD,
+                              excitation=max(a.parameters[j].excitation for a in als)))
+    tp = [p for p in als[0].parameters if p.name == "time offset"]
+    if tp:
+        params.append(replace(tp[0], value=tau, sd=tau_sd,
+                              status=ESTIMATED if tau_sd <= INFORMED * tp[0].prior_sd
+                              else HELD))
+    return params

@@ -267,43 +267,20 @@ def calibrate_static(flight: Flight, *, reference: str | None = None, alpha: flo
     CalibrationError
         The set is moving, or no alignment is observable.
     """
-    from replay.ingest.characterise_flight import slow_drift
-
     groups = _groups(flight)
     ref = reference or next(iter(groups))
     if ref not in groups:
         raise ConfigError(f"reference {ref!r} is not an IMU of {flight.source} "
                           f"(IMUs: {', '.join(groups)})")
-    ok = flight.valid.all(axis=1) & np.all(np.isfinite(flight.raw), axis=1)
-    t, x = flight.t[ok], np.asarray(flight.raw, float)[ok]
-    if x.shape[0] < 10 * BLOCKS:
-        raise CalibrationError(f"{flight.source}: only {x.shape[0]} valid samples")
-    xs = x - x.mean(axis=0)
-    spread = float(np.median(np.linalg.norm(xs[:, groups[ref]], axis=1)))
-    if spread > _MOVING_RPS:
-        raise CalibrationError(f"{flight.source}: the set is moving (median rate deviation "
-                               f"{spread:.3g} rad/s > {_MOVING_RPS:g}); use rimu calibrate "
-                               "in-flight")
+    ok, t, x, xs = _still_samples(flight, groups[ref])
     acc = {g: (_accel(flight, g)[ok] if _accel(flight, g) is not None else None)
            for g in groups}
     rots, notes, full = _rotations(x, acc, groups, ref)
     blocks = np.array_split(np.arange(x.shape[0]), BLOCKS)
-    rot_sd = {}
     bias_sd = np.std([x[b].mean(axis=0) for b in blocks], axis=0, ddof=1) / math.sqrt(BLOCKS)
-    for g in groups:
-        if g == ref:
-            rot_sd[g] = np.zeros(3)
-            continue
-        vs = []
-        for b in blocks:
-            try:
-                rb, _, _ = _rotations(x[b], {h: (a[b] if a is not None else None)
-                                             for h, a in acc.items()}, groups, ref)
-                vs.append((rb[g] * rots[g].inv()).as_rotvec())
-            except CalibrationError:
-                continue
-        rot_sd[g] = (np.std(vs, axis=0, ddof=1) / math.sqrt(len(vs)) if len(vs) > 2
-                     else np.full(3, np.inf))
+    rot_sd = {g: (np.zeros(3) if g == ref else _rotation_sd(g, x, acc, groups, ref, rots[g],
+                                                           blocks))
+              for g in groups}
     b = x.mean(axis=0)
     # the noise statistics, the residual models and the range describe the set at rest: a
     # knock is beyond the range (its jolt) and out of the monitor's envelope, not noise its
@@ -322,44 +299,18 @@ def calibrate_static(flight: Flight, *, reference: str | None = None, alpha: flo
         R = rots[g].as_matrix()                  # v_ref = R v_j; rows of H_j: R[:, k]
         cov[np.ix_(idx, idx)] = np.cov(xr[:, idx].T)
         for k, i in enumerate(idx):
-            h = R[:, k]
-            nom = np.zeros(3)
-            m = int(np.argmax(np.abs(h)))
-            nom[m] = np.sign(h[m])
-            E = tangent_basis(nom)
-            sd_rot = rot_sd[g]
-            ms = np.abs(E @ np.cross(sd_rot, h)) if np.all(np.isfinite(sd_rot)) else \
-                np.full(2, np.inf)
-            tol = SCALE_FACTOR_TOLERANCE
-            across = E.T @ np.diag(np.where(np.isfinite(ms), ms, 0.0) ** 2) @ E
-            sensors.append(SensorCal(
-                name=flight.sensor_names[i], axis=h, axis_nominal=nom, scale_factor=1.0,
-                scale_factor_sd=tol, bias=float(b[i]), bias_sd=float(bias_sd[i]),
-                input_error_cov=tol**2 * np.outer(h, h) + across,
-                misalignment_sd=ms, raw_unit=flight.raw_unit,
-                scale_factor_unit=_sf_unit(flight.raw_unit), bias_unit="deg/s",
-                residual_rms=float(np.std(xr[:, i]))))
+            sensors.append(_static_sensor(flight, i, R[:, k], rot_sd[g], float(b[i]),
+                                          float(bias_sd[i]), float(np.std(xr[:, i]))))
         if g == ref:
             continue
-        r = xs[:, idx] - w_ref @ R                  # y_j − H_j·ω̂ with H_j = Rᵀ
-        dr = slow_drift(t, r)
-        d = np.asarray(dr["change"])
-        dsd = np.asarray(dr["change_sd"])
-        rel_drift[g] = R @ d                        # into the reference (body) frame
-        rel_cov[g] = R @ np.diag(dsd**2) @ R.T
-        per_imu[g] = StaticImu(
-            rotation=tuple(rots[g].as_rotvec().tolist()), rotation_sd=tuple(rot_sd[g].tolist()),
-            relative_bias=tuple((b[idx] - R.T @ b[groups[ref]]).tolist()),
-            relative_drift=tuple(d.tolist()), relative_drift_sd=tuple(dsd.tolist()),
-            relative_drift_z=tuple(dr["z"]), relative_drift_p=tuple(dr["p_value"]),
-            drift_block_s=dr["block_s"], drift_hac_lags=dr["hac_lags"])
+        rel_drift[g], rel_cov[g], per_imu[g] = _static_imu(
+            t, xs[:, idx] - w_ref @ R, R, rots[g], rot_sd[g],
+            b[idx] - R.T @ b[groups[ref]])
     attr = attribute_drift(rel_drift, rel_cov, ref, alpha=alpha)
     notes.append(f"scale factors are not observable at rest: taken as 1 ± "
                  f"{100 * SCALE_FACTOR_TOLERANCE:g} % (a stated tolerance, in the input-error "
                  "covariance: the monitor's thresholds widen when the set moves)")
     notes.append("biases hold the Earth rate's projection (<= 0.0042 deg/s)")
-    H = np.array([c.axis for c in sensors])
-    acc_all = flight_accel(flight)
     notes.append(f"{int(np.sum(~rest))} of {rest.size} samples near shocks (more than "
                  f"{SHOCK_SD:g} robust sd in two IMUs, +-{SHOCK_PAD_S:g} s) are left out of "
                  f"the noise, the residual models and the range")
@@ -367,8 +318,190 @@ def calibrate_static(flight: Flight, *, reference: str | None = None, alpha: flo
         reference=ref, imus=per_imu, drift_attribution=_attribution(attr), notes=tuple(notes),
         alpha=alpha, bias=tuple(b.tolist()), bias_sd=tuple(bias_sd.tolist()),
         samples=int(x.shape[0]), duration_s=float(t[-1] - t[0]), alignment_full=full)
+    gs = _static_set(flight, ok, sensors, cov, groups, x, xs, xr, b, rest)
+    return Calibration(configuration=f"{len(groups)} IMUs at rest", sets={"gyro": gs},
+        sample_rate_hz=flight.sample_rate_hz,
+        extra=CalibrationExtras(method=Method(STATIC_METHOD), source=flight.source,
+                                static=summary).to_dict(STATIC_LAYOUT))
+
+
+def _still_samples(flight: Flight, ref_idx: list[int]
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The valid, finite samples of a recording that is at rest.
+
+    Parameters
+    ----------
+    flight : Flight
+    ref_idx : list of int
+        Channels of the reference IMU.
+
+    Returns
+    -------
+    ok : ndarray of bool, shape (N,)
+        Samples kept.
+    t, x : ndarray
+        Their times and raw values.
+    xs : ndarray
+        ``x`` less its mean.
+
+    Raises
+    ------
+    CalibrationError
+        Too few samples, or the reference's median rate deviation says the set moves.
+    """
+    ok = flight.valid.all(axis=1) & np.all(np.isfinite(flight.raw), axis=1)
+    t, x = flight.t[ok], np.asarray(flight.raw, float)[ok]
+    if x.shape[0] < 10 * BLOCKS:
+        raise CalibrationError(f"{flight.source}: only {x.shape[0]} valid samples")
+    xs = x - x.mean(axis=0)
+    spread = float(np.median(np.linalg.norm(xs[:, ref_idx], axis=1)))
+    if spread > _MOVING_RPS:
+        raise CalibrationError(f"{flight.source}: the set is moving (median rate deviation "
+                               f"{spread:.3g} rad/s > {_MOVING_RPS:g}); use rimu calibrate "
+                               "in-flight")
+    return ok, t, x, xs
+
+
+def _rotation_sd(g: str, x: np.ndarray, acc: dict[str, np.ndarray | None],
+                 groups: dict[str, list[int]], ref: str, rot: Rotation,
+                 blocks: list[np.ndarray]) -> np.ndarray:
+    """Sd of IMU ``g``'s rotation from its spread over blocks of the record.
+
+    Parameters
+    ----------
+    g : str
+    x : ndarray, shape (N, n)
+    acc : dict of str to ndarray or None
+        Each IMU's accelerometer (on the same samples), or None.
+    groups : dict of str to list of int
+    ref : str
+    rot : Rotation
+        ``g``'s rotation from the whole record.
+    blocks : list of ndarray of int
+        Sample indices of each block.
+
+    Returns
+    -------
+    ndarray, shape (3,)
+        Rotation-vector sd (rad); infinite when fewer than three blocks resolve it.
+    """
+    vs = []
+    for b in blocks:
+        try:
+            rb, _, _ = _rotations(x[b], {h: (a[b] if a is not None else None)
+                                         for h, a in acc.items()}, groups, ref)
+            vs.append((rb[g] * rot.inv()).as_rotvec())
+        except CalibrationError:
+            continue
+    return (np.std(vs, axis=0, ddof=1) / math.sqrt(len(vs)) if len(vs) > 2
+            else np.full(3, np.inf))
+
+
+def _static_sensor(flight: Flight, i: int, h: np.ndarray, sd_rot: np.ndarray, bias: float,
+                   bias_sd: float, residual_rms: float) -> SensorCal:
+    """One gyro axis of a static calibration: its axis from the rotation, scale factor 1
+    within :data:`SCALE_FACTOR_TOLERANCE`, its misalignment sd from the rotation's.
+
+    Parameters
+    ----------
+    flight : Flight
+    i : int
+        Channel.
+    h : ndarray, shape (3,)
+        Its axis in the reference frame.
+    sd_rot : ndarray, shape (3,)
+        Sd of its IMU's rotation vector (rad).
+    bias, bias_sd, residual_rms : float
+        Raw units.
+
+    Returns
+    -------
+    SensorCal
+    """
+    nom = np.zeros(3)
+    m = int(np.argmax(np.abs(h)))
+    nom[m] = np.sign(h[m])
+    E = tangent_basis(nom)
+    ms = np.abs(E @ np.cross(sd_rot, h)) if np.all(np.isfinite(sd_rot)) else \
+        np.full(2, np.inf)
+    tol = SCALE_FACTOR_TOLERANCE
+    across = E.T @ np.diag(np.where(np.isfinite(ms), ms, 0.0) ** 2) @ E
+    return SensorCal(
+        name=flight.sensor_names[i], axis=h, axis_nominal=nom, scale_factor=1.0,
+        scale_factor_sd=tol, bias=bias, bias_sd=bias_sd,
+        input_error_cov=tol**2 * np.outer(h, h) + across,
+        misalignment_sd=ms, raw_unit=flight.raw_unit,
+        scale_factor_unit=_sf_unit(flight.raw_unit), bias_unit="deg/s",
+        residual_rms=residual_rms)
+
+
+def _static_imu(t: np.ndarray, r: np.ndarray, R: np.ndarray, rot: Rotation,
+                rot_sd: np.ndarray, relative_bias: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray, StaticImu]:
+    """The drift of one IMU relative to the reference over the record.
+
+    Parameters
+    ----------
+    t : ndarray, shape (N,)
+    r : ndarray, shape (N, 3)
+        ``y_j − H_j·ω̂`` (its axes).
+    R : ndarray, shape (3, 3)
+        Its rotation onto the reference.
+    rot : Rotation
+    rot_sd : ndarray, shape (3,)
+    relative_bias : ndarray, shape (3,)
+
+    Returns
+    -------
+    drift : ndarray, shape (3,)
+        In the reference (body) frame.
+    drift_cov : ndarray, shape (3, 3)
+    record : StaticImu
+    """
+    from replay.ingest.characterise_flight import slow_drift
+
+    dr = slow_drift(t, r)
+    d = np.asarray(dr["change"])
+    dsd = np.asarray(dr["change_sd"])
+    rec = StaticImu(
+        rotation=tuple(rot.as_rotvec().tolist()), rotation_sd=tuple(rot_sd.tolist()),
+        relative_bias=tuple(relative_bias.tolist()),
+        relative_drift=tuple(d.tolist()), relative_drift_sd=tuple(dsd.tolist()),
+        relative_drift_z=tuple(dr["z"]), relative_drift_p=tuple(dr["p_value"]),
+        drift_block_s=dr["block_s"], drift_hac_lags=dr["hac_lags"])
+    return R @ d, R @ np.diag(dsd**2) @ R.T, rec
+
+
+def _static_set(flight: Flight, ok: np.ndarray, sensors: list[SensorCal], cov: np.ndarray,
+                groups: dict[str, list[int]], x: np.ndarray, xs: np.ndarray, xr: np.ndarray,
+                b: np.ndarray, rest: np.ndarray) -> SensorSet:
+    """The gyro set of a static calibration: noise, Allan table, the envelope covered at
+    rest and the residual models.
+
+    Parameters
+    ----------
+    flight : Flight
+    ok : ndarray of bool
+        Samples kept (of the flight).
+    sensors : list of SensorCal
+    cov : ndarray, shape (n, n)
+        Noise covariance.
+    groups : dict of str to list of int
+    x, xs, xr : ndarray
+        Raw values kept, less their mean, and that at rest.
+    b : ndarray, shape (n,)
+        Biases.
+    rest : ndarray of bool
+        Kept samples at rest.
+
+    Returns
+    -------
+    SensorSet
+    """
+    H = np.array([c.axis for c in sensors])
+    acc_all = flight_accel(flight)
     acc_ok = acc_all[ok] if acc_all is not None else None
-    gs = with_residual_models(
+    return with_residual_models(
         SensorSet("gyro", tuple(sensors), cov, allan=allan_table(xr, flight.sample_rate_hz),
                   validated_rate=covered_rate(H, list(groups.values()), x - b, rest),
                   validated_specific_force=(covered_specific_force(acc_ok, rest)
@@ -376,10 +509,6 @@ def calibrate_static(flight: Flight, *, reference: str | None = None, alpha: flo
                   validated_jolt=covered_jolt(acc_ok, rest) if acc_ok is not None else None),
         np.where(rest[:, None], xs, np.nan), x, flight.sample_rate_hz,
         source="static residual (raw - mean), shocks left out")
-    return Calibration(configuration=f"{len(groups)} IMUs at rest", sets={"gyro": gs},
-        sample_rate_hz=flight.sample_rate_hz,
-        extra=CalibrationExtras(method=Method(STATIC_METHOD), source=flight.source,
-                                static=summary).to_dict(STATIC_LAYOUT))
 
 
 def _attribution(attr: Mapping[str, Any]) -> DriftAttribution:

@@ -174,16 +174,45 @@ def run_target(elf: str | Path, sensor_names: Any, *, float32: bool, parity_len:
     if res.returncode != 0:
         raise ExportError(f"qemu-system-arm on {elf}: exit {res.returncode}: "
                           f"{(res.stderr.strip().splitlines() or [''])[-1]}")
+    # QEMU writes the semihosting console to its stderr
+    rows, events, event_rows, summary = _console_lines(res.stderr + "\n" + res.stdout)
+    if summary is None or int(summary[0]) != len(rows):
+        raise ExportError(f"qemu-system-arm on {elf}: {len(rows)} answers and no complete "
+                          "summary")
     names = tuple(sensor_names)
-    n = len(names)
-    rdt = np.dtype("<u4") if float32 else np.dtype("<u8")
-    fdt = np.float32 if float32 else np.float64
+    result = _target_answers(rows, names, _target_events(events, names, float32), event_rows,
+                             float32=float32, parity_len=parity_len, K=K)
+    steps, total, worst, stack, ans, state, crc = (int(v) for v in summary[:7])
+    return TargetRun(result, steps, TICK_INSTRUCTIONS * total / max(steps, 1),
+                     float(TICK_INSTRUCTIONS * worst), stack, ans, state, bool(crc))
+
+
+def _console_lines(text: str) -> tuple[list[list[str]], list[list[str]], list[int],
+                                       list[str] | None]:
+    """The program's console split into answer (``R``), event (``E``) and summary (``S``)
+    lines.
+
+    Parameters
+    ----------
+    text : str
+        What QEMU printed.
+
+    Returns
+    -------
+    rows : list of list of str
+        The cells of each answer.
+    events : list of list of str
+        The cells of each event.
+    event_rows : list of int
+        The answer each event came with.
+    summary : list of str or None
+        The summary's cells (None when the program printed none).
+    """
     rows: list[list[str]] = []
-    events: list[Any] = []
+    events: list[list[str]] = []
     event_rows: list[int] = []
     summary: list[str] | None = None
-    # QEMU writes the semihosting console to its stderr
-    for line in (res.stderr + "\n" + res.stdout).splitlines():
+    for line in text.splitlines():
         tok = line.split()
         if not tok:
             continue
@@ -194,18 +223,56 @@ def run_target(elf: str | Path, sensor_names: Any, *, float32: bool, parity_len:
             event_rows.append(len(rows) - 1)
         elif tok[0] == "S":
             summary = tok[1:]
-    if summary is None or int(summary[0]) != len(rows):
-        raise ExportError(f"qemu-system-arm on {elf}: {len(rows)} answers and no complete "
-                          "summary")
+    return rows, events, event_rows, summary
 
-    def reals(cells: list[str]) -> np.ndarray:
-        u = np.array([int(c, 16) for c in cells], dtype=rdt)
-        return u.view(fdt).astype(np.float64)
 
+def _reals(cells: list[str], float32: bool) -> np.ndarray:
+    """Hex bit patterns of the target's reals, as float64.
+
+    Parameters
+    ----------
+    cells : list of str
+    float32 : bool
+        The target's reals are float (else double).
+
+    Returns
+    -------
+    ndarray
+    """
+    rdt = np.dtype("<u4") if float32 else np.dtype("<u8")
+    fdt = np.float32 if float32 else np.float64
+    u = np.array([int(c, 16) for c in cells], dtype=rdt)
+    return u.view(fdt).astype(np.float64)
+
+
+def _target_answers(rows: list[list[str]], names: tuple[str, ...], evs: list[Any],
+                    event_rows: list[int], *, float32: bool, parity_len: int, K: int
+                    ) -> CResult:
+    """The answers the target printed, as the host's C monitor returns them.
+
+    Parameters
+    ----------
+    rows : list of list of str
+        The cells of each answer line.
+    names : tuple of str
+        Sensor names.
+    evs : list of Event
+        :func:`_target_events`.
+    event_rows : list of int
+        The answer each event came with.
+    float32 : bool
+    parity_len, K : int
+        Parity length and number of statistics.
+
+    Returns
+    -------
+    CResult
+    """
+    n = len(names)
     P = parity_len
     width = 3 + 3 + P + 2 * K + 1
     N = len(rows)
-    num = np.array([reals(r[:width]) for r in rows]).reshape(N, width)
+    num = np.array([_reals(r[:width], float32) for r in rows]).reshape(N, width)
     cap = np.array([int(r[width]) for r in rows])
     healthy = np.array([[(int(r[width + 1], 16) >> i) & 1 for i in range(n)] for r in rows],
                        bool).reshape(N, n)
@@ -216,30 +283,46 @@ def run_target(elf: str | Path, sensor_names: Any, *, float32: bool, parity_len:
                            for r in rows], bool).reshape(N, 3)
     env = np.array([int(r[width + 5], 16) for r in rows], np.int64)
     t = np.array([0.0] * N)
-    host = types.SimpleNamespace(names=names, n=n)
-    host._reason = types.MethodType(CMonitor._reason, host)
-    evs = []
-    for e in events:
-        ns = types.SimpleNamespace(
-            type=int(e[0]), sensor=int(e[1]), reason=int(e[2]), scale=int(e[3]),
-            t=float(np.array([int(e[4], 16)], np.uint64).view(np.float64)[0]),
-            statistic=float(reals([e[5]])[0]), threshold=float(reals([e[6]])[0]),
-            magnitude=float(reals([e[7]])[0]), sensors=int(e[8], 16),
-            envelope=int(e[9], 16))
-        evs.append(CMonitor._event(host, ns))
     o = 0
     cols = {}
     for name, k in (("omega", 3), ("omega_sd", 3), ("parity", P), ("statistics", K),
                     ("thresholds", K), ("protection_level", 1)):
         cols[name] = num[:, o:o + k]
         o += k
-    result = CResult(t=t, omega=cols["omega"], omega_sd=cols["omega_sd"], healthy=healthy,
-                     status=status, parity=cols["parity"], statistics=cols["statistics"],
-                     thresholds=cols["thresholds"],
-                     capability=np.array(CAPABILITIES, dtype=object)[cap],
-                     protection_level=cols["protection_level"][:, 0], envelope=env,
-                     unverified=unverified, suspects=suspects, events=evs,
-                     event_rows=np.array(event_rows, np.int64))
-    steps, total, worst, stack, ans, state, crc = (int(v) for v in summary[:7])
-    return TargetRun(result, steps, TICK_INSTRUCTIONS * total / max(steps, 1),
-                     float(TICK_INSTRUCTIONS * worst), stack, ans, state, bool(crc))
+    return CResult(t=t, omega=cols["omega"], omega_sd=cols["omega_sd"], healthy=healthy,
+                   status=status, parity=cols["parity"], statistics=cols["statistics"],
+                   thresholds=cols["thresholds"],
+                   capability=np.array(CAPABILITIES, dtype=object)[cap],
+                   protection_level=cols["protection_level"][:, 0], envelope=env,
+                   unverified=unverified, suspects=suspects, events=evs,
+                   event_rows=np.array(event_rows, np.int64))
+
+
+def _target_events(events: list[list[str]], names: tuple[str, ...], float32: bool
+                   ) -> list[Any]:
+    """The events the target printed, as the host's C monitor builds them.
+
+    Parameters
+    ----------
+    events : list of list of str
+        The cells of each event line.
+    names : tuple of str
+    float32 : bool
+
+    Returns
+    -------
+    list of Event
+    """
+    host = types.SimpleNamespace(names=names, n=len(names))
+    host._reason = types.MethodType(CMonitor._reason, host)
+    evs = []
+    for e in events:
+        ns = types.SimpleNamespace(
+            type=int(e[0]), sensor=int(e[1]), reason=int(e[2]), scale=int(e[3]),
+            t=float(np.array([int(e[4], 16)], np.uint64).view(np.float64)[0]),
+            statistic=float(_reals([e[5]], float32)[0]),
+            threshold=float(_reals([e[6]], float32)[0]),
+            magnitude=float(_reals([e[7]], float32)[0]), sensors=int(e[8], 16),
+            envelope=int(e[9], 16))
+        evs.append(CMonitor._event(host, ns))
+    return evs

@@ -271,12 +271,8 @@ def align_streams(read: LogRead, *, reference: str | None = None, gap_factor: fl
         fewer than ``min_imus`` streams that can form a time base (naming the others).
     """
     cleaned = [_clean(s) for s in read.streams]
-    for s, (_, dropped) in zip(read.streams, cleaned, strict=True):
-        if dropped.get(_BEYOND) and not salvage:
-            raise ConfigError(f"{read.path}: {s.name} ({s.source}): {dropped[_BEYOND]} of "
-                              f"{s.size} samples hold rates beyond any gyro's range (over "
-                              f"{MAX_RATE_DPS:g} deg/s): a damaged log or a wrong unit; "
-                              "--salvage drops and counts them")
+    if not salvage:
+        _refuse_beyond_range(read, cleaned)
     streams = [c[0] for c in cleaned]
     if not streams or all(s.size == 0 for s in streams):
         raise ConfigError(f"{read.path}: no IMU samples to ingest")
@@ -289,7 +285,6 @@ def align_streams(read: LogRead, *, reference: str | None = None, gap_factor: fl
     dt_b = _median_dt(tb)
     _check_base(read, streams[r].name, tb, dt_b)
     tol = tol_fraction * dt_b
-    m = tb.shape[0]
     gyro_cols, valid_cols, names, imu_groups = [], [], [], []
     aux_k, aux_n, aux_g, aux_v = [], [], [], []
     imus: list[dict[str, Any]] = []
@@ -297,7 +292,6 @@ def align_streams(read: LogRead, *, reference: str | None = None, gap_factor: fl
         dt_s = _median_dt(s.t) if s.size > 1 else dt_b
         i0, i1, w, how = _placement(s.t, tb, tol, gap_factor * max(dt_s, dt_b))
         ok = how > 0
-        kept, n_interp, drop = _accounting(s.t, dropped, tb, i0, i1, how)
         g = _place(s.gyro, i0, i1, w, ok)
         for k, ax in enumerate(_AXES):
             gyro_cols.append(g[:, k])
@@ -309,18 +303,8 @@ def align_streams(read: LogRead, *, reference: str | None = None, gap_factor: fl
             aux_n.append(name)
             aux_g.append(s.name)
             aux_v.append(values)
-        imus.append({
-            "name": s.name, "source": s.source, "device_id": s.device_id,
-            "samples_in": int(s.size + sum(dropped.values())), "kept": kept,
-            "used_for_resampling": n_interp, "dropped": drop,
-            "resampled_on_base": int((how == 2).sum()),
-            "missing_on_base": int((how == 0).sum()),
-            "nonfinite_gyro_values": int((~np.isfinite(g[ok])).sum()),
-            "median_dt_s": dt_s if np.isfinite(dt_s) else None,
-            "accel": s.accel is not None, "temperature": s.temperature is not None,
-            "error_count_max": (int(np.max(s.error_count)) if s.error_count is not None
-                                and s.size else None),
-            "notes": list(s.notes)})
+        imus.append(_imu_record(s, dropped, _accounting(s.t, dropped, tb, i0, i1, how), how,
+                                g[ok], dt_s))
     raw = np.column_stack(gyro_cols)
     valid = np.column_stack(valid_cols)
     aux = None
@@ -331,14 +315,102 @@ def align_streams(read: LogRead, *, reference: str | None = None, gap_factor: fl
     flight = Flight(t=np.asarray(tb, float), raw=raw, valid=valid, sample_rate_hz=fs,
                     sensor_names=tuple(names), raw_unit="rad/s", source=read.path,
                     kind="gyro", imu=tuple(imu_groups), aux=aux, events=read.events)
+    report = _ingest_report(read, streams[r].name, tb, dt_b, tol, gap_factor, imus, baseless)
+    return flight, report
+
+
+def _refuse_beyond_range(read: LogRead, cleaned: list[tuple[Any, dict[str, int]]]) -> None:
+    """Refuse a stream with rates beyond any gyro's range (a damaged log or a wrong unit).
+
+    Parameters
+    ----------
+    read : LogRead
+    cleaned : list of (stream, dropped)
+        :func:`_clean` of each of ``read``'s streams.
+
+    Raises
+    ------
+    ConfigError
+        Naming the stream and the count.
+    """
+    for s, (_, dropped) in zip(read.streams, cleaned, strict=True):
+        if dropped.get(_BEYOND):
+            raise ConfigError(f"{read.path}: {s.name} ({s.source}): {dropped[_BEYOND]} of "
+                              f"{s.size} samples hold rates beyond any gyro's range (over "
+                              f"{MAX_RATE_DPS:g} deg/s): a damaged log or a wrong unit; "
+                              "--salvage drops and counts them")
+
+
+def _imu_record(s: Any, dropped: dict[str, int], accounting: tuple[int, int, dict[str, int]],
+                how: np.ndarray, g_ok: np.ndarray, dt_s: float) -> dict[str, Any]:
+    """One IMU's entry of the ingest report: its sample accounting.
+
+    Parameters
+    ----------
+    s : stream
+        The cleaned stream.
+    dropped : dict of str to int
+        Samples :func:`_clean` dropped, by reason.
+    accounting : (int, int, dict)
+        :func:`_accounting`: kept, used for resampling, dropped.
+    how : ndarray of int
+        Per base sample: 0 missing, 1 on a sample, 2 resampled.
+    g_ok : ndarray
+        Its gyro values on the base samples it covers.
+    dt_s : float
+        Its median interval (s).
+
+    Returns
+    -------
+    dict
+    """
+    kept, n_interp, drop = accounting
+    return {
+        "name": s.name, "source": s.source, "device_id": s.device_id,
+        "samples_in": int(s.size + sum(dropped.values())), "kept": kept,
+        "used_for_resampling": n_interp, "dropped": drop,
+        "resampled_on_base": int((how == 2).sum()),
+        "missing_on_base": int((how == 0).sum()),
+        "nonfinite_gyro_values": int((~np.isfinite(g_ok)).sum()),
+        "median_dt_s": dt_s if np.isfinite(dt_s) else None,
+        "accel": s.accel is not None, "temperature": s.temperature is not None,
+        "error_count_max": (int(np.max(s.error_count)) if s.error_count is not None
+                            and s.size else None),
+        "notes": list(s.notes)}
+
+
+def _ingest_report(read: LogRead, reference: str, tb: np.ndarray, dt_b: float, tol: float,
+                   gap_factor: float, imus: list[dict[str, Any]],
+                   baseless: list[dict[str, Any]]) -> dict[str, Any]:
+    """The ``rimu.ingest-report/1`` document of an alignment.
+
+    Parameters
+    ----------
+    read : LogRead
+    reference : str
+        The IMU whose time stamps are the base.
+    tb : ndarray
+        The time base (s).
+    dt_b, tol : float
+        Its median interval and the on-sample tolerance (s).
+    gap_factor : float
+    imus : list of dict
+        :func:`_imu_record` of each IMU.
+    baseless : list of dict
+        IMU streams dropped for want of a time base.
+
+    Returns
+    -------
+    dict
+    """
     gaps = _gaps(tb, gap_factor * dt_b)
-    report = {
+    return {
         "schema": INGEST_REPORT_SCHEMA, "source": read.path, "format": read.format,
         "salvaged": read.damage is not None,
         "damage": read.damage.to_dict() if read.damage is not None else None,
-        "time_base": {"reference": streams[r].name, "samples": m,
+        "time_base": {"reference": reference, "samples": tb.shape[0],
                       "t_start_s": float(tb[0]), "t_end_s": float(tb[-1]),
-                      "median_dt_s": dt_b, "sample_rate_hz": fs,
+                      "median_dt_s": dt_b, "sample_rate_hz": 1.0 / dt_b,
                       "tolerance_s": tol, "gap_factor": gap_factor,
                       "gaps": gaps[:50], "n_gaps": len(gaps)},
         "imus": imus, "meta": read.meta,
@@ -349,4 +421,3 @@ def align_streams(read: LogRead, *, reference: str | None = None, gap_factor: fl
         "events": {"count": len(read.events),
                    "by_category": {c: sum(e.category == c for e in read.events)
                                    for c in sorted({e.category for e in read.events})}}}
-    return flight, report

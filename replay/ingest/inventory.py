@@ -109,43 +109,8 @@ def format_inventory(inv: dict[str, Any]) -> str:
     lines = [f"{inv['path']}: {inv['format']} log, {inv['bytes']} bytes, "
              f"{len(inv['imus'])} IMU stream(s)"]
     for d in inv["imus"]:
-        carries = [k for k in ("accel", "temperature", "error_count") if d[k]]
-        if d["device_id"] is not None:
-            carries.append(f"device id {d['device_id']}")
-        span = (f"{d['t_start_s']:.3f}-{d['t_end_s']:.3f} s ({d['duration_s']:.1f} s)"
-                if d["samples"] else "no sample")
-        g = d["gaps"]
-        lines.append(f"  {d['name']} ({d['source']}): {d['samples']} samples at "
-                     f"{_rate(d['sample_rate_hz'])}, {span}; gyro"
-                     + (f" + {', '.join(carries)}" if carries else ""))
-        issues = []
-        if g["count"]:
-            issues.append(f"{g['count']} gap(s) ({g['missing_samples']} samples missing, "
-                          f"longest {g['longest_s']:.3f} s at t="
-                          f"{max(g['first'], key=lambda x: x['length_s'])['t_s']:.3f} s"
-                          + (" among the first 5" if g["count"] > 5 else "") + ")")
-        if d["duplicate_stamps"]:
-            issues.append(f"{d['duplicate_stamps']} duplicate time stamp(s)")
-        if d["backward_stamps"]:
-            issues.append(f"{d['backward_stamps']} backward time stamp(s)")
-        if d["non_finite_samples"]:
-            issues.append(f"{d['non_finite_samples']} non-finite sample(s)")
-        for q, v in d["implausible"].items():
-            issues.append(f"{v['samples']} implausible {q} sample(s)")
-        lines.append("    " + ("; ".join(issues) if issues else "no gap, duplicate or "
-                                                                "backward time stamp"))
-    ev = inv["events"]
-    if ev["count"]:
-        by = ", ".join(f"{n} {c}" for c, n in sorted(ev["by_category"].items()))
-        lines.append(f"  declared events: {ev['count']} ({by})")
-        for e in ev["first"]:
-            span = (f"{e['t_s']:.2f}-{e['t_end_s']:.2f} s" if e["t_end_s"] > e["t_s"]
-                    else f"{e['t_s']:.2f} s")
-            lines.append(f"    {span:>17}  {e['category']:9s} {e['text']}")
-        if ev["count"] > len(ev["first"]):
-            lines.append(f"    ... {ev['count'] - len(ev['first'])} more")
-    else:
-        lines.append("  declared events: none")
+        lines += _stream_lines(d)
+    lines += _event_lines(inv["events"])
     if inv["damage"] is not None:
         st = inv["damage"]["stretches"]
         lines.append(f"  damaged: {inv['damage']['what']}"
@@ -154,3 +119,84 @@ def format_inventory(inv: dict[str, Any]) -> str:
     for w in inv["warnings"]:
         lines.append(f"  warning: {w}")
     return "\n".join(lines)
+
+
+def _stream_lines(d: dict[str, Any]) -> list[str]:
+    """One IMU stream of the inventory: what it carries, its span, and its issues.
+
+    Parameters
+    ----------
+    d : dict
+        One of the inventory's ``imus``.
+
+    Returns
+    -------
+    list of str
+    """
+    carries = [k for k in ("accel", "temperature", "error_count") if d[k]]
+    if d["device_id"] is not None:
+        carries.append(f"device id {d['device_id']}")
+    span = (f"{d['t_start_s']:.3f}-{d['t_end_s']:.3f} s ({d['duration_s']:.1f} s)"
+            if d["samples"] else "no sample")
+    issues = _stream_issues(d)
+    return [f"  {d['name']} ({d['source']}): {d['samples']} samples at "
+            f"{_rate(d['sample_rate_hz'])}, {span}; gyro"
+            + (f" + {', '.join(carries)}" if carries else ""),
+            "    " + ("; ".join(issues) if issues else "no gap, duplicate or "
+                                                       "backward time stamp")]
+
+
+def _stream_issues(d: dict[str, Any]) -> list[str]:
+    """Gaps, duplicate and backward stamps, non-finite and implausible samples of a stream.
+
+    Parameters
+    ----------
+    d : dict
+        One of the inventory's ``imus``.
+
+    Returns
+    -------
+    list of str
+        Empty when it has none.
+    """
+    g = d["gaps"]
+    issues = []
+    if g["count"]:
+        issues.append(f"{g['count']} gap(s) ({g['missing_samples']} samples missing, "
+                      f"longest {g['longest_s']:.3f} s at t="
+                      f"{max(g['first'], key=lambda x: x['length_s'])['t_s']:.3f} s"
+                      + (" among the first 5" if g["count"] > 5 else "") + ")")
+    if d["duplicate_stamps"]:
+        issues.append(f"{d['duplicate_stamps']} duplicate time stamp(s)")
+    if d["backward_stamps"]:
+        issues.append(f"{d['backward_stamps']} backward time stamp(s)")
+    if d["non_finite_samples"]:
+        issues.append(f"{d['non_finite_samples']} non-finite sample(s)")
+    for q, v in d["implausible"].items():
+        issues.append(f"{v['samples']} implausible {q} sample(s)")
+    return issues
+
+
+def _event_lines(ev: dict[str, Any]) -> list[str]:
+    """The declared events of the inventory: counts by category and the first ones.
+
+    Parameters
+    ----------
+    ev : dict
+        The inventory's ``events``.
+
+    Returns
+    -------
+    list of str
+    """
+    if not ev["count"]:
+        return ["  declared events: none"]
+    by = ", ".join(f"{n} {c}" for c, n in sorted(ev["by_category"].items()))
+    lines = [f"  declared events: {ev['count']} ({by})"]
+    for e in ev["first"]:
+        span = (f"{e['t_s']:.2f}-{e['t_end_s']:.2f} s" if e["t_end_s"] > e["t_s"]
+                else f"{e['t_s']:.2f} s")
+        lines.append(f"    {span:>17}  {e['category']:9s} {e['text']}")
+    if ev["count"] > len(ev["first"]):
+        lines.append(f"    ... {ev['count'] - len(ev['first'])} more")
+    return lines

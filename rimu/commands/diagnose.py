@@ -75,18 +75,7 @@ def text(d) -> str:
     if d.effects:
         lines.append("effects found:")
         for e in d.effects:
-            alias = f"  (strongly correlated on this sequence with {', '.join(e['aliases'])})" \
-                if e["aliases"] else ""
-            par = ", ".join(f"{k} {v:.4g}" for k, v in e["params"].items()
-                            if isinstance(v, float))
-            lines.append(f"  {e['name']:<18s} {e['kind']} {e['sensors'][0]}: "
-                         f"{e['estimate']:+.4g} ± {e['estimate_sd']:.2g} {e['unit']}"
-                         f"   p {_p(e)}" + (f"   [{par}]" if par else "") + alias)
-            if e.get("bound_note"):
-                lines.append(f"    {'':<18s} {e['bound_note']}")
-            if e.get("could_absorb"):
-                lines.append(f"    {'':<18s} could instead be absorbing (outside the "
-                             f"library): {e['could_absorb']}")
+            lines.extend(_effect_lines(e))
     else:
         lines.append("effects found: none")
     if d.unexplained:
@@ -105,17 +94,65 @@ def text(d) -> str:
     for name, kind, why in nt:
         lines.append(f"not testable: {name} ({kind}): {why}")
     for label, e in (("before", d.error_before), ("after ", d.error_after)):
-        for kind in e["residual_rms"]:
-            u = e["unit"][kind]
-            lines.append(f"{label} {kind}: residual rms [{u}] {_fmt_list(e['residual_rms'][kind])}"
-                         f"; step-mean chi2/dof {_fmt_list(e['step_chi2_dof'][kind], '{:.2f}')}"
-                         + (f"; parity rms [{u}] {_fmt_list(e['parity_rms'][kind])}"
-                            if kind in e["parity_rms"] else ""))
-        if "truth" in e:
-            t = e["truth"]
-            lines.append(f"{label} truth: max |error/sd| {t['max_abs_z']:.2f}, "
-                         f"{t['n_beyond_3']} beyond 3 sigma, rms error/sd {t['rms_z']:.2f}")
+        lines.extend(_error_lines(label, e))
     return "\n".join(lines)
+
+
+def _effect_lines(e: dict) -> list[str]:
+    """One claimed effect: its estimate, p and parameters, its bound note and what it
+    could be absorbing.
+
+    Parameters
+    ----------
+    e : dict
+        One of :attr:`calibration.diagnose.Diagnosis.effects`.
+
+    Returns
+    -------
+    list of str
+    """
+    alias = f"  (strongly correlated on this sequence with {', '.join(e['aliases'])})" \
+        if e["aliases"] else ""
+    par = ", ".join(f"{k} {v:.4g}" for k, v in e["params"].items()
+                    if isinstance(v, float))
+    lines = [f"  {e['name']:<18s} {e['kind']} {e['sensors'][0]}: "
+             f"{e['estimate']:+.4g} ± {e['estimate_sd']:.2g} {e['unit']}"
+             f"   p {_p(e)}" + (f"   [{par}]" if par else "") + alias]
+    if e.get("bound_note"):
+        lines.append(f"    {'':<18s} {e['bound_note']}")
+    if e.get("could_absorb"):
+        lines.append(f"    {'':<18s} could instead be absorbing (outside the "
+                     f"library): {e['could_absorb']}")
+    return lines
+
+
+def _error_lines(label: str, e: dict) -> list[str]:
+    """Residual rms, step-mean χ²/dof and parity rms per kind, and the truth errors, before
+    or after the refit.
+
+    Parameters
+    ----------
+    label : str
+        ``"before"`` or ``"after "``.
+    e : dict
+        :attr:`calibration.diagnose.Diagnosis.error_before` or ``error_after``.
+
+    Returns
+    -------
+    list of str
+    """
+    lines = []
+    for kind in e["residual_rms"]:
+        u = e["unit"][kind]
+        lines.append(f"{label} {kind}: residual rms [{u}] {_fmt_list(e['residual_rms'][kind])}"
+                     f"; step-mean chi2/dof {_fmt_list(e['step_chi2_dof'][kind], '{:.2f}')}"
+                     + (f"; parity rms [{u}] {_fmt_list(e['parity_rms'][kind])}"
+                        if kind in e["parity_rms"] else ""))
+    if "truth" in e:
+        t = e["truth"]
+        lines.append(f"{label} truth: max |error/sd| {t['max_abs_z']:.2f}, "
+                     f"{t['n_beyond_3']} beyond 3 sigma, rms error/sd {t['rms_z']:.2f}")
+    return lines
 
 
 def _is_flight(path: str) -> bool:
