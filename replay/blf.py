@@ -68,6 +68,15 @@ from can.io.blf import (
 from can.io.generic import BinaryIOMessageReader
 
 from fdi.errors import FileFormatError
+from replay.blf_repair import (
+    INVALID,
+    REPAIR_FILE_TRIALS,
+    REPAIR_TRIALS,
+    UNKNOWN,
+    repair_stream,
+    trailer_repair,
+    walk,
+)
 
 __all__ = ["MAX_CONTAINER_BYTES", "MAX_OBJECT_BYTES", "ResyncBLFReader"]
 
@@ -166,6 +175,23 @@ def _lands(data: bytes, end: int) -> bool:
     return data.find(b"LOBJ", end, end + 12) >= 0
 
 
+def _next_object(data: bytes, pos: int) -> int:
+    """Where the object after the valid object at ``pos`` starts (after up to 8 padding
+    bytes); :data:`~replay.blf_repair.INVALID` when the object is invalid or does not land
+    on the next ``LOBJ``; :data:`~replay.blf_repair.UNKNOWN` when ``data`` ends before
+    this can be told (the walk of :mod:`replay.blf_repair`)."""
+    if not b"LOBJ".startswith(data[pos : pos + 4]):
+        return INVALID
+    size = _object_size(data, pos)
+    if size is None:
+        return INVALID
+    end = pos + size
+    if size == _INCOMPLETE or end + 12 > len(data):
+        return UNKNOWN
+    k = data.find(b"LOBJ", end, end + 12)
+    return k if k >= 0 else INVALID
+
+
 def _inflate(payload: bytes) -> tuple[bytes, str | None, bool]:
     """Inflate a zlib stream, keeping every byte produced before an error.
 
@@ -224,6 +250,8 @@ class ResyncBLFReader(can.BLFReader):
         self.skipped_bytes = 0
         self._sync = False
         self._cpos = 0
+        self._repair_left = REPAIR_FILE_TRIALS
+        self._repair_note = ""
         self._tail = b""
         self._tail_at = 0
         self._pos = 0
@@ -421,20 +449,81 @@ class ResyncBLFReader(can.BLFReader):
                     "truncated",
                 )
             return payload, nxt, cut
+        data, gap = self._inflate_container(pos0, payload, declared if trusted else None, cut)
+        return data, nxt, gap
+
+    def _inflate_container(
+        self, pos0: int, payload: bytes, declared: int | None, cut: bool
+    ) -> tuple[bytes, bool]:
+        """The inflated bytes of the zlib stream of the container at ``pos0`` and whether
+        they stop short; a damaged stream is repaired when one byte can be found that
+        makes it whole (:mod:`replay.blf_repair`), else recorded."""
         data, err, gap = _inflate(payload)
+        if err is None and declared in (None, len(data)):
+            return data, gap
+        if not cut:
+            fixed = self._repair(pos0, payload, data, err, declared)
+            if fixed is not None:
+                return fixed, False
         if err is not None:
             if cut:
                 why = (f"truncated: the last container ends early ({err}); the "
                        f"{len(data)} bytes inflated before the cut are kept")
             else:
                 why = (f"damaged compressed container ({err}); the {len(data)} bytes "
-                       "inflated before it are kept")
+                       f"inflated before it are kept{self._repair_note}")
             self._record(pos0, why, 0, "truncated" if cut else "resync")
-        elif declared != len(data) and trusted:
+        else:
             self._record(
                 pos0, f"container declares {declared} uncompressed bytes, {len(data)} inflated", 0
             )
-        return data, nxt, gap
+        return data, gap
+
+    def _repair(
+        self, pos0: int, payload: bytes, data: bytes, err: str | None, declared: int | None
+    ) -> bytes | None:
+        """The container's bytes with its one damaged compressed byte repaired (recorded
+        as a ``repaired`` damage), or None (:attr:`_repair_note` says why)."""
+        self._repair_note = ""
+        prefix = self._tail if not self._sync and self._tail.startswith(b"LOBJ") else b""
+        joined = prefix + data
+        first = 0 if prefix else self._resync(joined, 0)
+        whole = not walk(joined, first, _next_object)[1] and declared in (None, len(data))
+        if whole and err is not None and "incorrect data check" in err:
+            # every object valid, the size right: only the Adler-32 disagrees
+            self._repair_note = (
+                "; its objects are all valid, so the damage changed a value or the "
+                "Adler-32 itself, and is not searched for"
+            )
+            fix = trailer_repair(payload, data)
+            if fix is None:
+                return None
+            self._record_repair(pos0, *fix, "the Adler-32 trailer; the inflated bytes are intact")
+            return data
+        budget = min(REPAIR_TRIALS, self._repair_left)
+        if budget <= 0:
+            self._repair_note = "; no repair searched (the file's repair budget is spent)"
+            return None
+        found, trials = repair_stream(payload, data, prefix, first, _next_object, declared,
+                                      budget)
+        self._repair_left -= trials
+        if found is None:
+            self._repair_note = f"; no one-byte repair found in {trials} trials"
+            return None
+        self._record_repair(
+            pos0, found.offset, found.old, found.new,
+            f"its zlib stream (Adler-32 and size checked; {trials} trials)",
+        )
+        return found.data
+
+    def _record_repair(self, pos0: int, offset: int, old: int, new: int, what: str) -> None:
+        self._record(
+            pos0,
+            f"repaired: compressed byte {offset} of the container (file byte "
+            f"{pos0 + _CHDR + offset}) read 0x{old:02x}; 0x{new:02x} makes whole {what}",
+            0,
+            "repaired",
+        )
 
     def __iter__(self) -> Iterator[can.Message]:
         pos = self._start
