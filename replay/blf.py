@@ -192,6 +192,17 @@ def _next_object(data: bytes, pos: int) -> int:
     return k if k >= 0 else INVALID
 
 
+def _ends_early(payload: bytes) -> bool:
+    """Whether the zlib stream in ``payload`` ends before it (bytes other than padding
+    follow its Adler-32)."""
+    d = zlib.decompressobj()
+    try:
+        d.decompress(payload)
+    except zlib.error:
+        return False
+    return d.eof and bool(d.unused_data.strip(b"\x00"))
+
+
 def _inflate(payload: bytes) -> tuple[bytes, str | None, bool]:
     """Inflate a zlib stream, keeping every byte produced before an error.
 
@@ -461,21 +472,33 @@ class ResyncBLFReader(can.BLFReader):
         data, err, gap = _inflate(payload)
         if err is None and declared in (None, len(data)):
             return data, gap
+        if err is None and not _ends_early(payload):  # the header's size is damaged
+            self._record(
+                pos0, f"container declares {declared} uncompressed bytes, {len(data)} inflated", 0
+            )
+            return data, gap
         if not cut:
             fixed = self._repair(pos0, payload, data, err, declared)
             if fixed is not None:
                 return fixed, False
         if err is not None:
             if cut:
-                why = (f"truncated: the last container ends early ({err}); the "
-                       f"{len(data)} bytes inflated before the cut are kept")
+                why = (
+                    f"truncated: the last container ends early ({err}); the "
+                    f"{len(data)} bytes inflated before the cut are kept"
+                )
             else:
-                why = (f"damaged compressed container ({err}); the {len(data)} bytes "
-                       f"inflated before it are kept{self._repair_note}")
+                why = (
+                    f"damaged compressed container ({err}); the {len(data)} bytes "
+                    f"inflated before it are kept{self._repair_note}"
+                )
             self._record(pos0, why, 0, "truncated" if cut else "resync")
         else:
             self._record(
-                pos0, f"container declares {declared} uncompressed bytes, {len(data)} inflated", 0
+                pos0,
+                f"container declares {declared} uncompressed bytes, {len(data)} inflated "
+                f"(the stream ends early){self._repair_note}",
+                0,
             )
         return data, gap
 
@@ -504,14 +527,16 @@ class ResyncBLFReader(can.BLFReader):
         if budget <= 0:
             self._repair_note = "; no repair searched (the file's repair budget is spent)"
             return None
-        found, trials = repair_stream(payload, data, prefix, first, _next_object, declared,
-                                      budget)
+        found, trials = repair_stream(payload, data, prefix, first, _next_object, declared, budget)
         self._repair_left -= trials
         if found is None:
             self._repair_note = f"; no one-byte repair found in {trials} trials"
             return None
         self._record_repair(
-            pos0, found.offset, found.old, found.new,
+            pos0,
+            found.offset,
+            found.old,
+            found.new,
             f"its zlib stream (Adler-32 and size checked; {trials} trials)",
         )
         return found.data

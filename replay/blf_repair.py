@@ -53,10 +53,13 @@ __all__ = [
     "trailer_repair",
 ]
 
-REPAIR_TRIALS = 150_000
-"""Trials (one byte value at one position) per container: about 1 s at 5–10 µs each."""
-REPAIR_FILE_TRIALS = 20 * REPAIR_TRIALS
-"""Trials per file: a file with many damaged containers is read in bounded time."""
+REPAIR_TRIALS = 100_000
+"""Trials (one byte value at one position) per container: about 1 s at about 10 µs each
+(measured: a repair takes a median of 1800 trials, at most 8200 in 150 repairs; the window
+holds about 600 positions, 150 000 trials, in a python-can container)."""
+REPAIR_FILE_TRIALS = 10 * REPAIR_TRIALS
+"""Trials per file: a file with many damaged containers is read in bounded time (about
+10 s of search at most)."""
 REPAIR_BEFORE = 2048
 """Output bytes before the first invalid object where the damaged byte is looked for."""
 REPAIR_AFTER = 64
