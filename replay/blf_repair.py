@@ -24,8 +24,10 @@ looks for the one byte (at an unknown position, with an unknown value) that make
    size it declares. The other values at the accepted position are tried too and must not
    give a different output (else the repair is ambiguous and refused).
 
-The cost is bounded by a number of trials (one value at one position) per container,
-:data:`REPAIR_TRIALS`, and per file, :data:`REPAIR_FILE_TRIALS`; when the budget runs
+The cost is bounded per container, :data:`REPAIR_BUDGET`, and per file,
+:data:`REPAIR_FILE_BUDGET`, in units of about 10 µs counted from the work done (one per
+trial, one per :data:`_WALK_UNIT` bytes of output checked, one per :data:`_INFLATE_UNIT`
+compressed bytes inflated to the end), so the bound does not depend on the machine; when it runs
 out, the reader keeps what inflated before the damage and resynchronises after it, as it
 does without repair.
 
@@ -45,21 +47,29 @@ from dataclasses import dataclass
 __all__ = [
     "REPAIR_AFTER",
     "REPAIR_BEFORE",
+    "REPAIR_BUDGET",
     "REPAIR_CHECK",
-    "REPAIR_FILE_TRIALS",
-    "REPAIR_TRIALS",
+    "REPAIR_FILE_BUDGET",
     "Repair",
     "repair_stream",
     "trailer_repair",
 ]
 
-REPAIR_TRIALS = 100_000
-"""Trials (one byte value at one position) per container: about 1 s at about 10 µs each
-(measured: a repair takes a median of 1800 trials, at most 8200 in 150 repairs; the window
-holds about 600 positions, 150 000 trials, in a python-can container)."""
-REPAIR_FILE_TRIALS = 10 * REPAIR_TRIALS
-"""Trials per file: a file with many damaged containers is read in bounded time (about
-10 s of search at most)."""
+REPAIR_BUDGET = 100_000
+"""Work units per container (module docstring): about 1 s (measured: a repair takes a
+median of 1800 trials, at most 8200 in 150 repairs; the window holds about 600 positions,
+150 000 trials, in a python-can container)."""
+REPAIR_FILE_BUDGET = 10 * REPAIR_BUDGET
+"""Work units per file: a file with many damaged containers is read in bounded time
+(about 10 s of search at most)."""
+_WALK_UNIT = 128
+"""Bytes of a candidate's output checked object by object per work unit."""
+_STEP_OUT = 512
+"""Most output bytes inflated between two checks of a candidate (a wrong value may
+decode to long matches: a few input bytes can give kilobytes)."""
+_INFLATE_UNIT = 1024
+"""Compressed bytes of a candidate inflated to the end per work unit (about 4 kB of
+output)."""
 REPAIR_BEFORE = 2048
 """Output bytes before the first invalid object where the damaged byte is looked for."""
 REPAIR_AFTER = 64
@@ -94,6 +104,8 @@ class Repair:
         The container's uncompressed bytes after the repair.
     trials : int
         Candidate values tried.
+    cost : int
+        Work units spent.
     """
 
     offset: int
@@ -101,6 +113,7 @@ class Repair:
     new: int
     data: bytes
     trials: int
+    cost: int
 
 
 def walk(data: bytes, pos: int, next_object: NextObject) -> tuple[int, bool]:
@@ -147,7 +160,9 @@ class _Search:
     next_object: NextObject
     budget: int
     trials: int = 0
+    cost: int = 0
     done: bool = False
+    check: int = REPAIR_CHECK
 
     def chain_start(self, out_len: int) -> int:
         """The last valid object start at or before output offset ``out_len``."""
@@ -165,25 +180,29 @@ class _Search:
         """The container's output with byte ``p`` set to ``value`` (the inflater
         ``state`` had produced ``out_len`` bytes before it), or None when rejected."""
         self.trials += 1
+        self.cost += 1
         t = state.copy()
         first = self.chain_start(out_len)
         base = min(first, self.off + out_len)
         buf = self.joined[base : self.off + out_len]
-        pos, i, step, head = first - base, p + 1, _FIRST_FEED, bytes([value])
-        goal = self.off + self.brk + REPAIR_CHECK - base
-        n = len(self.payload)
+        pos, goal = first - base, self.off + self.brk + self.check - base
+        feed, i, step, n = bytes([value]), p + 1, _FIRST_FEED, len(self.payload)
         try:
-            while not t.eof and i < n:
-                if len(buf) >= goal:
-                    buf += t.decompress(head + self.payload[i:])
-                    break
-                buf += t.decompress(head + self.payload[i : i + step])
-                head, i, step = b"", i + step, 2 * step
+            while not t.eof and len(buf) < goal:
+                if not feed:
+                    if i >= n:
+                        break
+                    feed, i, step = self.payload[i : i + step], i + step, 2 * step
+                got = t.decompress(feed, _STEP_OUT)
+                feed = t.unconsumed_tail
+                buf += got
+                self.cost += len(got) // _WALK_UNIT
                 pos, broken = walk(buf, pos, self.next_object)
                 if broken:
                     return None
             if not t.eof:
-                buf += t.decompress(head)
+                self.cost += (n - i) // _INFLATE_UNIT  # charged before: zlib may raise
+                buf += t.decompress(feed + self.payload[i:])
         except zlib.error:
             return None
         if not t.eof or t.unused_data:
@@ -195,7 +214,7 @@ class _Search:
 
 
 def _locate(
-    payload: bytes, brk: int
+    payload: bytes, brk: int, after: int
 ) -> tuple[list[int], list[tuple[int, zlib._Decompress]], int, int]:
     """Inflate ``payload`` byte by byte around the break at output offset ``brk``.
 
@@ -224,7 +243,7 @@ def _locate(
     lo = p
     out_len: list[int] = []
     checkpoints: list[tuple[int, zlib._Decompress]] = []
-    while p < len(payload) and n_out <= brk + REPAIR_AFTER:
+    while p < len(payload) and n_out <= brk + after:
         if (p - lo) % _GROUP == 0:
             checkpoints.append((p, d.copy()))
         out_len.append(n_out)
@@ -268,7 +287,7 @@ def _search_position(s: _Search, state: zlib._Decompress, p: int, out_len: int) 
     for v in range(256):
         if v == old:
             continue
-        if s.trials >= s.budget:
+        if s.cost >= s.budget:
             s.done = True
             return found
         data = s.trial(state, p, v, out_len)
@@ -278,7 +297,7 @@ def _search_position(s: _Search, state: zlib._Decompress, p: int, out_len: int) 
         if found is not None and data != found.data:
             return None  # two different repairs: ambiguous
         if found is None:
-            found = Repair(p, old, v, data, 0)
+            found = Repair(p, old, v, data, 0, 0)
     return found
 
 
@@ -289,8 +308,10 @@ def repair_stream(
     first: int,
     next_object: NextObject,
     expected: int | None,
-    budget: int = REPAIR_TRIALS,
-) -> tuple[Repair | None, int]:
+    budget: int = REPAIR_BUDGET,
+    after: int = REPAIR_AFTER,
+    check: int = REPAIR_CHECK,
+) -> tuple[Repair | None, int, int]:
     """Find the one byte of a damaged zlib stream that makes it whole (module docstring).
 
     Parameters
@@ -309,7 +330,11 @@ def repair_stream(
     expected : int or None
         The uncompressed size the container declares (None: not trusted).
     budget : int
-        Most trials.
+        Most work units (module docstring).
+    after : int
+        Output bytes after the start of the first invalid object where the damaged byte
+        is looked for (:data:`REPAIR_AFTER`; more when ``next_object`` judges an object by
+        the one after it).
 
     Returns
     -------
@@ -317,7 +342,9 @@ def repair_stream(
         The repair, or None (no damage located, none found within the budget, or two
         different ones).
     trials : int
-        Trials spent.
+        Candidate values tried.
+    cost : int
+        Work units spent (at or above ``budget``: the budget ran out).
     """
     joined = prefix + data
     starts = [first]
@@ -330,11 +357,13 @@ def repair_stream(
         pos = nxt
     brk = max(pos - len(prefix), 0)
     s = _Search(payload, joined, len(prefix), starts, brk, expected, next_object, budget)
-    out_len, checkpoints, lo, hi = _locate(payload, brk)
+    s.check = check
+    out_len, checkpoints, lo, hi = _locate(payload, brk, after)
     for start, state in reversed(checkpoints):
         found = _search_group(s, start, state, out_len, hi, lo)
         if s.done:
             if found is None:
-                return None, s.trials
-            return Repair(found.offset, found.old, found.new, found.data, s.trials), s.trials
-    return None, s.trials
+                return None, s.trials, s.cost
+            repair = Repair(found.offset, found.old, found.new, found.data, s.trials, s.cost)
+            return repair, s.trials, s.cost
+    return None, s.trials, s.cost

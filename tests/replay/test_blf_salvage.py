@@ -230,11 +230,12 @@ def test_unrepairable_damage_falls_back_to_resync(logs, tmp_path, monkeypatch):
 
     _, raw, truth = logs["compressed"]
     q = _two_flips(tmp_path, raw, [0])
-    monkeypatch.setattr(blf, "REPAIR_TRIALS", 3000)
+    monkeypatch.setattr(blf, "REPAIR_BUDGET", 3000)
     got, r = _read(q)
-    assert "no one-byte repair found in 3000 trials" in r.damage[0]["why"]
+    assert "no one-byte repair found" in r.damage[0]["why"]
+    assert "budget spent" in r.damage[0]["why"]
     assert all(d["kind"] != "repaired" for d in r.damage)
-    monkeypatch.setattr(blf, "REPAIR_TRIALS", 0)
+    monkeypatch.setattr(blf, "REPAIR_BUDGET", 0)
     without, r0 = _read(q)
     assert "no repair searched" in r0.damage[0]["why"]
     assert got == without
@@ -250,17 +251,17 @@ def test_repair_budget_bounds_the_search(logs, tmp_path, monkeypatch):
 
     _, raw, _ = logs["compressed"]
     q = _two_flips(tmp_path, raw, [0, 1, 2])
-    monkeypatch.setattr(blf, "REPAIR_TRIALS", 2000)
-    monkeypatch.setattr(blf, "REPAIR_FILE_TRIALS", 3000)
+    monkeypatch.setattr(blf, "REPAIR_BUDGET", 2000)
+    monkeypatch.setattr(blf, "REPAIR_FILE_BUDGET", 3000)
     t0 = time.perf_counter()
     _, r = _read(q)
     elapsed = time.perf_counter() - t0
     notes = [d["why"] for d in r.damage if "damaged compressed container" in d["why"]]
     assert len(notes) == 3
-    assert "no one-byte repair found in 2000 trials" in notes[0]
-    assert "no one-byte repair found in 1000 trials" in notes[1]
+    assert "no one-byte repair found" in notes[0] and "budget spent" in notes[0]
+    assert "no one-byte repair found" in notes[1] and "budget spent" in notes[1]
     assert "no repair searched" in notes[2]
-    assert r._repair_left == 0
+    assert r._repair_left <= 0
     assert elapsed < 10.0  # 3000 trials of about 10 us, with a wide margin for a loaded machine
 
 
