@@ -21,15 +21,22 @@ python-can's parsing of CAN objects and adds, around it:
   at the next valid object header (confirmed by the one after it): one damaged object costs
   one frame, its bytes are counted.
 
-What a flip inside *compressed* bytes costs is set by deflate, not by this reader: the
-bytes after the flip are decoded with a wrong bit alignment or wrong back-references
-until the decoder fails or falls back into step, and python-can's writer puts 128 KiB of
-objects (about 2700 frames) in one deflate stream. The frames decoded before the damage
-are kept and the stream is resynchronised where valid objects come out again;
-``docs/formats.md`` gives the measured loss.
+A flip inside *compressed* bytes puts deflate out of step: the bytes after it are decoded
+with a wrong bit alignment or wrong back-references, and python-can's writer puts 128 KiB
+of objects (about 2700 frames) in one deflate stream. So a damaged stream is first
+**repaired by search** (:mod:`replay.blf_repair`): the first invalid object (or, when
+every object is valid but the Adler-32 is wrong, the first time stamp that goes back)
+locates the damaged byte within a few hundred compressed bytes, the 255 other values of
+each candidate byte are tried, and a repair is accepted only when the whole stream then
+inflates with the right Adler-32 and declared size. When no single byte repairs it (within
+a bounded budget), the frames decoded before the damage are kept and the stream is
+resynchronised where valid objects come out again. ``docs/edges.md`` ("Damaged logs")
+gives the measured loss.
 
 Each damage is recorded in :attr:`ResyncBLFReader.damage` as ``{"where": "byte N", "why":
-..., "kind": "resync" | "truncated", "skipped_bytes": k}`` (the first 50;
+..., "kind": "resync" | "truncated" | "repaired", "skipped_bytes": k}`` (the first 50;
+a ``repaired`` record names the container, the byte and its damaged and repaired values:
+every frame is read, but the file was damaged, so ``--strict`` refuses it;
 :attr:`ResyncBLFReader.n_damage` counts all); the frames lost with it show in the frame
 counters (rolling and sample counter gaps).
 """

@@ -25,17 +25,23 @@ looks for the one byte (at an unknown position, with an unknown value) that make
    give a different output (else the repair is ambiguous and refused).
 
 The cost is bounded per container, :data:`REPAIR_BUDGET`, and per file,
-:data:`REPAIR_FILE_BUDGET`, in units of about 10 µs counted from the work done (one per
-trial, one per :data:`_WALK_UNIT` bytes of output checked, one per :data:`_INFLATE_UNIT`
-compressed bytes inflated to the end), so the bound does not depend on the machine; when it runs
-out, the reader keeps what inflated before the damage and resynchronises after it, as it
-does without repair.
+:data:`REPAIR_FILE_BUDGET`, in work units counted from the work done (one per trial, one
+per :data:`_WALK_UNIT` bytes of output checked, one per :data:`_INFLATE_UNIT` compressed
+bytes inflated to the end; about 10 µs each), so the bound and the result do not depend
+on the machine's speed; when it runs out, the reader keeps what inflated before the
+damage and resynchronises after it, as it does without repair.
 
 A stream whose objects are all valid and whose size is right but whose Adler-32 is wrong
-(a flip that changed only a frame's data or timestamp) is not searched: the damage can be
-anywhere in the container and each trial would inflate it to the end. When the stored
+(a flip that changed only frame values) cannot be located by its objects. When the stored
 Adler-32 differs from the computed one in exactly one byte, the trailer itself is the
-damaged byte (:func:`trailer_repair`).
+damaged byte (:func:`trailer_repair`). Else, when a time stamp goes back, the object
+walk is run with the time order as one more check (the reader's ``_next_in_time``) and
+the search above runs around it, with a longer check past it (a damage that copies wrong
+time stamps into many objects leaves many out of order). Else the stream is not
+searched: the damage can be anywhere in the container. (Locating a single changed output
+byte from the Adler-32 itself, which the sums A and B allow, was tried and dropped: it
+spends the 32 bits of the check on the location, and a wrong "repair" was accepted in 1
+of 60 flips.)
 """
 
 from __future__ import annotations
