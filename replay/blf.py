@@ -588,6 +588,7 @@ class ResyncBLFReader(can.BLFReader):
         return found.data
 
     def _record_repair(self, pos0: int, offset: int, old: int, new: int, what: str) -> None:
+        """One ``repaired`` damage record: the container, the byte, both values."""
         self._record(
             pos0,
             f"repaired: compressed byte {offset} of the container (file byte "

@@ -51,14 +51,19 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 __all__ = [
+    "INVALID",
     "REPAIR_AFTER",
     "REPAIR_BEFORE",
     "REPAIR_BUDGET",
     "REPAIR_CHECK",
     "REPAIR_FILE_BUDGET",
+    "UNKNOWN",
+    "Inflater",
+    "NextObject",
     "Repair",
     "repair_stream",
     "trailer_repair",
+    "walk",
 ]
 
 REPAIR_BUDGET = 100_000
@@ -87,6 +92,9 @@ _GROUP = 32
 """Candidate positions restored from one checkpoint of the inflater."""
 _FIRST_FEED = 16
 """Input bytes fed after a candidate value before the first check (doubled after each)."""
+
+Inflater = type(zlib.decompressobj())
+"""The type of zlib's decompression objects (the :mod:`zlib` module does not name it)."""
 
 NextObject = Callable[[bytes, int], int]
 """``next_object(data, pos)``: where the object after the valid object at ``pos``
@@ -182,7 +190,7 @@ class _Search:
                 hi = mid
         return self.starts[max(lo - 1, 0)]
 
-    def trial(self, state: zlib._Decompress, p: int, value: int, out_len: int) -> bytes | None:
+    def trial(self, state: Inflater, p: int, value: int, out_len: int) -> bytes | None:
         """The container's output with byte ``p`` set to ``value`` (the inflater
         ``state`` had produced ``out_len`` bytes before it), or None when rejected."""
         self.trials += 1
@@ -221,7 +229,7 @@ class _Search:
 
 def _locate(
     payload: bytes, brk: int, after: int
-) -> tuple[list[int], list[tuple[int, zlib._Decompress]], int, int]:
+) -> tuple[list[int], list[tuple[int, Inflater]], int, int]:
     """Inflate ``payload`` byte by byte around the break at output offset ``brk``.
 
     Returns
@@ -248,7 +256,7 @@ def _locate(
         d, n_out, p = probe, n_out + got, p + step
     lo = p
     out_len: list[int] = []
-    checkpoints: list[tuple[int, zlib._Decompress]] = []
+    checkpoints: list[tuple[int, Inflater]] = []
     while p < len(payload) and n_out <= brk + after:
         if (p - lo) % _GROUP == 0:
             checkpoints.append((p, d.copy()))
@@ -265,7 +273,7 @@ def _locate(
 
 
 def _search_group(
-    s: _Search, start: int, state: zlib._Decompress, out_len: list[int], hi: int, lo: int
+    s: _Search, start: int, state: Inflater, out_len: list[int], hi: int, lo: int
 ) -> Repair | None:
     """Try the positions ``start .. start + _GROUP`` (below ``hi``), the last first;
     sets ``s.done`` when the search is over (a repair, an ambiguity, the budget)."""
@@ -285,7 +293,7 @@ def _search_group(
     return None
 
 
-def _search_position(s: _Search, state: zlib._Decompress, p: int, out_len: int) -> Repair | None:
+def _search_position(s: _Search, state: Inflater, p: int, out_len: int) -> Repair | None:
     """Try every other value of byte ``p``: the repair when exactly one output comes out
     whole (``s.done`` set also when two differ or the budget is spent)."""
     old = s.payload[p]
@@ -295,7 +303,7 @@ def _search_position(s: _Search, state: zlib._Decompress, p: int, out_len: int) 
             continue
         if s.cost >= s.budget:
             s.done = True
-            return found
+            return found  # a repair found, the rest of its values not all tried
         data = s.trial(state, p, v, out_len)
         if data is None:
             continue
@@ -341,6 +349,9 @@ def repair_stream(
         Output bytes after the start of the first invalid object where the damaged byte
         is looked for (:data:`REPAIR_AFTER`; more when ``next_object`` judges an object by
         the one after it).
+    check : int
+        Output bytes past the first invalid object that a candidate must inflate to valid
+        objects before it is inflated to the end (:data:`REPAIR_CHECK`).
 
     Returns
     -------
