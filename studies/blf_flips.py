@@ -5,10 +5,13 @@ BLF writer with its default 128 KiB containers) is written compressed (zlib, pyt
 default level) and uncompressed (``compression_level=0``). One byte at a time is XORed
 with a seeded random non-zero value, at seeded random positions of each kind of byte
 (file and container headers, object bytes of the uncompressed file, compressed bytes),
-and the file is read again. A frame is *lost* when the pristine (timestamp, id, data) is
-not read back; a frame read that is not in the pristine file is *altered* (left to the
-frame CRC and counters downstream). Losses are given as a fraction of the frames one
-container holds.
+and the file is read again (a damaged compressed byte is searched for and repaired when
+one byte value makes the zlib stream whole, :mod:`replay.blf_repair`). A frame is *lost*
+when the pristine (timestamp, id, data) is not read back; a frame read that is not in the
+pristine file is *altered* (left to the frame CRC and counters downstream). Losses are
+given as a fraction of the frames one container holds; how many flips were repaired and
+the seconds the reader spent in its repair search (locating and trying; the pristine
+file's whole read takes ``read_s``) are given too.
 
 Run: ``python -m studies.blf_flips [--flips 200] [--duration 30] [--out studies/blf_flips.json]``
 """
@@ -21,8 +24,10 @@ import io
 import json
 import struct
 import tempfile
+import time
 from collections import Counter
 from pathlib import Path
+from typing import Any
 
 import can
 import numpy as np
@@ -32,14 +37,29 @@ from replay.blf import ResyncBLFReader
 CONTAINER_BYTES = can.BLFWriter.max_container_size
 
 
-def _frames(path: Path) -> tuple[Counter, int]:
-    """(frames as (time after the file's start time, id, data), damage records): a
-    damaged start time in the file header shifts every frame, it does not lose one."""
-    r = ResyncBLFReader(path)
+class _TimedReader(ResyncBLFReader):
+    """The reader, with the seconds spent in its repair search added up."""
+
+    search_s = 0.0
+
+    def _repair(self, *args: Any, **kwargs: Any) -> Any:
+        t0 = time.perf_counter()
+        try:
+            return super()._repair(*args, **kwargs)
+        finally:
+            self.search_s += time.perf_counter() - t0
+
+
+def _frames(path: Path) -> tuple[Counter, int, bool, float]:
+    """(frames as (time after the file's start time, id, data), damage records, whether
+    a damaged byte was repaired, seconds spent in the repair search): a damaged start
+    time in the file header shifts every frame, it does not lose one."""
+    r = _TimedReader(path)
     c = Counter(
         (round(m.timestamp - r.start_timestamp, 4), m.arbitration_id, bytes(m.data)) for m in r
     )
-    return c, r.n_damage
+    repaired = any(d["kind"] == "repaired" for d in r.damage)
+    return c, r.n_damage, repaired, r.search_s
 
 
 def write_logs(d: Path, duration_s: float, seed: int) -> tuple[Path, Path, int]:
@@ -109,24 +129,30 @@ def run(flips: int, duration_s: float, seed: int) -> dict:
             ("uncompressed", plain, "object"),
         ):
             raw = path.read_bytes()
-            truth, nd = _frames(path)
+            t0 = time.perf_counter()
+            truth, nd, _, _ = _frames(path)
+            t_read = time.perf_counter() - t0
             if nd:
                 raise SystemExit(f"pristine {name} file has damage records")
             out[name] = {
                 "frames": sum(truth.values()),
                 "bytes": len(raw),
                 "containers": len(_containers(raw)),
+                "read_s": t_read,
             }
             for kind, pos in positions(raw).items():
                 label = "header" if kind == "header" else body_kind
                 lost, altered, silent, worst = [], [], 0, {}
+                repaired, seconds = [], []
                 for p in rng.choice(pos, size=flips, replace=True):
                     bad = bytearray(raw)
                     x = int(rng.integers(1, 256))
                     bad[p] ^= x
                     q = d / "bad.blf"
                     q.write_bytes(bytes(bad))
-                    got, ndam = _frames(q)
+                    got, ndam, fixed, dt = _frames(q)
+                    repaired.append(fixed)
+                    seconds.append(dt)
                     n_lost = sum((truth - got).values())
                     if not lost or n_lost > max(lost):
                         worst = {"byte": int(p), "xor": x, "lost_frames": int(n_lost)}
@@ -145,6 +171,19 @@ def run(flips: int, duration_s: float, seed: int) -> dict:
                     "altered_frames_max": int(max(altered)),
                     "dropped_without_damage_record": int(silent),
                     "worst": worst,
+                    "repaired": int(sum(repaired)),
+                    "search_s_median": float(np.median(seconds)),
+                    "search_s_max": float(max(seconds)),
+                    "search_s_median_repaired": (
+                        float(np.median([t for t, f in zip(seconds, repaired, strict=True) if f]))
+                        if any(repaired)
+                        else None
+                    ),
+                    "search_s_max_repaired": (
+                        float(max(t for t, f in zip(seconds, repaired, strict=True) if f))
+                        if any(repaired)
+                        else None
+                    ),
                 }
                 print(name, label, json.dumps(out[name][label]), flush=True)
     return out
