@@ -259,9 +259,11 @@ def test_a_maps_auxiliary_channels_move_with_their_imu(lagged, tmp_path):
 def test_an_envelope_tracker_in_the_chain_gives_its_codes_to_the_monitor(lagged):
     """The chain's per-block seam: an EnvelopeTracker given to the chain sees the moved
     samples' calibrated rates and accelerometer triads, and its codes reach the answers
-    (the codes flight_envelope gives on the moved flight)."""
+    (the codes flight_envelope gives on the moved flight, each the union with the next
+    sample's: IMU2 is read 10 ms ahead, replay.envelope_lead)."""
     from fdi.envelope import SHOCK, EnvelopeTracker
     from replay.envelope import flight_envelope
+    from replay.envelope_lead import dilate_back
 
     f, cal = lagged
     vals = f.aux.values.copy()
@@ -275,17 +277,21 @@ def test_an_envelope_tracker_in_the_chain_gives_its_codes_to_the_monitor(lagged)
                          validated_rate=cal.gyro.validated_rate,
                          validated_specific_force=cal.gyro.validated_specific_force,
                          validated_jolt=cal.gyro.validated_jolt)
-    res, rep = run_flight(chain_for_flight(f, cal, ChainOptions(envelope=tr)), f)
-    np.testing.assert_array_equal(res.envelope, want)
+    ch = chain_for_flight(f, cal, ChainOptions(envelope=tr))
+    assert ch._hold is not None and ch._hold.lead == 1
+    res, rep = run_flight(ch, f)
+    np.testing.assert_array_equal(res.envelope, dilate_back(want, 1))
     assert any(e["type"] == "envelope" for e in rep["events"])
 
 
 def test_the_chain_decides_the_envelope_by_default_and_reports_it(lagged):
     """Without options the chain marks a shock (the codes flight_envelope gives on the
-    moved flight), the report counts the excursion with its reason and the share of samples
-    out, and names what the set can isolate; --no-envelope (envelope=False) marks nothing."""
+    moved flight, each the union with the next sample's: replay.envelope_lead), the report
+    counts the excursion with its reason and the share of samples out, and names what the
+    set can isolate; --no-envelope (envelope=False) marks nothing."""
     from fdi.envelope import SHOCK
     from replay.envelope import flight_envelope
+    from replay.envelope_lead import dilate_back
 
     f, cal = lagged
     vals = f.aux.values.copy()
@@ -293,7 +299,7 @@ def test_the_chain_decides_the_envelope_by_default_and_reports_it(lagged):
     vals[300:306, acc] = 300.0
     f = replace(f, aux=replace(f.aux, values=vals))
     moved, _ = apply_time_offsets(f, cal)
-    want = flight_envelope(moved, cal)
+    want = dilate_back(flight_envelope(moved, cal), 1)
     res, rep = run_flight(chain_for_flight(f, cal), f)
     np.testing.assert_array_equal(res.envelope, want)
     s = rep["summary"]
