@@ -161,8 +161,9 @@ class MonitorChain:
             return 0
         fs = float(self.cal.sample_rate_hz)
         ahead = float(self.aligner.delay_s) * fs if fs > 0 else 0.0
+        # a kernel wider than two samples (its half support) reads ahead whatever τ's sign
         extra = int(getattr(self.aligner, "hold_samples", 0) or 0)
-        return (int(np.ceil(ahead - 1e-9)) if ahead > 0 else 0) + (extra if ahead > 0 else 0)
+        return (int(np.ceil(ahead - 1e-9)) if ahead > 0 else 0) + extra
 
     # -------------------------------------------------------------- what it does
     @property
