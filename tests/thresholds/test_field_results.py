@@ -7,7 +7,7 @@ sensor of both flights. Each claim of :func:`studies.field_claims.must_hold` is 
 claims and their numbers come from the issue (no tolerance chosen here). Skipped when the
 data are absent (``RIMU_SHARED_DATA`` overrides the folder).
 
-All ten hold (statistical isolation, envelope with the calibrated range, tail thresholds
+Eight of the ten hold (statistical isolation, envelope with the calibrated range, tail thresholds
 with the timing-jitter term, the static set's tail and parity-drift thresholds,
 docs/drift.md, the clearing floor, the targets ``rimu tune`` refuses, correction flights
 inside the calibration's validated range and a flight simulator whose drawn bias keeps the
@@ -81,7 +81,17 @@ def test_the_evidence_covers_what_the_issue_asks(verdicts):
         assert any(r["resolved"] for r in rows)
 
 
-OPEN: dict[str, str] = {}
+OPEN: dict[str, str] = {
+    "the faulted direction is unverified from the first alarm on":
+        "detections end (issue 27 item 3: hysteresis, clear_samples below the clearing level): "
+        "a fault near the detectable size whose evidence falls back clears and the axis is "
+        "verified again while the fault persists; 12 of 242 detected runs (5 deg/s steps on "
+        "83, one 2 deg/s step on 41), docs/field-results.md regenerated 2026-12-02",
+    "held out, outside the envelope: false alarms within 3x of the target where the length "
+    "resolves it":
+        "41 at 100/h, second half: 6 alarm episodes against 1.90 expected (3x = 5.7) since the "
+        "per-IMU in-flight calibration (a8b94ff); the other 6 resolved rows hold",
+}
 """Claims that do not hold yet (issue 17 stays open on them): strict xfail, so a change that
 makes one hold fails here until it moves to the holding list."""
 
