@@ -25,9 +25,10 @@ A flip inside *compressed* bytes puts deflate out of step: the bytes after it ar
 with a wrong bit alignment or wrong back-references, and python-can's writer puts 128 KiB
 of objects (about 2700 frames) in one deflate stream. So a damaged stream is first
 **repaired by search** (:mod:`replay.blf_repair`): the first invalid object (or, when
-every object is valid but the Adler-32 is wrong, the first time stamp that goes back)
-locates the damaged byte within a few hundred compressed bytes, the 255 other values of
-each candidate byte are tried, and a repair is accepted only when the whole stream then
+every object is valid but the Adler-32 is wrong, the first time stamp that goes back,
+or the first CAN frame whose key or pair of successive keys is rare in the file) locates
+the damaged byte within a few hundred compressed bytes, the 255 other values of each
+candidate byte are tried, and a repair is accepted only when the whole stream then
 inflates with the right Adler-32 and declared size. When no single byte repairs it (within
 a bounded budget), the frames decoded before the damage are kept and the stream is
 resynchronised where valid objects come out again. ``docs/edges.md`` ("Damaged logs")

@@ -177,8 +177,9 @@ def test_flip_in_compressed_bytes_is_repaired_to_the_exact_frames(logs, tmp_path
     blf_repair): every original frame comes back, and the one damage record, of kind
     ``repaired``, names the byte and both values. A flip that changes only a frame's
     value (its objects stay valid, only the Adler-32 disagrees) is not searched for and
-    costs at most 2 % of a container unless a time stamp goes back (then it is searched
-    too, test below). Measured (studies/blf_flips.py): 165 of 200 flips are repaired."""
+    costs at most 2 % of a container unless a time stamp goes back or a frame's key
+    becomes rare (then it is searched too, tests below). Measured (studies/blf_flips.py):
+    165 of 200 flips are repaired."""
     _, raw, truth = logs["compressed"]
     repaired = 0
     for pos, x in _compressed_flips(raw, 21, 16):
