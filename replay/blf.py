@@ -687,6 +687,9 @@ class ResyncBLFReader(can.BLFReader):
                 # a time stamp that goes back locates the damage
                 walker, after, check = _next_in_time, _TIME_AFTER, _TIME_CHECK
                 said = "; its objects are all valid but a time stamp goes back"
+            elif self._repair_left <= 0:
+                self._repair_note = "; no repair searched (the file's repair budget is spent)"
+                return None
             else:
                 known = self._key_walker(joined, first)
                 if known is None:
