@@ -344,7 +344,8 @@ def test_key_flip_in_a_file_of_one_container_is_repaired(tmp_path):
     """In a file of one container, the frames of the container before the candidate are
     the reference keys: a flip that changed the keys of 1127 of its 2000 frames (found
     by a seeded search; checked first) is repaired to the exact frames."""
-    from replay.blf import _frame_keys
+    from replay.blf import _frame_keys, _next_in_time, _next_object
+    from replay.blf_repair import walk
 
     p = tmp_path / "one.blf"
     raw = _write(p, -1, 2000)
@@ -357,6 +358,9 @@ def test_key_flip_in_a_file_of_one_container_is_repaired(tmp_path):
     bad[pos - start - 32] ^= x
     out = zlib.decompressobj().decompress(bytes(bad[:-4]))
     first = out.find(b"LOBJ")
+    assert len(out) == len(good)
+    assert not walk(out, first, _next_object)[1], "the flip no longer keeps the objects valid"
+    assert not walk(out, first, _next_in_time)[1], "the flip now moves a time stamp back"
     changed = sum(
         a[1] != b[1] for a, b in zip(_frame_keys(out, first), _frame_keys(good, first), strict=True)
     )
