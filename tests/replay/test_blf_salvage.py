@@ -179,7 +179,7 @@ def test_flip_in_compressed_bytes_is_repaired_to_the_exact_frames(logs, tmp_path
     value (its objects stay valid, only the Adler-32 disagrees) is not searched for and
     costs at most 2 % of a container unless a time stamp goes back or a frame's key
     becomes rare (then it is searched too, tests below). Measured (studies/blf_flips.py):
-    165 of 200 flips are repaired."""
+    166 of 200 flips are repaired."""
     _, raw, truth = logs["compressed"]
     repaired = 0
     for pos, x in _compressed_flips(raw, 21, 16):
