@@ -243,6 +243,9 @@ _KEY_CONTAINERS = 2
 before the damaged one, else the next ones after it)."""
 _KEY_LOOKAHEAD = 4
 """Containers after the damaged one read, at most, to find intact ones."""
+_KEY_UNIT = 128
+"""Uncompressed bytes of a reference container (inflated and walked for its keys) or of
+the damaged one (walked) per work unit of the repair budget (about the search's cost)."""
 _KEY_AFTER = 128
 """Output bytes after the start of the first frame with a rare key where the damaged byte
 is looked for (its key fields end 44 bytes after it)."""
@@ -676,6 +679,7 @@ class ResyncBLFReader(can.BLFReader):
         first = 0 if prefix else self._resync(joined, 0)
         whole = not walk(joined, first, _next_object)[1] and declared in (None, len(data))
         walker, after, check, said = _next_object, REPAIR_AFTER, REPAIR_CHECK, ""
+        ref_cost = 0  # work units spent on the reference keys
         if whole and err is not None and "incorrect data check" in err:
             # every object valid, the size right: only the Adler-32 disagrees
             fix = trailer_repair(payload, data)
@@ -691,7 +695,8 @@ class ResyncBLFReader(can.BLFReader):
                 self._repair_note = "; no repair searched (the file's repair budget is spent)"
                 return None
             else:
-                known = self._key_walker(joined, first)
+                known, ref_cost = self._key_walker(joined, first)
+                self._repair_left -= ref_cost
                 if known is None:
                     self._repair_note = (
                         "; its objects are all valid, in time order and their keys seen in "
@@ -702,7 +707,7 @@ class ResyncBLFReader(can.BLFReader):
                 # a frame whose key is rare in the file locates the damage
                 walker, after, check = known, _KEY_AFTER, _KEY_CHECK
                 said = "; its objects are all valid but a frame's key is rare in the file"
-        budget = min(REPAIR_BUDGET, self._repair_left)
+        budget = min(REPAIR_BUDGET - ref_cost, self._repair_left)
         if budget <= 0:
             self._repair_note = "; no repair searched (the file's repair budget is spent)"
             return None
@@ -724,15 +729,18 @@ class ResyncBLFReader(can.BLFReader):
         )
         return found.data
 
-    def _key_walker(self, joined: bytes, first: int) -> NextObject | None:
+    def _key_walker(self, joined: bytes, first: int) -> tuple[NextObject | None, int]:
         """The walk that stops at the first CAN frame of ``joined`` (from the object at
         ``first``) whose (channel, identifier, DLC, flags) key is rare in the file's
         intact containers and the frames before it (:func:`_rare_key`), or None when no
-        key is rare."""
+        key is rare; and the work units spent (:data:`_KEY_UNIT`)."""
         keys: Counter = Counter()
         pairs: Counter = Counter()
+        cost = len(joined) // _KEY_UNIT
 
         def count(data: bytes) -> None:
+            nonlocal cost
+            cost += len(data) // _KEY_UNIT
             frames = [k for _, k in _frame_keys(data, self._resync(data, 0))]
             keys.update(frames)
             pairs.update(pairwise(frames))
@@ -752,9 +760,9 @@ class ResyncBLFReader(can.BLFReader):
             pos = max(nxt, pos + 1)
         found = _rare_key(_frame_keys(joined, first), keys, pairs)
         if found is None:
-            return None
+            return None, cost
         known = _known_keys(*found)
-        return known if walk(joined, first, known)[1] else None
+        return (known if walk(joined, first, known)[1] else None), cost
 
     def _intact(self, pos0: int) -> tuple[bytes | None, int]:
         """(the uncompressed bytes of the container at ``pos0`` when its header and zlib
