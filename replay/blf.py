@@ -25,9 +25,10 @@ A flip inside *compressed* bytes puts deflate out of step: the bytes after it ar
 with a wrong bit alignment or wrong back-references, and python-can's writer puts 128 KiB
 of objects (about 2700 frames) in one deflate stream. So a damaged stream is first
 **repaired by search** (:mod:`replay.blf_repair`): the first invalid object (or, when
-every object is valid but the Adler-32 is wrong, the first time stamp that goes back)
-locates the damaged byte within a few hundred compressed bytes, the 255 other values of
-each candidate byte are tried, and a repair is accepted only when the whole stream then
+every object is valid but the Adler-32 is wrong, the first time stamp that goes back,
+or the first CAN frame whose key or pair of successive keys is rare in the file) locates
+the damaged byte within a few hundred compressed bytes, the 255 other values of each
+candidate byte are tried, and a repair is accepted only when the whole stream then
 inflates with the right Adler-32 and declared size. When no single byte repairs it (within
 a bounded budget), the frames decoded before the damage are kept and the stream is
 resynchronised where valid objects come out again. ``docs/edges.md`` ("Damaged logs")
@@ -45,7 +46,9 @@ from __future__ import annotations
 
 import struct
 import zlib
+from collections import Counter, deque
 from collections.abc import Iterator
+from itertools import pairwise
 from pathlib import Path
 from typing import Any, cast
 
@@ -82,6 +85,7 @@ from replay.blf_repair import (
     REPAIR_CHECK,
     REPAIR_FILE_BUDGET,
     UNKNOWN,
+    NextObject,
     repair_stream,
     trailer_repair,
     walk,
@@ -228,6 +232,128 @@ def _next_in_time(data: bytes, pos: int) -> int:
     return INVALID if unit0 == unit1 and t1 < t0 else nxt
 
 
+_KEY_RARE = 16
+"""A CAN frame's key is rare when it was seen at least this many times less often than
+the typical key of the reference frames (the median count of a key)."""
+_KEY_TYPICAL = 4
+"""Least median count of a key for the reference to tell a rare key (a short reference
+tells nothing)."""
+_KEY_CONTAINERS = 2
+"""Intact containers of the file whose keys are the reference (the last ones read
+before the damaged one, else the next ones after it)."""
+_KEY_LOOKAHEAD = 4
+"""Containers after the damaged one read, at most, to find intact ones."""
+_KEY_UNIT = 128
+"""Uncompressed bytes of a reference container (inflated and walked for its keys) or of
+the damaged one (walked) per work unit of the repair budget (about the search's cost)."""
+_KEY_AFTER = 128
+"""Output bytes after the start of the first frame with a rare key where the damaged byte
+is looked for (its key fields end 44 bytes after it)."""
+_KEY_CHECK = 4096
+"""Output bytes past the first frame with a rare key that a candidate must inflate to
+valid objects whose keys are not rare (a damage copied by back-references alters the keys
+of many frames after it)."""
+
+
+Key = tuple[int, int, int, int]
+"""A CAN frame's (channel, identifier, DLC, flags)."""
+
+
+def _frame_key(data: bytes, pos: int) -> Key | None:
+    """(channel, identifier, DLC, flags) of the classic CAN frame object at ``pos``
+    (a valid object), or None for another object."""
+    _, hsize, _, _, kind = OBJ_HEADER_BASE_STRUCT.unpack_from(data, pos)
+    if kind not in (CAN_MESSAGE, CAN_MESSAGE2):
+        return None
+    channel, flags, dlc, can_id, _ = CAN_MSG_STRUCT.unpack_from(data, pos + hsize)
+    return channel, can_id, dlc, flags
+
+
+def _frame_keys(data: bytes, first: int) -> list[tuple[int, Key]]:
+    """(offset, key) of the CAN frame objects among the valid objects of ``data`` from
+    the object at ``first`` (the last one too when it is whole)."""
+    out = []
+    pos = first
+    while True:
+        nxt = _next_object(data, pos)
+        if nxt == INVALID:
+            return out
+        size = _object_size(data, pos)
+        if size is not None and size > 0:
+            key = _frame_key(data, pos)
+            if key is not None:
+                out.append((pos, key))
+        if nxt < 0:
+            return out
+        pos = nxt
+
+
+def _typical(counts: Counter) -> int:
+    """The median count of the keys (or pairs of keys) of ``counts``."""
+    values = sorted(counts.values())
+    return values[len(values) // 2] if values else 0
+
+
+def _rare_key(
+    frames: list[tuple[int, Key]], keys: Counter, pairs: Counter
+) -> tuple[set[Key], set[tuple[Key, Key]]] | None:
+    """The keys and the pairs of successive keys that are not rare, when a frame of
+    ``frames`` has a rare key or follows its predecessor's key in a rare pair; else None.
+
+    A key (a pair) is rare when it was seen, in the reference counts ``keys`` (``pairs``)
+    and the frames before it, :data:`_KEY_RARE` times less often than the median key
+    (pair), and that median is at least :data:`_KEY_TYPICAL`. Every key and pair of the
+    frames before the first rare one is kept as not rare.
+    """
+    keys, pairs = Counter(keys), Counter(pairs)
+    tk = tp = 0
+    prev: Key | None = None
+    for i, (_, key) in enumerate(frames):
+        pair = (prev, key) if prev is not None else None
+        if i % 32 == 0 or keys[key] == 0 or (pair is not None and pairs[pair] == 0):
+            tk, tp = _typical(keys), _typical(pairs)
+        rare = tk >= _KEY_TYPICAL and _KEY_RARE * keys[key] < tk
+        if pair is not None and tp >= _KEY_TYPICAL and _KEY_RARE * pairs[pair] < tp:
+            rare = True
+        if rare:
+            before = frames[:i]
+            ok_keys = {k for k, c in keys.items() if _KEY_RARE * c >= tk}
+            ok_keys.update(k for _, k in before)
+            ok_pairs = {q for q, c in pairs.items() if _KEY_RARE * c >= tp}
+            ok_pairs.update((a[1], b[1]) for a, b in pairwise(before))
+            return ok_keys, ok_pairs
+        keys[key] += 1
+        if pair is not None:
+            pairs[pair] += 1
+        prev = key
+    return None
+
+
+def _known_keys(keys: set[Key], pairs: set[tuple[Key, Key]]) -> NextObject:
+    """:func:`_next_object`, and :data:`~replay.blf_repair.INVALID` also when the object
+    is a CAN frame whose key is not in ``keys``, or whose key and the next frame's are not
+    a pair of ``pairs``: the walk that locates a damage that changed a frame's channel,
+    identifier, DLC or flags, and checks a candidate."""
+
+    def next_known(data: bytes, pos: int) -> int:
+        nxt = _next_object(data, pos)
+        if nxt < 0:
+            return nxt
+        key = _frame_key(data, pos)
+        if key is None:
+            return nxt
+        if key not in keys:
+            return INVALID
+        if len(data) < nxt + _HDR + 40:  # the next frame's key (a version 2 header)
+            return UNKNOWN
+        if _object_size(data, nxt) is None:
+            return nxt
+        after = _frame_key(data, nxt)
+        return INVALID if after is not None and (key, after) not in pairs else nxt
+
+    return next_known
+
+
 def _ends_early(payload: bytes) -> bool:
     """Whether the zlib stream in ``payload`` ends before it (bytes other than padding
     follow its Adler-32)."""
@@ -299,6 +425,8 @@ class ResyncBLFReader(can.BLFReader):
         self._cpos = 0
         self._repair_left = REPAIR_FILE_BUDGET
         self._repair_note = ""
+        self._clean: deque[int] = deque(maxlen=_KEY_CONTAINERS)
+        self._after = 0
         self._tail = b""
         self._tail_at = 0
         self._pos = 0
@@ -496,6 +624,7 @@ class ResyncBLFReader(can.BLFReader):
                     "truncated",
                 )
             return payload, nxt, cut
+        self._after = nxt
         data, gap = self._inflate_container(pos0, payload, declared if trusted else None, cut)
         return data, nxt, gap
 
@@ -507,6 +636,7 @@ class ResyncBLFReader(can.BLFReader):
         makes it whole (:mod:`replay.blf_repair`), else recorded."""
         data, err, gap = _inflate(payload)
         if err is None and declared in (None, len(data)):
+            self._clean.append(pos0)
             return data, gap
         if err is None and not _ends_early(payload):  # the header's size is damaged
             self._record(
@@ -549,6 +679,7 @@ class ResyncBLFReader(can.BLFReader):
         first = 0 if prefix else self._resync(joined, 0)
         whole = not walk(joined, first, _next_object)[1] and declared in (None, len(data))
         walker, after, check, said = _next_object, REPAIR_AFTER, REPAIR_CHECK, ""
+        ref_cost = 0  # work units spent on the reference keys
         if whole and err is not None and "incorrect data check" in err:
             # every object valid, the size right: only the Adler-32 disagrees
             fix = trailer_repair(payload, data)
@@ -556,16 +687,27 @@ class ResyncBLFReader(can.BLFReader):
                 what = "the Adler-32 trailer; the inflated bytes are intact"
                 self._record_repair(pos0, *fix, what)
                 return data
-            if not walk(joined, first, _next_in_time)[1]:
-                self._repair_note = (
-                    "; its objects are all valid and in time order, so the damage changed "
-                    "values, not objects, and is not searched for"
-                )
+            if walk(joined, first, _next_in_time)[1]:
+                # a time stamp that goes back locates the damage
+                walker, after, check = _next_in_time, _TIME_AFTER, _TIME_CHECK
+                said = "; its objects are all valid but a time stamp goes back"
+            elif self._repair_left <= 0:
+                self._repair_note = "; no repair searched (the file's repair budget is spent)"
                 return None
-            # a time stamp that goes back locates the damage
-            walker, after, check = _next_in_time, _TIME_AFTER, _TIME_CHECK
-            said = "; its objects are all valid but a time stamp goes back"
-        budget = min(REPAIR_BUDGET, self._repair_left)
+            else:
+                known, ref_cost = self._key_walker(joined, first)
+                self._repair_left -= ref_cost
+                if known is None:
+                    self._repair_note = (
+                        "; its objects are all valid, in time order and their keys seen in "
+                        "the file, so the damage changed values, not objects, and is not "
+                        "searched for"
+                    )
+                    return None
+                # a frame whose key is rare in the file locates the damage
+                walker, after, check = known, _KEY_AFTER, _KEY_CHECK
+                said = "; its objects are all valid but a frame's key is rare in the file"
+        budget = min(REPAIR_BUDGET - ref_cost, self._repair_left)
         if budget <= 0:
             self._repair_note = "; no repair searched (the file's repair budget is spent)"
             return None
@@ -586,6 +728,57 @@ class ResyncBLFReader(can.BLFReader):
             f"checked; {trials} trials)",
         )
         return found.data
+
+    def _key_walker(self, joined: bytes, first: int) -> tuple[NextObject | None, int]:
+        """The walk that stops at the first CAN frame of ``joined`` (from the object at
+        ``first``) whose (channel, identifier, DLC, flags) key is rare in the file's
+        intact containers and the frames before it (:func:`_rare_key`), or None when no
+        key is rare; and the work units spent (:data:`_KEY_UNIT`)."""
+        keys: Counter = Counter()
+        pairs: Counter = Counter()
+        cost = len(joined) // _KEY_UNIT
+
+        def count(data: bytes) -> None:
+            nonlocal cost
+            cost += len(data) // _KEY_UNIT
+            frames = [k for _, k in _frame_keys(data, self._resync(data, 0))]
+            keys.update(frames)
+            pairs.update(pairwise(frames))
+
+        for pos in self._clean:
+            data = self._intact(pos)[0]
+            if data is not None:
+                count(data)
+        pos, n = self._after, len(self._clean)
+        for _ in range(_KEY_LOOKAHEAD):
+            if n >= _KEY_CONTAINERS or pos >= self._size:
+                break
+            data, nxt = self._intact(pos)
+            if data is not None:
+                count(data)
+                n += 1
+            pos = max(nxt, pos + 1)
+        found = _rare_key(_frame_keys(joined, first), keys, pairs)
+        if found is None:
+            return None, cost
+        known = _known_keys(*found)
+        return (known if walk(joined, first, known)[1] else None), cost
+
+    def _intact(self, pos0: int) -> tuple[bytes | None, int]:
+        """(the uncompressed bytes of the container at ``pos0`` when its header and zlib
+        stream are whole, else None; where the next container starts), read without a
+        damage record (the reference keys of :meth:`_key_walker`)."""
+        end, nxt, trusted, cut = self._next_container(pos0)
+        f = self.file
+        f.seek(pos0)
+        raw = f.read(end - pos0)
+        if not trusted or cut or self._container_score(raw[:_CHDR])[0] < 6:
+            return None, nxt
+        method, declared = LOG_CONTAINER_STRUCT.unpack_from(raw, _HDR)
+        if method == NO_COMPRESSION:
+            return raw[_CHDR:], nxt
+        data, err, _ = _inflate(raw[_CHDR:])
+        return (data if err is None and len(data) == declared else None), nxt
 
     def _record_repair(self, pos0: int, offset: int, old: int, new: int, what: str) -> None:
         """One ``repaired`` damage record: the container, the byte, both values."""

@@ -37,11 +37,16 @@ Adler-32 differs from the computed one in exactly one byte, the trailer itself i
 damaged byte (:func:`trailer_repair`). Else, when a time stamp goes back, the object
 walk is run with the time order as one more check (the reader's ``_next_in_time``) and
 the search above runs around it, with a longer check past it (a damage that copies wrong
-time stamps into many objects leaves many out of order). Else the stream is not
-searched: the damage can be anywhere in the container. (Locating a single changed output
-byte from the Adler-32 itself, which the sums A and B allow, was tried and dropped: it
-spends the 32 bits of the check on the location, and a wrong "repair" was accepted in 1
-of 60 flips.)
+time stamps into many objects leaves many out of order). Else, when a CAN frame's
+(channel, identifier, DLC, flags) key, or the pair of its key and its predecessor's, is
+rare in the file's intact containers (read before it, else after it) and the frames
+before it, the walk stops at the first such frame and the search runs around it, every
+key and pair of the check past it being one seen often (a damage that copies a wrong
+identifier into many frames through back-references; the reader's ``_known_keys``).
+Else the stream is not searched: the damage can be anywhere in the container.
+(Locating a single changed output byte from the Adler-32 itself, which the sums A and B
+allow, was tried and dropped: it spends the 32 bits of the check on the location, and a
+wrong "repair" was accepted in 1 of 60 flips.)
 """
 
 from __future__ import annotations
