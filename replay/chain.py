@@ -11,7 +11,10 @@
 4. :class:`ChainBlock`, what the operating envelope is decided from: the time, the
    calibrated rates and each IMU's accelerometer triad. With an ``envelope`` tracker
    (``update(t, rates, accel) -> (B,) int`` codes, :mod:`fdi.envelope`), its codes go to
-   the monitor (``envelope=``); without one the monitor gets none;
+   the monitor (``envelope=``); without one the monitor gets none. Where an IMU is read
+   from samples ahead of its time, each code is the union with the next ``lead`` samples'
+   and ``lead`` samples are held back for it (:mod:`replay.envelope_lead`): the answers
+   then come ``lead`` sample periods later still;
 5. the monitor with run-time compensation (:class:`fdi.effects_monitor.CompensatedMonitor`),
    over the block at once or sample by sample (live, ``--realtime``: events as they
    happen);
