@@ -19,13 +19,11 @@ sample moved forward in time) changes nothing.
 
 from __future__ import annotations
 
-from dataclasses import replace
-
 import numpy as np
 
-from replay.flight_data import Flight, concat_flights
+from replay.flight_data import Flight, concat_flights, flight_rows
 
-__all__ = ["LeadHold", "dilate_back", "flight_rows"]
+__all__ = ["LeadHold", "dilate_back"]
 
 
 def dilate_back(codes: np.ndarray, lead: int) -> np.ndarray:
@@ -42,13 +40,6 @@ def dilate_back(codes: np.ndarray, lead: int) -> np.ndarray:
     for j in range(1, min(int(lead), c.shape[0] - 1) + 1):
         out[:-j] |= c[j:]
     return out
-
-
-def flight_rows(f: Flight, rows: slice) -> Flight:
-    """The flight's samples ``rows`` (views)."""
-    return replace(f, t=f.t[rows], raw=f.raw[rows], valid=f.valid[rows],
-                   omega_true=None if f.omega_true is None else f.omega_true[rows],
-                   aux=None if f.aux is None else f.aux.slice(rows))
 
 
 class LeadHold:

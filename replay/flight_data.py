@@ -25,7 +25,7 @@ from replay.faults import Fault
 from replay.log_events import LogEvent
 
 __all__ = ["AUX_KINDS", "AUX_UNITS", "FLIGHT_TRUTH_SCHEMA", "AuxChannels", "Flight",
-           "concat_flights"]
+           "concat_flights", "flight_rows"]
 
 FLIGHT_TRUTH_SCHEMA = "rimu.flight-truth/1"
 """Schema of a flight's truth record (simulated or fault-injected flights)."""
@@ -192,6 +192,13 @@ class Flight:
             raise ConfigError(f"{self.source}: {what} needs two or more IMU groups of three "
                               f"gyros (manifest 'imu')")
         return g
+
+
+def flight_rows(f: Flight, rows: slice) -> Flight:
+    """The flight's samples ``rows`` (views), truth and auxiliary channels with them."""
+    return replace(f, t=f.t[rows], raw=f.raw[rows], valid=f.valid[rows],
+                   omega_true=None if f.omega_true is None else f.omega_true[rows],
+                   aux=None if f.aux is None else f.aux.slice(rows))
 
 
 def concat_flights(pieces: Sequence[Flight]) -> Flight:

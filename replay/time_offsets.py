@@ -42,7 +42,7 @@ import numpy as np
 
 from fdi.calfile import Calibration
 from fdi.errors import ConfigError
-from replay.flight_data import Flight
+from replay.flight_data import Flight, flight_rows
 
 __all__ = ["MAX_TIME_OFFSET_S", "StreamAligner", "apply_time_offsets", "flight_identity",
            "imu_groups", "moved_aux_channels", "time_offsets_s"]
@@ -235,7 +235,7 @@ class StreamAligner:
             if stop < t.shape[0] else max(int(np.searchsorted(t, t_last - self._back_s)) - 1,
                                           0)
         keep = min(keep, stop)
-        self._buf = _rows(buf, slice(keep, None))
+        self._buf = flight_rows(buf, slice(keep, None))
         self._next = stop - keep
         return out
 
@@ -262,18 +262,11 @@ class StreamAligner:
                 for j in (j for j, h in enumerate(a_groups) if h == g):
                     a_val[:, j], a_ok[:, j] = _resample(t, ts, inside, right,
                                                         aux.values[:, j], aux.valid[:, j])
-        piece = _rows(buf, rows)
+        piece = flight_rows(buf, rows)
         new_aux = piece.aux
         if a_val is not None:
             new_aux = replace(piece.aux, values=a_val, valid=a_ok)
         return replace(piece, raw=raw, valid=valid, aux=new_aux)
-
-
-def _rows(f: Flight, rows: slice) -> Flight:
-    """The flight's samples ``rows`` (views)."""
-    return replace(f, t=f.t[rows], raw=f.raw[rows], valid=f.valid[rows],
-                   omega_true=None if f.omega_true is None else f.omega_true[rows],
-                   aux=None if f.aux is None else f.aux.slice(rows))
 
 
 def _concat(a: Flight, b: Flight) -> Flight:
