@@ -165,6 +165,7 @@ from fdi.state import (
     TIME_OK,
     TIME_REBASED,
     TIME_STATUS,
+    U_NORM2,
     VIB_DWELL,
     VIB_LEVEL,
     VIB_ON,
@@ -553,9 +554,25 @@ def _noise_levels(z, df, sensors, mats, fconst, noise, zprev, vib) -> None:
 
 
 @njit(**_INLINE)
+def _in_flight_variance(sensors, vib, i) -> float:
+    """P_i = Σ_ii + max(v_i − 1, 0)/|u_i|² (SI²): sensor i's in-flight noise variance, its
+    calibrated Σ_ii plus the excess its level v_i shows along its unit whitened column (a
+    sensor alone at a times Σ_ii gives v_i = 1 + (a − 1)·|u_i|²·Σ_ii). It compares sensors
+    in physical units: a sensor whose calibration under-stated its noise has a large v_i
+    without being noisier than its peers."""
+    u2 = sensors[U_NORM2, i]
+    x = vib[i] - 1.0
+    if not x > 0.0 or not u2 > 0.0:           # (also NaN)
+        return sensors[SIGMA_II, i]
+    return sensors[SIGMA_II, i] + x / u2
+
+
+@njit(**_INLINE)
 def _vibration_test(sensors, fconst, vib_dwell, vib, counters) -> int:
     """The sensor with the largest v_i, above ``VIB_LEVEL`` and more than ``VIB_RATIO`` times
-    the next largest, for ``vib_dwell`` samples in a row (−1: none yet)."""
+    the next largest, whose in-flight variance (:func:`_in_flight_variance`) is also more than
+    ``VIB_RATIO`` times every other sensor's, for ``vib_dwell`` samples in a row (−1: none
+    yet)."""
     n = sensors.shape[1]
     top = -1
     v1 = -np.inf
@@ -570,7 +587,15 @@ def _vibration_test(sensors, fconst, vib_dwell, vib, counters) -> int:
             top = i
         elif x > v2:
             v2 = x
-    if top >= 0 and v1 > fconst[VIB_LEVEL] and v1 > fconst[VIB_RATIO] * v2:
+    passes = top >= 0 and v1 > fconst[VIB_LEVEL] and v1 > fconst[VIB_RATIO] * v2
+    if passes:
+        p_top = _in_flight_variance(sensors, vib, top)
+        for i in range(n):
+            if i != top and sensors[IN_SET, i] != 0.0 and not (
+                    p_top > fconst[VIB_RATIO] * _in_flight_variance(sensors, vib, i)):
+                passes = False
+                break
+    if passes:
         if counters[VIB_RUN] > 0 and counters[VIB_SENSOR] == top:
             counters[VIB_RUN] += 1
         else:

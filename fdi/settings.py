@@ -319,7 +319,11 @@ class MonitorSettings:
         The vibration test (sets that isolate): the same sensor has the largest noise level
         v_i along its unit whitened parity column, more than ``vibration_ratio`` times the
         next largest and above ``vibration_level`` (in units of the calibrated variance),
-        for ``vibration_dwell_s``: it is excluded (status and event ``"vibration"``).
+        and its in-flight variance in SI (Σ_ii plus the excess its level shows,
+        :func:`fdi.kernel._in_flight_variance`) more than ``vibration_ratio`` times every
+        other sensor's, for ``vibration_dwell_s``: it is excluded (status and event
+        ``"vibration"``). The physical comparison keeps a sensor whose calibration
+        understated its noise (a large v_i, a peer's noise in °/s) from being blamed.
         In expectation v_i is largest for the noisy sensor itself (the others see its
         noise through cos² of the angle between their columns), so the test never prefers
         a healthy sensor; a set whose columns are too close to reach the ratio never

@@ -125,10 +125,11 @@ BLOCK_ROWS = 32
 """Rows the kernel compensates ahead (independent of the detector state; see fdi.kernel)."""
 
 SENSORS = Names.slots("sensors (SENSOR_COLS, n): one row per quantity",
-                      "SF BIAS LO HI IN_SET SIGMA_II H_P_H AXIS0*3 RHO_COEF0*6 JITTER_COEF",
+                      "SF BIAS LO HI IN_SET SIGMA_II H_P_H AXIS0*3 RHO_COEF0*6 JITTER_COEF U_NORM2",
                       "SENSOR_COLS")
 """y = SF·u − BIAS; raw bounds; in the set; Σ_ii; h_iᵀPh_i; h_i; ρ_i's six coefficients;
-τ_i²·fs²/Σ_ii (ρ_i += JITTER_COEF·(h_iᵀΔω̂)²)."""
+τ_i²·fs²/Σ_ii (ρ_i += JITTER_COEF·(h_iᵀΔω̂)²); |u_i|², the squared norm of the sensor's
+whitened parity column (the vibration test's physical comparison, +0.0 outside the set)."""
 SCALES = Names.slots("scales (K_w, SCALE_COLS)",
                      "WINDOW THRESHOLD CHI2_SCALE RHO_GAIN OFFSET_GAIN CLEAR_THRESHOLD",
                      "SCALE_COLS")
@@ -401,6 +402,7 @@ def pack_set(model, H: np.ndarray, sigma_diag: np.ndarray, lo: tuple[float, ...]
         norms = np.linalg.norm(model.U, axis=0)
         unit = np.where(norms > 0, model.U / np.where(norms > 0, norms, 1.0), 0.0)
         mats[2 * df + 3:, list(model.idx)] = unit
+        sensors[c.U_NORM2, list(model.idx)] = norms**2
     mats[:df + 3, out_of_set] = 0.0
     f = FCONST
     fconst[f.KAPPA] = model.kappa

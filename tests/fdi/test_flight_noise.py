@@ -12,6 +12,8 @@ specs, ``noise:S:Kx:T``) give the truth.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from test_isolation import triads
@@ -70,6 +72,50 @@ def test_healthy_flights_of_three_imus_blame_no_one(three_imus, seed):
     fl = simulate_flight(three_imus, 60.0, seed=100 + seed, max_rate_dps=100.0)
     res = Monitor(three_imus).run(fl.t, fl.raw)
     assert not [e for e in res.events if e.type in ("isolated", "health")]
+
+
+def _vibration_verdict(cal_sd_dps, flight_sd_dps, dwell=5, weight=0.8):
+    """The kernel's vibration test on four sensors (the y axes of four IMUs) whose in-flight
+    sd and calibrated sd are given (°/s): levels v_i = 1 + (a_i − 1)·w with a_i the variance
+    ratio and w = |u_i|²·Σ_ii the sensor's share of its own unit column; the sensor the
+    test returns after ``dwell`` samples (−1: none)."""
+    from fdi.kernel import _vibration_test
+    from fdi.units import DPS
+
+    n = len(cal_sd_dps)
+    sig2 = (np.asarray(cal_sd_dps, float) * DPS) ** 2
+    a = (np.asarray(flight_sd_dps, float) * DPS) ** 2 / sig2
+    sensors = np.zeros((S.SENSORS.SENSOR_COLS, n))
+    sensors[S.SENSORS.IN_SET] = 1.0
+    sensors[S.SENSORS.SIGMA_II] = sig2
+    sensors[S.SENSORS.U_NORM2] = weight / sig2
+    fconst = np.zeros(S.FCONST.F_SLOTS)
+    fconst[S.FCONST.VIB_RATIO] = MonitorSettings().vibration_ratio
+    fconst[S.FCONST.VIB_LEVEL] = MonitorSettings().vibration_level
+    counters = np.zeros(S.COUNTERS.HEALTH0 + n, np.int64)
+    vib = 1.0 + (a - 1.0) * weight
+    out = -1
+    for _ in range(dwell):
+        out = _vibration_test(sensors, fconst, dwell, vib, counters)
+    return out, vib
+
+
+def test_an_understated_calibration_is_not_a_vibrating_axis():
+    """Four IMUs' y axes calibrated at 2.5, 3, 5 and 8.7 °/s and flying at 7, 5, 9 and
+    12 °/s (the Xsens DOT paths H5 and H7 look like this: imu1.y, whose noise the
+    calibration of the other paths understated, was excluded for vibration while quieter
+    in °/s than the other IMUs' y axes). imu1.y's level relative to its calibration is
+    above the vibration level and more than twice every other's, so the relative test
+    alone blames it; it is the quietest in °/s, and the physical comparison blames no one.
+    The same sensor at 25 °/s is blamed."""
+    cal = [2.5, 3.0, 5.0, 8.7]
+    blamed, vib = _vibration_verdict(cal, [7.0, 5.0, 9.0, 12.0])
+    top, rest = vib[0], np.delete(vib, 0)
+    assert top > MonitorSettings().vibration_level and \
+        top > MonitorSettings().vibration_ratio * rest.max(), vib     # relative: passes
+    assert blamed == -1, vib
+    blamed, vib = _vibration_verdict(cal, [25.0, 5.0, 9.0, 12.0])
+    assert blamed == 0, vib
 
 
 def test_two_nearly_aligned_triads_never_blame_vibration(tmp_path):
