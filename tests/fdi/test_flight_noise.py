@@ -12,8 +12,6 @@ specs, ``noise:S:Kx:T``) give the truth.
 
 from __future__ import annotations
 
-from dataclasses import replace
-
 import numpy as np
 import pytest
 from test_isolation import triads
