@@ -124,15 +124,20 @@ class MonitorChain:
     turn_on : replay.turn_on.TurnOn, optional
         What was done about the turn-on bias (:func:`replay.turn_on.turn_on_for_flight`),
         for the report.
+    firmware_prior : replay.firmware_prior.FirmwarePrior, optional
+        The parameters held at the calibration's prior on a flight under another firmware,
+        for the report.
     """
 
     def __init__(self, monitor: Any, cal: Calibration, *, cmap: ChannelMap | None = None,
                  imu: Sequence[str] = (), aux_groups: Sequence[str] | None = None,
                  time_offsets: bool = True, injector: Any = None,
                  report: RunningReport | None = None, envelope: Any = None,
-                 thresholds_how: dict[str, Any] | None = None, turn_on: Any = None) -> None:
+                 thresholds_how: dict[str, Any] | None = None, turn_on: Any = None,
+                 firmware_prior: Any = None) -> None:
         self.monitor = monitor
         self.turn_on = turn_on
+        self.firmware_prior = firmware_prior
         self.cal = cal
         self.cmap = cmap
         self.kind = monitor.kind
@@ -198,6 +203,8 @@ class MonitorChain:
             out["thresholds"] = self.thresholds_how
         if self.turn_on is not None:
             out["turn_on_bias"] = self.turn_on.to_dict()
+        if self.firmware_prior is not None:
+            out["firmware_prior"] = self.firmware_prior.to_dict()
         if self.time_offsets_ms:
             out["time_offsets_applied_ms"] = self.time_offsets_ms
             out["time_offsets_delay_s"] = self.delay_s
@@ -388,11 +395,13 @@ def _compensated(mon: Monitor, cal: Calibration, kind: str, *, effects: bool,
 
 def _monitor(cal: Calibration, kind: str, *, thresholds_file: Any, calibration_file: Any,
              false_alarms_per_hour: Any, settings: Any, thresholds: Any = None,
-             turn_on: Any = None) -> tuple[Monitor, dict[str, Any]]:
+             turn_on: Any = None, firmware: Any = None) -> tuple[Monitor, dict[str, Any]]:
     """The monitor and where its thresholds came from. The thresholds are chosen for
     ``cal`` (a file made for another calibration is refused); with a ``turn_on``
     (:class:`replay.turn_on.TurnOn`) the monitor runs on the biases it estimated at rest,
-    or on thresholds raised for its nominal bias bound (:mod:`fdi.bias_bound`)."""
+    or on thresholds raised for its nominal bias bound (:mod:`fdi.bias_bound`); with a
+    ``firmware`` (:class:`replay.firmware_prior.FirmwarePrior`) on the calibration whose
+    firmware-dependent parameters are widened to their prior."""
     from replay.threshold_choice import select
 
     if thresholds is not None:                          # given in the library (a Thresholds)
@@ -414,6 +423,10 @@ def _monitor(cal: Calibration, kind: str, *, thresholds_file: Any, calibration_f
         from replay.turn_on import apply_turn_on
 
         mon_cal = apply_turn_on(cal, turn_on)
+    if firmware is not None:
+        from replay.firmware_prior import apply_firmware_prior
+
+        mon_cal = apply_firmware_prior(mon_cal, firmware, kind)
     return Monitor(mon_cal, thr, kind=kind, settings=settings), how
 
 
@@ -452,6 +465,10 @@ class ChainOptions:
     bias_bound_dps : float or None
         ``--bias-bound-dps``: the nominal bias bound per gyro (°/s) over the calibration's
         ``bias_turn_on_sd`` and the default.
+    firmware_prior : bool
+        On a flight whose log names another firmware than the calibration's, hold every
+        IMU's relative scale, mounting and time offset at the calibration's prior
+        (:mod:`replay.firmware_prior`; ``--keep-firmware-parameters`` turns it off).
     """
 
     thresholds_file: Any = None
@@ -466,6 +483,7 @@ class ChainOptions:
     thresholds: Any = None
     turn_on: str = "auto"
     bias_bound_dps: float | None = None
+    firmware_prior: bool = True
 
 
 def _report(opts: ChainOptions) -> RunningReport | None:
@@ -501,15 +519,18 @@ def chain_for_flight(flight: Flight, cal: Calibration, opts: ChainOptions = Chai
     """A chain for a recorded flight (folder): effect inputs from its own channels; the
     turn-on bias estimated at rest before take-off or covered by a bound
     (:func:`replay.turn_on.turn_on_for_flight`, ``opts.turn_on``)."""
+    from replay.firmware_prior import apply_firmware_prior, firmware_prior
     from replay.turn_on import apply_turn_on, turn_on_for_flight
 
     ton = turn_on_for_flight(flight, cal, kind=flight.kind, mode=opts.turn_on,
                              bias_bound_dps=opts.bias_bound_dps)
+    fw = firmware_prior(cal, flight, flight.kind) if opts.firmware_prior else None
     mon, how = _monitor(cal, flight.kind, thresholds_file=opts.thresholds_file,
                         calibration_file=opts.calibration_file,
                         false_alarms_per_hour=opts.false_alarms_per_hour,
-                        settings=opts.settings, thresholds=opts.thresholds, turn_on=ton)
-    cal = apply_turn_on(cal, ton)
+                        settings=opts.settings, thresholds=opts.thresholds, turn_on=ton,
+                        firmware=fw)
+    cal = apply_firmware_prior(apply_turn_on(cal, ton), fw, flight.kind)
     avail: dict[str, list[int]] = {}
     if opts.effects and cal.effects:
         _, _, avail = flight_effect_inputs(flight)
@@ -520,7 +541,7 @@ def chain_for_flight(flight: Flight, cal: Calibration, opts: ChainOptions = Chai
                     declared_intervals(getattr(flight, "events", ())))
     return MonitorChain(comp, cal, imu=flight.imu, time_offsets=opts.time_offsets,
                         report=_report(opts), envelope=env, thresholds_how=how,
-                        turn_on=ton)
+                        turn_on=ton, firmware_prior=fw)
 
 
 def _aux_groups(cmap: ChannelMap, groups: Sequence[str]) -> tuple[str, ...]:

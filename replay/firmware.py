@@ -29,7 +29,8 @@ from typing import Any
 
 from replay.log_events import LogEvent
 
-__all__ = ["ULOG_INFO_SOURCE", "firmware_change", "firmware_of", "px4_firmware_text"]
+__all__ = ["ULOG_INFO_SOURCE", "calibration_firmwares", "firmware_change", "firmware_of",
+           "px4_firmware_text"]
 
 ULOG_INFO_SOURCE = "ulog.info"
 """Source of the event that carries a PX4 log's firmware (its info fields)."""
@@ -98,3 +99,20 @@ def firmware_change(calibrated: str, flight: str) -> str | None:
             f"{flight!r}: what belongs to the firmware (time offsets, filtering, driver "
             f"scale) may not carry; calibrate on a flight of this firmware "
             f"(rimu calibrate in-flight)")
+
+
+def calibration_firmwares(cal: Any) -> tuple[str, ...]:
+    """The firmware builds a calibration's flights name (``extra.inflight``): that of its
+    flight, or of each flight calibrated together, in order, without repeats; ``()`` when
+    none names one."""
+    names: list[str] = []
+    extras = getattr(cal, "extras", None)
+    alignment = getattr(extras, "inflight_alignment", None)
+    for fv in (alignment.flights if alignment is not None else ()):
+        if fv.flight is not None and fv.flight.firmware and fv.flight.firmware not in names:
+            names.append(fv.flight.firmware)
+    inflight = getattr(extras, "inflight", None)
+    own = inflight.flight if inflight is not None else None
+    if not names and own is not None and own.firmware:
+        names.append(own.firmware)
+    return tuple(names)

@@ -93,7 +93,10 @@ def must_hold(res: dict[str, Any]) -> list[tuple[str, bool, str]]:
     out.append(("the faulted direction is unverified from the first alarm on",
                 bool(det) and not unv,
                 "the answer has no unverified axes" if na and det
-                else f"{len(unv)} of {len(det)} detected runs not marked"))
+                else f"{len(unv)} of {len(det)} detected runs not marked ("
+                f"{sum(bool(r.get('at_or_above_detectable')) for r in unv)} of them at or "
+                "above the detectable size; below it a detection clears when its evidence "
+                "falls back under the clearing level)"))
     env = [(k, r) for k, r in starts if r["thresholds"].startswith("rimu tune")]
     over = [f"{k}: {r['envelope_fraction_of_flying']:.1%}" for k, r in env
             if not r["envelope_fraction_of_flying"] <= 0.10]

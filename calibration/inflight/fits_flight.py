@@ -252,7 +252,9 @@ def flight_mismatch(cal: Calibration, flight: Any, *, alpha: float = 0.01
     checks."""
     if cal.extras.inflight_alignment is None or same_power_up(cal, flight):
         return [], []
-    fw = firmware_change(calibration_firmware(cal), str(flight_identity(flight)["firmware"]))
+    here = str(flight_identity(flight)["firmware"])
+    fw = None if here in calibration_firmware(cal).split(" | ") else firmware_change(
+        calibration_firmware(cal), here)
     first = [fw] if fw else []
     try:
         fc = flight_calibration(flight)
@@ -266,14 +268,7 @@ def flight_mismatch(cal: Calibration, flight: Any, *, alpha: float = 0.01
 def calibration_firmware(cal: Calibration) -> str:
     """The firmware the calibration's flights name (``extra.inflight``): that of its flight,
     or of each flight calibrated together (different ones joined by ``" | "``); ``""``
-    when none names one."""
-    names: list[str] = []
-    alignment = cal.extras.inflight_alignment
-    for fv in (alignment.flights if alignment is not None else ()):
-        if fv.flight is not None and fv.flight.firmware and fv.flight.firmware not in names:
-            names.append(fv.flight.firmware)
-    inflight = cal.extras.inflight
-    own = inflight.flight if inflight is not None else None
-    if not names and own is not None and own.firmware:
-        names.append(own.firmware)
-    return " | ".join(names)
+    when none names one (:func:`replay.firmware.calibration_firmwares`)."""
+    from replay.firmware import calibration_firmwares
+
+    return " | ".join(calibration_firmwares(cal))

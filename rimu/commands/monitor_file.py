@@ -43,6 +43,11 @@ def configure(p: argparse.ArgumentParser) -> None:
                    metavar="DPS",
                    help="nominal turn-on bias bound per gyro (deg/s) when no rest stretch is "
                         "found (default: 3 x the calibration's bias_turn_on_sd, else 1)")
+    p.add_argument("--keep-firmware-parameters", action="store_true",
+                   help="on a flight whose log names another firmware than the calibration's, "
+                        "keep every IMU's relative scale, mounting and time offset as "
+                        "calibrated (default: held at the calibration's prior tolerance; "
+                        "replay.firmware_prior)")
     p.add_argument("--no-parameter-check", action="store_true",
                    help="do not fit this flight to check every parameter of an in-flight "
                         "calibration made on another flight (default: checked, and each "
@@ -123,10 +128,13 @@ def run(args: argparse.Namespace) -> int:
         thresholds_file=args.thresholds, calibration_file=args.cal,
         false_alarms_per_hour=args.false_alarms_per_hour, effects=not args.no_effects,
         time_offsets=not args.no_time_offsets, envelope=not args.no_envelope,
-        turn_on=args.turn_on, bias_bound_dps=args.bias_bound_dps))
+        turn_on=args.turn_on, bias_bound_dps=args.bias_bound_dps,
+        firmware_prior=not args.keep_firmware_parameters))
     describe_chain(chain, flight)
     if chain.turn_on is not None and chain.turn_on.method != "calibrated":
         print(chain.turn_on.text(chain.sensor_names))
+    if chain.firmware_prior is not None:
+        print(chain.firmware_prior.text())
     current().stage(f"monitoring {flight.t.shape[0]} samples")
     _, report = run_flight(chain, flight)
     report["time_base"] = flight.time_base.to_dict()     # the gaps it monitored across
