@@ -3,9 +3,12 @@
 For every ordered pair of flights of one vehicle, the first is calibrated in flight
 (``rimu calibrate in-flight`` defaults) and tuned at 1 false alarm per hour (``rimu tune``),
 and the second is monitored through ``rimu monitor-file``'s chain
-(:func:`replay.chain.chain_for_flight`) twice: *before*, with the calibration's biases as
-they are (``--turn-on off``, the chain before issue 27), and *after*, with the chain's
-defaults (the turn-on bias estimated at rest before take-off, or a nominal bias bound).
+(:func:`replay.chain.chain_for_flight`) twice: *before*, with the calibration's biases and
+firmware-dependent parameters as they are (``--turn-on off --keep-firmware-parameters``,
+the chain before issue 27), and *after*, with the chain's defaults (the turn-on bias
+estimated at rest before take-off, or a nominal bias bound; on a flight under another
+firmware build the relative scale, mounting and time offset held at the calibration's
+prior, :mod:`replay.firmware_prior`).
 Counted per pair, as the issue's must-hold states them:
 
 - exclusions (``isolated`` / ``health`` events naming a sensor);
@@ -82,10 +85,13 @@ def _part(flight: Any, sl: slice) -> Any:
 
 
 def _run(flight: Any, cal: Any, thr: Any, turn_on: str) -> tuple[Any, Any]:
+    """The chain on ``flight``: its defaults with ``turn_on="auto"``; ``"off"`` is the chain
+    before issue 27 (biases as calibrated, firmware-dependent parameters as calibrated)."""
     from replay.chain import ChainOptions, chain_for_flight
 
     ch = chain_for_flight(flight, cal, ChainOptions(thresholds=thr, report=False,
-                                                    turn_on=turn_on))
+                                                    turn_on=turn_on,
+                                                    firmware_prior=turn_on != "off"))
     return ch.feed_whole(flight), ch
 
 
@@ -370,8 +376,8 @@ def markdown(doc: dict[str, Any]) -> str:
     wall = f", {doc['wall_s']:.0f} s" if "wall_s" in doc else ""
     out = [BEGIN, f"Measured with `python -m studies.cross_flight` "
            f"(commit {doc.get('commit', '?')}{wall}). Before: "
-           "`--turn-on off` (the calibration's biases as they are); after: the chain's "
-           "defaults. Alarms are counted inside the envelope; unverified is the share of "
+           "`--turn-on off --keep-firmware-parameters` (the calibration as it is); after: "
+           "the chain's defaults. Alarms are counted inside the envelope; unverified is the share of "
            "all samples with an unverified axis."]
     for key in ("erle", "xsens"):
         if key not in doc:

@@ -4,10 +4,12 @@
 Calibrated and tuned (1/h) on one flight, monitored on the other. What holds and is checked
 here: no exclusion in either pair, before or after; the chain finds the rest stretch before
 take-off on both flights and moves the biases by what it measured there; the parameter
-check names the scale, time offset and noise mismatch of both pairs. The issue's
-must-hold on alarms (at most one per pair) and unverified time (at most 10 %) is NOT met
-(docs/next-flight.md gives the numbers): the calibration's noise model and detections that
-do not clear are the kernel's part of issue 27.
+check names the scale, time offset and noise mismatch of both pairs; with the chain's
+defaults (the two logs name two firmware builds, so IMU2's relative scale, mounting and
+time offset are held at the calibration's prior, replay.firmware_prior) at most one alarm
+inside the envelope per pair and at most 10 % of the samples unverified (the issue's
+must-hold; before the firmware prior 83 -> 41 gave 13-15 alarms and 54-69 %). The 10 °/s
+step within 1 s is NOT met (4 of 24 with the prior: docs/next-flight.md).
 """
 
 from __future__ import annotations
@@ -33,6 +35,8 @@ def test_erle_pairs_exclude_nothing_and_name_what_does_not_fit():
         flagged = {(m["imu"], m["parameter"]) for m in r["misfit"]}
         assert {("imu2", "scale"), ("imu2", "time offset")} <= flagged, flagged
         assert any(p == "noise" for _, p in flagged)
+        assert r["after"]["alarms_in_envelope"] <= 1, r["after"]
+        assert r["after"]["unverified_fraction"] <= 0.10, r["after"]
     assert doc["after"]["hours"] > 0 and doc["after"]["ci95_per_hour"][0] >= 0
 
 
