@@ -377,8 +377,8 @@ def markdown(doc: dict[str, Any]) -> str:
     out = [BEGIN, f"Measured with `python -m studies.cross_flight` "
            f"(commit {doc.get('commit', '?')}{wall}). Before: "
            "`--turn-on off --keep-firmware-parameters` (the calibration as it is); after: "
-           "the chain's defaults. Alarms are counted inside the envelope; unverified is the share of "
-           "all samples with an unverified axis."]
+           "the chain's defaults. Alarms are counted inside the envelope; unverified is the "
+           "share of all samples with an unverified axis."]
     for key in ("erle", "xsens"):
         if key not in doc:
             continue
