@@ -36,7 +36,7 @@ from scipy import stats
 from fdi.calfile import Calibration
 from fdi.errors import RimuError
 from fdi.units import DPS
-from replay.firmware import firmware_change
+from replay.firmware import calibration_firmwares, firmware_change
 from replay.time_offsets import flight_identity
 from replay.turn_on import same_power_up
 
@@ -252,9 +252,9 @@ def flight_mismatch(cal: Calibration, flight: Any, *, alpha: float = 0.01
     checks."""
     if cal.extras.inflight_alignment is None or same_power_up(cal, flight):
         return [], []
+    builds = calibration_firmwares(cal)
     here = str(flight_identity(flight)["firmware"])
-    fw = None if here in calibration_firmware(cal).split(" | ") else firmware_change(
-        calibration_firmware(cal), here)
+    fw = None if here in builds else firmware_change(" | ".join(builds), here)
     first = [fw] if fw else []
     try:
         fc = flight_calibration(flight)
@@ -269,6 +269,4 @@ def calibration_firmware(cal: Calibration) -> str:
     """The firmware the calibration's flights name (``extra.inflight``): that of its flight,
     or of each flight calibrated together (different ones joined by ``" | "``); ``""``
     when none names one (:func:`replay.firmware.calibration_firmwares`)."""
-    from replay.firmware import calibration_firmwares
-
     return " | ".join(calibration_firmwares(cal))
