@@ -88,7 +88,7 @@ class Thresholds:
         One of :data:`NOISE_MODELS`.
     rate_error_factor : float
         q ≥ 1: the inflation for the calibration error at the current rate
-        (``κ/f_w·Σ_w ρ_c``, :mod:`fdi.windows`; not the timing jitter's) is taken q times, so the thresholds hold for
+        (``κ/f_w·Σ_w ρ``, :mod:`fdi.windows`) is taken q times, so the thresholds hold for
         a calibration error up to a stated quantile of the calibration's covariance, not
         only on average over errors (``rimu tune``: :func:`thresholds.per_draw.rate_error_factor`).
         Written to the file only when it is not 1.

@@ -3,7 +3,7 @@
 A user has one calibration, and its error against the true sensors is one draw from the
 calibration's covariance (``input_error_cov``: misalignment and scale; ``bias_sd``). The
 monitor inflates its thresholds in a manoeuvre by the calibration uncertainty at the
-current rate (``κ/f_w·Σ_w ρ_c``, :mod:`fdi.windows`): that inflation is right on average over
+current rate (``κ/f_w·Σ_w ρ``, :mod:`fdi.windows`): that inflation is right on average over
 draws, but one draw whose error points along the parity directions the flight excites
 raises the healthy statistic more than the inflation allows, and its false-alarm rate sits
 well above the average (issue 27: 33 to 162 alarms/h for one tuning at 60/h).
@@ -28,7 +28,7 @@ parity direction. One draw's worst direction over ω is
 
 (evaluated on :data:`DIRECTIONS` unit directions), and it reaches 10-17 for the worst of
 30 cone6 draws. Over a window the healthy statistic is then non-central,
-``χ'²(df, c·x)`` with ``x = κ·Σ_w ρ_c/f_w``, against the threshold ``thr·(1 + q·x)``; its
+``χ'²(df, c·x)`` with ``x = κ·Σ_w ρ/f_w``, against the threshold ``thr·(1 + q·x)``; its
 exceedance grows like exp(√(c·x·thr)) while the threshold grows linearly, so the worst
 draws alarm at moderate rates (x ≈ 0.03-1). The factor q makes a draw at the
 :data:`DRAW_QUANTILE` quantile of c_max (over :data:`ERROR_DRAWS` draws of δ from the
@@ -79,7 +79,7 @@ DIRECTIONS = 400
 EXCEEDANCE_FACTOR = 2.0
 """Largest per-sample exceedance of the quantile draw, in units of the scale's α."""
 X_GRID = tuple(float(x) for x in np.geomspace(1e-3, 30.0, 46))
-"""Rate terms x = κ·Σ_w ρ_c/f_w over which q(x) is maximised."""
+"""Rate terms x = κ·Σ_w ρ/f_w over which q(x) is maximised."""
 _FLIGHT_S = 600.0
 """Longest simulated flight of one draw (s); a draw flies several."""
 

@@ -2,11 +2,10 @@
 
 :func:`thresholds.tune.detectable_sizes` states the smallest step one full window detects
 at rest. In flight the monitor raises every threshold with the calibration uncertainty at
-the current rate and the timing jitter at the current angular acceleration (ρ_c, ρ_j,
-:mod:`fdi.windows`: ``T_w·(1 + w·β/f_w + q·κ/f_w·Σρ_c + κ/(w·f_w)·Σρ_j)``): before the
-jitter was taken as the random error it is (2026-12-02), on erle flight 41 the thresholds ran
-a median 23× (p90 67×) above their floor at the longest window and a step of 1.4× the
-at-rest size went undetected for 17 s.
+the current rate and the timing jitter at the current angular acceleration (ρ,
+:mod:`fdi.kernel`: ``T_w·(1 + w·β/f_w + κ/f_w·Σρ)``), so on erle flight 41 the thresholds
+run a median 23× (p90 67×) above their floor at the longest window and a step of 1.4× the
+at-rest size goes undetected for 17 s.
 
 :func:`flight_detectable` runs the monitor chain of ``rimu monitor-file`` over a flight
 (healthy as recorded: its thresholds are what they would be), reads per sample and scale
