@@ -58,12 +58,12 @@ def with_residual_models(s: SensorSet, residual: np.ndarray, raw: np.ndarray,
         ctx: dict[str, object] = {}
         src = source
         if inflation:
-            rho, rho_j, kappa, beta = inflation_terms(
+            rho, kappa, beta = inflation_terms(
                 s.H, s.scale_factors, s.biases, s.noise_covariance,
                 np.array([c.input_error_cov for c in s.sensors]),
                 np.array([c.bias_sd for c in s.sensors]),
                 np.array([c.timing_jitter for c in s.sensors]), sample_rate_hz, raw)
-            ctx = {"rho": rho, "rho_jitter": rho_j, "kappa": kappa, "beta": beta}
+            ctx = {"rho": rho, "kappa": kappa, "beta": beta}
             jit = any(c.timing_jitter > 0 for c in s.sensors)
             src += (", relative to the monitor's threshold inflation"
                     + (" (with timing jitter)" if jit else ""))

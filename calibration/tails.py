@@ -8,10 +8,9 @@ over every window of w consecutive valid samples (a window never spans a left-ou
 as the monitor restarts its windows).
 
 Relative to the monitor's own threshold: the monitor widens its threshold at scale w by
-``1 + w·β + κ·Σ_w ρ_c + κ·Σ_w ρ_j/w`` (:mod:`fdi.windows`, with f_w = 1: the calibration's
-bias and calibration uncertainty, and the timing jitter at the current angular
-acceleration, a random error that adds variance rather than an offset). Given the
-per-sample ρ_c, ρ_j of the recording and κ, β (:func:`fdi.reconstruction.inflation_terms`),
+``1 + w·β + κ·Σ_w ρ`` (:mod:`fdi.windows`, with f_w = 1: the calibration's bias and
+calibration uncertainty, and the timing jitter at the current angular acceleration). Given
+the per-sample ρ of the recording and κ, β (:func:`fdi.reconstruction.inflation_terms`),
 every window statistic is divided by its window's inflation (the independent window sums
 by its square root), so that the tails describe what the thresholds do not already
 explain: a residual that is large only while the body accelerates hard, as a timing jitter
@@ -283,8 +282,7 @@ def fit_tail_model(residual: np.ndarray, H: np.ndarray, noise_cov: np.ndarray,
                                                                               for k in range(8)),
                    source: str = "", confidence: float = CONFIDENCE,
                    level: float = LEVEL, rho: np.ndarray | None = None, kappa: float = 0.0,
-                   beta: float = 0.0, rho_jitter: np.ndarray | None = None
-                   ) -> TailModel | None:
+                   beta: float = 0.0) -> TailModel | None:
     """The tail model of a calibration residual (module docstring).
 
     Parameters
@@ -302,13 +300,10 @@ def fit_tail_model(residual: np.ndarray, H: np.ndarray, noise_cov: np.ndarray,
         What the residual is (recorded).
     confidence, level : float
     rho : ndarray, shape (N,), optional
-        The calibration part ρ_c of the monitor's ρ per sample
-        (:func:`fdi.reconstruction.inflation_terms`); with ``kappa`` and ``beta`` every
-        window statistic is taken relative to the monitor's inflation
-        ``1 + w·β + κ·Σ_w ρ_c + κ·Σ_w ρ_j/w`` (module docstring). Omitted: no inflation.
+        The monitor's ρ per sample (:func:`fdi.reconstruction.inflation_terms`); with
+        ``kappa`` and ``beta`` every window statistic is taken relative to the monitor's
+        inflation ``1 + w·β + κ·Σ_w ρ`` (module docstring). Omitted: no inflation.
     kappa, beta : float
-    rho_jitter : ndarray, shape (N,), optional
-        The jitter part ρ_j (with ``rho``; omitted: 0).
 
     Returns
     -------
@@ -328,18 +323,15 @@ def fit_tail_model(residual: np.ndarray, H: np.ndarray, noise_cov: np.ndarray,
         return None
     out: list[ScaleTail] = []
     verdict: bool | None = None
-    cq = cj = None
+    cq = None
     if rho is not None:
         r = np.where(valid & np.isfinite(np.asarray(rho, float)), np.asarray(rho, float), 0.0)
         cq = np.concatenate([[0.0], np.cumsum(r)])
-        rj = np.zeros_like(r) if rho_jitter is None else np.asarray(rho_jitter, float)
-        rj = np.where(valid & np.isfinite(rj), rj, 0.0)
-        cj = np.concatenate([[0.0], np.cumsum(rj)])
     for w in sorted(int(x) for x in scales):
         S, end, ind = window_statistics(z, valid, w)
         if S.size < 2:
             break
-        S, sums_ind = _independent_sums(z, S, end, ind, w, cq, kappa, beta, cj)
+        S, sums_ind = _independent_sums(z, S, end, ind, w, cq, kappa, beta)
         n_eff = int(ind.sum())
         kurt, kp, ep, ok = _normality(S, sums_ind, df, level / len(scales))
         ok, verdict, notes = _decide(ok, verdict, n_eff, out)
@@ -382,18 +374,16 @@ def _quantiles(S: np.ndarray, end: np.ndarray, w: int, n_eff: int, confidence: f
 
 
 def _independent_sums(z: np.ndarray, S: np.ndarray, end: np.ndarray, ind: np.ndarray,
-                      w: int, cq: np.ndarray | None, kappa: float, beta: float,
-                      cj: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+                      w: int, cq: np.ndarray | None, kappa: float, beta: float
+                      ) -> tuple[np.ndarray, np.ndarray]:
     """The window statistics ``S`` and the whitened sums of the independent windows
-    (``ind``), both relative to the monitor's inflation when ``cq`` (the cumulative ρ_c;
-    ``cj``: the cumulative ρ_j) is given."""
+    (``ind``), both relative to the monitor's inflation when ``cq`` (the cumulative ρ) is
+    given."""
     df = z.shape[1]
     c = np.vstack([np.zeros((1, df)), np.cumsum(z, axis=0)])
     sums_ind = (c[end[ind] + 1] - c[end[ind] + 1 - w]) / math.sqrt(w)
     if cq is not None:
         infl = 1.0 + w * float(beta) + float(kappa) * (cq[end + 1] - cq[end + 1 - w])
-        if cj is not None:
-            infl = infl + float(kappa) * (cj[end + 1] - cj[end + 1 - w]) / w
         S = S / infl
         sums_ind = sums_ind / np.sqrt(infl[ind])[:, None]
     return S, sums_ind

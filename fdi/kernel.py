@@ -218,7 +218,7 @@ def set_views(kset, n):
 def scratch_views(values, n):
     """The kernel's scratch vectors y, p, z (n each) and ω̂ (3) in the detector state, the
     ω̂ of the last completed sample and of the one before it (3 each: ``prev``,
-    ``before``), and the block of (z, ρ_c, ρ_j, ρ) rows, shape (BLOCK_ROWS, n + 1)
+    ``before``), and the block of (z, ρ) rows, shape (BLOCK_ROWS, n + 1)
     (:data:`fdi.state.STATE_PARTS`)."""
     return (_span(values, SCRATCH_Y, n, 0), _span(values, SCRATCH_P, n, 0),
             _span(values, SCRATCH_Z, n, 0), _span(values, SCRATCH_W, n, 0),
@@ -228,12 +228,9 @@ def scratch_views(values, n):
 
 @njit(**_INLINE)
 def compensate(raw, r, corr, cr, sensors, mats, df, has_omega, y, p, z, w, v0, v1,
-               v2) -> tuple[float, float, float]:
+               v2) -> float:
     """y = SF·u − b − c, p = V·y, z = A·p, ω̂ = G·y of the sensors of the set, row r;
-    returns (ρ, ρ_c, ρ_j): ρ = max_i (calibration + jitter term)_i for the protection level
-    and the CUSUM bank, ρ_c = max_i of the calibration terms and ρ_j = max_i of the jitter
-    terms for the windows (:func:`fdi.windows.window_update`). ``sensors`` is laid out
-    (SENSOR_COLS, n): one row per quantity.
+    returns ρ. ``sensors`` is laid out (SENSOR_COLS, n): one row per quantity.
     (v0, v1, v2) is the ω̂ of the sample before (rad/s): the timing-jitter term of ρ reads
     Δω̂ = ω̂ − ω̂_{t−1} (zero when not finite).
 
@@ -265,7 +262,7 @@ def compensate(raw, r, corr, cr, sensors, mats, df, has_omega, y, p, z, w, v0, v
         w[0] = np.nan
         w[1] = np.nan
         w[2] = np.nan
-        return 0.0, 0.0, 0.0
+        return 0.0
     w0 = 0.0
     w1 = 0.0
     w2 = 0.0
@@ -282,25 +279,18 @@ def compensate(raw, r, corr, cr, sensors, mats, df, has_omega, y, p, z, w, v0, v
     if not (math.isfinite(d0) and math.isfinite(d1) and math.isfinite(d2)):
         d0, d1, d2 = 0.0, 0.0, 0.0
     rho = 0.0                       # a sensor outside the set gives s = 0 (or NaN): no change
-    rc = 0.0
-    rj = 0.0
     c = RHO_COEF0
     for i in range(n):
         s = (sensors[c, i] * q0 + sensors[c + 1, i] * q1 + sensors[c + 2, i] * q2
              + sensors[c + 3, i] * q3 + sensors[c + 4, i] * q4 + sensors[c + 5, i] * q5)
-        if s > rc:
-            rc = s
         jc = sensors[JITTER_COEF, i]
         if jc != 0.0:                   # τ = 0: exactly the calibration term (no 0·inf)
             a = (sensors[AXIS0, i] * d0 + sensors[AXIS0 + 1, i] * d1
                  + sensors[AXIS0 + 2, i] * d2)
-            sj = jc * (a * a)
-            if sj > rj:
-                rj = sj
-            s = s + sj
+            s = s + jc * (a * a)
         if s > rho:
             rho = s
-    return rho, rc, rj
+    return rho
 
 
 @njit(**_INLINE)
@@ -623,13 +613,10 @@ def _vibration_test(sensors, fconst, vib_dwell, vib, counters) -> int:
 def parity_tests(z, rho, df, sensors, scales, mats, fconst, has_cusum, windows, cusum,
                  counters, K, out, r, ns) -> tuple[bool, bool, int]:
     """Windows (thresholds and clearing levels times the noise scale ``ns``) and CUSUM
-    bank of one complete sample; returns (alarm, clear, fired) for the state machine.
-    ``z`` is the sample's row of the compensated block: ρ_c and ρ_j (for the windows) in
-    its entries n − 2 and n − 1, ``rho`` (entry n) for the CUSUM bank."""
+    bank of one complete sample; returns (alarm, clear, fired) for the state machine."""
     nw = scales.shape[0]
-    n = sensors.shape[1]
-    alarm, clear, fired, best = window_update(z, z[n - 2], z[n - 1], df, windows, counters,
-                                              scales, K, out, r, ns)
+    alarm, clear, fired, best = window_update(z, rho, df, windows, counters, scales, K, out, r,
+                                              ns)
     if has_cusum:
         g = cusum_update(z, rho, df, sensors, mats, fconst, cusum)
         h = fconst[CUSUM_H]
@@ -705,7 +692,7 @@ def _advance(t, raw, corr, valid, r0, r1, kset, values, counters, out) -> int:
     vib = _span(values, STATE_VIB, n, 0)
     cusum = _span(values, STATE_CUSUM, n, 0).reshape(CUSUM_ROWS, n)
     o_windows = offset(STATE_WINDOWS, n, 0)
-    windows = values[o_windows:o_windows + (R + 1) * (df + 2)].reshape(R + 1, df + 2)
+    windows = values[o_windows:o_windows + (R + 1) * (df + 1)].reshape(R + 1, df + 1)
     y, p, z, w, prev, before, block = scratch_views(values, n)
     K = nw + (1 if has_cusum else 0)
     parity0 = STATS0 + 2 * K
@@ -776,7 +763,7 @@ def compensate_ahead(raw, corr, b0, b1, sensors, mats, fconst, df, has_omega, ha
                      parity0, y, p, z, w, prev, block, out) -> None:
     """Compensate rows b0 … b1−1 (at most BLOCK_ROWS) with the current set, before their
     health checks: ω̂, the protection level and the parity go straight into their output
-    rows, z, ρ_c, ρ_j and ρ into ``block`` for the windows and the CUSUM bank.
+    rows, z and ρ into ``block`` for the windows and the CUSUM bank.
 
     These quantities depend on the row and the set only, not on the detector state, so the
     rows are independent and the processor overlaps them (the sequential part of the
@@ -791,8 +778,8 @@ def compensate_ahead(raw, corr, b0, b1, sensors, mats, fconst, df, has_omega, ha
     per_row_corr = corr.shape[0] > 1
     v0, v1, v2 = prev[0], prev[1], prev[2]
     for q in range(b0, b1):
-        rho, rc, rj = compensate(raw, q, corr, q if per_row_corr else 0, sensors, mats, df,
-                                 has_omega, y, p, z, w, v0, v1, v2)
+        rho = compensate(raw, q, corr, q if per_row_corr else 0, sensors, mats, df,
+                         has_omega, y, p, z, w, v0, v1, v2)
         v0, v1, v2 = w[0], w[1], w[2]
         out[q, OMEGA0] = w[0]
         out[q, OMEGA0 + 1] = w[1]
@@ -801,8 +788,6 @@ def compensate_ahead(raw, corr, b0, b1, sensors, mats, fconst, df, has_omega, ha
         k = q - b0
         for j in range(df):
             block[k, j] = z[j]
-        block[k, n - 2] = rc
-        block[k, n - 1] = rj
         block[k, n] = rho
         if has_parity and df > 0:
             for j in range(df):
@@ -861,9 +846,9 @@ def _reconstruct_row(raw, corr, r, kset, values, row) -> None:
     fconst, sensors, _, mats, df, _ = set_views(kset, n)
     y, p, z, w, prev, before, _ = scratch_views(values, n)
     cr = r if corr.shape[0] > 1 else 0
-    rho, _, _ = compensate(raw, r, corr, cr, sensors, mats, df,
-                           kset[SET_ICONST0 + HAS_OMEGA] != 0.0, y, p, z, w, before[0],
-                           before[1], before[2])
+    rho = compensate(raw, r, corr, cr, sensors, mats, df,
+                     kset[SET_ICONST0 + HAS_OMEGA] != 0.0, y, p, z, w, before[0], before[1],
+                     before[2])
     row[OMEGA0] = w[0]
     row[OMEGA0 + 1] = w[1]
     row[OMEGA0 + 2] = w[2]

@@ -58,12 +58,10 @@ class SetModel:
     beta : float
         Bias-uncertainty constant: A·V·diag(bias_sd²)·Vᵀ·Aᵀ ≼ β·I (a constant parity offset
         that no window averages down).
-    thr, chi2_scale, rho_gain, offset_gain, jitter_gain : tuple of float, shape (K,)
+    thr, chi2_scale, rho_gain, offset_gain : tuple of float, shape (K,)
         Per window scale w with variance factor f_w: the χ² threshold T_w for df, the
-        statistic's scale 1/(w·f_w), the gain q·κ/f_w of the window's summed calibration
-        ratio ρ_c, the constant-offset inflation 1 + w·β/f_w and the gain κ/(w·f_w) of the
-        window's summed jitter ratio ρ_j (threshold
-        ``T_w·(offset_gain + rho_gain·Σρ_c + jitter_gain·Σρ_j)``, :mod:`fdi.windows`).
+        statistic's scale 1/(w·f_w), the gain κ/f_w of the window's summed ρ and the
+        constant-offset inflation 1 + w·β/f_w (threshold ``T_w·(offset_gain + rho_gain·Σρ)``).
     cusum_h : float
         CUSUM decision threshold h (NaN without a CUSUM bank).
     sines : ndarray, shape (m, m)
@@ -105,7 +103,6 @@ class SetModel:
     beta: float
     offset_gain: tuple[float, ...]
     cusum_h: float
-    jitter_gain: tuple[float, ...]
     sines: np.ndarray
     detectable: np.ndarray
     isolable_from: np.ndarray
@@ -149,10 +146,9 @@ class SetModel:
         w = self.G @ y
         return p, z, w, self.rho(w, omega_prev)
 
-    def rho(self, w: np.ndarray, omega_prev: np.ndarray | None = None, part: str = "all"
-            ) -> np.ndarray:
+    def rho(self, w: np.ndarray, omega_prev: np.ndarray | None = None) -> np.ndarray:
         """ρ_t = max_i [ω̂ᵀC_iω̂ + τ_i²·(h_iᵀω̇̂)²]/Σ_ii of a block of ω̂ (the kernel's
-        definition, :mod:`fdi.kernel`), or one of its two parts (:func:`rho_series`).
+        definition, :mod:`fdi.kernel`).
 
         Parameters
         ----------
@@ -160,15 +156,12 @@ class SetModel:
             ω̂ (rad/s).
         omega_prev : ndarray, shape (3,), optional
             ω̂ before the block; ω̇̂ of the first row counts as 0 without it.
-        part : str
-            ``"all"``, ``"calibration"`` or ``"jitter"``.
 
         Returns
         -------
         ndarray, shape (N,)
         """
-        return rho_series(w, self.cal_coef, self.jit_coef, self.axes, self.idx, omega_prev,
-                          part=part)
+        return rho_series(w, self.cal_coef, self.jit_coef, self.axes, self.idx, omega_prev)
 
     def healthy_mask(self) -> np.ndarray:
         """Boolean mask of the healthy sensors, shape (n,)."""
@@ -177,14 +170,8 @@ class SetModel:
 
 def rho_series(w: np.ndarray, cal_coef: np.ndarray, jit_coef: np.ndarray | None,
                axes: np.ndarray | None, idx: tuple[int, ...],
-               omega_prev: np.ndarray | None = None, *, part: str = "all") -> np.ndarray:
+               omega_prev: np.ndarray | None = None) -> np.ndarray:
     """ρ_t = max_i [ω̂ᵀC_iω̂ + τ_i²·(h_iᵀω̇̂)²]/Σ_ii over the sensors ``idx`` (≥ 0).
-
-    ``part="calibration"`` gives ρ_c = max_i ω̂ᵀC_iω̂/Σ_ii (the calibration error: a
-    deterministic offset over a window), ``part="jitter"`` ρ_j = max_i τ_i²(h_iᵀω̇̂)²/Σ_ii
-    (the timing jitter: a random error, independent from sample to sample); the windows
-    inflate their thresholds by the two differently (:mod:`fdi.windows`), the protection
-    level and the CUSUM bank by ρ.
 
     Parameters
     ----------
@@ -206,11 +193,8 @@ def rho_series(w: np.ndarray, cal_coef: np.ndarray, jit_coef: np.ndarray | None,
     q = np.stack([w[0] * w[0], w[1] * w[1], w[2] * w[2], w[0] * w[1], w[0] * w[2],
                   w[1] * w[2]])
     idx = list(idx)
-    if part not in ("all", "calibration", "jitter"):
-        raise ValueError(f"rho_series: part must be all, calibration or jitter, got {part!r}")
-    terms = cal_coef[idx] @ q if part != "jitter" else np.zeros((len(idx), w.shape[1]))
-    if part != "calibration" and jit_coef is not None and axes is not None and \
-            np.any(jit_coef[idx]):
+    terms = cal_coef[idx] @ q
+    if jit_coef is not None and axes is not None and np.any(jit_coef[idx]):
         prev = np.full((3, 1), np.nan) if omega_prev is None else \
             np.asarray(omega_prev, float).reshape(3, 1)
         with np.errstate(invalid="ignore", over="ignore"):
@@ -224,12 +208,12 @@ def rho_series(w: np.ndarray, cal_coef: np.ndarray, jit_coef: np.ndarray | None,
 def inflation_terms(H: np.ndarray, sf: np.ndarray, bias: np.ndarray, noise_cov: np.ndarray,
                     input_error_cov: np.ndarray, bias_sd: np.ndarray,
                     timing_jitter: np.ndarray, sample_rate_hz: float, raw: np.ndarray
-                    ) -> tuple[np.ndarray, np.ndarray, float, float]:
-    """What the monitor's thresholds of the full set do with a recording: ρ_c, ρ_j, κ, β.
+                    ) -> tuple[np.ndarray, float, float]:
+    """What the monitor's thresholds of the full set do with a recording: ρ_t, κ and β.
 
-    The monitor's threshold at scale w is
-    ``thr_w·(1 + w·β/f_w + κ/f_w·Σ_w ρ_c + κ/(w·f_w)·Σ_w ρ_j)`` (:mod:`fdi.windows`, with
-    q = 1); a tail model measured relative to it (:mod:`calibration.tails`) needs these.
+    The monitor's threshold at scale w is ``thr_w·(1 + w·β/f_w + κ/f_w·Σ_w ρ)``
+    (:mod:`fdi.windows`); a tail model measured relative to it (:mod:`calibration.tails`)
+    needs these three.
 
     Parameters
     ----------
@@ -245,8 +229,7 @@ def inflation_terms(H: np.ndarray, sf: np.ndarray, bias: np.ndarray, noise_cov: 
 
     Returns
     -------
-    rho_c, rho_j : ndarray, shape (N,)
-        The calibration and the jitter parts of ρ (:func:`rho_series`).
+    rho : ndarray, shape (N,)
     kappa, beta : float
     """
     H = np.asarray(H, float)
@@ -264,10 +247,8 @@ def inflation_terms(H: np.ndarray, sf: np.ndarray, bias: np.ndarray, noise_cov: 
     jit = jitter_coefficients(timing_jitter, np.diag(Sig), sample_rate_hz, n)
     y = np.asarray(raw, float) * np.asarray(sf, float) - np.asarray(bias, float)
     w = G @ y.T
-    rc = rho_series(w, coef, jit, H, idx, part="calibration")
-    rj = rho_series(w, coef, jit, H, idx, part="jitter")
-    return (np.where(np.isfinite(rc), rc, 0.0), np.where(np.isfinite(rj), rj, 0.0), kappa,
-            beta)
+    rho = rho_series(w, coef, jit, H, idx)
+    return np.where(np.isfinite(rho), rho, 0.0), kappa, beta
 
 
 def _whitening(V: np.ndarray, Sig: np.ndarray, idx: tuple[int, ...], bias_sd: np.ndarray
@@ -419,11 +400,6 @@ def build_set_model(H: np.ndarray, sf: np.ndarray, bias: np.ndarray, noise_cov: 
     q = float(thresholds.rate_error_factor)
     rho_gain = tuple(q * kappa / f for f in vf)
     offset_gain = tuple(1.0 + w * beta / f for w, f in zip(scales, vf, strict=True))
-    # the timing jitter is a random error, independent from sample to sample (its variance
-    # τ²(h·ω̇)² per sample: calibration.inflight.jitter): over w samples it adds κ·Σ_w ρ_j to
-    # the variance w·f_w of the summed whitened parity, a factor 1 + κ·Σ_w ρ_j/(w·f_w) on the
-    # statistic's scale; it does not grow with w as a calibration error does
-    jitter_gain = tuple(kappa / (w * f) for w, f in zip(scales, vf, strict=True))
     h = float("nan")
     if df > 0 and thresholds.detector != "windows":
         h = cusum_threshold(thresholds.alpha[0], thresholds.cusum_drift, 2 * m)
@@ -438,7 +414,6 @@ def build_set_model(H: np.ndarray, sf: np.ndarray, bias: np.ndarray, noise_cov: 
     return SetModel(mask=mask, idx=idx, df=df, capability=cap, V=V, A=A, U=U, G=G, cov=cov,
                     omega_sd=osd, kappa=kappa, thr=thr, chi2_scale=chi2_scale,
                     rho_gain=rho_gain, beta=beta, offset_gain=offset_gain, cusum_h=h,
-                    jitter_gain=jitter_gain,
                     sines=sines, detectable=det, isolable_from=iso, pl=pl,
                     sf=sf, bias=bias, cal_coef=coef, jit_coef=jit, axes=axes)
 

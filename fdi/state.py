@@ -12,8 +12,7 @@ Per healthy set (constants, :class:`KernelSet`, built once per set by :func:`pac
   coefficients of ρ_i = ω̂ᵀC_iω̂/Σ_ii and the timing-jitter coefficient τ_i²·fs²/Σ_ii of
   the term τ_i²(h_iᵀω̇̂)²/Σ_ii (zero outside the set).
 - ``scales`` (K_w, :data:`SCALE_COLS`): per dyadic window w the χ² threshold T_w,
-  1/(w·f_w), q·κ/f_w, 1 + w·β/f_w, the clearing threshold (hysteresis) and κ/(w·f_w)
-  (the jitter's gain).
+  1/(w·f_w), κ/f_w, 1 + w·β/f_w and the clearing threshold (hysteresis).
 - ``mats`` (3·df + 3, n): the parity matrix V (rows 0 … df−1), the reconstruction matrix G
   (rows df … df+2), the lower-triangular whitening A (rows df+3 …, first df columns) and the
   unit whitened parity columns u_i/|u_i| (rows 2·df+3 …, column i for sensor i).
@@ -22,9 +21,9 @@ Per healthy set (constants, :class:`KernelSet`, built once per set by :func:`pac
 
 Detector state (:class:`DetectorState`):
 
-- ``windows`` (R + 1, df + 2): rows 0 … R−1 the ring of the last R cumulative sums
-  c_t = Σ_{s≤t} (z_s, ρ_c,s, ρ_j,s) (seed 000's multi-resolution means as differences of
-  c; ρ_c, ρ_j the calibration and jitter parts of ρ), row R the current c_t.
+- ``windows`` (R + 1, df + 1): rows 0 … R−1 the ring of the last R cumulative sums
+  c_t = Σ_{s≤t} (z_s, ρ_s) (seed 000's multi-resolution means as differences of c),
+  row R the current c_t.
 - ``cusum`` (4, n): per sensor the two one-sided random walks S⁺, S⁻ and their running
   minima; the CUSUM statistic is g = S − min S (Page's recursion written so).
 - ``sensor`` (n, 4): last raw value, time of the latest valid sample, start of good
@@ -132,8 +131,7 @@ SENSORS = Names.slots("sensors (SENSOR_COLS, n): one row per quantity",
 τ_i²·fs²/Σ_ii (ρ_i += JITTER_COEF·(h_iᵀΔω̂)²); |u_i|², the squared norm of the sensor's
 whitened parity column (the vibration test's physical comparison, +0.0 outside the set)."""
 SCALES = Names.slots("scales (K_w, SCALE_COLS)",
-                     "WINDOW THRESHOLD CHI2_SCALE RHO_GAIN OFFSET_GAIN CLEAR_THRESHOLD "
-                     "JITTER_GAIN",
+                     "WINDOW THRESHOLD CHI2_SCALE RHO_GAIN OFFSET_GAIN CLEAR_THRESHOLD",
                      "SCALE_COLS")
 FCONST = Names.slots("fconst", "KAPPA BETA NU CUSUM_H CUSUM_CLEAR PL_A PL_B PL_C PL_D PL_E "
                      "STALE_TIMEOUT_S READMIT_DWELL_S READMIT_GATE STALE_SAMPLES "
@@ -253,9 +251,8 @@ STATE_PARTS = _parts((("STATE_CLOCK", CLOCK.CLOCK_SLOTS, 0, 0),
                       ("SCRATCH_BLOCK", BLOCK_ROWS, BLOCK_ROWS, 0)), "STATE_WINDOWS")
 """Parts of the float detector state (:attr:`DetectorState.values`): the sensor history, the
 CUSUM bank, the kernel's scratch (y, p, z; ω̂; the ω̂ of the last completed sample and of
-the one before it; (z, ρ_c, ρ_j, ρ) of :data:`BLOCK_ROWS` rows, n + 1 each: z in the first
-df entries, ρ_c, ρ_j and ρ in the last three, df ≤ n − 3) and, last, the windows
-((R + 1)·(n + 1) entries, room for the df + 2 columns of any parity dimension df ≤ n − 3)."""
+the one before it; (z, ρ) of :data:`BLOCK_ROWS` rows, n + 1 each) and, last, the windows
+((R + 1)·(n + 1) entries, room for any parity dimension df ≤ n)."""
 _export(SET_PARTS)                          # SET_FCONST, …, SCRATCH_Y, …: tuples of ints
 _export(STATE_PARTS)
 _SCALES, _MATS, _WINDOWS = (SET_PARTS["SET_SCALES"], SET_PARTS["SET_MATS"],
@@ -397,7 +394,6 @@ def pack_set(model, H: np.ndarray, sigma_diag: np.ndarray, lo: tuple[float, ...]
     scales[:, s.CHI2_SCALE] = model.chi2_scale
     scales[:, s.RHO_GAIN] = model.rho_gain
     scales[:, s.OFFSET_GAIN] = model.offset_gain
-    scales[:, s.JITTER_GAIN] = model.jitter_gain
     scales[:, s.CLEAR_THRESHOLD] = clear_thresholds(model.thr, df, settings)
     mats[:df] = model.V
     mats[df:df + 3] = model.G
@@ -502,8 +498,8 @@ class DetectorState:
         """Empty windows, CUSUM and detection for a new healthy set of parity dimension df."""
         o = self._o_windows
         self.values[o:] = 0.0
-        self.windows = self.values[o:o + (self.ring + 1) * (df + 2)].reshape(self.ring + 1,
-                                                                             df + 2)
+        self.windows = self.values[o:o + (self.ring + 1) * (df + 1)].reshape(self.ring + 1,
+                                                                             df + 1)
         self.cusum[:] = 0.0
         self.vibration[:] = 1.0             # the columns change with the set; v does not
         c = COUNTERS
@@ -512,7 +508,7 @@ class DetectorState:
 
     @property
     def cumulative(self) -> np.ndarray:
-        """Current cumulative sums c_t of (z, ρ_c, ρ_j), shape (df + 2,)."""
+        """Current cumulative sums c_t of (z, ρ), shape (df + 1,)."""
         return self.windows[self.ring]
 
     def window_sum(self, w: int) -> np.ndarray:
@@ -520,7 +516,7 @@ class DetectorState:
         pos = int(self.counters[COUNTERS.RING_POS]) - w
         old = self.windows[pos % self.ring]
         cur = self.windows[self.ring]
-        return cur[:-2] - old[:-2]
+        return cur[:-1] - old[:-1]
 
     def cusum_scores(self, m_idx: tuple[int, ...]) -> np.ndarray:
         """CUSUM statistic max(S⁺ − min S⁺, S⁻ − min S⁻) per healthy sensor."""

@@ -1,25 +1,12 @@
 """Dyadic windows over the whitened parity: one compiled update per complete sample.
 
-The cumulative sums c_t = Σ_{s≤t} (z_s, ρ_c,s, ρ_j,s) since the healthy set began are kept
-in a ring of the last R = 2^K + 1 of them; the sum over the last w samples is c_t − c_{t−w}
+The cumulative sums c_t = Σ_{s≤t} (z_s, ρ_s) since the healthy set began are kept in a
+ring of the last R = 2^K + 1 of them; the sum over the last w samples is c_t − c_{t−w}
 (O(1) per scale, seed 000's multi-resolution means as differences). Per scale::
 
-    D_w = |Σ_w z|² / (w·f_w)                  (χ²(df) for healthy white noise)
-    T_w = thr_w · (1 + w·β/f_w + q·κ/f_w · Σ_w ρ_c + κ/(w·f_w) · Σ_w ρ_j) · s
-
-with s the in-flight noise scale. The two rate terms differ in kind:
-
-- ρ_c (the calibration error of axes and scale at the current rate) is one fixed error for
-  the whole flight: over a window it is an offset, Σ_w of it grows like w as a fault's
-  does, so it does not average (q: the quantile of the calibration's error it is held for,
-  :attr:`fdi.settings.Thresholds.rate_error_factor`);
-- ρ_j (the timing jitter τ_i·h_iᵀω̇̂: :mod:`calibration.inflight.jitter` fits it as a
-  sampling-time error independent from sample to sample) is a random error: over w samples
-  it adds κ·Σ_w ρ_j to the variance w·f_w of Σ_w z, a factor ``1 + κ·Σ_w ρ_j/(w·f_w)`` on
-  the statistic's scale, which stays at the per-sample level however long the window. (Taken
-  as an offset, as before, it raised the longest window's threshold about w-fold: on the
-  Xsens DOT flights a median 240× and up to 2300× its floor, where the statistics stayed
-  below a thousandth of it.)
+    D_w = |Σ_w z|² / (w·f_w)                         (χ²(df) for healthy white noise)
+    T_w = thr_w · (1 + w·β/f_w + κ/f_w · Σ_w ρ) · s  (calibration error does not average;
+                                                       s: the in-flight noise scale)
 
 an alarm is D_w > T_w; the detection clears only while every D_w is below its clearing
 level C_w·g_w, with C_w = ``clear_ratio·thr_w`` (and the floor of
@@ -39,7 +26,6 @@ from numba import njit
 from fdi.state import (
     CHI2_SCALE,
     CLEAR_THRESHOLD,
-    JITTER_GAIN,
     OFFSET_GAIN,
     RHO_GAIN,
     RING_POS,
@@ -53,7 +39,7 @@ __all__ = ["window_update"]
 
 
 @njit(error_model="numpy", inline="always", _nrt=False)
-def window_update(z: np.ndarray, rho: float, rho_j: float, df: int, windows: np.ndarray,
+def window_update(z: np.ndarray, rho: float, df: int, windows: np.ndarray,
                   counters: np.ndarray, scales: np.ndarray, K: int, out: np.ndarray,
                   r: int, ns: float = 1.0) -> tuple[bool, bool, int, float]:
     """Add one complete sample and test every window scale.
@@ -63,11 +49,9 @@ def window_update(z: np.ndarray, rho: float, rho_j: float, df: int, windows: np.
     z : ndarray, shape (≥ df,)
         Whitened parity of the sample.
     rho : float
-        Calibration-uncertainty ratio ρ_c of the sample.
-    rho_j : float
-        Timing-jitter ratio ρ_j of the sample.
+        Calibration-uncertainty ratio ρ of the sample.
     df : int
-    windows : ndarray, shape (R + 1, df + 2)
+    windows : ndarray, shape (R + 1, df + 1)
         Ring of cumulative sums (row R: current), updated in place.
     counters : ndarray of int64
         Ring position and window count, updated in place.
@@ -95,14 +79,13 @@ def window_update(z: np.ndarray, rho: float, rho_j: float, df: int, windows: np.
     for j in range(df):
         windows[R, j] = windows[R, j] + z[j]
     windows[R, df] = windows[R, df] + rho
-    windows[R, df + 1] = windows[R, df + 1] + rho_j
     count = counters[WINDOW_COUNT] + 1
     counters[WINDOW_COUNT] = count
     pos = counters[RING_POS] + 1
     if pos == R:
         pos = 0
     counters[RING_POS] = pos
-    for j in range(df + 2):
+    for j in range(df + 1):
         windows[pos, j] = windows[R, j]
     alarm = False
     clear = True
@@ -118,8 +101,7 @@ def window_update(z: np.ndarray, rho: float, rho_j: float, df: int, windows: np.
                 d = windows[R, j] - windows[o, j]
                 acc = acc + d * d
             D = acc * scales[k, CHI2_SCALE]
-            g = (scales[k, OFFSET_GAIN] + scales[k, RHO_GAIN] * (windows[R, df] - windows[o, df])
-                 + scales[k, JITTER_GAIN] * (windows[R, df + 1] - windows[o, df + 1]))
+            g = scales[k, OFFSET_GAIN] + scales[k, RHO_GAIN] * (windows[R, df] - windows[o, df])
             g = g * ns
             T = scales[k, THRESHOLD] * g
             if D > T:

@@ -73,14 +73,12 @@ def oracle_detect(cal: Calibration, t: np.ndarray, raw: np.ndarray, sensor: int,
     mdl = mon.model
     t = np.asarray(t, float)
     raw = np.asarray(raw, float)
-    _, z, w_hat, rho = mdl.compensate(raw)
-    rho_c, rho_j = mdl.rho(w_hat, part="calibration"), mdl.rho(w_hat, part="jitter")
+    _, z, _, rho = mdl.compensate(raw)
     k = mdl.idx.index(sensor - 1)
     u = mdl.U[:, k] / np.linalg.norm(mdl.U[:, k])
     r = sum(u[j] * z[j] for j in range(mdl.df))
     cr = np.concatenate([[0.0], np.cumsum(r)])
-    cq = np.concatenate([[0.0], np.cumsum(rho_c)])
-    cj = np.concatenate([[0.0], np.cumsum(rho_j)])
+    cq = np.concatenate([[0.0], np.cumsum(rho)])
     N = t.shape[0]
     first = np.full(N, False)
     which = np.full(N, -1)
@@ -90,9 +88,7 @@ def oracle_detect(cal: Calibration, t: np.ndarray, raw: np.ndarray, sensor: int,
             continue
         s = cr[w:] - cr[:-w]
         q = cq[w:] - cq[:-w]
-        qj = cj[w:] - cj[:-w]
-        T = chi2_threshold(a, 1) * (1.0 + w * mdl.beta / f + mdl.kappa / f * q
-                                    + mdl.kappa / (w * f) * qj)
+        T = chi2_threshold(a, 1) * (1.0 + w * mdl.beta / f + mdl.kappa / f * q)
         al = np.zeros(N, bool)
         al[w - 1:] = s * s / (w * f) > T
         which = np.where(al & ~first, w, which)

@@ -394,10 +394,10 @@ class _Crc:
 
 def _ops_per_step(n: int, df: int, nw: int, cusum: bool, terms: int) -> int:
     """Worst-case arithmetic operations of one step (see :class:`CModule`)."""
-    comp = 4 * n + 2 * df * n + df * (df + 1) + 6 * n + 15 + 22 * n
+    comp = 4 * n + 2 * df * n + df * (df + 1) + 6 * n + 15 + 20 * n
     health = 8 * n
     readmit = comp + 14 * n
-    windows = 2 * (df + 2) + nw * (2 * df + 13)
+    windows = 2 * (df + 1) + nw * (2 * df + 10)
     cus = n * (2 * df + 12) + 4 if cusum else 0
     sequential = comp + 6 + health + readmit + windows + cus + 8
     decision = n * (5 * df + 8) + 2 * df + 10
@@ -685,7 +685,7 @@ def _state_bytes(n: int, df_max: int, nw: int, ring: int, real: int) -> int:
     set_bytes = real * (S.F_SLOTS + S.SENSOR_COLS * n + nw * S.SCALE_COLS
                         + (3 * df_max + 3) * n + max(df_max, 1) * n + 4 + nw) + 4 * S.I_SLOTS
     return (8 * 5 * n + 8 * 2
-            + real * (4 * n + (ring + 1) * (df_max + 2) + 3 * n + 9 + n + 1 + 1 + 2 * n)
+            + real * (4 * n + (ring + 1) * (df_max + 1) + 3 * n + 9 + n + 1 + 1 + 2 * n)
             + 8 * (S.HEALTH0 + n) + 8 * 4 + 3 + 8 + 4 + 4 + 4 + n + 2 * set_bytes
             + 4 * 4)
 

@@ -92,7 +92,6 @@ class OracleMonitor:
         self.model = self.cache.get(self._mask(self.healthy))
         self.hist_z: list[np.ndarray] = []
         self.hist_rho: list[float] = []
-        self.hist_rho_j: list[float] = []
         m = self.model.m
         self.g_up = np.zeros(m)
         self.g_down = np.zeros(m)
@@ -114,22 +113,21 @@ class OracleMonitor:
             return np.nan
         return cusum_threshold(self.th.alpha[0], self.th.cusum_drift, 2 * self.model.m)
 
-    def _reconstruct(self, model, u: np.ndarray) -> tuple[np.ndarray, float, float, float]:
-        """ω̂ = G·y over the set's sensors,
-        ρ = max_i [ω̂ᵀC_iω̂ + τ_i²(h_iᵀω̇̂)²]/Σ_ii (≥ 0), ω̇̂ = (ω̂ − ω̂_{t−1})·fs, and its
-        parts ρ_c = max_i ω̂ᵀC_iω̂/Σ_ii, ρ_j = max_i τ_i²(h_iᵀω̇̂)²/Σ_ii."""
+    def _reconstruct(self, model, u: np.ndarray) -> tuple[np.ndarray, float]:
+        """ω̂ = G·y over the set's sensors and
+        ρ = max_i [ω̂ᵀC_iω̂ + τ_i²(h_iᵀω̇̂)²]/Σ_ii (≥ 0), ω̇̂ = (ω̂ − ω̂_{t−1})·fs."""
         if model.capability == "none":
-            return np.full(3, np.nan), 0.0, 0.0, 0.0
+            return np.full(3, np.nan), 0.0
         idx = list(model.idx)
         y = self.sf[idx] * u[idx] - self.bias[idx]
         w = model.G[:, idx] @ y
         wdot = (w - self.w_prev) * self.fs
         if not np.all(np.isfinite(wdot)):
             wdot = np.zeros(3)
-        cal = [float(w @ self.cin[i] @ w) / self.sigma[i, i] for i in idx]
-        jit = [self.tau[i] ** 2 * float(self.H[i] @ wdot) ** 2 / self.sigma[i, i] for i in idx]
-        rho = max([0.0] + [c + j for c, j in zip(cal, jit, strict=True)])
-        return w, rho, max([0.0, *cal]), max([0.0, *jit])
+        rho = max([0.0] + [(float(w @ self.cin[i] @ w)
+                            + self.tau[i] ** 2 * float(self.H[i] @ wdot) ** 2)
+                           / self.sigma[i, i] for i in idx])
+        return w, rho
 
     # ------------------------------------------------------------ one sample
     def step(self, t: float, u: np.ndarray, ok: np.ndarray) -> OracleSample:
@@ -149,23 +147,23 @@ class OracleMonitor:
         if not ok[idx].all():                               # incomplete: no parity test
             present = self.healthy & ok
             sub = self.cache.get(self._mask(present))
-            w = self._reconstruct(sub, u)[0]
+            w, _ = self._reconstruct(sub, u)
             return OracleSample(w, sub.omega_sd, self.healthy.copy(),
                                 np.full(self.K, np.nan), self._base_thresholds(), nan_par,
                                 np.inf, mdl.capability, events)
         y = self.sf[idx] * u[idx] - self.bias[idx]
         p = mdl.V[:, idx] @ y
         z = mdl.A @ p
-        w, rho, rho_c, rho_j = self._reconstruct(mdl, u)
+        w, rho = self._reconstruct(mdl, u)
         if mdl.df == 0:
             stats, thrs, par = np.full(self.K, np.nan), self._base_thresholds(), nan_par
         else:
-            stats, thrs, alarm, clear, fired = self._tests(z, rho, rho_c, rho_j)
+            stats, thrs, alarm, clear, fired = self._tests(z, rho)
             par = nan_par.copy()
             par[:mdl.df] = p
             events += self._machine(t, stats, thrs, alarm, clear, fired)
             if self.model is not mdl:
-                w, rho = self._reconstruct(self.model, u)[:2]
+                w, rho = self._reconstruct(self.model, u)
         pl = self.model.pl
         level = pl.a * math.sqrt(1.0 + pl.b * rho) + pl.c * math.sqrt(pl.d + pl.e * rho)
         if self.suspects:
@@ -197,12 +195,11 @@ class OracleMonitor:
             self._new_set()
         return events
 
-    def _tests(self, z: np.ndarray, rho: float, rho_c: float, rho_j: float):
+    def _tests(self, z: np.ndarray, rho: float):
         """Window statistics by direct sums, the CUSUM bank by Page's recursion."""
         mdl = self.model
         self.hist_z.append(z)
-        self.hist_rho.append(rho_c)
-        self.hist_rho_j.append(rho_j)
+        self.hist_rho.append(rho)
         count = len(self.hist_z)
         stats, thrs, ratios = [], [], []
         clear = True
@@ -215,9 +212,7 @@ class OracleMonitor:
                 continue
             s = np.sum(self.hist_z[-w:], axis=0)
             D = float(s @ s) / (w * f)
-            q = self.th.rate_error_factor
-            gain = (1.0 + w * mdl.beta / f + q * mdl.kappa / f * float(np.sum(self.hist_rho[-w:]))
-                    + mdl.kappa / (w * f) * float(np.sum(self.hist_rho_j[-w:])))
+            gain = 1.0 + w * mdl.beta / f + mdl.kappa / f * float(np.sum(self.hist_rho[-w:]))
             T = thr * gain
             stats.append(D)
             thrs.append(T)
